@@ -1,0 +1,1 @@
+//! Pure-Rust BVH (work in progress).

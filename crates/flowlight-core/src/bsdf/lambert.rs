@@ -1,0 +1,46 @@
+//! Lambertian diffuse reflection.
+
+use super::BsdfSample;
+use crate::path::NodeType;
+use crate::sampling::{cosine_hemisphere, cosine_hemisphere_pdf};
+use crate::Rgb;
+use glam::{Vec2, Vec3};
+use std::f32::consts::FRAC_1_PI;
+
+/// f = albedo / π on the side of `wo`; two-sided (the hemisphere follows `wo`).
+#[derive(Clone, Copy, Debug)]
+pub struct Lambert {
+    pub albedo: Rgb,
+}
+
+impl Lambert {
+    #[inline]
+    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Rgb {
+        if wo.z * wi.z <= 0.0 {
+            return Rgb::ZERO;
+        }
+        self.albedo * FRAC_1_PI
+    }
+    #[inline]
+    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        if wo.z * wi.z <= 0.0 {
+            return 0.0;
+        }
+        cosine_hemisphere_pdf(wi.z.abs())
+    }
+    #[inline]
+    pub fn sample(&self, wo: Vec3, u: Vec2) -> Option<BsdfSample> {
+        let mut wi = cosine_hemisphere(u);
+        if wo.z < 0.0 {
+            wi.z = -wi.z;
+        }
+        let pdf = cosine_hemisphere_pdf(wi.z.abs());
+        (pdf > 0.0).then(|| BsdfSample {
+            wi,
+            f: self.albedo * FRAC_1_PI,
+            pdf,
+            node: NodeType::DiffuseReflection,
+            delta: false,
+        })
+    }
+}

@@ -1,0 +1,190 @@
+//! Rays, surface hits, local frames and explicit floating-point error handling for ray spawning.
+
+use glam::{Vec2, Vec3};
+
+/// A ray `origin + t·dir`, `t ∈ (0, t_max)`. `dir` need not be unit length, but every ray the
+/// integrators trace has a unit direction so that `t` is a distance.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    pub origin: Vec3,
+    pub dir: Vec3,
+    pub t_max: f32,
+}
+
+impl Ray {
+    #[inline]
+    pub fn new(origin: Vec3, dir: Vec3, t_max: f32) -> Self {
+        Ray { origin, dir, t_max }
+    }
+    #[inline]
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.origin + self.dir * t
+    }
+}
+
+/// Everything an integrator needs to know about a ray's closest hit. Filled in by the host
+/// (which owns the meshes); plugins never see vertex buffers.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceHit {
+    /// Ray parameter of the hit.
+    pub t: f32,
+    /// Hit point, interpolated from the triangle's vertices by barycentrics.
+    pub p: Vec3,
+    /// Conservative absolute error bound of `p` per axis (pbrt-v4 §6.8 style), used to spawn
+    /// rays that never re-hit the surface they leave.
+    pub p_error: Vec3,
+    /// Unit geometric normal, oriented by the triangle's winding (counter-clockwise = front).
+    pub ng: Vec3,
+    /// Unit shading normal (interpolated vertex normal), on the same side as `ng`.
+    pub ns: Vec3,
+    /// Texture coordinates (0 when the mesh has none).
+    pub uv: Vec2,
+    /// Global triangle index in the scene.
+    pub prim: u32,
+    /// Index into the scene's material table.
+    pub material: u32,
+    /// Index into the scene's emitter table, or -1 when the triangle does not emit.
+    pub emitter: i32,
+}
+
+/// Float error growth bound γ_n = nε/(1-nε) with ε = 2^-24 (pbrt-v4 §6.8.1).
+#[inline]
+pub fn gamma(n: i32) -> f32 {
+    let e = f32::EPSILON * 0.5;
+    (n as f32 * e) / (1.0 - n as f32 * e)
+}
+
+/// Error bound of a point interpolated by barycentrics `b` from `p0, p1, p2`:
+/// γ_7·(|b0 p0| + |b1 p1| + |b2 p2|) (pbrt-v4, Triangle::InteractionFromIntersection).
+#[inline]
+pub fn barycentric_error(b: [f32; 3], p0: Vec3, p1: Vec3, p2: Vec3) -> Vec3 {
+    ((b[0] * p0).abs() + (b[1] * p1).abs() + (b[2] * p2).abs()) * gamma(7)
+}
+
+#[inline]
+fn next_float_up(v: f32) -> f32 {
+    if v.is_infinite() && v > 0.0 {
+        return v;
+    }
+    let v = if v == -0.0 { 0.0 } else { v };
+    let bits = v.to_bits();
+    let bits = if v >= 0.0 { bits + 1 } else { bits - 1 };
+    f32::from_bits(bits)
+}
+
+#[inline]
+fn next_float_down(v: f32) -> f32 {
+    if v.is_infinite() && v < 0.0 {
+        return v;
+    }
+    let v = if v == 0.0 { -0.0 } else { v };
+    let bits = v.to_bits();
+    let bits = if v > 0.0 { bits - 1 } else { bits + 1 };
+    f32::from_bits(bits)
+}
+
+/// Moves `p` off the surface along the geometric normal by its error bound, on the side `w`
+/// points to, then rounds each coordinate away from the surface. The offset scales with the
+/// magnitude of the triangle's coordinates, so it works for scenes at 1e-4 and at 1e5 alike,
+/// unlike a fixed epsilon. (Wächter & Binder, Ray Tracing Gems ch. 6 motivate the idea;
+/// the bound is pbrt-v4's `OffsetRayOrigin`.)
+#[inline]
+pub fn offset_ray_origin(p: Vec3, p_error: Vec3, ng: Vec3, w: Vec3) -> Vec3 {
+    let d = ng.abs().dot(p_error);
+    // Leave on the side `w` points to; rounding follows the normal's sign even when the bound is
+    // zero (an axis-aligned plane through the origin), so the origin always leaves the plane.
+    let n = if w.dot(ng) < 0.0 { -ng } else { ng };
+    let mut po = p + n * d;
+    for i in 0..3 {
+        if n[i] > 0.0 {
+            po[i] = next_float_up(po[i]);
+        } else if n[i] < 0.0 {
+            po[i] = next_float_down(po[i]);
+        }
+    }
+    po
+}
+
+impl SurfaceHit {
+    /// A ray leaving this hit in direction `dir` (unit), safe from self-intersection.
+    #[inline]
+    pub fn spawn_ray(&self, dir: Vec3) -> Ray {
+        Ray::new(offset_ray_origin(self.p, self.p_error, self.ng, dir), dir, f32::INFINITY)
+    }
+
+    /// A shadow ray from this hit towards the point `target` that itself lies on a surface
+    /// with normal `target_ng` and error `target_error`. Both ends are offset, and the ray
+    /// stops just short of the target, so neither surface occludes the connection.
+    #[inline]
+    pub fn spawn_ray_to(&self, target: Vec3, target_error: Vec3, target_ng: Vec3) -> Ray {
+        let o = offset_ray_origin(self.p, self.p_error, self.ng, target - self.p);
+        let t = offset_ray_origin(target, target_error, target_ng, o - target);
+        let d = t - o;
+        let len = d.length();
+        Ray::new(o, d / len, len * (1.0 - 1e-4))
+    }
+}
+
+/// An orthonormal frame whose `z` axis is a given unit vector (Duff et al. 2017).
+#[derive(Clone, Copy, Debug)]
+pub struct Frame {
+    pub x: Vec3,
+    pub y: Vec3,
+    pub z: Vec3,
+}
+
+impl Frame {
+    #[inline]
+    pub fn from_z(n: Vec3) -> Frame {
+        let sign = 1.0f32.copysign(n.z);
+        let a = -1.0 / (sign + n.z);
+        let b = n.x * n.y * a;
+        let x = Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+        let y = Vec3::new(b, sign + n.y * n.y * a, -n.y);
+        Frame { x, y, z: n }
+    }
+    #[inline]
+    pub fn to_local(&self, v: Vec3) -> Vec3 {
+        Vec3::new(v.dot(self.x), v.dot(self.y), v.dot(self.z))
+    }
+    #[inline]
+    pub fn to_world(&self, v: Vec3) -> Vec3 {
+        self.x * v.x + self.y * v.y + self.z * v.z
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frame_is_orthonormal() {
+        for n in [Vec3::Z, -Vec3::Z, Vec3::new(0.3, -0.5, 0.8).normalize(), Vec3::X] {
+            let f = Frame::from_z(n);
+            assert!(f.x.dot(f.y).abs() < 1e-5 && f.x.dot(f.z).abs() < 1e-5);
+            assert!((f.x.length() - 1.0).abs() < 1e-5 && (f.y.length() - 1.0).abs() < 1e-5);
+            let v = Vec3::new(0.1, 0.2, 0.9);
+            assert!((f.to_world(f.to_local(v)) - v).length() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn offset_moves_to_the_requested_side_at_any_scale() {
+        for scale in [1e-4f32, 1.0, 1e4, 1e5] {
+            let p0 = Vec3::new(1.0, 0.0, 1.0) * scale;
+            let p1 = Vec3::new(2.0, 0.0, 1.0) * scale;
+            let p2 = Vec3::new(1.0, 0.0, 2.0) * scale;
+            let b = [0.3, 0.3, 0.4];
+            let p = p0 * b[0] + p1 * b[1] + p2 * b[2];
+            let err = barycentric_error(b, p0, p1, p2);
+            let up = offset_ray_origin(p, err, Vec3::Y, Vec3::Y);
+            let down = offset_ray_origin(p, err, Vec3::Y, -Vec3::Y);
+            assert!(up.y > 0.0, "scale {scale}");
+            assert!(down.y < 0.0, "scale {scale}");
+            // The offset is tiny relative to the scene.
+            assert!(up.y < 1e-5 * scale, "scale {scale}: {}", up.y);
+        }
+    }
+}

@@ -1,0 +1,134 @@
+//! Materials as the scene loader describes them, and the textures they read.
+
+use crate::Rgb;
+use glam::Vec2;
+
+/// Which diffuse model a non-metallic, non-transmissive material uses.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DiffuseModel {
+    Lambert = 0,
+    /// Oren–Nayar rough diffuse (the thesis renders with it); `oren_nayar_sigma` is its
+    /// roughness in radians.
+    OrenNayar = 1,
+}
+
+/// A glTF metallic-roughness material with the transmission and emission extensions.
+/// The BSDF it stands for is built by [`crate::bsdf::Bsdf::from_material`].
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Material {
+    /// Linear base colour factor.
+    pub base_color: Rgb,
+    /// Index into the texture table, multiplied with `base_color`; -1 for none.
+    pub base_color_texture: i32,
+    pub diffuse_model: DiffuseModel,
+    pub oren_nayar_sigma: f32,
+    /// glTF metallic factor in [0, 1]: weight of the GGX conductor against the diffuse base.
+    pub metallic: f32,
+    /// glTF perceptual roughness in [0, 1]; GGX α = roughness². 0 is a perfect mirror.
+    pub roughness: f32,
+    /// KHR_materials_transmission factor in [0, 1]: weight of the dielectric.
+    pub transmission: f32,
+    /// KHR_materials_ior (1.5 by default).
+    pub ior: f32,
+    /// Emitted radiance (emissive factor × KHR_materials_emissive_strength).
+    pub emission: Rgb,
+    /// 1 when both faces scatter and emit; 0 when only the front (counter-clockwise) face emits.
+    pub double_sided: u32,
+}
+
+impl Default for Material {
+    fn default() -> Self {
+        Material {
+            base_color: Rgb::splat(0.8),
+            base_color_texture: -1,
+            diffuse_model: DiffuseModel::Lambert,
+            oren_nayar_sigma: 0.0,
+            metallic: 0.0,
+            roughness: 1.0,
+            transmission: 0.0,
+            ior: 1.5,
+            emission: Rgb::ZERO,
+            double_sided: 1,
+        }
+    }
+}
+
+impl Material {
+    #[inline]
+    pub fn is_emissive(&self) -> bool {
+        !self.emission.is_black()
+    }
+
+    /// Base colour at texture coordinate `uv`.
+    #[inline]
+    pub fn base_color_at(&self, uv: Vec2, textures: &[Texture]) -> Rgb {
+        match usize::try_from(self.base_color_texture).ok().and_then(|i| textures.get(i)) {
+            Some(t) => self.base_color * t.lookup(uv),
+            None => self.base_color,
+        }
+    }
+}
+
+/// A linear-RGB texture owned by the host; plugins read it through this view.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct Texture {
+    pub width: u32,
+    pub height: u32,
+    /// `width × height` texels, row-major, top row first. Valid while the scene lives.
+    pub texels: *const Rgb,
+}
+
+// SAFETY: textures are immutable for the whole render; the host keeps the texels alive.
+unsafe impl Send for Texture {}
+unsafe impl Sync for Texture {}
+
+impl Texture {
+    #[inline]
+    fn texel(&self, x: i64, y: i64) -> Rgb {
+        let x = x.rem_euclid(self.width as i64) as usize;
+        let y = y.rem_euclid(self.height as i64) as usize;
+        // SAFETY: indices are wrapped into range; the host guarantees the buffer's size.
+        unsafe { *self.texels.add(y * self.width as usize + x) }
+    }
+
+    /// Bilinear lookup with repeat wrapping (glTF's default sampler).
+    pub fn lookup(&self, uv: Vec2) -> Rgb {
+        if self.width == 0 || self.height == 0 || self.texels.is_null() {
+            return Rgb::ONE;
+        }
+        let x = uv.x * self.width as f32 - 0.5;
+        let y = uv.y * self.height as f32 - 0.5;
+        if !(x.is_finite() && y.is_finite()) {
+            return Rgb::ONE;
+        }
+        let x0 = x.floor();
+        let y0 = y.floor();
+        let fx = x - x0;
+        let fy = y - y0;
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        self.texel(x0, y0) * ((1.0 - fx) * (1.0 - fy))
+            + self.texel(x0 + 1, y0) * (fx * (1.0 - fy))
+            + self.texel(x0, y0 + 1) * ((1.0 - fx) * fy)
+            + self.texel(x0 + 1, y0 + 1) * (fx * fy)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn texture_lookup_wraps_and_interpolates() {
+        let texels = [Rgb::splat(0.0), Rgb::splat(1.0)];
+        let t = Texture { width: 2, height: 1, texels: texels.as_ptr() };
+        assert!((t.lookup(Vec2::new(0.25, 0.5)).r - 0.0).abs() < 1e-6);
+        assert!((t.lookup(Vec2::new(0.75, 0.5)).r - 1.0).abs() < 1e-6);
+        assert!((t.lookup(Vec2::new(0.5, 0.5)).r - 0.5).abs() < 1e-6);
+        assert!((t.lookup(Vec2::new(1.25, 0.5)).r - 0.0).abs() < 1e-6);
+        let m = Material { base_color_texture: 0, base_color: Rgb::splat(0.5), ..Default::default() };
+        assert!((m.base_color_at(Vec2::new(0.75, 0.5), &[t]).g - 0.5).abs() < 1e-6);
+    }
+}

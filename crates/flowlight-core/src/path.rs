@@ -1,0 +1,122 @@
+//! Node and path types (thesis §3.3): Heckbert notation and the node-type classes.
+
+use crate::Rgb;
+use glam::{Vec2, Vec3};
+
+/// Node type of the third kind, Λ₃ = {D_r, G_r, S_r, D_t, G_t, S_t}, plus the path's end
+/// points. It records the scattering mode a sampler actually chose (the strong type).
+#[repr(u8)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum NodeType {
+    Eye = 0,
+    Light = 1,
+    DiffuseReflection = 2,
+    GlossyReflection = 3,
+    SpecularReflection = 4,
+    DiffuseTransmission = 5,
+    GlossyTransmission = 6,
+    SpecularTransmission = 7,
+}
+
+/// Whether direct and indirect lighting may be estimated separately at a node (thesis §3.3):
+/// Λβ (diffuse, wide glossy) may be connected to a light explicitly; Λα (specular, narrow
+/// glossy) may not, so light reaching it is only found by hitting an emitter.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NodeClass {
+    Alpha,
+    Beta,
+}
+
+impl NodeType {
+    /// Heckbert letter (node type of the second kind, with T for any transmission).
+    pub fn heckbert(self) -> char {
+        match self {
+            NodeType::Eye => 'E',
+            NodeType::Light => 'L',
+            NodeType::DiffuseReflection => 'D',
+            NodeType::GlossyReflection => 'G',
+            NodeType::SpecularReflection => 'S',
+            NodeType::DiffuseTransmission
+            | NodeType::GlossyTransmission
+            | NodeType::SpecularTransmission => 'T',
+        }
+    }
+
+    /// Node type of the first kind: reflection or transmission.
+    pub fn is_transmission(self) -> bool {
+        matches!(
+            self,
+            NodeType::DiffuseTransmission | NodeType::GlossyTransmission | NodeType::SpecularTransmission
+        )
+    }
+
+    pub fn is_specular(self) -> bool {
+        matches!(self, NodeType::SpecularReflection | NodeType::SpecularTransmission)
+    }
+}
+
+/// Writes a path type in Heckbert notation, e.g. `EDSL`.
+pub fn heckbert_string(types: &[NodeType]) -> String {
+    types.iter().map(|t| t.heckbert()).collect()
+}
+
+/// Most vertices a [`Path`] can hold (eye and light included).
+pub const MAX_PATH_VERTICES: usize = 34;
+
+/// One vertex of a stored path. Directions are recomputed from positions.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PathVertex {
+    pub p: Vec3,
+    pub p_error: Vec3,
+    pub ng: Vec3,
+    pub ns: Vec3,
+    pub uv: Vec2,
+    pub prim: u32,
+    pub material: u32,
+    pub emitter: i32,
+    pub node: NodeType,
+    /// BSDF component chosen at this vertex (the strong type's scattering mode).
+    pub component: u8,
+}
+
+/// A complete eye-to-light path with its sampled contribution: the state of a Markov chain.
+/// Fixed capacity so it can cross the plugin boundary by pointer without allocation.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct Path {
+    /// Raster position of the eye ray.
+    pub raster: Vec2,
+    /// Number of vertices in use; path length n = vertex_count - 1.
+    pub vertex_count: u32,
+    /// Lighting layer (virtual length - 1, §2) this path contributes to.
+    pub layer: u32,
+    /// Monte Carlo estimate f(x)/p(x) carried by this path.
+    pub contribution: Rgb,
+    pub vertices: [PathVertex; MAX_PATH_VERTICES],
+}
+
+impl Path {
+    pub fn vertices(&self) -> &[PathVertex] {
+        &self.vertices[..self.vertex_count as usize]
+    }
+
+    /// Path type in Heckbert notation.
+    pub fn heckbert(&self) -> String {
+        self.vertices().iter().map(|v| v.node.heckbert()).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn heckbert_notation() {
+        use NodeType::*;
+        let t = [Eye, DiffuseReflection, SpecularTransmission, SpecularTransmission, Light];
+        assert_eq!(heckbert_string(&t), "EDTTL");
+        assert!(SpecularReflection.is_specular() && !GlossyReflection.is_specular());
+        assert!(GlossyTransmission.is_transmission());
+    }
+}

@@ -1,0 +1,162 @@
+//! Warping functions from the unit square and their densities.
+
+use glam::{Vec2, Vec3};
+use std::f32::consts::{FRAC_1_PI, PI};
+
+/// Concentric square-to-disk map (Shirley & Chiu 1997).
+#[inline]
+pub fn concentric_disk(u: Vec2) -> Vec2 {
+    let o = 2.0 * u - Vec2::ONE;
+    if o.x == 0.0 && o.y == 0.0 {
+        return Vec2::ZERO;
+    }
+    let (r, theta) = if o.x.abs() > o.y.abs() {
+        (o.x, (PI / 4.0) * (o.y / o.x))
+    } else {
+        (o.y, PI / 2.0 - (PI / 4.0) * (o.x / o.y))
+    };
+    r * Vec2::new(theta.cos(), theta.sin())
+}
+
+/// Cosine-weighted direction on the +z hemisphere; density `cos θ / π`.
+#[inline]
+pub fn cosine_hemisphere(u: Vec2) -> Vec3 {
+    let d = concentric_disk(u);
+    let z = (1.0 - d.length_squared()).max(0.0).sqrt();
+    Vec3::new(d.x, d.y, z)
+}
+
+#[inline]
+pub fn cosine_hemisphere_pdf(cos_theta: f32) -> f32 {
+    cos_theta.max(0.0) * FRAC_1_PI
+}
+
+/// Uniform direction on the unit sphere; density `1 / 4π`.
+#[inline]
+pub fn uniform_sphere(u: Vec2) -> Vec3 {
+    let z = 1.0 - 2.0 * u.x;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = 2.0 * PI * u.y;
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// Uniform direction in the cone of half-angle `acos(cos_max)` around +z; density
+/// `1 / (2π (1 - cos_max))`. This is the spherical cap used by soft reconnection.
+#[inline]
+pub fn uniform_cone(u: Vec2, cos_max: f32) -> Vec3 {
+    let cos_t = 1.0 - u.x * (1.0 - cos_max);
+    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+    let phi = 2.0 * PI * u.y;
+    Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t)
+}
+
+#[inline]
+pub fn uniform_cone_pdf(cos_max: f32) -> f32 {
+    1.0 / (2.0 * PI * (1.0 - cos_max))
+}
+
+/// Barycentrics of a uniformly distributed point on a triangle (Heitz 2019: low distortion).
+#[inline]
+pub fn uniform_triangle(u: Vec2) -> [f32; 3] {
+    let (b0, b1) = if u.x < u.y {
+        let b0 = u.x / 2.0;
+        (b0, u.y - b0)
+    } else {
+        let b1 = u.y / 2.0;
+        (u.x - b1, b1)
+    };
+    [b0, b1, 1.0 - b0 - b1]
+}
+
+/// Veach's power heuristic with β = 2 for two strategies.
+#[inline]
+pub fn power_heuristic(pdf_a: f32, pdf_b: f32) -> f32 {
+    let a = pdf_a * pdf_a;
+    let b = pdf_b * pdf_b;
+    if a.is_infinite() {
+        return 1.0;
+    }
+    if a + b == 0.0 {
+        0.0
+    } else {
+        a / (a + b)
+    }
+}
+
+/// Samples an index from a cumulative distribution `cdf` (non-decreasing, last entry 1).
+/// Returns the index and its probability.
+#[inline]
+pub fn sample_cdf(cdf: &[f32], u: f32) -> (usize, f32) {
+    debug_assert!(!cdf.is_empty());
+    let i = cdf.partition_point(|&c| c <= u).min(cdf.len() - 1);
+    let lo = if i == 0 { 0.0 } else { cdf[i - 1] };
+    (i, cdf[i] - lo)
+}
+
+/// Builds a normalised CDF from non-negative weights. Returns `None` when they sum to zero or
+/// are not finite.
+pub fn build_cdf(weights: &[f32]) -> Option<Vec<f32>> {
+    let mut acc = 0.0f64;
+    let mut cdf = Vec::with_capacity(weights.len());
+    for &w in weights {
+        if !(w >= 0.0 && w.is_finite()) {
+            return None;
+        }
+        acc += w as f64;
+        cdf.push(acc);
+    }
+    if acc <= 0.0 {
+        return None;
+    }
+    let mut out: Vec<f32> = cdf.iter().map(|&c| (c / acc) as f32).collect();
+    if let Some(last) = out.last_mut() {
+        *last = 1.0;
+    }
+    Some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Rng;
+
+    #[test]
+    fn cosine_hemisphere_is_normalised_and_upper() {
+        let mut r = Rng::new(1, 0);
+        let n = 100_000;
+        let mut mean_z = 0.0f64;
+        for _ in 0..n {
+            let d = cosine_hemisphere(r.uniform2());
+            assert!(d.z >= 0.0 && (d.length() - 1.0).abs() < 1e-4);
+            mean_z += d.z as f64;
+        }
+        // E[cos θ] under cos/π is 2/3.
+        assert!((mean_z / n as f64 - 2.0 / 3.0).abs() < 0.01);
+    }
+
+    #[test]
+    fn cdf_sampling_matches_weights() {
+        let cdf = build_cdf(&[1.0, 0.0, 3.0]).unwrap();
+        let mut r = Rng::new(2, 0);
+        let mut counts = [0usize; 3];
+        for _ in 0..40_000 {
+            let (i, p) = sample_cdf(&cdf, r.uniform());
+            assert!(p > 0.0);
+            counts[i] += 1;
+        }
+        assert_eq!(counts[1], 0);
+        assert!((counts[0] as f32 / 40_000.0 - 0.25).abs() < 0.01);
+        assert!(build_cdf(&[0.0, 0.0]).is_none());
+        assert!(build_cdf(&[f32::NAN]).is_none());
+    }
+
+    #[test]
+    fn triangle_barycentrics_are_valid() {
+        let mut r = Rng::new(3, 0);
+        for _ in 0..10_000 {
+            let b = uniform_triangle(r.uniform2());
+            assert!(b.iter().all(|&x| (-1e-6..=1.0 + 1e-6).contains(&x)));
+            assert!((b[0] + b[1] + b[2] - 1.0).abs() < 1e-5);
+        }
+    }
+}

@@ -1,0 +1,1 @@
+//! Scene loading (work in progress).
