@@ -89,8 +89,19 @@ mod tests {
 
     #[test]
     fn project_inverts_generate_ray() {
-        let cam = Camera::look_along(Vec3::new(1.0, 2.0, 3.0), Vec3::new(0.2, -0.1, 1.0), Vec3::Y, 40.0, 64, 48);
-        for raster in [Vec2::new(0.5, 0.5), Vec2::new(32.0, 24.0), Vec2::new(63.2, 40.7)] {
+        let cam = Camera::look_along(
+            Vec3::new(1.0, 2.0, 3.0),
+            Vec3::new(0.2, -0.1, 1.0),
+            Vec3::Y,
+            40.0,
+            64,
+            48,
+        );
+        for raster in [
+            Vec2::new(0.5, 0.5),
+            Vec2::new(32.0, 24.0),
+            Vec2::new(63.2, 40.7),
+        ] {
             let r = cam.generate_ray(raster);
             let back = cam.project(r.at(5.0)).unwrap();
             assert!((back - raster).length() < 1e-3, "{raster} -> {back}");

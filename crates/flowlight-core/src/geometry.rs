@@ -111,7 +111,11 @@ impl SurfaceHit {
     /// A ray leaving this hit in direction `dir` (unit), safe from self-intersection.
     #[inline]
     pub fn spawn_ray(&self, dir: Vec3) -> Ray {
-        Ray::new(offset_ray_origin(self.p, self.p_error, self.ng, dir), dir, f32::INFINITY)
+        Ray::new(
+            offset_ray_origin(self.p, self.p_error, self.ng, dir),
+            dir,
+            f32::INFINITY,
+        )
     }
 
     /// A shadow ray from this hit towards the point `target` that itself lies on a surface
@@ -161,7 +165,12 @@ mod tests {
 
     #[test]
     fn frame_is_orthonormal() {
-        for n in [Vec3::Z, -Vec3::Z, Vec3::new(0.3, -0.5, 0.8).normalize(), Vec3::X] {
+        for n in [
+            Vec3::Z,
+            -Vec3::Z,
+            Vec3::new(0.3, -0.5, 0.8).normalize(),
+            Vec3::X,
+        ] {
             let f = Frame::from_z(n);
             assert!(f.x.dot(f.y).abs() < 1e-5 && f.x.dot(f.z).abs() < 1e-5);
             assert!((f.x.length() - 1.0).abs() < 1e-5 && (f.y.length() - 1.0).abs() < 1e-5);

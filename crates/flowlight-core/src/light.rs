@@ -138,7 +138,10 @@ mod tests {
         };
         let es = [tri(1.0, 1.0), tri(2.0, 1.0)];
         let cdf = build_cdf(&es.iter().map(|e| e.power()).collect::<Vec<_>>()).unwrap();
-        let lights = Lights { emitters: &es, power_cdf: &cdf };
+        let lights = Lights {
+            emitters: &es,
+            power_cdf: &cdf,
+        };
         let mut r = Rng::new(5, 0);
         let mut second = 0;
         for _ in 0..10_000 {

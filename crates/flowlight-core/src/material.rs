@@ -34,8 +34,11 @@ pub struct Material {
     pub ior: f32,
     /// Emitted radiance (emissive factor × KHR_materials_emissive_strength).
     pub emission: Rgb,
-    /// 1 when both faces scatter and emit; 0 when only the front (counter-clockwise) face emits.
-    pub double_sided: u32,
+    /// 1 when both faces emit; 0 (default) when only the front, counter-clockwise face does,
+    /// like the one-sided area lights of Mitsuba and pbrt. glTF's `doubleSided` does not set
+    /// it (every surface scatters on both sides anyway): a lamp a hair below a ceiling would
+    /// otherwise light the gap above it. Set it with extras `{"flowlight": {"two_sided_emission": true}}`.
+    pub two_sided_emission: u32,
 }
 
 impl Default for Material {
@@ -50,7 +53,7 @@ impl Default for Material {
             transmission: 0.0,
             ior: 1.5,
             emission: Rgb::ZERO,
-            double_sided: 1,
+            two_sided_emission: 0,
         }
     }
 }
@@ -64,7 +67,10 @@ impl Material {
     /// Base colour at texture coordinate `uv`.
     #[inline]
     pub fn base_color_at(&self, uv: Vec2, textures: &[Texture]) -> Rgb {
-        match usize::try_from(self.base_color_texture).ok().and_then(|i| textures.get(i)) {
+        match usize::try_from(self.base_color_texture)
+            .ok()
+            .and_then(|i| textures.get(i))
+        {
             Some(t) => self.base_color * t.lookup(uv),
             None => self.base_color,
         }
@@ -123,12 +129,20 @@ mod tests {
     #[test]
     fn texture_lookup_wraps_and_interpolates() {
         let texels = [Rgb::splat(0.0), Rgb::splat(1.0)];
-        let t = Texture { width: 2, height: 1, texels: texels.as_ptr() };
+        let t = Texture {
+            width: 2,
+            height: 1,
+            texels: texels.as_ptr(),
+        };
         assert!((t.lookup(Vec2::new(0.25, 0.5)).r - 0.0).abs() < 1e-6);
         assert!((t.lookup(Vec2::new(0.75, 0.5)).r - 1.0).abs() < 1e-6);
         assert!((t.lookup(Vec2::new(0.5, 0.5)).r - 0.5).abs() < 1e-6);
         assert!((t.lookup(Vec2::new(1.25, 0.5)).r - 0.0).abs() < 1e-6);
-        let m = Material { base_color_texture: 0, base_color: Rgb::splat(0.5), ..Default::default() };
+        let m = Material {
+            base_color_texture: 0,
+            base_color: Rgb::splat(0.5),
+            ..Default::default()
+        };
         assert!((m.base_color_at(Vec2::new(0.75, 0.5), &[t]).g - 0.5).abs() < 1e-6);
     }
 }

@@ -46,12 +46,17 @@ impl NodeType {
     pub fn is_transmission(self) -> bool {
         matches!(
             self,
-            NodeType::DiffuseTransmission | NodeType::GlossyTransmission | NodeType::SpecularTransmission
+            NodeType::DiffuseTransmission
+                | NodeType::GlossyTransmission
+                | NodeType::SpecularTransmission
         )
     }
 
     pub fn is_specular(self) -> bool {
-        matches!(self, NodeType::SpecularReflection | NodeType::SpecularTransmission)
+        matches!(
+            self,
+            NodeType::SpecularReflection | NodeType::SpecularTransmission
+        )
     }
 }
 
@@ -114,7 +119,13 @@ mod tests {
     #[test]
     fn heckbert_notation() {
         use NodeType::*;
-        let t = [Eye, DiffuseReflection, SpecularTransmission, SpecularTransmission, Light];
+        let t = [
+            Eye,
+            DiffuseReflection,
+            SpecularTransmission,
+            SpecularTransmission,
+            Light,
+        ];
         assert_eq!(heckbert_string(&t), "EDTTL");
         assert!(SpecularReflection.is_specular() && !GlossyReflection.is_specular());
         assert!(GlossyTransmission.is_transmission());

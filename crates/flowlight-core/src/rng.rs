@@ -14,7 +14,10 @@ const MULT: u64 = 6364136223846793005;
 
 impl Rng {
     pub fn new(seed: u64, stream: u64) -> Self {
-        let mut r = Rng { state: 0, inc: (stream << 1) | 1 };
+        let mut r = Rng {
+            state: 0,
+            inc: (stream << 1) | 1,
+        };
         r.next_u32();
         r.state = r.state.wrapping_add(seed);
         r.next_u32();
@@ -25,7 +28,10 @@ impl Rng {
     pub fn hash(values: &[u64]) -> u64 {
         let mut h = 0x9E37_79B9_7F4A_7C15u64;
         for &v in values {
-            h ^= v.wrapping_add(0x9E37_79B9_7F4A_7C15).wrapping_add(h << 6).wrapping_add(h >> 2);
+            h ^= v
+                .wrapping_add(0x9E37_79B9_7F4A_7C15)
+                .wrapping_add(h << 6)
+                .wrapping_add(h >> 2);
             h = (h ^ (h >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
             h = (h ^ (h >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
             h ^= h >> 31;

@@ -1,6 +1,6 @@
 //! RGB spectrum with the thesis' split into total energy and fractional distribution (§3.4).
 
-use std::ops::{Add, AddAssign, Div, Mul, MulAssign};
+use std::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign};
 
 /// Linear RGB radiance or reflectance (Rec.709 primaries).
 #[repr(C)]
@@ -105,6 +105,12 @@ impl MulAssign<f32> for Rgb {
     #[inline]
     fn mul_assign(&mut self, s: f32) {
         *self = *self * s;
+    }
+}
+impl DivAssign<f32> for Rgb {
+    #[inline]
+    fn div_assign(&mut self, s: f32) {
+        *self = *self / s;
     }
 }
 impl Div<f32> for Rgb {

@@ -60,7 +60,11 @@ impl TerminationSchedule {
                 let mut survived = 1.0f64;
                 (1..=n)
                     .map(|k| {
-                        let t = if k == n { 1.0 } else { (p(k) / survived).min(1.0) };
+                        let t = if k == n {
+                            1.0
+                        } else {
+                            (p(k) / survived).min(1.0)
+                        };
                         survived -= p(k);
                         t as f32
                     })
@@ -88,7 +92,11 @@ impl TerminationSchedule {
         }
         match self.kind {
             TerminationDistribution::Bxdf => {
-                let a = if albedo.is_finite() { albedo.clamp(0.0, 0.95) } else { 0.0 };
+                let a = if albedo.is_finite() {
+                    albedo.clamp(0.0, 0.95)
+                } else {
+                    0.0
+                };
                 1.0 - a
             }
             _ => self.table[k as usize - 1],

@@ -1,1 +1,17 @@
+//! Flowlight host: everything a plugin does not own.
+//!
+//! The host loads plugins ([`plugin`]), owns the one rayon thread pool and schedules work
+//! units on it ([`render`]), answers ray queries through an intersector ([`intersector`]),
+//! owns the accumulators ([`film`]), counts statistics, and writes images atomically
+//! ([`output`]).
 
+pub mod film;
+pub mod intersector;
+pub mod output;
+pub mod params;
+pub mod plugin;
+pub mod render;
+pub mod session;
+
+pub use plugin::{IntegratorInstance, PluginError, PluginLibrary};
+pub use render::{render, RenderOptions, RenderStats};

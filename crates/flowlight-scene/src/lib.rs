@@ -1,1 +1,29 @@
-//! Scene loading (work in progress).
+//! Scene loading for Flowlight: glTF 2.0 meshes, materials, textures, lights and camera
+//! ([`load_gltf`]), and the TOML render configuration ([`load_config`]).
+//!
+//! One file per concept:
+//! - [`scene`]: the loaded, world-space [`Scene`] and its hit reconstruction;
+//! - [`gltf_loader`]: walking a glTF document into a [`Scene`];
+//! - [`source`]: reading `.gltf`/`.glb` files and their buffers (external files, data URIs);
+//! - [`accessor`]: validated reading of glTF accessors;
+//! - [`material`]: glTF materials to [`flowlight_core::material::Material`], overrides;
+//! - [`texture`]: image decoding and sRGB → linear conversion;
+//! - [`config`]: the TOML render configuration;
+//! - [`error`]: the error types.
+
+pub mod accessor;
+pub mod config;
+pub mod error;
+pub mod gltf_loader;
+pub mod material;
+pub mod scene;
+pub mod source;
+pub mod texture;
+
+pub use config::{
+    load_config, parse_config, CameraOverride, Intersector, RenderConfig, SampleBudget,
+};
+pub use error::{ConfigError, SceneError};
+pub use gltf_loader::load_gltf;
+pub use material::{DiffuseChoice, MaterialOverride};
+pub use scene::{CameraDesc, LoadStats, Scene, TextureData};

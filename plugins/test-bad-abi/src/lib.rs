@@ -1,1 +1,50 @@
+//! Test fixture: declares ABI version `ABI_VERSION + 100`. The host must refuse to load it
+//! with an error that names this file and both versions, before calling anything in it.
 
+use flowlight_sdk::abi::{IntegratorTable, ParamSpec, PluginDeclaration, ABI_VERSION};
+use flowlight_sdk::{
+    AccumulationStyle, Film, Integrator, IntegratorInfo, Params, PluginKind, Scene, Tracer,
+    WorkUnit,
+};
+
+pub struct NeverCalled;
+
+impl Integrator for NeverCalled {
+    const NAME: &'static str = "test-bad-abi";
+    const DESCRIPTION: &'static str = "test fixture with a wrong ABI version";
+    const PARAMS: &'static [ParamSpec] = &[];
+
+    fn create(_: &Params, _: Scene<'static>) -> Result<(Self, IntegratorInfo), String> {
+        let info = IntegratorInfo {
+            layer_count: 0,
+            accumulation: AccumulationStyle::Tile,
+            flange: 0,
+            biased: 0,
+        };
+        Ok((NeverCalled, info))
+    }
+
+    fn render(&self, _: &WorkUnit, _: &Tracer, _: &mut Film) -> Result<(), String> {
+        panic!("a plugin with a mismatched ABI must never be called")
+    }
+}
+
+static TABLE: IntegratorTable = flowlight_sdk::integrator::table::<NeverCalled>();
+static DECLARATION: PluginDeclaration = {
+    let mut d = flowlight_sdk::declaration(
+        PluginKind::Integrator,
+        NeverCalled::NAME,
+        NeverCalled::DESCRIPTION,
+        NeverCalled::PARAMS,
+        &TABLE,
+        std::ptr::null(),
+    );
+    d.abi_version = ABI_VERSION + 100;
+    d
+};
+
+/// The (deliberately wrong) declaration.
+#[no_mangle]
+pub extern "C" fn flowlight_plugin_declaration() -> *const PluginDeclaration {
+    &DECLARATION
+}

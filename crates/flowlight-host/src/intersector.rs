@@ -1,0 +1,144 @@
+//! Intersectors and the host's answer to plugins' ray queries.
+
+use flowlight_bvh::{Bvh, TriangleHit};
+use flowlight_core::geometry::Ray;
+use flowlight_scene::config::Intersector as IntersectorChoice;
+use flowlight_scene::Scene;
+use flowlight_sdk::abi::{HitRecord, TracerTable};
+use std::ffi::c_void;
+use std::time::{Duration, Instant};
+
+/// A ray/triangle acceleration structure. Implementations answer queries from all host
+/// threads at once.
+pub trait Intersector: Send + Sync {
+    fn name(&self) -> &'static str;
+    fn intersect(&self, ray: &Ray) -> Option<TriangleHit>;
+    fn occluded(&self, ray: &Ray) -> bool;
+}
+
+/// The pure-Rust BVH backend.
+pub struct BvhIntersector {
+    bvh: Bvh,
+}
+
+impl BvhIntersector {
+    pub fn build(scene: &Scene) -> (BvhIntersector, Duration) {
+        let start = Instant::now();
+        let bvh = Bvh::build(&scene.triangle_vertices());
+        (BvhIntersector { bvh }, start.elapsed())
+    }
+}
+
+impl Intersector for BvhIntersector {
+    fn name(&self) -> &'static str {
+        "bvh"
+    }
+    #[inline]
+    fn intersect(&self, ray: &Ray) -> Option<TriangleHit> {
+        self.bvh.intersect(ray)
+    }
+    #[inline]
+    fn occluded(&self, ray: &Ray) -> bool {
+        self.bvh.occluded(ray)
+    }
+}
+
+/// Builds the intersector the config asks for, and reports its build time. `auto` takes the
+/// best backend compiled in (the BVH until the Embree backend lands); `embree` is an error
+/// in a build without it.
+pub fn build_intersector(
+    kind: IntersectorChoice,
+    scene: &Scene,
+) -> Result<(Box<dyn Intersector>, Duration), String> {
+    match kind {
+        IntersectorChoice::Bvh | IntersectorChoice::Auto => {
+            let (b, t) = BvhIntersector::build(scene);
+            Ok((Box::new(b), t))
+        }
+        IntersectorChoice::Embree => Err(
+            "intersector = \"embree\" is not available in this build; use \"bvh\" or \"auto\""
+                .into(),
+        ),
+    }
+}
+
+/// Ray counts of one work unit; merged into the render's totals when the unit ends, so
+/// threads never share a counter.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RayCounts {
+    pub closest: u64,
+    pub shadow: u64,
+}
+
+/// Answers one work unit's ray queries: intersects and fills in the surface data.
+pub struct UnitTracer<'a> {
+    pub scene: &'a Scene,
+    pub intersector: &'a dyn Intersector,
+    pub counts: RayCounts,
+}
+
+impl<'a> UnitTracer<'a> {
+    pub fn new(scene: &'a Scene, intersector: &'a dyn Intersector) -> Self {
+        UnitTracer {
+            scene,
+            intersector,
+            counts: RayCounts::default(),
+        }
+    }
+
+    /// The C-ABI table pointing at `self`, valid while `self` is borrowed.
+    pub fn table(&mut self) -> TracerTable {
+        TracerTable {
+            ctx: self as *mut Self as *mut c_void,
+            intersect: intersect_cb,
+            occluded: occluded_cb,
+        }
+    }
+
+    #[inline]
+    pub fn intersect(&mut self, ray: &Ray) -> HitRecord {
+        self.counts.closest += 1;
+        match self.intersector.intersect(ray) {
+            Some(h) => HitRecord {
+                hit: 1,
+                surface: self.scene.surface_hit(ray, h.t, h.prim, h.b1, h.b2),
+            },
+            None => HitRecord {
+                hit: 0,
+                surface: EMPTY_HIT,
+            },
+        }
+    }
+}
+
+const EMPTY_HIT: flowlight_core::geometry::SurfaceHit = flowlight_core::geometry::SurfaceHit {
+    t: f32::INFINITY,
+    p: glam::Vec3::ZERO,
+    p_error: glam::Vec3::ZERO,
+    ng: glam::Vec3::Z,
+    ns: glam::Vec3::Z,
+    uv: glam::Vec2::ZERO,
+    prim: u32::MAX,
+    material: 0,
+    emitter: -1,
+};
+
+unsafe extern "C" fn intersect_cb(
+    ctx: *mut c_void,
+    rays: *const Ray,
+    hits: *mut HitRecord,
+    n: usize,
+) {
+    let tracer = &mut *(ctx as *mut UnitTracer);
+    for i in 0..n {
+        *hits.add(i) = tracer.intersect(&*rays.add(i));
+    }
+}
+
+unsafe extern "C" fn occluded_cb(ctx: *mut c_void, rays: *const Ray, blocked: *mut u8, n: usize) {
+    let tracer = &mut *(ctx as *mut UnitTracer);
+    tracer.counts.shadow += n as u64;
+    for i in 0..n {
+        *blocked.add(i) = tracer.intersector.occluded(&*rays.add(i)) as u8;
+    }
+}

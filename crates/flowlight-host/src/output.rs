@@ -1,0 +1,664 @@
+//! Image output: multi-layer OpenEXR (the render result) and an 8-bit sRGB PNG preview.
+//!
+//! # EXR layout
+//!
+//! Every file is a **single-part, scan-line OpenEXR** with 32-bit float channels and lossless
+//! ZIP compression (16 scan lines per block). Layers are expressed with the OpenEXR
+//! channel-naming convention rather than as separate parts:
+//!
+//! * the main image (`ImageLayer { name: "" }`) is stored as channels `R`, `G`, `B`;
+//! * every other layer `name` is stored as `name.R`, `name.G`, `name.B`.
+//!
+//! This is the layout Blender's multilayer EXR, Nuke, tev and OpenImageIO all group into
+//! layers (OpenImageIO reports one subimage with channels `R,G,B,layer1.R,...`), and unlike
+//! multi-part files it is read by every OpenEXR reader, including old ones. There is no
+//! `chromaticities` attribute: per the OpenEXR specification that means Rec.709 primaries
+//! with a D65 white point, which is what [`Rgb`] holds. Pixels are row-major, top row first
+//! (pixel `(x, y)` is `pixels[y * width + x]`), written with increasing line order.
+//!
+//! Metadata entries ([`ExrMetadata`]) are written as header attributes of type `string`
+//! (values as UTF-8 bytes). The standard text attributes `software`, `comments`, `owner` and
+//! `capDate` may be set through it as well; any other standard OpenEXR attribute name is
+//! rejected, since it would collide with (or be mis-typed as) a structural attribute.
+//!
+//! # Safety of existing files
+//!
+//! Both writers go through [`write_atomically`]: the data are written to a temporary file in
+//! the destination directory, flushed to disk, then renamed over the destination. A failed
+//! write therefore never leaves a truncated image behind nor damages an existing one. All
+//! input is validated (sizes, finiteness, names) before anything touches the file system.
+
+use std::collections::{BTreeMap, HashSet};
+use std::fs;
+use std::io::{self, BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use exr::prelude::{
+    AnyChannel, AnyChannels, AttributeValue, Blocks, Compression, Encoding, FlatSamples, Image,
+    Layer, LayerAttributes, LineOrder, Text, Vec2, WritableImage,
+};
+use flowlight_core::spectrum::Rgb;
+
+/// One RGB layer of an EXR file. `name == ""` is the main image (channels `R,G,B`); any
+/// other name `n` is stored as channels `n.R`, `n.G`, `n.B`.
+#[derive(Clone, Debug)]
+pub struct ImageLayer<'a> {
+    pub name: String,
+    /// `width * height` pixels, row-major, top row first.
+    pub pixels: &'a [Rgb],
+}
+
+/// String attributes written into the EXR header (e.g. `integrator`, `spp`, `seed`,
+/// `biased`). Keys must be unique, non-empty, free of NUL bytes and not a structural OpenEXR
+/// attribute name (see the module documentation).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ExrMetadata {
+    pub entries: Vec<(String, String)>,
+}
+
+/// Everything that can go wrong while writing or reading an image. Every variant names the
+/// file it concerns.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    #[error("cannot create directory {dir} for {path}: {source}")]
+    CreateDir {
+        path: PathBuf,
+        dir: PathBuf,
+        source: io::Error,
+    },
+
+    #[error("cannot write {path}: {source}")]
+    Io { path: PathBuf, source: io::Error },
+
+    #[error("cannot encode EXR {path}: {source}")]
+    ExrEncode {
+        path: PathBuf,
+        source: exr::error::Error,
+    },
+
+    #[error("cannot read EXR {path}: {source}")]
+    ExrDecode {
+        path: PathBuf,
+        source: exr::error::Error,
+    },
+
+    #[error("cannot encode PNG {path}: {source}")]
+    PngEncode {
+        path: PathBuf,
+        source: png::EncodingError,
+    },
+
+    #[error("invalid image size {width}x{height} for {path}")]
+    InvalidSize {
+        path: PathBuf,
+        width: usize,
+        height: usize,
+    },
+
+    #[error(
+        "layer {layer:?} of {path} has {actual} pixels, expected {expected} ({width}x{height})"
+    )]
+    PixelCount {
+        path: PathBuf,
+        layer: String,
+        width: usize,
+        height: usize,
+        expected: usize,
+        actual: usize,
+    },
+
+    #[error("layer {layer:?} of {path} has a non-finite (NaN or infinite) pixel at ({x}, {y})")]
+    NonFinite {
+        path: PathBuf,
+        layer: String,
+        x: usize,
+        y: usize,
+    },
+
+    #[error("invalid layer name {layer:?} for {path}: {reason}")]
+    InvalidLayer {
+        path: PathBuf,
+        layer: String,
+        reason: String,
+    },
+
+    #[error("invalid metadata key {key:?} for {path}: {reason}")]
+    InvalidMetadata {
+        path: PathBuf,
+        key: String,
+        reason: String,
+    },
+
+    #[error("unsupported EXR content in {path}: {reason}")]
+    Unsupported { path: PathBuf, reason: String },
+}
+
+/// Standard OpenEXR attribute names that user metadata must not use.
+const RESERVED_ATTRIBUTES: &[&str] = &[
+    "tiles",
+    "name",
+    "type",
+    "version",
+    "chunkCount",
+    "maxSamplesPerPixel",
+    "channels",
+    "compression",
+    "dataWindow",
+    "displayWindow",
+    "lineOrder",
+    "pixelAspectRatio",
+    "screenWindowCenter",
+    "screenWindowWidth",
+    "whiteLuminance",
+    "adoptedNeutral",
+    "renderingTransform",
+    "lookModTransform",
+    "xDensity",
+    "utcOffset",
+    "longitude",
+    "latitude",
+    "altitude",
+    "focus",
+    "expTime",
+    "aperture",
+    "isoSpeed",
+    "envmap",
+    "keyCode",
+    "timeCode",
+    "wrapmodes",
+    "framesPerSecond",
+    "multiView",
+    "worldToCamera",
+    "worldToNDC",
+    "deepImageState",
+    "originalDataWindow",
+    "dwaCompressionLevel",
+    "preview",
+    "view",
+    "chromaticities",
+    "near",
+    "far",
+    "fieldOfViewHorizontal",
+    "fieldOfViewVertical",
+];
+
+fn text(s: &str) -> Text {
+    // OpenEXR strings are byte strings; store UTF-8 (what OpenEXR and its tools assume).
+    Text::from_slice_unchecked(s.as_bytes())
+}
+
+fn text_to_string(t: &Text) -> String {
+    match std::str::from_utf8(t.as_slice()) {
+        Ok(s) => s.to_owned(),
+        // Not UTF-8: treat as Latin-1, which every byte maps to.
+        Err(_) => t.as_slice().iter().map(|&b| b as char).collect(),
+    }
+}
+
+fn pixel_count(path: &Path, width: usize, height: usize) -> Result<usize, OutputError> {
+    let invalid = || OutputError::InvalidSize {
+        path: path.to_owned(),
+        width,
+        height,
+    };
+    if width == 0 || height == 0 || width > i32::MAX as usize || height > i32::MAX as usize {
+        return Err(invalid());
+    }
+    width.checked_mul(height).ok_or_else(invalid)
+}
+
+fn check_pixels(
+    path: &Path,
+    layer: &str,
+    width: usize,
+    height: usize,
+    pixels: &[Rgb],
+) -> Result<(), OutputError> {
+    let expected = pixel_count(path, width, height)?;
+    if pixels.len() != expected {
+        return Err(OutputError::PixelCount {
+            path: path.to_owned(),
+            layer: layer.to_owned(),
+            width,
+            height,
+            expected,
+            actual: pixels.len(),
+        });
+    }
+    if let Some(i) = pixels.iter().position(|p| !p.is_finite()) {
+        return Err(OutputError::NonFinite {
+            path: path.to_owned(),
+            layer: layer.to_owned(),
+            x: i % width,
+            y: i / width,
+        });
+    }
+    Ok(())
+}
+
+fn check_layer_name(path: &Path, name: &str) -> Result<(), OutputError> {
+    let invalid = |reason: &str| OutputError::InvalidLayer {
+        path: path.to_owned(),
+        layer: name.to_owned(),
+        reason: reason.to_owned(),
+    };
+    if name.is_empty() {
+        return Ok(());
+    }
+    if name.contains('\0') {
+        return Err(invalid("contains a NUL byte"));
+    }
+    if name.starts_with('.') || name.ends_with('.') || name.contains("..") {
+        return Err(invalid("empty component between '.' separators"));
+    }
+    Ok(())
+}
+
+/// Writes `layers` (each `width * height` pixels) as one multi-layer EXR, atomically.
+///
+/// Fails without touching the file system when a layer has the wrong pixel count, a pixel
+/// is NaN or infinite ([`OutputError::NonFinite`]), layer names are invalid or duplicated,
+/// or a metadata key is invalid. Missing parent directories are created.
+pub fn write_exr(
+    path: &Path,
+    width: usize,
+    height: usize,
+    layers: &[ImageLayer],
+    meta: &ExrMetadata,
+) -> Result<(), OutputError> {
+    pixel_count(path, width, height)?;
+    if layers.is_empty() {
+        return Err(OutputError::InvalidLayer {
+            path: path.to_owned(),
+            layer: String::new(),
+            reason: "no layers to write".to_owned(),
+        });
+    }
+    let mut names = HashSet::new();
+    for layer in layers {
+        check_layer_name(path, &layer.name)?;
+        if !names.insert(layer.name.as_str()) {
+            return Err(OutputError::InvalidLayer {
+                path: path.to_owned(),
+                layer: layer.name.clone(),
+                reason: "duplicate layer name".to_owned(),
+            });
+        }
+        check_pixels(path, &layer.name, width, height, layer.pixels)?;
+    }
+
+    let mut attributes = LayerAttributes::default();
+    let mut keys = HashSet::new();
+    for (key, value) in &meta.entries {
+        let invalid = |reason: &str| OutputError::InvalidMetadata {
+            path: path.to_owned(),
+            key: key.clone(),
+            reason: reason.to_owned(),
+        };
+        if key.is_empty() {
+            return Err(invalid("empty key"));
+        }
+        if key.contains('\0') {
+            return Err(invalid("key contains a NUL byte"));
+        }
+        if key.len() > 255 {
+            return Err(invalid("key longer than 255 bytes"));
+        }
+        if !keys.insert(key.as_str()) {
+            return Err(invalid("duplicate key"));
+        }
+        if RESERVED_ATTRIBUTES.contains(&key.as_str()) {
+            return Err(invalid("reserved OpenEXR attribute name"));
+        }
+        let value = text(value);
+        match key.as_str() {
+            "software" => attributes.software_name = Some(value),
+            "comments" => attributes.comments = Some(value),
+            "owner" => attributes.owner = Some(value),
+            "capDate" => attributes.capture_date = Some(value),
+            _ => {
+                attributes
+                    .other
+                    .insert(text(key), AttributeValue::Text(value));
+            }
+        }
+    }
+
+    let mut channels = smallvec_of_channels(layers.len() * 3);
+    for layer in layers {
+        for (c, suffix) in ["R", "G", "B"].into_iter().enumerate() {
+            let name = if layer.name.is_empty() {
+                suffix.to_owned()
+            } else {
+                format!("{}.{suffix}", layer.name)
+            };
+            let samples: Vec<f32> = layer.pixels.iter().map(|p| p.to_array()[c]).collect();
+            channels.push(AnyChannel::new(text(&name), FlatSamples::F32(samples)));
+        }
+    }
+
+    let encoding = Encoding {
+        compression: Compression::ZIP16,
+        blocks: Blocks::ScanLines,
+        line_order: LineOrder::Increasing,
+    };
+    let layer = Layer::new(
+        Vec2(width, height),
+        attributes,
+        encoding,
+        AnyChannels::sort(channels),
+    );
+    let image = Image::from_layer(layer);
+
+    write_atomically(path, |tmp| {
+        image.write().to_file(tmp).map_err(|source| match source {
+            exr::error::Error::Io(source) => OutputError::Io {
+                path: path.to_owned(),
+                source,
+            },
+            source => OutputError::ExrEncode {
+                path: path.to_owned(),
+                source,
+            },
+        })
+    })
+}
+
+fn smallvec_of_channels(capacity: usize) -> exr::prelude::SmallVec<[AnyChannel<FlatSamples>; 4]> {
+    exr::prelude::SmallVec::with_capacity(capacity)
+}
+
+/// Layers as read back: `(layer name, width * height pixels)`, main layer (`""`) first.
+pub type NamedLayers = Vec<(String, Vec<Rgb>)>;
+
+/// Reads every RGB layer of an EXR file as `(width, height, [(layer name, pixels)])`.
+///
+/// Channels are grouped by the text before their last `.` (`R,G,B` → layer `""`,
+/// `layer1.R,...` → `"layer1"`); in multi-part files the part name is prepended
+/// (`part.layer`). Channels other than `R`, `G`, `B` (alpha, depth, ...) are ignored. The
+/// main layer `""` comes first, the others follow sorted by name. Half and uint samples are
+/// converted to `f32`.
+pub fn read_exr_rgb(path: &Path) -> Result<(usize, usize, NamedLayers), OutputError> {
+    use exr::prelude::traits::*;
+    let image = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .all_layers()
+        .all_attributes()
+        .from_file(path)
+        .map_err(|source| OutputError::ExrDecode {
+            path: path.to_owned(),
+            source,
+        })?;
+
+    let unsupported = |reason: String| OutputError::Unsupported {
+        path: path.to_owned(),
+        reason,
+    };
+    let first = image
+        .layer_data
+        .first()
+        .ok_or_else(|| unsupported("file has no parts".to_owned()))?;
+    let size = first.size;
+    let (width, height) = (size.0, size.1);
+    let count = width * height;
+
+    // layer name -> [R, G, B] samples
+    let mut groups: BTreeMap<String, [Option<Vec<f32>>; 3]> = BTreeMap::new();
+    for part in &image.layer_data {
+        if part.size != size {
+            return Err(unsupported(format!(
+                "parts differ in size ({}x{} vs {}x{})",
+                part.size.0, part.size.1, width, height
+            )));
+        }
+        let part_name = part.attributes.layer_name.as_ref().map(text_to_string);
+        for channel in &part.channel_data.list {
+            let full = text_to_string(&channel.name);
+            let (prefix, suffix) = match full.rfind('.') {
+                Some(i) => (&full[..i], &full[i + 1..]),
+                None => ("", full.as_str()),
+            };
+            let index = match suffix {
+                "R" => 0,
+                "G" => 1,
+                "B" => 2,
+                _ => continue,
+            };
+            if channel.sampling != Vec2(1, 1) {
+                return Err(unsupported(format!("channel {full:?} is subsampled")));
+            }
+            let layer = match (&part_name, prefix) {
+                (Some(p), "") if !p.is_empty() => p.clone(),
+                (Some(p), q) if !p.is_empty() => format!("{p}.{q}"),
+                _ => prefix.to_owned(),
+            };
+            let samples: Vec<f32> = channel.sample_data.values_as_f32().collect();
+            if samples.len() != count {
+                return Err(unsupported(format!(
+                    "channel {full:?} has {} samples",
+                    samples.len()
+                )));
+            }
+            let slot = &mut groups.entry(layer.clone()).or_default()[index];
+            if slot.is_some() {
+                return Err(unsupported(format!(
+                    "layer {layer:?} has channel {suffix} twice"
+                )));
+            }
+            *slot = Some(samples);
+        }
+    }
+
+    let mut layers = Vec::with_capacity(groups.len());
+    for (name, [r, g, b]) in groups {
+        let (Some(r), Some(g), Some(b)) = (r, g, b) else {
+            return Err(unsupported(format!("layer {name:?} lacks one of R, G, B")));
+        };
+        let pixels = (0..count).map(|i| Rgb::new(r[i], g[i], b[i])).collect();
+        layers.push((name, pixels));
+    }
+    // BTreeMap order puts "" first already; the rest are sorted by name.
+    Ok((width, height, layers))
+}
+
+/// Reads the string attributes of an EXR file (everything [`write_exr`] writes from
+/// [`ExrMetadata`], plus `software`, `comments`, `owner`, `capDate` when present), sorted by
+/// key. In multi-part files the first part's attributes are returned.
+pub fn read_exr_metadata(path: &Path) -> Result<ExrMetadata, OutputError> {
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|source| {
+        OutputError::ExrDecode {
+            path: path.to_owned(),
+            source,
+        }
+    })?;
+    let header = meta
+        .headers
+        .first()
+        .ok_or_else(|| OutputError::Unsupported {
+            path: path.to_owned(),
+            reason: "file has no parts".to_owned(),
+        })?;
+    let mut entries = BTreeMap::new();
+    let own = &header.own_attributes;
+    for (key, value) in [
+        ("software", &own.software_name),
+        ("comments", &own.comments),
+        ("owner", &own.owner),
+        ("capDate", &own.capture_date),
+    ] {
+        if let Some(value) = value {
+            entries.insert(key.to_owned(), text_to_string(value));
+        }
+    }
+    for (key, value) in own
+        .other
+        .iter()
+        .chain(header.shared_attributes.other.iter())
+    {
+        if let AttributeValue::Text(value) = value {
+            entries.insert(text_to_string(key), text_to_string(value));
+        }
+    }
+    Ok(ExrMetadata {
+        entries: entries.into_iter().collect(),
+    })
+}
+
+/// sRGB opto-electronic transfer function (IEC 61966-2-1), for `v` in `[0, 1]`.
+fn srgb_oetf(v: f32) -> f32 {
+    if v <= 0.003_130_8 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// Maps a linear value to an 8-bit sRGB code: `× scale`, clamp to `[0, 1]`, OETF, round.
+fn to_srgb8(v: f32, scale: f32) -> u8 {
+    let v = (v * scale).clamp(0.0, 1.0);
+    (srgb_oetf(v) * 255.0 + 0.5).floor() as u8
+}
+
+/// Writes an 8-bit sRGB PNG preview of linear `pixels`: each channel is multiplied by
+/// `2^exposure`, clamped to `[0, 1]`, encoded with the sRGB OETF and rounded. The file is
+/// tagged with an sRGB chunk and written atomically; parent directories are created.
+/// Non-finite pixels (and a non-finite exposure) are rejected like in [`write_exr`]
+/// (the layer is reported as `""`).
+pub fn write_png_preview(
+    path: &Path,
+    width: usize,
+    height: usize,
+    pixels: &[Rgb],
+    exposure: f32,
+) -> Result<(), OutputError> {
+    check_pixels(path, "", width, height, pixels)?;
+    let (w, h) = match (u32::try_from(width), u32::try_from(height)) {
+        (Ok(w), Ok(h)) => (w, h),
+        _ => {
+            return Err(OutputError::InvalidSize {
+                path: path.to_owned(),
+                width,
+                height,
+            })
+        }
+    };
+    let scale = exposure.exp2();
+    if !scale.is_finite() {
+        return Err(OutputError::NonFinite {
+            path: path.to_owned(),
+            layer: format!("exposure {exposure}"),
+            x: 0,
+            y: 0,
+        });
+    }
+    let mut bytes = Vec::with_capacity(pixels.len() * 3);
+    for p in pixels {
+        bytes.extend([
+            to_srgb8(p.r, scale),
+            to_srgb8(p.g, scale),
+            to_srgb8(p.b, scale),
+        ]);
+    }
+
+    write_atomically(path, |tmp| {
+        let io_err = |source| OutputError::Io {
+            path: path.to_owned(),
+            source,
+        };
+        let png_err = |source| OutputError::PngEncode {
+            path: path.to_owned(),
+            source,
+        };
+        let file = fs::File::create(tmp).map_err(io_err)?;
+        let mut out = BufWriter::new(file);
+        let mut encoder = png::Encoder::new(&mut out, w, h);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        encoder.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+        let mut writer = encoder.write_header().map_err(png_err)?;
+        writer.write_image_data(&bytes).map_err(png_err)?;
+        writer.finish().map_err(png_err)?;
+        out.flush().map_err(io_err)
+    })
+}
+
+/// Removes the temporary file when dropped, unless disarmed.
+struct TempGuard<'a> {
+    path: &'a Path,
+    armed: bool,
+}
+
+impl Drop for TempGuard<'_> {
+    fn drop(&mut self) {
+        if self.armed {
+            let _ = fs::remove_file(self.path);
+        }
+    }
+}
+
+/// Produces `path` atomically: creates missing parent directories, lets `write` fill a
+/// temporary file `.{file name}.tmp-{pid}-{n}` in the same directory, fsyncs it, renames
+/// it over `path` and (on Unix) fsyncs the directory. When `write`, the sync or the rename
+/// fails, the temporary file is removed and any existing file at `path` is left untouched.
+pub fn write_atomically(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<(), OutputError>,
+) -> Result<(), OutputError> {
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+
+    let io_err = |source| OutputError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let file_name = path.file_name().ok_or_else(|| {
+        io_err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            "path has no file name",
+        ))
+    })?;
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
+        _ => PathBuf::from("."),
+    };
+    fs::create_dir_all(&dir).map_err(|source| OutputError::CreateDir {
+        path: path.to_owned(),
+        dir: dir.clone(),
+        source,
+    })?;
+
+    let mut tmp_name = std::ffi::OsString::from(".");
+    tmp_name.push(file_name);
+    tmp_name.push(format!(
+        ".tmp-{}-{}",
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    ));
+    let tmp = dir.join(tmp_name);
+    let mut guard = TempGuard {
+        path: &tmp,
+        armed: true,
+    };
+
+    write(&tmp)?;
+    // Flush the data to disk before the rename makes it visible under the final name.
+    fs::OpenOptions::new()
+        .write(true)
+        .open(&tmp)
+        .and_then(|f| f.sync_all())
+        .map_err(io_err)?;
+    fs::rename(&tmp, path).map_err(io_err)?;
+    guard.armed = false;
+    drop(guard);
+
+    #[cfg(unix)]
+    {
+        // Best effort: persist the directory entry. Failure here does not undo the write.
+        if let Ok(d) = fs::File::open(&dir) {
+            let _ = d.sync_all();
+        }
+    }
+    Ok(())
+}

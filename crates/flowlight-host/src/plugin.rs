@@ -1,0 +1,409 @@
+//! Finding, loading and checking plugins, and the host-side wrappers of their tables.
+
+use crate::params::build_params;
+use flowlight_sdk::abi::{
+    self, ErrorBuf, FilmTable, IntegratorInfo, IntegratorTable, MutationTable, ParamSpec,
+    PluginDeclaration, SceneView, Status, TracerTable, WorkUnit,
+};
+use flowlight_sdk::{ParamKind, PluginKind};
+use libloading::Library;
+use std::ffi::c_void;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+#[derive(Debug, thiserror::Error)]
+pub enum PluginError {
+    #[error("plugin '{name}' not found (looked for {file} in: {searched})")]
+    NotFound {
+        name: String,
+        file: String,
+        searched: String,
+    },
+    #[error("cannot load plugin {path}: {message}")]
+    Load { path: PathBuf, message: String },
+    #[error(
+        "plugin {path} does not export `flowlight_plugin_declaration`; is it a Flowlight plugin?"
+    )]
+    NoDeclaration { path: PathBuf },
+    #[error("plugin {path} was refused: {what} mismatch (plugin has {plugin}, host has {host}); rebuild the plugin against this host's SDK")]
+    Mismatch {
+        path: PathBuf,
+        what: &'static str,
+        plugin: String,
+        host: String,
+    },
+    #[error("plugin {path} is a {found:?} plugin, but the config uses it as {expected:?}")]
+    WrongKind {
+        path: PathBuf,
+        expected: PluginKind,
+        found: PluginKind,
+    },
+    #[error("plugin '{name}' ({path}): {message}")]
+    Call {
+        name: String,
+        path: PathBuf,
+        message: String,
+    },
+}
+
+/// A parameter as listed by `flowlight plugins`.
+#[derive(Clone, Debug)]
+pub struct ParamInfo {
+    pub name: String,
+    pub kind: ParamKind,
+    pub default: String,
+    pub doc: String,
+}
+
+/// A loaded and checked plugin library. The declaration it points into lives as long as the
+/// library, which this value keeps loaded.
+pub struct PluginLibrary {
+    pub path: PathBuf,
+    pub name: String,
+    pub kind: PluginKind,
+    pub description: String,
+    pub sdk_version: String,
+    pub rustc_version: String,
+    decl: *const PluginDeclaration,
+    // Dropped last: every pointer above points into it.
+    _library: Library,
+}
+
+// SAFETY: the declaration is immutable static data of the loaded library.
+unsafe impl Send for PluginLibrary {}
+unsafe impl Sync for PluginLibrary {}
+
+/// File name of plugin `name` on this platform: `libflowlight_NAME.so` and the like.
+pub fn plugin_file_name(name: &str) -> String {
+    let stem = format!("flowlight_{}", name.replace('-', "_"));
+    format!(
+        "{}{stem}{}",
+        std::env::consts::DLL_PREFIX,
+        std::env::consts::DLL_SUFFIX
+    )
+}
+
+/// Directories searched for plugins, in order: those the config names, then
+/// `FLOWLIGHT_PLUGIN_PATH`, then the executable's directory (and, for test executables in
+/// Cargo's `deps/`, its parent).
+pub fn search_dirs(config_dirs: &[PathBuf]) -> Vec<PathBuf> {
+    let mut dirs: Vec<PathBuf> = config_dirs.to_vec();
+    if let Some(paths) = std::env::var_os("FLOWLIGHT_PLUGIN_PATH") {
+        dirs.extend(std::env::split_paths(&paths).filter(|p| !p.as_os_str().is_empty()));
+    }
+    if let Some(exe_dir) = std::env::current_exe()
+        .ok()
+        .and_then(|e| e.parent().map(Path::to_path_buf))
+    {
+        if exe_dir.file_name().is_some_and(|n| n == "deps") {
+            if let Some(parent) = exe_dir.parent() {
+                dirs.push(parent.to_path_buf());
+            }
+        }
+        dirs.push(exe_dir);
+    }
+    dirs
+}
+
+/// Finds plugin `name` in `dirs`. A name containing a path separator or ending in the
+/// platform's library suffix is taken as a file path.
+pub fn find_plugin(name: &str, dirs: &[PathBuf]) -> Result<PathBuf, PluginError> {
+    if name.contains(std::path::MAIN_SEPARATOR) || name.ends_with(std::env::consts::DLL_SUFFIX) {
+        let p = PathBuf::from(name);
+        return if p.is_file() {
+            Ok(p)
+        } else {
+            Err(PluginError::NotFound {
+                name: name.into(),
+                file: name.into(),
+                searched: "(given as a path)".into(),
+            })
+        };
+    }
+    let file = plugin_file_name(name);
+    dirs.iter()
+        .map(|d| d.join(&file))
+        .find(|p| p.is_file())
+        .ok_or_else(|| PluginError::NotFound {
+            name: name.into(),
+            file,
+            searched: dirs
+                .iter()
+                .map(|d| d.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", "),
+        })
+}
+
+/// Every plugin file in `dirs` (for `flowlight plugins`), deduplicated by file name.
+pub fn list_plugin_files(dirs: &[PathBuf]) -> Vec<PathBuf> {
+    let prefix = format!("{}flowlight_", std::env::consts::DLL_PREFIX);
+    let mut seen = std::collections::BTreeSet::new();
+    let mut out = Vec::new();
+    for d in dirs {
+        let Ok(entries) = std::fs::read_dir(d) else {
+            continue;
+        };
+        let mut files: Vec<PathBuf> = entries
+            .flatten()
+            .map(|e| e.path())
+            .filter(|p| {
+                p.file_name().and_then(|n| n.to_str()).is_some_and(|n| {
+                    n.starts_with(&prefix) && n.ends_with(std::env::consts::DLL_SUFFIX)
+                })
+            })
+            .collect();
+        files.sort();
+        for f in files {
+            if seen.insert(f.file_name().map(|n| n.to_os_string())) {
+                out.push(f);
+            }
+        }
+    }
+    out
+}
+
+impl PluginLibrary {
+    /// Loads the library at `path` and checks its declaration before anything else is called:
+    /// ABI version, layout hash, SDK version and rustc version must all equal the host's.
+    pub fn load(path: &Path) -> Result<PluginLibrary, PluginError> {
+        let path = path.to_path_buf();
+        // SAFETY: loading a library runs its initialisers; plugins are trusted code the user
+        // chose in the config.
+        let library = unsafe { Library::new(&path) }.map_err(|e| PluginError::Load {
+            path: path.clone(),
+            message: e.to_string(),
+        })?;
+        // SAFETY: the symbol's type is fixed by the ABI.
+        let decl = unsafe {
+            let f = library
+                .get::<unsafe extern "C" fn() -> *const PluginDeclaration>(abi::DECLARATION_SYMBOL)
+                .map_err(|_| PluginError::NoDeclaration { path: path.clone() })?;
+            f()
+        };
+        if decl.is_null() {
+            return Err(PluginError::NoDeclaration { path });
+        }
+        // SAFETY: `abi_version` and `layout_hash` keep their place in every ABI version; the
+        // rest is read only after both match.
+        let d = unsafe { &*decl };
+        let mismatch = |what, plugin: String, host: String| PluginError::Mismatch {
+            path: path.clone(),
+            what,
+            plugin,
+            host,
+        };
+        if d.abi_version != abi::ABI_VERSION {
+            return Err(mismatch(
+                "ABI version",
+                d.abi_version.to_string(),
+                abi::ABI_VERSION.to_string(),
+            ));
+        }
+        if d.layout_hash != abi::layout_hash() {
+            return Err(mismatch(
+                "type layout",
+                format!("{:016x}", d.layout_hash),
+                format!("{:016x}", abi::layout_hash()),
+            ));
+        }
+        // SAFETY: the declaration's strings are static data of the library.
+        let (sdk, rustc, name, description) = unsafe {
+            (
+                d.sdk_version.as_str(),
+                d.rustc_version.as_str(),
+                d.name.as_str(),
+                d.description.as_str(),
+            )
+        };
+        if sdk != abi::SDK_VERSION {
+            return Err(mismatch("SDK version", sdk.into(), abi::SDK_VERSION.into()));
+        }
+        if rustc != abi::RUSTC_VERSION {
+            return Err(mismatch(
+                "rustc version",
+                rustc.into(),
+                abi::RUSTC_VERSION.into(),
+            ));
+        }
+        let kind = d.kind;
+        let table_ok = match kind {
+            PluginKind::Integrator => !d.integrator.is_null(),
+            PluginKind::Mutation => !d.mutation.is_null(),
+        };
+        if !table_ok {
+            return Err(PluginError::NoDeclaration { path });
+        }
+        Ok(PluginLibrary {
+            name: name.to_string(),
+            kind,
+            description: description.to_string(),
+            sdk_version: sdk.to_string(),
+            rustc_version: rustc.to_string(),
+            path,
+            decl,
+            _library: library,
+        })
+    }
+
+    fn decl(&self) -> &PluginDeclaration {
+        // SAFETY: checked non-null at load; valid while the library is loaded.
+        unsafe { &*self.decl }
+    }
+
+    pub fn param_specs(&self) -> &[ParamSpec] {
+        let d = self.decl();
+        if d.params.is_null() || d.param_count == 0 {
+            return &[];
+        }
+        // SAFETY: the plugin declares `param_count` static specs.
+        unsafe { std::slice::from_raw_parts(d.params, d.param_count) }
+    }
+
+    pub fn params(&self) -> Vec<ParamInfo> {
+        self.param_specs()
+            .iter()
+            .map(|s| unsafe {
+                // SAFETY: static strings of the loaded library.
+                ParamInfo {
+                    name: s.name.as_str().into(),
+                    kind: s.kind,
+                    default: s.default.as_str().into(),
+                    doc: s.doc.as_str().into(),
+                }
+            })
+            .collect()
+    }
+
+    fn integrator_table(&self) -> Result<IntegratorTable, PluginError> {
+        match self.kind {
+            // SAFETY: non-null checked at load.
+            PluginKind::Integrator => Ok(unsafe { *self.decl().integrator }),
+            found => Err(PluginError::WrongKind {
+                path: self.path.clone(),
+                expected: PluginKind::Integrator,
+                found,
+            }),
+        }
+    }
+
+    /// The mutation table, for mutation plugins.
+    pub fn mutation_table(&self) -> Result<MutationTable, PluginError> {
+        match self.kind {
+            // SAFETY: non-null checked at load.
+            PluginKind::Mutation => Ok(unsafe { *self.decl().mutation }),
+            found => Err(PluginError::WrongKind {
+                path: self.path.clone(),
+                expected: PluginKind::Mutation,
+                found,
+            }),
+        }
+    }
+
+    fn call_error(&self, status: Status, err: &ErrorBuf) -> PluginError {
+        let what = if status == Status::Panic {
+            "panicked"
+        } else {
+            "failed"
+        };
+        let msg = err.message();
+        PluginError::Call {
+            name: self.name.clone(),
+            path: self.path.clone(),
+            message: if msg.starts_with("panicked") || status != Status::Panic {
+                msg
+            } else {
+                format!("{what}: {msg}")
+            },
+        }
+    }
+}
+
+/// An integrator plugin instance. Keeps its library and the scene view it was given alive.
+pub struct IntegratorInstance {
+    plugin: Arc<PluginLibrary>,
+    table: IntegratorTable,
+    instance: *mut c_void,
+    pub info: IntegratorInfo,
+    // The plugin may keep pointers into the view for its whole life.
+    _view: Box<SceneView>,
+}
+
+// SAFETY: the SDK requires integrators to be Send + Sync; the host calls `render` concurrently.
+unsafe impl Send for IntegratorInstance {}
+unsafe impl Sync for IntegratorInstance {}
+
+impl IntegratorInstance {
+    /// Creates an instance with `params` from the config.
+    ///
+    /// # Safety
+    /// The data `view` points to must outlive the instance.
+    pub unsafe fn create(
+        plugin: Arc<PluginLibrary>,
+        params: &[(String, toml::Value)],
+        view: SceneView,
+    ) -> Result<IntegratorInstance, PluginError> {
+        let table = plugin.integrator_table()?;
+        let list = build_params(&plugin.name, plugin.param_specs(), params).map_err(|message| {
+            PluginError::Call {
+                name: plugin.name.clone(),
+                path: plugin.path.clone(),
+                message,
+            }
+        })?;
+        let view = Box::new(view);
+        let mut instance = std::ptr::null_mut();
+        let mut info = IntegratorInfo {
+            layer_count: 0,
+            accumulation: abi::AccumulationStyle::Tile,
+            flange: 0,
+            biased: 0,
+        };
+        let mut err = ErrorBuf::default();
+        let status = (table.create)(
+            list.as_slice().as_ptr(),
+            list.as_slice().len(),
+            &*view,
+            &mut instance,
+            &mut info,
+            &mut err,
+        );
+        if status != Status::Ok {
+            return Err(plugin.call_error(status, &err));
+        }
+        Ok(IntegratorInstance {
+            plugin,
+            table,
+            instance,
+            info,
+            _view: view,
+        })
+    }
+
+    pub fn plugin(&self) -> &PluginLibrary {
+        &self.plugin
+    }
+
+    /// Renders one work unit through the plugin.
+    pub fn render(
+        &self,
+        unit: &WorkUnit,
+        tracer: &TracerTable,
+        film: &FilmTable,
+    ) -> Result<(), PluginError> {
+        let mut err = ErrorBuf::default();
+        // SAFETY: all pointers are valid for the call; the instance is alive.
+        let status = unsafe { (self.table.render)(self.instance, unit, tracer, film, &mut err) };
+        if status != Status::Ok {
+            return Err(self.plugin.call_error(status, &err));
+        }
+        Ok(())
+    }
+}
+
+impl Drop for IntegratorInstance {
+    fn drop(&mut self) {
+        // SAFETY: created by this table's `create`, destroyed once.
+        unsafe { (self.table.destroy)(self.instance) };
+    }
+}

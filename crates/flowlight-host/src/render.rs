@@ -1,0 +1,210 @@
+//! The scheduler: splits the image into tiles and passes of samples, runs the work units on
+//! the host's one rayon pool, merges finished tiles, and stops cleanly when asked.
+
+use crate::film::{Frame, TileAccumulator};
+use crate::intersector::{Intersector, UnitTracer};
+use crate::plugin::{IntegratorInstance, PluginError};
+use flowlight_scene::Scene;
+use flowlight_sdk::{Accumulator, WorkUnit};
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+/// How much to render.
+#[derive(Clone, Debug)]
+pub struct RenderOptions {
+    /// Samples per pixel; ignored when `time` is set.
+    pub spp: u32,
+    /// Wall-clock budget: passes are started until it runs out.
+    pub time: Option<Duration>,
+    /// Threads in the pool (0: one per core).
+    pub threads: usize,
+    pub tile_size: u32,
+    pub seed: u64,
+}
+
+/// Counters of a finished (or stopped) render.
+#[derive(Clone, Debug, Default)]
+pub struct RenderStats {
+    pub wall: Duration,
+    pub threads: usize,
+    /// Completed camera samples (pixel × sample).
+    pub pixel_samples: u64,
+    pub closest_rays: u64,
+    pub shadow_rays: u64,
+    /// NaN/Inf/negative deposits: counted, never written.
+    pub invalid_deposits: u64,
+    pub stray_deposits: u64,
+    pub units: u64,
+    /// True when the render stopped before its budget (Ctrl-C or a plugin error).
+    pub interrupted: bool,
+}
+
+impl RenderStats {
+    pub fn rays(&self) -> u64 {
+        self.closest_rays + self.shadow_rays
+    }
+}
+
+/// Progress reported after each finished unit.
+#[derive(Clone, Copy, Debug)]
+pub struct Progress {
+    pub pixel_samples: u64,
+    /// Total planned pixel samples, or 0 for a time budget.
+    pub planned: u64,
+    pub elapsed: Duration,
+    pub budget: Option<Duration>,
+}
+
+/// What a render produced; `error` is set when a plugin failed, in which case `frame` still
+/// holds every unit finished before it.
+pub struct RenderOutcome {
+    pub frame: Frame,
+    pub stats: RenderStats,
+    pub error: Option<PluginError>,
+}
+
+fn tiles(width: u32, height: u32, size: u32) -> Vec<(u32, u32, u32, u32)> {
+    let size = size.max(1);
+    let mut out = Vec::new();
+    for y0 in (0..height).step_by(size as usize) {
+        for x0 in (0..width).step_by(size as usize) {
+            out.push((x0, y0, (x0 + size).min(width), (y0 + size).min(height)));
+        }
+    }
+    out
+}
+
+/// Renders with `instance` until the budget is spent or `stop` is set.
+pub fn render(
+    instance: &IntegratorInstance,
+    scene: &Scene,
+    intersector: &dyn Intersector,
+    width: u32,
+    height: u32,
+    opts: &RenderOptions,
+    stop: &AtomicBool,
+    progress: &(dyn Fn(&Progress) + Sync),
+) -> Result<RenderOutcome, String> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(opts.threads)
+        .thread_name(|i| format!("flowlight-worker-{i}"))
+        .build()
+        .map_err(|e| format!("cannot start the thread pool: {e}"))?;
+    let threads = pool.current_num_threads();
+    let layer_count = instance.info.layer_count;
+    let frame = Mutex::new(Frame::new(width, height, layer_count));
+    let tiles = tiles(width, height, opts.tile_size);
+    let start = Instant::now();
+    let deadline = opts.time.map(|t| start + t);
+    let planned = if opts.time.is_some() {
+        0
+    } else {
+        opts.spp as u64 * width as u64 * height as u64
+    };
+
+    let done = AtomicU64::new(0);
+    let closest = AtomicU64::new(0);
+    let shadow = AtomicU64::new(0);
+    let invalid = AtomicU64::new(0);
+    let stray = AtomicU64::new(0);
+    let units = AtomicU64::new(0);
+    let error: Mutex<Option<PluginError>> = Mutex::new(None);
+    let halted = AtomicBool::new(false);
+    let out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
+
+    let mut sample_begin = 0u32;
+    let mut pass_spp = 1u32;
+    pool.install(|| loop {
+        let remaining = if opts.time.is_some() {
+            u32::MAX
+        } else {
+            opts.spp - sample_begin
+        };
+        if remaining == 0
+            || stop.load(Ordering::Relaxed)
+            || halted.load(Ordering::Relaxed)
+            || out_of_time()
+        {
+            break;
+        }
+        let count = pass_spp.min(remaining);
+        tiles.par_iter().for_each(|&(x0, y0, x1, y1)| {
+            if stop.load(Ordering::Relaxed) || halted.load(Ordering::Relaxed) || out_of_time() {
+                return;
+            }
+            let unit = WorkUnit {
+                x0,
+                y0,
+                x1,
+                y1,
+                sample_begin,
+                sample_count: count,
+                seed: opts.seed,
+            };
+            let mut tile = TileAccumulator::new(x0, y0, x1, y1, layer_count);
+            let mut tracer = UnitTracer::new(scene, intersector);
+            let result = instance.render(&unit, &tracer.table(), &tile.table());
+            closest.fetch_add(tracer.counts.closest, Ordering::Relaxed);
+            shadow.fetch_add(tracer.counts.shadow, Ordering::Relaxed);
+            if let Err(e) = result {
+                halted.store(true, Ordering::Relaxed);
+                error.lock().unwrap().get_or_insert(e);
+                return;
+            }
+            invalid.fetch_add(tile.counts.invalid, Ordering::Relaxed);
+            stray.fetch_add(tile.counts.stray, Ordering::Relaxed);
+            frame.lock().unwrap().merge(&tile, count);
+            units.fetch_add(1, Ordering::Relaxed);
+            let pixels = ((x1 - x0) * (y1 - y0)) as u64;
+            let d =
+                done.fetch_add(pixels * count as u64, Ordering::Relaxed) + pixels * count as u64;
+            progress(&Progress {
+                pixel_samples: d,
+                planned,
+                elapsed: start.elapsed(),
+                budget: opts.time,
+            });
+        });
+        sample_begin += count;
+        // Short passes first for a quick preview, then longer ones to amortise scheduling.
+        pass_spp = (pass_spp * 2).min(16);
+    });
+
+    let error = error.into_inner().unwrap();
+    let pixel_samples = done.load(Ordering::Relaxed);
+    let interrupted = error.is_some() || (opts.time.is_none() && pixel_samples < planned);
+    let stats = RenderStats {
+        wall: start.elapsed(),
+        threads,
+        pixel_samples,
+        closest_rays: closest.load(Ordering::Relaxed),
+        shadow_rays: shadow.load(Ordering::Relaxed),
+        invalid_deposits: invalid.load(Ordering::Relaxed),
+        stray_deposits: stray.load(Ordering::Relaxed),
+        units: units.load(Ordering::Relaxed),
+        interrupted,
+    };
+    Ok(RenderOutcome {
+        frame: frame.into_inner().unwrap(),
+        stats,
+        error,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::tiles;
+
+    #[test]
+    fn tiles_cover_the_image_once() {
+        let t = tiles(70, 33, 32);
+        assert_eq!(t.len(), 3 * 2);
+        let area: u32 = t
+            .iter()
+            .map(|&(x0, y0, x1, y1)| (x1 - x0) * (y1 - y0))
+            .sum();
+        assert_eq!(area, 70 * 33);
+    }
+}

@@ -1,0 +1,45 @@
+//! Unidirectional path samplers shared by plugins (compiled into each, so they inline).
+//!
+//! * [`untangled`]: one light connection per path (thesis §3.7); ERPT's seed sampler.
+//! * [`entangled`]: next-event estimation at every vertex combined with BSDF sampling by
+//!   multiple importance sampling.
+//!
+//! Both track the physical ray depth (every scattering event, capped by `max_ray_depth`) and
+//! the virtual, lighting depth (thesis §2): scattering events counted from the first
+//! non-specular vertex, so a chain of mirrors seen from the camera does not use up lighting
+//! layers. A contribution found with lighting depth k belongs to lighting layer k (paths of
+//! virtual length k + 1); the path-space depth N is the deepest layer.
+
+pub mod entangled;
+pub mod settings;
+mod shading;
+pub mod untangled;
+
+pub use settings::{PathSettings, Variant};
+
+use flowlight_core::Rgb;
+
+/// Contributions of one camera sample, per lighting layer. Deposited only if all are valid.
+#[derive(Clone, Debug, Default)]
+pub struct SampleContributions {
+    pub entries: Vec<(u32, Rgb)>,
+}
+
+impl SampleContributions {
+    pub fn clear(&mut self) {
+        self.entries.clear();
+    }
+    #[inline]
+    pub fn add(&mut self, layer: u32, value: Rgb) {
+        if !value.is_black() {
+            self.entries.push((layer, value));
+        }
+    }
+    pub fn total(&self) -> Rgb {
+        self.entries.iter().fold(Rgb::ZERO, |a, &(_, v)| a + v)
+    }
+    /// True when every contribution is finite and non-negative.
+    pub fn is_valid(&self) -> bool {
+        self.entries.iter().all(|(_, v)| v.is_valid_radiance())
+    }
+}

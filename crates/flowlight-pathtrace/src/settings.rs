@@ -1,0 +1,62 @@
+//! Parameters of the path samplers.
+
+use flowlight_core::termination::{TerminationDistribution, TerminationSchedule};
+use flowlight_sdk::{param, ParamKind, Params};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Variant {
+    Untangled,
+    Entangled,
+}
+
+/// Depth limits and the termination distribution.
+#[derive(Clone, Debug)]
+pub struct PathSettings {
+    pub variant: Variant,
+    /// Path-space depth N: deepest lighting layer (paths of virtual length ≤ N + 1).
+    pub path_depth: u32,
+    /// Maximal ray-trace depth: cap on physical scattering events, mirrors included.
+    pub max_ray_depth: u32,
+    pub termination: TerminationSchedule,
+}
+
+/// Parameters every path-sampling plugin accepts (user documentation in each plugin header).
+pub const PATH_PARAMS: [flowlight_sdk::abi::ParamSpec; 4] = [
+    param("variant", ParamKind::String, "\"entangled\"", "\"untangled\" (one light connection per path) or \"entangled\" (NEE + MIS at every vertex)"),
+    param("termination", ParamKind::String, "\"bxdf\"", "depth-based termination distribution: \"bxdf\", \"equi\" or \"expo\" (thesis §3.8)"),
+    param("path_depth", ParamKind::Int, "8", "path-space depth N: deepest lighting layer rendered (1..=32)"),
+    param("max_ray_depth", ParamKind::Int, "64", "maximal physical ray depth, mirror and glass bounces included (>= path_depth)"),
+];
+
+impl PathSettings {
+    pub fn from_params(p: &Params) -> Result<Self, String> {
+        let variant = match p.choice("variant", "entangled", &["untangled", "entangled"])? {
+            "untangled" => Variant::Untangled,
+            _ => Variant::Entangled,
+        };
+        let termination = TerminationDistribution::parse(p.choice(
+            "termination",
+            "bxdf",
+            &["bxdf", "equi", "expo"],
+        )?)
+        .expect("validated choice");
+        let path_depth = p.int("path_depth", 8)?;
+        if !(1..=32).contains(&path_depth) {
+            return Err(format!(
+                "parameter 'path_depth' must be in 1..=32, got {path_depth}"
+            ));
+        }
+        let max_ray_depth = p.int("max_ray_depth", 64)?;
+        if max_ray_depth < path_depth || max_ray_depth > 1024 {
+            return Err(format!(
+                "parameter 'max_ray_depth' must be in path_depth..=1024 ({path_depth}..=1024), got {max_ray_depth}"
+            ));
+        }
+        Ok(PathSettings {
+            variant,
+            path_depth: path_depth as u32,
+            max_ray_depth: max_ray_depth as u32,
+            termination: TerminationSchedule::new(termination, path_depth as u32),
+        })
+    }
+}

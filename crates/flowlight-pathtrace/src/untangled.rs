@@ -1,0 +1,224 @@
+//! Untangled MCPT (thesis §3.6–3.7): every path has exactly one connection to a light.
+//!
+//! At each vertex the sampler first picks a BSDF component (the strong node type, probability
+//! p_m). At a Λβ vertex with lighting depth k it ends the path with an explicit light
+//! connection with probability T_k, or extends it with probability 1 − T_k; light hit by
+//! an extension from a Λβ vertex is ignored (the connection branch estimates it). At a Λα
+//! vertex (specular, narrow glossy) it always extends, and an emitter hit after it ends the
+//! path as an implicit path, with probability ζ_e when the emitter also scatters. Estimator:
+//!
+//!   X = L_e · Π wᵢfᵢ·|cos| / (p_m · p_d · (1 − T)) · w f·G / (p_m · T · p_A)   (explicit)
+//!   X = L_e / ζ_e · Π wᵢfᵢ·|cos| / (p_m · p_d · (1 − T))                       (implicit)
+//!
+//! where fᵢ is the chosen component and wᵢ its mixture weight. Components are chosen with
+//! p_m = wᵢ, so each factor wᵢfᵢ/p_m reduces to fᵢ.
+
+use crate::settings::PathSettings;
+use crate::shading::{connect_light, side_consistent, Shading};
+use flowlight_core::camera::Camera;
+use flowlight_core::path::{NodeClass, NodeType, Path, PathVertex};
+use flowlight_core::rng::Rng;
+use flowlight_core::Rgb;
+use flowlight_sdk::{Scene, Tracer};
+use glam::Vec2;
+
+/// Probability of ending at an emitter that also scatters light (ζ_e in thesis §3.6).
+pub const EMISSION_TERMINATION: f32 = 0.5;
+
+/// One path sample: its estimate and its lighting layer. `value` is zero for paths that did
+/// not reach a light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PathSample {
+    pub value: Rgb,
+    pub layer: u32,
+}
+
+fn vertex(hit: &flowlight_core::geometry::SurfaceHit, node: NodeType, component: u8) -> PathVertex {
+    PathVertex {
+        p: hit.p,
+        p_error: hit.p_error,
+        ng: hit.ng,
+        ns: hit.ns,
+        uv: hit.uv,
+        prim: hit.prim,
+        material: hit.material,
+        emitter: hit.emitter,
+        node,
+        component,
+    }
+}
+
+/// Records vertices into an optional [`Path`] (ERPT seeds keep them; MCPT does not).
+struct Recorder<'p> {
+    path: Option<&'p mut Path>,
+}
+
+impl Recorder<'_> {
+    fn push(&mut self, v: PathVertex) -> bool {
+        match self.path.as_deref_mut() {
+            None => true,
+            Some(p) => {
+                let i = p.vertex_count as usize;
+                if i >= p.vertices.len() {
+                    return false;
+                }
+                p.vertices[i] = v;
+                p.vertex_count += 1;
+                true
+            }
+        }
+    }
+}
+
+/// Traces one untangled path through raster position `raster`. When `record` is given, the
+/// path's vertices, layer and contribution are stored in it (vertex_count = 0 when the path
+/// carries no light).
+pub fn trace(
+    scene: &Scene,
+    tracer: &Tracer,
+    settings: &PathSettings,
+    rng: &mut Rng,
+    raster: Vec2,
+    record: Option<&mut Path>,
+) -> PathSample {
+    let camera: &Camera = &scene.camera;
+    let mut rec = Recorder { path: record };
+    if let Some(p) = rec.path.as_deref_mut() {
+        p.raster = raster;
+        p.vertex_count = 0;
+        p.contribution = Rgb::ZERO;
+    }
+    let none = PathSample {
+        value: Rgb::ZERO,
+        layer: 0,
+    };
+    let eye = PathVertex {
+        p: camera.position,
+        p_error: glam::Vec3::ZERO,
+        ng: camera.forward,
+        ns: camera.forward,
+        uv: Vec2::ZERO,
+        prim: u32::MAX,
+        material: u32::MAX,
+        emitter: -1,
+        node: NodeType::Eye,
+        component: 0,
+    };
+    rec.push(eye);
+
+    let mut ray = camera.generate_ray(raster);
+    let mut beta = Rgb::ONE;
+    let mut depth = 0u32; // lighting (virtual) depth of the last vertex
+    let mut physical = 0u32;
+    let mut after_alpha = true; // the eye behaves like a specular vertex
+    let finish = |rec: &mut Recorder, value: Rgb, layer: u32| {
+        if let Some(p) = rec.path.as_deref_mut() {
+            p.contribution = value;
+            p.layer = layer;
+        }
+        PathSample { value, layer }
+    };
+
+    loop {
+        let Some(hit) = tracer.intersect(&ray) else {
+            return none;
+        };
+        let wo_world = -ray.dir;
+        let bsdf = scene.bsdf(&hit);
+
+        if hit.emitter >= 0 && after_alpha {
+            let le = scene.lights.emitters[hit.emitter as usize].radiance_towards(wo_world);
+            if !le.is_black() {
+                let zeta = if bsdf.albedo() > 0.0 {
+                    EMISSION_TERMINATION
+                } else {
+                    1.0
+                };
+                if rng.uniform() < zeta {
+                    if !rec.push(vertex(&hit, NodeType::Light, 0)) {
+                        return none;
+                    }
+                    return finish(&mut rec, beta * le / zeta, depth);
+                }
+                beta /= 1.0 - zeta;
+            }
+        }
+
+        physical += 1;
+        let shading = Shading::new(&hit, wo_world);
+        let (c, _p_select) = bsdf.choose_component(rng.uniform());
+        let component = bsdf.component(c);
+        let class = component.class();
+        // A Λα vertex before any lighting vertex belongs to the primordial mirror chain.
+        let next_depth = if depth == 0 && class == NodeClass::Alpha {
+            0
+        } else {
+            depth + 1
+        };
+        if next_depth > settings.path_depth {
+            return none;
+        }
+        depth = next_depth;
+
+        if class == NodeClass::Beta {
+            let t = settings.termination.probability(depth, component.albedo());
+            if rng.uniform() < t {
+                // Explicit path: connect this vertex to a point on a light.
+                let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) else {
+                    return none;
+                };
+                let Some(conn) = connect_light(scene, tracer, &hit, &shading, ls) else {
+                    return none;
+                };
+                let f = component.eval(shading.wo, conn.wi_local);
+                // The mixture weight of the chosen component equals its selection
+                // probability p_m, so w·f / p_m = f: the component's own value is the estimate.
+                let value = beta
+                    * f
+                    * conn.radiance
+                    * (conn.wi_local.z.abs() * conn.geometry / (t * conn.pdf_area));
+                let node = component.node_type(shading.wo, conn.wi_local);
+                if !rec.push(vertex(&hit, node, c as u8)) {
+                    return none;
+                }
+                let light = flowlight_core::geometry::SurfaceHit {
+                    t: 0.0,
+                    p: ls.p,
+                    p_error: ls.p_error,
+                    ng: ls.n,
+                    ns: ls.n,
+                    uv: Vec2::ZERO,
+                    prim: scene.lights.emitters[ls.emitter as usize].prim,
+                    material: u32::MAX,
+                    emitter: ls.emitter as i32,
+                };
+                if !rec.push(vertex(&light, NodeType::Light, 0)) {
+                    return none;
+                }
+                return finish(&mut rec, value, depth);
+            }
+            beta /= 1.0 - t;
+        }
+
+        if physical >= settings.max_ray_depth {
+            return none;
+        }
+        let Some(s) = component.sample_with(shading.wo, rng.uniform(), rng.uniform2()) else {
+            return none;
+        };
+        let wi_world = shading.frame.to_world(s.wi);
+        if s.pdf <= 0.0 || !side_consistent(&hit, wi_world, s.wi) {
+            return none;
+        }
+        // As above, the component's weight cancels its selection probability.
+        beta *= s.f * (s.wi.z.abs() / s.pdf);
+        if beta.is_black() {
+            return none;
+        }
+        if !rec.push(vertex(&hit, s.node, c as u8)) {
+            return none;
+        }
+        after_alpha = class == NodeClass::Alpha;
+        ray = hit.spawn_ray(wi_world);
+    }
+}

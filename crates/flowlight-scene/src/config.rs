@@ -1,0 +1,501 @@
+//! The TOML render configuration.
+//!
+//! Every relative path in the file (`scene`, `[output]`, `[plugins] search_paths`) is relative
+//! to the folder of the config file, not to the current directory; [`load_config`] resolves
+//! them to absolute paths. Unknown keys are errors everywhere except among the integrator's
+//! parameters, which belong to the plugin and are kept in file order.
+//!
+//! ```toml
+//! scene = "cornell-box.gltf"
+//! [render]
+//! width = 512
+//! height = 512
+//! spp = 64            # or time = 30.0 (seconds); not both; default spp = 16
+//! seed = 1
+//! threads = 0         # 0 = all cores
+//! tile_size = 32
+//! intersector = "bvh" # "bvh" | "embree" | "auto" (default "auto")
+//! [camera]            # optional, overrides the glTF camera key by key
+//! position = [0.278, 0.273, -0.8]
+//! look_at = [0.278, 0.273, 0.0]   # or forward = [...]
+//! up = [0.0, 1.0, 0.0]
+//! fov_y = 39.3        # degrees
+//! [integrator]
+//! plugin = "mcpt"
+//! variant = "entangled"           # every other key is a plugin parameter
+//! [output]
+//! exr = "cornell-box.exr"         # default: <config file stem>.exr
+//! png = "cornell-box.png"         # optional sRGB preview
+//! [plugins]
+//! search_paths = ["../my-plugins"]
+//! [materials.white]
+//! diffuse = "oren-nayar"          # or "lambert"
+//! sigma_degrees = 20.0
+//! ```
+
+use crate::error::ConfigError;
+use crate::material::MaterialOverride;
+use crate::scene::Scene;
+use flowlight_core::camera::Camera;
+use glam::Vec3;
+use serde::de::{self, MapAccess, Visitor};
+use serde::{Deserialize, Deserializer};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// Which ray intersector the host should use.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Intersector {
+    Bvh,
+    Embree,
+    Auto,
+}
+
+/// How long to render.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SampleBudget {
+    /// Samples per pixel.
+    Spp(u32),
+    /// Seconds of rendering.
+    Time(f64),
+}
+
+/// The optional `[camera]` table: each key present replaces that part of the glTF camera.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CameraOverride {
+    pub position: Option<Vec3>,
+    pub look_at: Option<Vec3>,
+    pub forward: Option<Vec3>,
+    pub up: Option<Vec3>,
+    /// Vertical field of view in degrees.
+    pub fov_y: Option<f32>,
+}
+
+/// A validated render configuration with absolute paths.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderConfig {
+    /// The config file itself.
+    pub path: PathBuf,
+    /// Its folder, against which relative paths were resolved.
+    pub base_dir: PathBuf,
+    pub scene: PathBuf,
+    pub width: u32,
+    pub height: u32,
+    pub budget: SampleBudget,
+    pub seed: u64,
+    /// Worker threads; 0 = all cores.
+    pub threads: usize,
+    pub tile_size: u32,
+    pub intersector: Intersector,
+    pub camera_override: Option<CameraOverride>,
+    pub integrator_plugin: String,
+    /// The integrator's parameters (every key of `[integrator]` but `plugin`), in file order.
+    pub integrator_params: Vec<(String, toml::Value)>,
+    pub output_exr: PathBuf,
+    pub output_png: Option<PathBuf>,
+    pub plugin_search_paths: Vec<PathBuf>,
+    pub material_overrides: BTreeMap<String, MaterialOverride>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawConfig {
+    scene: String,
+    #[serde(default)]
+    render: RawRender,
+    camera: Option<RawCamera>,
+    integrator: RawIntegrator,
+    #[serde(default)]
+    output: RawOutput,
+    #[serde(default)]
+    plugins: RawPlugins,
+    #[serde(default)]
+    materials: BTreeMap<String, MaterialOverride>,
+}
+
+fn default_size() -> u32 {
+    512
+}
+fn default_tile() -> u32 {
+    32
+}
+fn default_intersector() -> String {
+    "auto".into()
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRender {
+    #[serde(default = "default_size")]
+    width: u32,
+    #[serde(default = "default_size")]
+    height: u32,
+    spp: Option<u32>,
+    time: Option<f64>,
+    #[serde(default)]
+    seed: u64,
+    #[serde(default)]
+    threads: usize,
+    #[serde(default = "default_tile")]
+    tile_size: u32,
+    #[serde(default = "default_intersector")]
+    intersector: String,
+}
+
+impl Default for RawRender {
+    fn default() -> Self {
+        RawRender {
+            width: default_size(),
+            height: default_size(),
+            spp: None,
+            time: None,
+            seed: 0,
+            threads: 0,
+            tile_size: default_tile(),
+            intersector: default_intersector(),
+        }
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCamera {
+    position: Option<[f32; 3]>,
+    look_at: Option<[f32; 3]>,
+    forward: Option<[f32; 3]>,
+    up: Option<[f32; 3]>,
+    fov_y: Option<f32>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawOutput {
+    exr: Option<String>,
+    png: Option<String>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawPlugins {
+    #[serde(default)]
+    search_paths: Vec<String>,
+}
+
+/// `[integrator]`: `plugin` plus free parameters, kept in file order (the toml crate's map is
+/// sorted, so the order is recovered from each key's position in the file).
+struct RawIntegrator {
+    plugin: String,
+    params: Vec<(String, toml::Value)>,
+}
+
+impl<'de> Deserialize<'de> for RawIntegrator {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = RawIntegrator;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("an [integrator] table with a `plugin` key")
+            }
+            fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<RawIntegrator, A::Error> {
+                let mut plugin = None;
+                let mut params: Vec<(usize, String, toml::Value)> = Vec::new();
+                while let Some(key) = map.next_key::<toml::Spanned<String>>()? {
+                    let at = key.span().start;
+                    let key = key.into_inner();
+                    if key == "plugin" {
+                        plugin = Some(map.next_value::<String>()?);
+                    } else {
+                        params.push((at, key, map.next_value::<toml::Value>()?));
+                    }
+                }
+                params.sort_by_key(|p| p.0);
+                Ok(RawIntegrator {
+                    plugin: plugin.ok_or_else(|| de::Error::missing_field("plugin"))?,
+                    params: params.into_iter().map(|(_, k, v)| (k, v)).collect(),
+                })
+            }
+        }
+        d.deserialize_map(V)
+    }
+}
+
+/// Line (1-based) and dotted key that a toml error's span points at.
+fn locate(text: &str, err: &toml::de::Error) -> (usize, String) {
+    let msg = err.message();
+    let quoted = |prefix: &str| {
+        msg.find(prefix).and_then(|i| {
+            let rest = &msg[i + prefix.len()..];
+            rest.find('`').map(|j| rest[..j].to_string())
+        })
+    };
+    let Some(span) = err.span() else {
+        return (0, quoted("field `").unwrap_or_default());
+    };
+    let start = span.start.min(text.len());
+    let line_no = text[..start].matches('\n').count() + 1;
+    let line_start = text[..start].rfind('\n').map_or(0, |i| i + 1);
+    let line = text[line_start..].lines().next().unwrap_or("").trim();
+    let header_of = |l: &str| -> Option<String> {
+        let l = l.trim();
+        l.strip_prefix('[')
+            .and_then(|h| h.split(']').next())
+            .map(|h| h.trim_matches('[').trim().to_string())
+    };
+    let join = |t: Option<String>, k: String| match t {
+        Some(t) if t == k || t.ends_with(&format!(".{k}")) => t,
+        Some(t) => format!("{t}.{k}"),
+        None => k,
+    };
+    let whole_document = span.start == 0 && span.end >= text.trim_end().len();
+    let key = if let Some(header) = header_of(line) {
+        // The error is about a table: the table itself, or a key missing from it.
+        match (quoted("unknown field `"), quoted("missing field `")) {
+            (Some(k), _) => join(Some(header), k),
+            (None, Some(k)) if whole_document => k,
+            (None, Some(k)) => join(Some(header), k),
+            (None, None) => header,
+        }
+    } else {
+        let table = text[..line_start].lines().filter_map(header_of).next_back();
+        let own = quoted("unknown field `")
+            .or_else(|| quoted("missing field `"))
+            .or_else(|| {
+                line.split_once('=')
+                    .map(|(k, _)| k.trim().trim_matches('"').to_string())
+            })
+            .unwrap_or_default();
+        join(table, own)
+    };
+    (line_no, key)
+}
+
+/// Parses `text` as the config at `path` (used for messages and to resolve relative paths).
+pub fn parse_config(path: &Path, text: &str) -> Result<RenderConfig, ConfigError> {
+    let file = path.to_path_buf();
+    let raw: RawConfig = toml::from_str(text).map_err(|e| {
+        let (line, key) = locate(text, &e);
+        ConfigError::Parse {
+            file: file.clone(),
+            line,
+            key,
+            message: e.to_string().trim_end().to_string(),
+        }
+    })?;
+    let invalid = |key: &str, reason: String| ConfigError::Invalid {
+        file: file.clone(),
+        key: key.into(),
+        reason,
+    };
+    let abs = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let base_dir = abs.parent().map(Path::to_path_buf).unwrap_or_default();
+    let resolve = |p: &str| base_dir.join(p);
+
+    let r = &raw.render;
+    if r.width == 0 {
+        return Err(invalid("render.width", "must be > 0".into()));
+    }
+    if r.height == 0 {
+        return Err(invalid("render.height", "must be > 0".into()));
+    }
+    if r.tile_size == 0 {
+        return Err(invalid("render.tile_size", "must be > 0".into()));
+    }
+    let budget = match (r.spp, r.time) {
+        (Some(_), Some(_)) => {
+            return Err(invalid(
+                "render.spp",
+                "give either `spp` or `time`, not both".into(),
+            ))
+        }
+        (Some(0), None) => return Err(invalid("render.spp", "must be > 0".into())),
+        (Some(s), None) => SampleBudget::Spp(s),
+        (None, Some(t)) if !(t > 0.0 && t.is_finite()) => {
+            return Err(invalid(
+                "render.time",
+                format!("must be a positive number of seconds, got {t}"),
+            ))
+        }
+        (None, Some(t)) => SampleBudget::Time(t),
+        (None, None) => SampleBudget::Spp(16),
+    };
+    let intersector = match r.intersector.as_str() {
+        "bvh" => Intersector::Bvh,
+        "embree" => Intersector::Embree,
+        "auto" => Intersector::Auto,
+        other => {
+            return Err(invalid(
+                "render.intersector",
+                format!("\"{other}\" is not one of \"bvh\", \"embree\", \"auto\""),
+            ))
+        }
+    };
+    let camera_override = match &raw.camera {
+        None => None,
+        Some(c) => {
+            for (key, v) in [
+                ("camera.position", c.position),
+                ("camera.look_at", c.look_at),
+                ("camera.forward", c.forward),
+                ("camera.up", c.up),
+            ] {
+                if v.is_some_and(|v| !v.iter().all(|x| x.is_finite())) {
+                    return Err(invalid(key, "must be finite".into()));
+                }
+            }
+            if c.look_at.is_some() && c.forward.is_some() {
+                return Err(invalid(
+                    "camera.forward",
+                    "give either `look_at` or `forward`, not both".into(),
+                ));
+            }
+            if c.forward
+                .is_some_and(|f| Vec3::from_array(f).length_squared() == 0.0)
+            {
+                return Err(invalid("camera.forward", "must not be zero".into()));
+            }
+            if c.up
+                .is_some_and(|u| Vec3::from_array(u).length_squared() == 0.0)
+            {
+                return Err(invalid("camera.up", "must not be zero".into()));
+            }
+            if let Some(f) = c.fov_y {
+                if !(f > 0.0 && f < 180.0) {
+                    return Err(invalid(
+                        "camera.fov_y",
+                        format!("{f} is not in (0, 180) degrees"),
+                    ));
+                }
+            }
+            Some(CameraOverride {
+                position: c.position.map(Vec3::from_array),
+                look_at: c.look_at.map(Vec3::from_array),
+                forward: c.forward.map(Vec3::from_array),
+                up: c.up.map(Vec3::from_array),
+                fov_y: c.fov_y,
+            })
+        }
+    };
+    if raw.integrator.plugin.trim().is_empty() {
+        return Err(invalid("integrator.plugin", "must not be empty".into()));
+    }
+    for (name, o) in &raw.materials {
+        o.validate()
+            .map_err(|e| invalid(&format!("materials.{name}"), e))?;
+    }
+    let stem = path
+        .file_stem()
+        .map_or_else(|| "render".into(), |s| s.to_string_lossy().into_owned());
+    let output_exr = resolve(raw.output.exr.as_deref().unwrap_or(&format!("{stem}.exr")));
+    Ok(RenderConfig {
+        path: abs.clone(),
+        scene: resolve(&raw.scene),
+        width: r.width,
+        height: r.height,
+        budget,
+        seed: r.seed,
+        threads: r.threads,
+        tile_size: r.tile_size,
+        intersector,
+        camera_override,
+        integrator_plugin: raw.integrator.plugin,
+        integrator_params: raw.integrator.params,
+        output_exr,
+        output_png: raw.output.png.as_deref().map(resolve),
+        plugin_search_paths: raw
+            .plugins
+            .search_paths
+            .iter()
+            .map(|p| resolve(p))
+            .collect(),
+        material_overrides: raw.materials,
+        base_dir,
+    })
+}
+
+/// Reads and validates the config file at `path`.
+pub fn load_config(path: &Path) -> Result<RenderConfig, ConfigError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+        file: path.to_path_buf(),
+        source,
+    })?;
+    parse_config(path, &text)
+}
+
+impl RenderConfig {
+    /// The integrator parameter `key`, if the config sets it.
+    pub fn integrator_param(&self, key: &str) -> Option<&toml::Value> {
+        self.integrator_params
+            .iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v)
+    }
+
+    /// Samples per pixel, when the budget is a sample count.
+    pub fn spp(&self) -> Option<u32> {
+        match self.budget {
+            SampleBudget::Spp(s) => Some(s),
+            SampleBudget::Time(_) => None,
+        }
+    }
+
+    /// The camera at this config's resolution: the glTF camera with the `[camera]` keys
+    /// replacing its parts. Without a glTF camera, `[camera]` must give `position`,
+    /// `look_at` or `forward`, and `fov_y` (`up` defaults to +Y).
+    pub fn camera(&self, scene: &Scene) -> Result<Camera, ConfigError> {
+        let o = self.camera_override.unwrap_or_default();
+        let g = scene.camera;
+        if g.is_none() && self.camera_override.is_none() {
+            return Err(ConfigError::NoCamera {
+                file: self.path.clone(),
+            });
+        }
+        let missing = |key: &str| ConfigError::Invalid {
+            file: self.path.clone(),
+            key: format!("camera.{key}"),
+            reason: "required: the scene has no camera to take it from".into(),
+        };
+        let position = o
+            .position
+            .or(g.map(|g| g.position))
+            .ok_or_else(|| missing("position"))?;
+        let forward = match (o.look_at, o.forward) {
+            (Some(l), _) => l - position,
+            (None, Some(f)) => f,
+            (None, None) => g.map(|g| g.forward).ok_or_else(|| missing("look_at"))?,
+        };
+        let up = o.up.or(g.map(|g| g.up)).unwrap_or(Vec3::Y);
+        let fov = o
+            .fov_y
+            .or(g.map(|g| g.fov_y_degrees))
+            .ok_or_else(|| missing("fov_y"))?;
+        let f = forward.normalize_or_zero();
+        if f == Vec3::ZERO {
+            return Err(ConfigError::Invalid {
+                file: self.path.clone(),
+                key: "camera.look_at".into(),
+                reason: "the camera looks at its own position".into(),
+            });
+        }
+        if f.cross(up.normalize_or_zero()).length_squared() < 1e-12 {
+            return Err(ConfigError::Invalid {
+                file: self.path.clone(),
+                key: "camera.up".into(),
+                reason: "is parallel to the viewing direction".into(),
+            });
+        }
+        if let Some(a) = g.and_then(|g| g.aspect) {
+            let ours = self.width as f32 / self.height as f32;
+            if (a - ours).abs() > 1e-3 * ours {
+                tracing::warn!(file = %self.path.display(), "the glTF camera's aspect ratio {a} differs from the image's {ours}; the image's is used");
+            }
+        }
+        Ok(Camera::look_along(
+            position,
+            f,
+            up,
+            fov,
+            self.width,
+            self.height,
+        ))
+    }
+}

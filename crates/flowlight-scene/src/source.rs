@@ -1,0 +1,358 @@
+//! Reading a glTF asset from disk: `.gltf` JSON or `.glb` container, validation, and the
+//! buffers it references (the GLB binary chunk, external files, base64 data URIs).
+
+use crate::error::SceneError;
+use std::path::{Path, PathBuf};
+
+/// A parsed and validated glTF document with the means to fetch its buffers on demand.
+pub struct GltfSource {
+    pub file: PathBuf,
+    pub base_dir: PathBuf,
+    pub document: gltf::Document,
+    blob: Option<Vec<u8>>,
+    buffers: Vec<Option<Vec<u8>>>,
+}
+
+const GLB_MAGIC: &[u8; 4] = b"glTF";
+const CHUNK_JSON: u32 = 0x4E4F_534A;
+const CHUNK_BIN: u32 = 0x004E_4942;
+
+fn read_u32(data: &[u8], at: usize) -> Option<u32> {
+    let b = data.get(at..at.checked_add(4)?)?;
+    Some(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+}
+
+/// A GLB chunk: type, payload, offset of the next chunk.
+type Chunk<'a> = (u32, &'a [u8], usize);
+
+/// Splits a GLB container into its JSON chunk and optional BIN chunk, checking every length.
+pub fn split_glb(data: &[u8]) -> Result<(&[u8], Option<&[u8]>), String> {
+    if data.len() < 12 {
+        return Err(format!(
+            "file is {} bytes, shorter than the 12-byte header",
+            data.len()
+        ));
+    }
+    if &data[0..4] != GLB_MAGIC {
+        return Err("missing 'glTF' magic".into());
+    }
+    let version = read_u32(data, 4).unwrap_or(0);
+    if version != 2 {
+        return Err(format!(
+            "unsupported container version {version} (expected 2)"
+        ));
+    }
+    let total = read_u32(data, 8).unwrap_or(0) as usize;
+    if total > data.len() {
+        return Err(format!(
+            "header says {total} bytes but the file has only {} (truncated)",
+            data.len()
+        ));
+    }
+    if total < 20 {
+        return Err(format!(
+            "header length {total} leaves no room for a JSON chunk"
+        ));
+    }
+    let data = &data[..total];
+    let chunk = |at: usize| -> Result<Option<Chunk>, String> {
+        if at == data.len() {
+            return Ok(None);
+        }
+        let (Some(len), Some(ty)) = (read_u32(data, at), read_u32(data, at + 4)) else {
+            return Err(format!("chunk header at byte {at} is truncated"));
+        };
+        let start = at + 8;
+        let end = start
+            .checked_add(len as usize)
+            .filter(|&e| e <= data.len())
+            .ok_or_else(|| {
+                format!(
+                    "chunk at byte {at} claims {len} bytes but only {} remain (truncated)",
+                    data.len() - start
+                )
+            })?;
+        Ok(Some((ty, &data[start..end], end)))
+    };
+    let Some((ty, json, next)) = chunk(12)? else {
+        return Err("no JSON chunk".into());
+    };
+    if ty != CHUNK_JSON {
+        return Err(format!("first chunk has type {ty:#x}, expected JSON"));
+    }
+    let mut bin = None;
+    let mut at = next;
+    // Later chunks: the first BIN chunk is the binary buffer; unknown chunk types are skipped.
+    while let Some((ty, bytes, next)) = chunk(at)? {
+        if ty == CHUNK_BIN && bin.is_none() {
+            bin = Some(bytes);
+        }
+        at = next;
+    }
+    Ok((json, bin))
+}
+
+impl GltfSource {
+    /// Reads and validates `file`.
+    pub fn open(file: &Path) -> Result<GltfSource, SceneError> {
+        let path = file.to_path_buf();
+        let data = std::fs::read(file).map_err(|source| SceneError::Io {
+            file: path.clone(),
+            source,
+        })?;
+        let (json, blob) = if data.starts_with(GLB_MAGIC) {
+            let (json, bin) = split_glb(&data).map_err(|reason| SceneError::Glb {
+                file: path.clone(),
+                reason,
+            })?;
+            (json, bin.map(<[u8]>::to_vec))
+        } else {
+            (&data[..], None)
+        };
+        let root: gltf::json::Root =
+            gltf::json::deserialize::from_slice(json).map_err(|e| SceneError::Json {
+                file: path.clone(),
+                reason: e.to_string(),
+            })?;
+        // The crate's validation, less the POSITION min/max requirement, which many exporters
+        // ignore and this loader does not need.
+        let mut errors = Vec::new();
+        {
+            use gltf::json::validation::{Error as VError, Validate};
+            root.validate(&root, gltf::json::Path::new, &mut |path, error| {
+                let p = path();
+                let minmax = p.as_str().ends_with(".min") || p.as_str().ends_with(".max");
+                if !(minmax && matches!(error, VError::Missing)) {
+                    errors.push(format!("{p}: {error}"));
+                }
+            });
+        }
+        if !errors.is_empty() {
+            return Err(SceneError::Validation {
+                file: path,
+                reason: errors.join("; "),
+            });
+        }
+        let document = gltf::Document::from_json_without_validation(root);
+        let base_dir = file.parent().map(Path::to_path_buf).unwrap_or_default();
+        let buffers = vec![None; document.buffers().len()];
+        Ok(GltfSource {
+            file: path,
+            base_dir,
+            document,
+            blob,
+            buffers,
+        })
+    }
+
+    fn buffer_error(&self, buffer: usize, reason: impl Into<String>) -> SceneError {
+        SceneError::Buffer {
+            file: self.file.clone(),
+            buffer,
+            reason: reason.into(),
+        }
+    }
+
+    /// The bytes of buffer `index`, loaded on first use and checked against `byteLength`.
+    pub fn buffer(&mut self, index: usize) -> Result<&[u8], SceneError> {
+        if index >= self.buffers.len() {
+            return Err(self.buffer_error(index, "no such buffer"));
+        }
+        if self.buffers[index].is_none() {
+            let buffer = self.document.buffers().nth(index).expect("index checked");
+            let bytes = match buffer.source() {
+                gltf::buffer::Source::Bin => match &self.blob {
+                    Some(b) => b.clone(),
+                    None => {
+                        return Err(self.buffer_error(
+                            index,
+                            "refers to the GLB binary chunk, which is absent",
+                        ))
+                    }
+                },
+                gltf::buffer::Source::Uri(uri) => self.read_uri(uri).map_err(|e| match e {
+                    UriError::Io(missing, source) => SceneError::MissingBuffer {
+                        file: self.file.clone(),
+                        buffer: index,
+                        missing,
+                        source,
+                    },
+                    UriError::Other(reason) => self.buffer_error(index, reason),
+                })?,
+            };
+            if bytes.len() < buffer.length() {
+                return Err(self.buffer_error(
+                    index,
+                    format!(
+                        "byteLength is {} but only {} bytes are present",
+                        buffer.length(),
+                        bytes.len()
+                    ),
+                ));
+            }
+            self.buffers[index] = Some(bytes);
+        }
+        Ok(self.buffers[index].as_deref().expect("just loaded"))
+    }
+
+    /// Bytes of buffer view `view`, bounds-checked.
+    pub fn view_bytes(&mut self, view: &gltf::buffer::View) -> Result<&[u8], SceneError> {
+        let (buffer, offset, length) = (view.buffer().index(), view.offset(), view.length());
+        let declared = view.buffer().length();
+        let available = self.buffer(buffer)?.len();
+        let end = offset
+            .checked_add(length)
+            .filter(|&e| e <= available && e <= declared);
+        match end {
+            Some(end) => Ok(&self.buffer(buffer)?[offset..end]),
+            None => Err(SceneError::Buffer {
+                file: self.file.clone(),
+                buffer,
+                reason: format!(
+                    "buffer view {} (offset {offset}, length {length}) runs past the buffer's {declared} bytes",
+                    view.index()
+                ),
+            }),
+        }
+    }
+
+    /// Reads a URI relative to the asset: a `data:` URI or a (percent-encoded) relative path.
+    pub fn read_uri(&self, uri: &str) -> Result<Vec<u8>, UriError> {
+        if let Some(rest) = uri.strip_prefix("data:") {
+            let (meta, payload) = rest
+                .split_once(',')
+                .ok_or_else(|| UriError::Other("data URI without ','".into()))?;
+            if meta.ends_with(";base64") {
+                decode_base64(payload).map_err(UriError::Other)
+            } else {
+                Ok(percent_decode(payload).into_bytes())
+            }
+        } else if uri.contains("://") {
+            Err(UriError::Other(format!(
+                "unsupported URI scheme in '{uri}' (only relative paths and data URIs)"
+            )))
+        } else {
+            let path = self.base_dir.join(percent_decode(uri));
+            std::fs::read(&path).map_err(|e| UriError::Io(path, e))
+        }
+    }
+}
+
+/// Failure to read a URI: a missing or unreadable file, or a malformed URI.
+#[derive(Debug)]
+pub enum UriError {
+    Io(PathBuf, std::io::Error),
+    Other(String),
+}
+
+impl std::fmt::Display for UriError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            UriError::Io(p, e) => write!(f, "cannot read {}: {e}", p.display()),
+            UriError::Other(s) => f.write_str(s),
+        }
+    }
+}
+
+fn percent_decode(s: &str) -> String {
+    let b = s.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%' && i + 2 < b.len() {
+            let hex = std::str::from_utf8(&b[i + 1..i + 3])
+                .ok()
+                .and_then(|h| u8::from_str_radix(h, 16).ok());
+            if let Some(v) = hex {
+                out.push(v);
+                i += 3;
+                continue;
+            }
+        }
+        out.push(b[i]);
+        i += 1;
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+/// Standard (RFC 4648) base64 with optional padding; whitespace is ignored.
+pub fn decode_base64(s: &str) -> Result<Vec<u8>, String> {
+    fn val(c: u8) -> Option<u32> {
+        Some(match c {
+            b'A'..=b'Z' => c - b'A',
+            b'a'..=b'z' => c - b'a' + 26,
+            b'0'..=b'9' => c - b'0' + 52,
+            b'+' | b'-' => 62,
+            b'/' | b'_' => 63,
+            _ => return None,
+        } as u32)
+    }
+    let mut out = Vec::with_capacity(s.len() * 3 / 4);
+    let (mut acc, mut bits) = (0u32, 0u32);
+    let mut padding = false;
+    for (i, &c) in s.as_bytes().iter().enumerate() {
+        if c.is_ascii_whitespace() {
+            continue;
+        }
+        if c == b'=' {
+            padding = true;
+            continue;
+        }
+        if padding {
+            return Err(format!(
+                "invalid base64: data after padding at character {i}"
+            ));
+        }
+        let v = val(c).ok_or_else(|| format!("invalid base64 character {:?} at {i}", c as char))?;
+        acc = (acc << 6) | v;
+        bits += 6;
+        if bits >= 8 {
+            bits -= 8;
+            out.push((acc >> bits) as u8);
+            acc &= (1 << bits) - 1;
+        }
+    }
+    if bits >= 6 {
+        return Err("invalid base64: truncated final group".into());
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn base64_round_trips_known_vectors() {
+        assert_eq!(decode_base64("").unwrap(), b"");
+        assert_eq!(decode_base64("Zg==").unwrap(), b"f");
+        assert_eq!(decode_base64("Zm8=").unwrap(), b"fo");
+        assert_eq!(decode_base64("Zm9v").unwrap(), b"foo");
+        assert_eq!(decode_base64("Zm9vYmFy").unwrap(), b"foobar");
+        assert!(decode_base64("Zm9v!").is_err());
+        assert!(decode_base64("Z").is_err());
+        assert_eq!(percent_decode("a%20b.bin"), "a b.bin");
+        assert_eq!(percent_decode("100%"), "100%");
+    }
+
+    #[test]
+    fn glb_split_rejects_truncation() {
+        let json = br#"{"asset":{"version":"2.0"}}  "#; // 28 bytes, 4-aligned
+        let mut glb = Vec::new();
+        glb.extend_from_slice(b"glTF");
+        glb.extend_from_slice(&2u32.to_le_bytes());
+        glb.extend_from_slice(&((12 + 8 + json.len()) as u32).to_le_bytes());
+        glb.extend_from_slice(&(json.len() as u32).to_le_bytes());
+        glb.extend_from_slice(&CHUNK_JSON.to_le_bytes());
+        glb.extend_from_slice(json);
+        let (j, b) = split_glb(&glb).unwrap();
+        assert_eq!(j, json);
+        assert!(b.is_none());
+        for n in 0..glb.len() {
+            assert!(
+                split_glb(&glb[..n]).is_err(),
+                "prefix of {n} bytes accepted"
+            );
+        }
+    }
+}

@@ -1,0 +1,363 @@
+//! The C-ABI surface between the host and a plugin. Everything here is `#[repr(C)]`, borrowed
+//! (never freed on the other side) and versioned by [`ABI_VERSION`] plus a layout hash.
+//!
+//! Ownership rules: a pointer passed in a call is valid for that call only, unless the type's
+//! doc says otherwise (the scene view lives as long as the plugin instance). Strings are
+//! [`StrRef`]s: pointer + length, never freed by the receiver. Errors come back by copying a
+//! message into a host-provided [`ErrorBuf`]. Panics are caught on the side that raised them.
+
+use crate::params::ParamKind;
+use flowlight_core::camera::Camera;
+use flowlight_core::geometry::{Ray, SurfaceHit};
+use flowlight_core::light::Emitter;
+use flowlight_core::material::{Material, Texture};
+use flowlight_core::path::{Path, PathVertex};
+use flowlight_core::rng::Rng;
+use flowlight_core::Rgb;
+use glam::Vec3;
+use std::ffi::c_void;
+
+/// Bumped whenever any type or function table in this module changes incompatibly.
+pub const ABI_VERSION: u32 = 1;
+/// Version of the SDK crate compiled into this binary.
+pub const SDK_VERSION: &str = env!("CARGO_PKG_VERSION");
+/// `rustc --version` of the compiler that built this binary.
+pub const RUSTC_VERSION: &str = env!("FLOWLIGHT_RUSTC_VERSION");
+/// Name of the one symbol a plugin exports.
+pub const DECLARATION_SYMBOL: &[u8] = b"flowlight_plugin_declaration\0";
+
+/// A borrowed UTF-8 string.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct StrRef {
+    pub ptr: *const u8,
+    pub len: usize,
+}
+
+// SAFETY: a StrRef only ever borrows immutable data (static strings or host-owned config text).
+unsafe impl Sync for StrRef {}
+unsafe impl Send for StrRef {}
+
+impl StrRef {
+    pub const EMPTY: StrRef = StrRef {
+        ptr: std::ptr::null(),
+        len: 0,
+    };
+
+    pub const fn new(s: &str) -> StrRef {
+        StrRef {
+            ptr: s.as_ptr(),
+            len: s.len(),
+        }
+    }
+
+    /// # Safety
+    /// The pointer must be valid for `len` bytes of UTF-8 for the chosen lifetime.
+    pub unsafe fn as_str<'a>(&self) -> &'a str {
+        if self.ptr.is_null() || self.len == 0 {
+            return "";
+        }
+        let bytes = std::slice::from_raw_parts(self.ptr, self.len);
+        std::str::from_utf8(bytes).unwrap_or("<invalid utf-8>")
+    }
+}
+
+/// Outcome of a call across the boundary.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Status {
+    Ok = 0,
+    /// The callee returned an error; its message is in the [`ErrorBuf`].
+    Error = 1,
+    /// The callee panicked; the panic message is in the [`ErrorBuf`].
+    Panic = 2,
+}
+
+/// Host-owned buffer a callee copies an error message into (truncated to fit).
+#[repr(C)]
+pub struct ErrorBuf {
+    pub len: usize,
+    pub bytes: [u8; 1024],
+}
+
+impl Default for ErrorBuf {
+    fn default() -> Self {
+        ErrorBuf {
+            len: 0,
+            bytes: [0; 1024],
+        }
+    }
+}
+
+impl ErrorBuf {
+    pub fn set(&mut self, msg: &str) {
+        let mut n = msg.len().min(self.bytes.len());
+        while !msg.is_char_boundary(n) {
+            n -= 1;
+        }
+        self.bytes[..n].copy_from_slice(&msg.as_bytes()[..n]);
+        self.len = n;
+    }
+
+    pub fn message(&self) -> String {
+        String::from_utf8_lossy(&self.bytes[..self.len.min(self.bytes.len())]).into_owned()
+    }
+}
+
+/// What a plugin provides.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PluginKind {
+    Integrator = 0,
+    Mutation = 1,
+}
+
+/// One parameter a plugin accepts, for validation and for `flowlight plugins`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct ParamSpec {
+    pub name: StrRef,
+    pub kind: ParamKind,
+    /// Default value as the user would write it in TOML.
+    pub default: StrRef,
+    pub doc: StrRef,
+}
+
+/// One parameter value from the config, already checked against the plugin's [`ParamSpec`]s.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct ParamValue {
+    pub name: StrRef,
+    pub kind: ParamKind,
+    pub int: i64,
+    pub float: f64,
+    pub boolean: u32,
+    pub string: StrRef,
+}
+
+/// Read-only view of the scene a plugin may use for shading and light sampling. Valid for
+/// the lifetime of the plugin instance it was given to.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct SceneView {
+    pub camera: Camera,
+    pub materials: *const Material,
+    pub material_count: usize,
+    pub textures: *const Texture,
+    pub texture_count: usize,
+    pub emitters: *const Emitter,
+    pub emitter_count: usize,
+    /// CDF over emitter power, `emitter_count` entries.
+    pub emitter_power_cdf: *const f32,
+    pub bounds_min: Vec3,
+    pub bounds_max: Vec3,
+}
+
+/// Result of one closest-hit query.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct HitRecord {
+    /// 1 when `surface` is valid.
+    pub hit: u32,
+    pub surface: SurfaceHit,
+}
+
+/// Ray queries the host answers. `ctx` is the host's per-work-unit context.
+#[repr(C)]
+#[derive(Clone, Copy)]
+pub struct TracerTable {
+    pub ctx: *mut c_void,
+    /// Closest hit for each of `n` rays.
+    pub intersect:
+        unsafe extern "C" fn(ctx: *mut c_void, rays: *const Ray, hits: *mut HitRecord, n: usize),
+    /// Writes 1 for each of `n` rays that is blocked before its `t_max`, else 0.
+    pub occluded:
+        unsafe extern "C" fn(ctx: *mut c_void, rays: *const Ray, blocked: *mut u8, n: usize),
+}
+
+/// One contribution to the image: radiance `value` (already divided by its sample density)
+/// at raster position (`x`, `y`), recorded in lighting `layer` as well as the main image.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Deposit {
+    pub x: f32,
+    pub y: f32,
+    pub layer: u32,
+    pub value: Rgb,
+}
+
+/// An accumulator the host owns: a plugin hands it deposits in batches.
+#[repr(C)]
+#[derive(Clone, Copy)]
+pub struct FilmTable {
+    pub ctx: *mut c_void,
+    pub deposit: unsafe extern "C" fn(ctx: *mut c_void, deposits: *const Deposit, n: usize),
+}
+
+/// How an integrator's deposits must be accumulated (thesis §5.9).
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AccumulationStyle {
+    /// Every deposit of a work unit lands inside its tile: the host gives each unit a private
+    /// tile buffer and merges it when the unit ends (path tracing).
+    Tile = 0,
+    /// Deposits may land within `flange` pixels around the tile (flanged tiles, ERPT).
+    FlangedTile = 1,
+    /// Deposits may land anywhere on the film (per-thread full-frame buffers).
+    FullFrame = 2,
+}
+
+/// What an integrator instance tells the host after creation.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct IntegratorInfo {
+    /// Number of extra per-depth lighting layers (0 = main image only).
+    pub layer_count: u32,
+    pub accumulation: AccumulationStyle,
+    /// Flange width in pixels for [`AccumulationStyle::FlangedTile`].
+    pub flange: u32,
+    /// 1 when the estimator is biased (e.g. ERPT's consecutive sample filter); written to the
+    /// output metadata.
+    pub biased: u32,
+}
+
+/// A coarse piece of work: `sample_count` samples per pixel for the pixels of a tile.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct WorkUnit {
+    pub x0: u32,
+    pub y0: u32,
+    pub x1: u32,
+    pub y1: u32,
+    /// Index of the first sample of each pixel in this unit (samples of a pixel are numbered
+    /// 0, 1, … across the whole render).
+    pub sample_begin: u32,
+    pub sample_count: u32,
+    /// Render seed; combine with pixel and sample indices for per-sample generators.
+    pub seed: u64,
+}
+
+/// Function table of an integrator plugin.
+#[repr(C)]
+#[derive(Clone, Copy)]
+pub struct IntegratorTable {
+    pub create: unsafe extern "C" fn(
+        params: *const ParamValue,
+        param_count: usize,
+        scene: *const SceneView,
+        instance: *mut *mut c_void,
+        info: *mut IntegratorInfo,
+        err: *mut ErrorBuf,
+    ) -> Status,
+    pub destroy: unsafe extern "C" fn(instance: *mut c_void),
+    /// Renders one unit. Called concurrently from the host's threads with the same instance.
+    pub render: unsafe extern "C" fn(
+        instance: *const c_void,
+        unit: *const WorkUnit,
+        tracer: *const TracerTable,
+        film: *const FilmTable,
+        err: *mut ErrorBuf,
+    ) -> Status,
+}
+
+/// What a mutation proposed.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Proposal {
+    /// 1 when a proposal of the same path length and weak type was built; 0 for a domain
+    /// miss (the chain stays where it is and deposits there).
+    pub valid: u32,
+    /// Tentative transition density ratio T(y→x) / T(x→y) (thesis §5.4).
+    pub transition_ratio: f32,
+}
+
+/// Function table of a mutation plugin.
+#[repr(C)]
+#[derive(Clone, Copy)]
+pub struct MutationTable {
+    pub create: unsafe extern "C" fn(
+        params: *const ParamValue,
+        param_count: usize,
+        scene: *const SceneView,
+        instance: *mut *mut c_void,
+        err: *mut ErrorBuf,
+    ) -> Status,
+    pub destroy: unsafe extern "C" fn(instance: *mut c_void),
+    /// Proposes `proposal` from `current`. Called concurrently with the same instance.
+    pub propose: unsafe extern "C" fn(
+        instance: *const c_void,
+        tracer: *const TracerTable,
+        rng: *mut Rng,
+        current: *const Path,
+        proposal: *mut Path,
+        out: *mut Proposal,
+        err: *mut ErrorBuf,
+    ) -> Status,
+}
+
+/// The one declaration a plugin exports. `abi_version` and `layout_hash` come first and keep
+/// their place in every ABI version, so a host can read them from any plugin.
+#[repr(C)]
+pub struct PluginDeclaration {
+    pub abi_version: u32,
+    pub kind: PluginKind,
+    pub layout_hash: u64,
+    pub sdk_version: StrRef,
+    pub rustc_version: StrRef,
+    pub name: StrRef,
+    pub description: StrRef,
+    pub params: *const ParamSpec,
+    pub param_count: usize,
+    /// Non-null for [`PluginKind::Integrator`].
+    pub integrator: *const IntegratorTable,
+    /// Non-null for [`PluginKind::Mutation`].
+    pub mutation: *const MutationTable,
+}
+
+// SAFETY: a declaration is immutable static data.
+unsafe impl Sync for PluginDeclaration {}
+
+/// Fingerprint of the size and alignment of every type that crosses the boundary. Host and
+/// plugin compute it from their own copy of the SDK; any difference refuses the plugin.
+pub const fn layout_hash() -> u64 {
+    use std::mem::{align_of, size_of};
+    let sizes = [
+        size_of::<StrRef>(),
+        size_of::<ErrorBuf>(),
+        size_of::<ParamSpec>(),
+        size_of::<ParamValue>(),
+        size_of::<SceneView>(),
+        size_of::<Camera>(),
+        size_of::<Material>(),
+        size_of::<Texture>(),
+        size_of::<Emitter>(),
+        size_of::<Ray>(),
+        size_of::<SurfaceHit>(),
+        size_of::<HitRecord>(),
+        size_of::<TracerTable>(),
+        size_of::<Deposit>(),
+        size_of::<FilmTable>(),
+        size_of::<IntegratorInfo>(),
+        size_of::<WorkUnit>(),
+        size_of::<IntegratorTable>(),
+        size_of::<Proposal>(),
+        size_of::<MutationTable>(),
+        size_of::<PathVertex>(),
+        size_of::<Path>(),
+        size_of::<Rng>(),
+        size_of::<PluginDeclaration>(),
+        align_of::<SceneView>(),
+        align_of::<Path>(),
+        align_of::<ErrorBuf>(),
+        align_of::<WorkUnit>(),
+    ];
+    // FNV-1a over the sizes, seeded with the ABI version.
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325 ^ ABI_VERSION as u64;
+    let mut i = 0;
+    while i < sizes.len() {
+        h ^= sizes[i] as u64;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+        i += 1;
+    }
+    h
+}

@@ -1,0 +1,133 @@
+//! Plugin parameters: declared by the plugin, validated by the host, read by the plugin.
+
+use crate::abi::{ParamSpec, ParamValue, StrRef};
+
+/// Type of a parameter value.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ParamKind {
+    Int = 0,
+    Float = 1,
+    Bool = 2,
+    String = 3,
+}
+
+impl ParamKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            ParamKind::Int => "integer",
+            ParamKind::Float => "float",
+            ParamKind::Bool => "boolean",
+            ParamKind::String => "string",
+        }
+    }
+}
+
+/// Declares a parameter in a plugin's `PARAMS` list.
+pub const fn param(
+    name: &'static str,
+    kind: ParamKind,
+    default: &'static str,
+    doc: &'static str,
+) -> ParamSpec {
+    ParamSpec {
+        name: StrRef::new(name),
+        kind,
+        default: StrRef::new(default),
+        doc: StrRef::new(doc),
+    }
+}
+
+/// The parameter values a plugin instance was created with (only those the config set).
+pub struct Params<'a> {
+    values: &'a [ParamValue],
+}
+
+impl<'a> Params<'a> {
+    /// # Safety
+    /// `values` must point to `count` valid entries whose strings outlive `'a`.
+    pub unsafe fn from_raw(values: *const ParamValue, count: usize) -> Params<'a> {
+        let values = if values.is_null() || count == 0 {
+            &[][..]
+        } else {
+            std::slice::from_raw_parts(values, count)
+        };
+        Params { values }
+    }
+
+    pub fn from_slice(values: &'a [ParamValue]) -> Params<'a> {
+        Params { values }
+    }
+
+    fn find(&self, name: &str) -> Option<&'a ParamValue> {
+        // SAFETY: names are valid for 'a by construction.
+        self.values
+            .iter()
+            .find(|v| unsafe { v.name.as_str() } == name)
+    }
+
+    /// Integer parameter, or `default` when absent. A float given for an int is an error.
+    pub fn int(&self, name: &str, default: i64) -> Result<i64, String> {
+        match self.find(name) {
+            None => Ok(default),
+            Some(v) if v.kind == ParamKind::Int => Ok(v.int),
+            Some(v) => Err(format!(
+                "parameter '{name}' must be an integer, got a {}",
+                v.kind.name()
+            )),
+        }
+    }
+
+    /// Float parameter; integers are accepted and converted.
+    pub fn float(&self, name: &str, default: f64) -> Result<f64, String> {
+        match self.find(name) {
+            None => Ok(default),
+            Some(v) if v.kind == ParamKind::Float => Ok(v.float),
+            Some(v) if v.kind == ParamKind::Int => Ok(v.int as f64),
+            Some(v) => Err(format!(
+                "parameter '{name}' must be a number, got a {}",
+                v.kind.name()
+            )),
+        }
+    }
+
+    pub fn boolean(&self, name: &str, default: bool) -> Result<bool, String> {
+        match self.find(name) {
+            None => Ok(default),
+            Some(v) if v.kind == ParamKind::Bool => Ok(v.boolean != 0),
+            Some(v) => Err(format!(
+                "parameter '{name}' must be a boolean, got a {}",
+                v.kind.name()
+            )),
+        }
+    }
+
+    pub fn string(&self, name: &str, default: &'a str) -> Result<&'a str, String> {
+        match self.find(name) {
+            None => Ok(default),
+            // SAFETY: strings are valid for 'a by construction.
+            Some(v) if v.kind == ParamKind::String => Ok(unsafe { v.string.as_str() }),
+            Some(v) => Err(format!(
+                "parameter '{name}' must be a string, got a {}",
+                v.kind.name()
+            )),
+        }
+    }
+
+    /// A string parameter that must be one of `choices`.
+    pub fn choice(
+        &self,
+        name: &str,
+        default: &'a str,
+        choices: &[&str],
+    ) -> Result<&'a str, String> {
+        let s = self.string(name, default)?;
+        if choices.contains(&s) {
+            Ok(s)
+        } else {
+            Err(format!(
+                "parameter '{name}' must be one of {choices:?}, got \"{s}\""
+            ))
+        }
+    }
+}

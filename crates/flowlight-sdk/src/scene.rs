@@ -1,0 +1,81 @@
+//! Plugin-side view of the scene: safe slices over the host's tables.
+
+use crate::abi::SceneView;
+use flowlight_core::bsdf::Bsdf;
+use flowlight_core::camera::Camera;
+use flowlight_core::geometry::SurfaceHit;
+use flowlight_core::light::{Emitter, Lights};
+use flowlight_core::material::{Material, Texture};
+use glam::Vec3;
+
+/// The scene as plugins see it. Borrowed from the host for the plugin instance's lifetime.
+#[derive(Clone, Copy)]
+pub struct Scene<'a> {
+    pub camera: Camera,
+    pub materials: &'a [Material],
+    pub textures: &'a [Texture],
+    pub lights: Lights<'a>,
+    pub bounds_min: Vec3,
+    pub bounds_max: Vec3,
+}
+
+unsafe fn slice<'a, T>(ptr: *const T, len: usize) -> &'a [T] {
+    if ptr.is_null() || len == 0 {
+        &[]
+    } else {
+        std::slice::from_raw_parts(ptr, len)
+    }
+}
+
+impl<'a> Scene<'a> {
+    /// # Safety
+    /// The view's pointers must be valid for `'a` (the host guarantees this for the lifetime
+    /// of a plugin instance).
+    pub unsafe fn from_view(v: &SceneView) -> Scene<'a> {
+        let emitters: &'a [Emitter] = slice(v.emitters, v.emitter_count);
+        Scene {
+            camera: v.camera,
+            materials: slice(v.materials, v.material_count),
+            textures: slice(v.textures, v.texture_count),
+            lights: Lights {
+                emitters,
+                power_cdf: slice(v.emitter_power_cdf, v.emitter_count),
+            },
+            bounds_min: v.bounds_min,
+            bounds_max: v.bounds_max,
+        }
+    }
+
+    /// Builds the view a host passes across the boundary for these tables.
+    pub fn to_view(&self) -> SceneView {
+        SceneView {
+            camera: self.camera,
+            materials: self.materials.as_ptr(),
+            material_count: self.materials.len(),
+            textures: self.textures.as_ptr(),
+            texture_count: self.textures.len(),
+            emitters: self.lights.emitters.as_ptr(),
+            emitter_count: self.lights.emitters.len(),
+            emitter_power_cdf: self.lights.power_cdf.as_ptr(),
+            bounds_min: self.bounds_min,
+            bounds_max: self.bounds_max,
+        }
+    }
+
+    #[inline]
+    pub fn material(&self, hit: &SurfaceHit) -> &'a Material {
+        &self.materials[hit.material as usize]
+    }
+
+    /// The BSDF at a hit (textures applied).
+    #[inline]
+    pub fn bsdf(&self, hit: &SurfaceHit) -> Bsdf {
+        let m = self.material(hit);
+        Bsdf::from_material(m, m.base_color_at(hit.uv, self.textures))
+    }
+
+    /// Radius of the scene's bounding sphere.
+    pub fn radius(&self) -> f32 {
+        (self.bounds_max - self.bounds_min).length() * 0.5
+    }
+}

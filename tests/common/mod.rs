@@ -1,0 +1,68 @@
+//! Helpers shared by the integration tests. Plugins must have been built first
+//! (`cargo build --workspace`, as `.ci/run` does); the host finds them next to the test
+//! executable's parent directory (`target/<profile>/`).
+#![allow(dead_code)]
+
+use flowlight_core::Rgb;
+use flowlight_host::render::RenderOutcome;
+use flowlight_host::session::{Overrides, Session};
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+
+pub fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+pub fn scene_config(rel: &str) -> PathBuf {
+    repo().join("scenes").join(rel)
+}
+
+/// A fresh scratch directory under the system temp dir.
+pub fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("flowlight-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+pub fn toml_params(pairs: &[(&str, toml::Value)]) -> Vec<(String, toml::Value)> {
+    pairs
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.clone()))
+        .collect()
+}
+
+/// Prepares a session for a scene config with integrator parameter overrides and no outputs.
+pub fn session(config: &str, spp: u32, params: &[(&str, toml::Value)]) -> Session {
+    let ov = Overrides {
+        spp: Some(spp),
+        threads: Some(2),
+        params: toml_params(params),
+        ..Default::default()
+    };
+    let mut s = Session::prepare(&scene_config(config), &ov).unwrap_or_else(|e| panic!("{e}"));
+    s.exr_path = None;
+    s.png_path = None;
+    s
+}
+
+pub fn render(s: &Session) -> RenderOutcome {
+    let stop = AtomicBool::new(false);
+    let out = s.render(&stop, &|_| {}).unwrap();
+    if let Some(e) = &out.error {
+        panic!("render failed: {e}");
+    }
+    out
+}
+
+/// Mean luminance and its standard error over the pixels of `img` (pixels are independent).
+pub fn mean_and_stderr(img: &[Rgb], f: impl Fn(Rgb) -> f32) -> (f64, f64) {
+    let n = img.len() as f64;
+    let mean = img.iter().map(|&c| f(c) as f64).sum::<f64>() / n;
+    let var = img
+        .iter()
+        .map(|&c| (f(c) as f64 - mean).powi(2))
+        .sum::<f64>()
+        / (n - 1.0);
+    (mean, (var / n).sqrt())
+}
