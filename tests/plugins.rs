@@ -138,3 +138,42 @@ fn the_real_plugin_renders_an_image() {
         .iter()
         .all(|c| c.is_valid_radiance() && c.luminance() > 0.0));
 }
+
+#[test]
+fn plugin_errors_and_panics_come_back_as_errors() {
+    let ov = Overrides {
+        params: common::toml_params(&[("fail_create", true.into())]),
+        ..Default::default()
+    };
+    let mut cfg =
+        flowlight_scene::config::load_config(&common::scene_config("furnace/furnace.toml"))
+            .unwrap();
+    cfg.integrator_plugin = "test-panic".into();
+    cfg.integrator_params.clear();
+    let err = Session::from_config(cfg.clone(), &ov)
+        .err()
+        .expect("create error ignored");
+    assert!(
+        err.contains("test-panic") && err.contains("asked to fail in create"),
+        "{err}"
+    );
+
+    let ov = Overrides {
+        spp: Some(1),
+        threads: Some(2),
+        ..Default::default()
+    };
+    let s = Session::from_config(cfg, &ov).unwrap();
+    let out = s
+        .render(&std::sync::atomic::AtomicBool::new(false), &|_| {})
+        .unwrap();
+    let err = out
+        .error
+        .expect("a panic in render was not reported")
+        .to_string();
+    assert!(
+        err.contains("test-panic") && err.contains("panicked") && err.contains("deliberate panic"),
+        "{err}"
+    );
+    assert!(out.stats.interrupted);
+}

@@ -46,6 +46,30 @@ pub fn session(config: &str, spp: u32, params: &[(&str, toml::Value)]) -> Sessio
     s
 }
 
+/// Like [`session`], at another resolution.
+pub fn session_at(
+    config: &str,
+    width: u32,
+    height: u32,
+    spp: u32,
+    params: &[(&str, toml::Value)],
+) -> Session {
+    let mut cfg = flowlight_scene::config::load_config(&scene_config(config))
+        .unwrap_or_else(|e| panic!("{e}"));
+    cfg.width = width;
+    cfg.height = height;
+    let ov = Overrides {
+        spp: Some(spp),
+        threads: Some(2),
+        params: toml_params(params),
+        ..Default::default()
+    };
+    let mut s = Session::from_config(cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
+    s.exr_path = None;
+    s.png_path = None;
+    s
+}
+
 pub fn render(s: &Session) -> RenderOutcome {
     let stop = AtomicBool::new(false);
     let out = s.render(&stop, &|_| {}).unwrap();

@@ -1,0 +1,46 @@
+//! Test fixture: an integrator that fails on purpose. `fail_create = true` makes `create`
+//! return an error; otherwise `render` panics on the unit that contains pixel (0, 0). The
+//! host must report both as errors naming the plugin, and keep the units finished before.
+
+use flowlight_sdk::abi::ParamSpec;
+use flowlight_sdk::core::Rgb;
+use flowlight_sdk::{
+    export_integrator, param, AccumulationStyle, Film, Integrator, IntegratorInfo, ParamKind,
+    Params, Scene, Tracer, WorkUnit,
+};
+
+pub struct Faulty;
+
+impl Integrator for Faulty {
+    const NAME: &'static str = "test-panic";
+    const DESCRIPTION: &'static str = "test fixture that fails on purpose";
+    const PARAMS: &'static [ParamSpec] = &[param(
+        "fail_create",
+        ParamKind::Bool,
+        "false",
+        "fail in create",
+    )];
+
+    fn create(params: &Params, _: Scene<'static>) -> Result<(Self, IntegratorInfo), String> {
+        if params.boolean("fail_create", false)? {
+            return Err("asked to fail in create".into());
+        }
+        let info = IntegratorInfo {
+            layer_count: 0,
+            accumulation: AccumulationStyle::Tile,
+            flange: 0,
+            biased: 0,
+        };
+        Ok((Faulty, info))
+    }
+
+    fn render(&self, unit: &WorkUnit, _: &Tracer, film: &mut Film) -> Result<(), String> {
+        if unit.x0 == 0 && unit.y0 == 0 {
+            panic!("deliberate panic in render");
+        }
+        film.deposit(unit.x0 as f32 + 0.5, unit.y0 as f32 + 0.5, 0, Rgb::ONE);
+        Ok(())
+    }
+}
+
+export_integrator!(Faulty);
