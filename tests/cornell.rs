@@ -6,6 +6,8 @@ mod common;
 use common::{render, session_at};
 use flowlight_core::Rgb;
 
+type Channel = fn(Rgb) -> f32;
+
 /// Per-block means and standard errors of one channel (pixels are independent samples).
 fn block_stats(
     img: &[Rgb],
@@ -51,7 +53,7 @@ fn entangled_and_untangled_agree_per_region() {
     let unt = render(&unt);
     assert_eq!(ent.stats.invalid_deposits + unt.stats.invalid_deposits, 0);
     let (a, b) = (ent.frame.image(), unt.frame.image());
-    let channels: [(&str, fn(Rgb) -> f32); 3] = [("r", |c| c.r), ("g", |c| c.g), ("b", |c| c.b)];
+    let channels: [(&str, Channel); 3] = [("r", |c| c.r), ("g", |c| c.g), ("b", |c| c.b)];
     let mut worst = 0.0f64;
     for (name, ch) in channels {
         let sa = block_stats(&a, w, h, 8, ch);

@@ -4,6 +4,7 @@ use flowlight_sdk::abi::{ParamSpec, ParamValue, StrRef};
 use flowlight_sdk::ParamKind;
 
 /// Parameter values with the strings they point into; keep alive while the plugin reads them.
+#[derive(Debug)]
 pub struct ParamList {
     _names: Vec<String>,
     _strings: Vec<String>,

@@ -14,6 +14,8 @@ use std::time::{Duration, Instant};
 /// How much to render.
 #[derive(Clone, Debug)]
 pub struct RenderOptions {
+    pub width: u32,
+    pub height: u32,
     /// Samples per pixel; ignored when `time` is set.
     pub spp: u32,
     /// Wall-clock budget: passes are started until it runs out.
@@ -81,12 +83,11 @@ pub fn render(
     instance: &IntegratorInstance,
     scene: &Scene,
     intersector: &dyn Intersector,
-    width: u32,
-    height: u32,
     opts: &RenderOptions,
     stop: &AtomicBool,
     progress: &(dyn Fn(&Progress) + Sync),
 ) -> Result<RenderOutcome, String> {
+    let (width, height) = (opts.width, opts.height);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.threads)
         .thread_name(|i| format!("flowlight-worker-{i}"))

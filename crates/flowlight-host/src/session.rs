@@ -105,6 +105,8 @@ impl Session {
             (None, None, SampleBudget::Time(t)) => (0, Some(t)),
         };
         let options = RenderOptions {
+            width: camera.width,
+            height: camera.height,
             spp,
             time: time.map(Duration::from_secs_f64),
             threads: ov.threads.unwrap_or(config.threads),
@@ -138,8 +140,6 @@ impl Session {
             &self.instance,
             &self.scene,
             self.intersector.as_ref(),
-            self.camera.width,
-            self.camera.height,
             &self.options,
             stop,
             progress,
