@@ -92,6 +92,9 @@ pub struct PathVertex {
 pub struct Path {
     /// Raster position of the eye ray.
     pub raster: Vec2,
+    /// Side K of the film-plane migration window of a Markov chain (0: the raster position
+    /// is fixed). Part of the state so that every mutation strategy moves alike.
+    pub film_window: u32,
     /// Number of vertices in use; path length n = vertex_count - 1.
     pub vertex_count: u32,
     /// Lighting layer (virtual length - 1, §2) this path contributes to.
@@ -102,6 +105,30 @@ pub struct Path {
 }
 
 impl Path {
+    /// An empty path (no vertices).
+    pub fn empty() -> Path {
+        let v = PathVertex {
+            p: Vec3::ZERO,
+            p_error: Vec3::ZERO,
+            ng: Vec3::Z,
+            ns: Vec3::Z,
+            uv: Vec2::ZERO,
+            prim: u32::MAX,
+            material: u32::MAX,
+            emitter: -1,
+            node: NodeType::Eye,
+            component: 0,
+        };
+        Path {
+            raster: Vec2::ZERO,
+            film_window: 0,
+            vertex_count: 0,
+            layer: 0,
+            contribution: Rgb::ZERO,
+            vertices: [v; MAX_PATH_VERTICES],
+        }
+    }
+
     pub fn vertices(&self) -> &[PathVertex] {
         &self.vertices[..self.vertex_count as usize]
     }

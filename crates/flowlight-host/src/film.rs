@@ -1,4 +1,10 @@
-//! Accumulators: the whole-image frame and the per-unit tile buffers merged into it.
+//! Accumulators: the whole-image frame and the per-unit tile buffers merged into it
+//! (thesis §5.9).
+//!
+//! Each work unit deposits into a private buffer covering its tile and, for integrators whose
+//! chains wander (ERPT), a flange around it; the host merges the buffer into the frame when
+//! the unit ends, so no locking happens while a unit runs. A deposit beyond the flange is not
+//! lost: it is kept in the unit's overflow list and merged the same way.
 
 use flowlight_core::Rgb;
 use flowlight_sdk::abi::Deposit;
@@ -28,18 +34,34 @@ impl Frame {
         }
     }
 
-    /// Adds a finished tile: its sums and `samples` more samples for each of its pixels.
+    fn add_at(&mut self, f: usize, layer: u32, v: Rgb) {
+        add(&mut self.main[f], v);
+        if let Some(l) = self.layers.get_mut(layer as usize) {
+            add(&mut l[f], v);
+        }
+    }
+
+    /// Adds a finished unit: its buffer (tile and flange), its overflow deposits, and
+    /// `samples` more samples for each pixel of its tile.
     pub fn merge(&mut self, tile: &TileAccumulator, samples: u32) {
-        let tw = (tile.x1 - tile.x0) as usize;
-        for y in tile.y0..tile.y1 {
-            for x in tile.x0..tile.x1 {
-                let t = (y - tile.y0) as usize * tw + (x - tile.x0) as usize;
+        let bw = (tile.bx1 - tile.bx0) as usize;
+        for y in tile.by0..tile.by1 {
+            for x in tile.bx0..tile.bx1 {
+                let t = (y - tile.by0) as usize * bw + (x - tile.bx0) as usize;
                 let f = y as usize * self.width as usize + x as usize;
                 add(&mut self.main[f], tile.main[t]);
                 for (l, layer) in self.layers.iter_mut().enumerate() {
                     add(&mut layer[f], tile.layers[l][t]);
                 }
-                self.samples[f] += samples;
+            }
+        }
+        for d in &tile.overflow {
+            let f = d.y as usize * self.width as usize + d.x as usize;
+            self.add_at(f, d.layer, d.value);
+        }
+        for y in tile.y0..tile.y1 {
+            for x in tile.x0..tile.x1 {
+                self.samples[y as usize * self.width as usize + x as usize] += samples;
             }
         }
     }
@@ -85,32 +107,63 @@ fn add(acc: &mut [f64; 3], v: Rgb) {
 pub struct DepositCounts {
     /// Deposits with a NaN, infinite or negative value: counted, never written.
     pub invalid: u64,
-    /// Deposits outside the unit's tile (a plugin breaking its accumulation style).
+    /// Deposits off the film: counted and dropped (a plugin bug).
     pub stray: u64,
+    /// Deposits beyond the flange, merged from the overflow list.
+    pub overflow: u64,
 }
 
-/// A work unit's private tile buffer (thesis §5.9: tiles are disjoint, so no locking while the
-/// unit runs; the host merges the tile into the frame when the unit ends).
+/// A deposit kept for pixel (x, y) outside the unit's buffer.
+#[derive(Clone, Copy, Debug)]
+pub struct PixelDeposit {
+    pub x: u32,
+    pub y: u32,
+    pub layer: u32,
+    pub value: Rgb,
+}
+
+/// A work unit's private buffer: its tile plus a flange, clipped to the film.
 pub struct TileAccumulator {
+    /// The tile (whose pixels the unit samples).
     pub x0: u32,
     pub y0: u32,
     pub x1: u32,
     pub y1: u32,
+    /// The buffer: tile plus flange, clipped to the film.
+    bx0: u32,
+    by0: u32,
+    bx1: u32,
+    by1: u32,
+    width: u32,
+    height: u32,
     main: Vec<Rgb>,
     layers: Vec<Vec<Rgb>>,
+    overflow: Vec<PixelDeposit>,
     pub counts: DepositCounts,
 }
 
 impl TileAccumulator {
-    pub fn new(x0: u32, y0: u32, x1: u32, y1: u32, layer_count: u32) -> Self {
-        let n = ((x1 - x0) * (y1 - y0)) as usize;
+    /// A buffer for tile [x0, x1) × [y0, y1) of a `width` × `height` film with `flange`
+    /// pixels around it.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(x0: u32, y0: u32, x1: u32, y1: u32, flange: u32, width: u32, height: u32, layer_count: u32) -> Self {
+        let (bx0, by0) = (x0.saturating_sub(flange), y0.saturating_sub(flange));
+        let (bx1, by1) = ((x1 + flange).min(width), (y1 + flange).min(height));
+        let n = ((bx1 - bx0) * (by1 - by0)) as usize;
         TileAccumulator {
             x0,
             y0,
             x1,
             y1,
+            bx0,
+            by0,
+            bx1,
+            by1,
+            width,
+            height,
             main: vec![Rgb::ZERO; n],
             layers: (0..layer_count).map(|_| vec![Rgb::ZERO; n]).collect(),
+            overflow: Vec::new(),
             counts: DepositCounts::default(),
         }
     }
@@ -124,16 +177,17 @@ impl Accumulator for TileAccumulator {
                 continue;
             }
             let (fx, fy) = (d.x.floor(), d.y.floor());
-            if !(fx >= self.x0 as f32
-                && fy >= self.y0 as f32
-                && fx < self.x1 as f32
-                && fy < self.y1 as f32)
-            {
+            if !(fx >= 0.0 && fy >= 0.0 && fx < self.width as f32 && fy < self.height as f32) {
                 self.counts.stray += 1;
                 continue;
             }
-            let i = (fy as u32 - self.y0) as usize * (self.x1 - self.x0) as usize
-                + (fx as u32 - self.x0) as usize;
+            let (px, py) = (fx as u32, fy as u32);
+            if px < self.bx0 || py < self.by0 || px >= self.bx1 || py >= self.by1 {
+                self.counts.overflow += 1;
+                self.overflow.push(PixelDeposit { x: px, y: py, layer: d.layer, value: d.value });
+                continue;
+            }
+            let i = (py - self.by0) as usize * (self.bx1 - self.bx0) as usize + (px - self.bx0) as usize;
             self.main[i] += d.value;
             if let Some(layer) = self.layers.get_mut(d.layer as usize) {
                 layer[i] += d.value;
@@ -146,22 +200,20 @@ impl Accumulator for TileAccumulator {
 mod tests {
     use super::*;
 
+    fn d(x: f32, y: f32, layer: u32, v: f32) -> Deposit {
+        Deposit { x, y, layer, value: Rgb::splat(v) }
+    }
+
     #[test]
-    fn tile_discards_and_counts_invalid_and_stray_deposits() {
-        let mut t = TileAccumulator::new(2, 2, 4, 4, 2);
-        let d = |x: f32, y: f32, layer: u32, v: f32| Deposit {
-            x,
-            y,
-            layer,
-            value: Rgb::splat(v),
-        };
+    fn tile_discards_and_counts_invalid_deposits() {
+        let mut t = TileAccumulator::new(2, 2, 4, 4, 0, 4, 4, 2);
         t.deposit(&[
             d(2.5, 2.5, 0, 1.0),
             d(3.5, 2.5, 1, 2.0),
             d(2.5, 2.5, 0, f32::NAN),
             d(2.5, 2.5, 0, f32::INFINITY),
             d(2.5, 2.5, 0, -1.0),
-            d(0.5, 0.5, 0, 1.0),
+            d(-0.5, 0.5, 0, 1.0),
         ]);
         assert_eq!(t.counts.invalid, 3);
         assert_eq!(t.counts.stray, 1);
@@ -174,5 +226,24 @@ mod tests {
         assert_eq!(f.layer(1)[2 * 4 + 3], Rgb::splat(1.0));
         assert_eq!(f.layer(0)[2 * 4 + 3], Rgb::ZERO);
         assert_eq!(f.samples()[0], 0);
+    }
+
+    #[test]
+    fn flange_and_overflow_deposits_are_merged_not_lost() {
+        // Tile (4..6)², flange 1 → buffer (3..7)² of an 8×8 film.
+        let mut t = TileAccumulator::new(4, 4, 6, 6, 1, 8, 8, 0);
+        t.deposit(&[d(4.5, 4.5, 0, 1.0), d(3.5, 6.5, 0, 2.0), d(0.5, 7.5, 0, 3.0)]);
+        assert_eq!(t.counts.overflow, 1);
+        let mut f = Frame::new(8, 8, 0);
+        f.merge(&t, 1);
+        // Other units sample the flange and overflow pixels.
+        let other = TileAccumulator::new(0, 0, 8, 8, 0, 8, 8, 0);
+        f.merge(&other, 1);
+        let img = f.image();
+        assert_eq!(img[4 * 8 + 4], Rgb::splat(0.5));
+        assert_eq!(img[6 * 8 + 3], Rgb::splat(2.0));
+        assert_eq!(img[7 * 8], Rgb::splat(3.0));
+        assert_eq!(f.samples()[4 * 8 + 4], 2);
+        assert_eq!(f.samples()[0], 1);
     }
 }

@@ -51,6 +51,9 @@ pub fn build_params(
             ));
         };
         let kind = specs[i].kind;
+        if kind == ParamKind::MutationList {
+            return Err(format!("parameter '{key}' of plugin '{owner}' is a list of mutation plugins, handled by the host"));
+        }
         let ok = matches!(
             (kind, value),
             (ParamKind::Int, toml::Value::Integer(_))

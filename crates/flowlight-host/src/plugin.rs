@@ -2,9 +2,10 @@
 
 use crate::params::build_params;
 use flowlight_sdk::abi::{
-    self, ErrorBuf, FilmTable, IntegratorInfo, IntegratorTable, MutationTable, ParamSpec,
-    PluginDeclaration, SceneView, Status, TracerTable, WorkUnit,
+    self, ErrorBuf, FilmTable, IntegratorInfo, IntegratorTable, MutationRef, MutationTable, ParamSpec,
+    PluginDeclaration, SceneView, StatSpec, Status, StrRef, TracerTable, WorkUnit,
 };
+use flowlight_sdk::integrator::STAT_SLOTS;
 use flowlight_sdk::{ParamKind, PluginKind};
 use libloading::Library;
 use std::ffi::c_void;
@@ -319,14 +320,79 @@ impl PluginLibrary {
     }
 }
 
-/// An integrator plugin instance. Keeps its library and the scene view it was given alive.
+/// A mutation plugin instance created from a `[[integrator.mutations]]` entry.
+pub struct MutationInstance {
+    plugin: Arc<PluginLibrary>,
+    table: Box<MutationTable>,
+    instance: *mut c_void,
+    /// Name as the integrator sees it (the plugin name).
+    name: String,
+    weight: f64,
+}
+
+// SAFETY: the SDK requires mutations to be Send + Sync.
+unsafe impl Send for MutationInstance {}
+unsafe impl Sync for MutationInstance {}
+
+impl MutationInstance {
+    /// Creates an instance of a mutation plugin with `params` from the config.
+    ///
+    /// # Safety
+    /// The data `view` points to must outlive the instance.
+    pub unsafe fn create(
+        plugin: Arc<PluginLibrary>,
+        params: &[(String, toml::Value)],
+        weight: f64,
+        view: &SceneView,
+    ) -> Result<MutationInstance, PluginError> {
+        let table = Box::new(plugin.mutation_table()?);
+        let list = build_params(&plugin.name, plugin.param_specs(), params).map_err(|message| {
+            PluginError::Call { name: plugin.name.clone(), path: plugin.path.clone(), message }
+        })?;
+        let mut instance = std::ptr::null_mut();
+        let mut err = ErrorBuf::default();
+        let status = (table.create)(
+            list.as_slice().as_ptr(),
+            list.as_slice().len(),
+            view,
+            &mut instance,
+            &mut err,
+        );
+        if status != Status::Ok {
+            return Err(plugin.call_error(status, &err));
+        }
+        let name = plugin.name.clone();
+        Ok(MutationInstance { plugin, table, instance, name, weight })
+    }
+
+    pub fn plugin(&self) -> &PluginLibrary {
+        &self.plugin
+    }
+
+    pub fn weight(&self) -> f64 {
+        self.weight
+    }
+}
+
+impl Drop for MutationInstance {
+    fn drop(&mut self) {
+        // SAFETY: created by this table's `create`, destroyed once.
+        unsafe { (self.table.destroy)(self.instance) };
+    }
+}
+
+/// An integrator plugin instance. Keeps its library, its mutation instances and the scene
+/// view it was given alive.
 pub struct IntegratorInstance {
     plugin: Arc<PluginLibrary>,
     table: IntegratorTable,
     instance: *mut c_void,
     pub info: IntegratorInfo,
-    // The plugin may keep pointers into the view for its whole life.
+    // The plugin may keep pointers into these for its whole life; dropped after `destroy`.
     _view: Box<SceneView>,
+    _mutation_refs: Vec<MutationRef>,
+    mutations: Vec<MutationInstance>,
+    prepared: std::sync::Mutex<bool>,
 }
 
 // SAFETY: the SDK requires integrators to be Send + Sync; the host calls `render` concurrently.
@@ -334,35 +400,39 @@ unsafe impl Send for IntegratorInstance {}
 unsafe impl Sync for IntegratorInstance {}
 
 impl IntegratorInstance {
-    /// Creates an instance with `params` from the config.
+    /// Creates an instance with `params` from the config and the given mutation strategies
+    /// (weights are normalised to sum to 1).
     ///
     /// # Safety
     /// The data `view` points to must outlive the instance.
     pub unsafe fn create(
         plugin: Arc<PluginLibrary>,
         params: &[(String, toml::Value)],
+        mutations: Vec<MutationInstance>,
         view: SceneView,
     ) -> Result<IntegratorInstance, PluginError> {
         let table = plugin.integrator_table()?;
-        let list = build_params(&plugin.name, plugin.param_specs(), params).map_err(|message| {
-            PluginError::Call {
-                name: plugin.name.clone(),
-                path: plugin.path.clone(),
-                message,
-            }
-        })?;
+        let call_error = |message| PluginError::Call { name: plugin.name.clone(), path: plugin.path.clone(), message };
+        let list = build_params(&plugin.name, plugin.param_specs(), params).map_err(call_error)?;
+        let total: f64 = mutations.iter().map(|m| m.weight).sum();
+        let refs: Vec<MutationRef> = mutations
+            .iter()
+            .map(|m| MutationRef {
+                name: StrRef::new(&m.name),
+                weight: m.weight / total,
+                table: &*m.table,
+                instance: m.instance,
+            })
+            .collect();
         let view = Box::new(view);
         let mut instance = std::ptr::null_mut();
-        let mut info = IntegratorInfo {
-            layer_count: 0,
-            accumulation: abi::AccumulationStyle::Tile,
-            flange: 0,
-            biased: 0,
-        };
+        let mut info = IntegratorInfo::simple();
         let mut err = ErrorBuf::default();
         let status = (table.create)(
             list.as_slice().as_ptr(),
             list.as_slice().len(),
+            refs.as_ptr(),
+            refs.len(),
             &*view,
             &mut instance,
             &mut info,
@@ -371,29 +441,73 @@ impl IntegratorInstance {
         if status != Status::Ok {
             return Err(plugin.call_error(status, &err));
         }
-        Ok(IntegratorInstance {
+        let inst = IntegratorInstance {
             plugin,
             table,
             instance,
             info,
             _view: view,
-        })
+            _mutation_refs: refs,
+            mutations,
+            prepared: std::sync::Mutex::new(false),
+        };
+        if inst.info.stat_count > STAT_SLOTS {
+            return Err(PluginError::Call {
+                name: inst.plugin.name.clone(),
+                path: inst.plugin.path.clone(),
+                message: format!("declares {} statistics, at most {STAT_SLOTS} are supported", inst.info.stat_count),
+            });
+        }
+        Ok(inst)
     }
 
     pub fn plugin(&self) -> &PluginLibrary {
         &self.plugin
     }
 
-    /// Renders one work unit through the plugin.
+    pub fn mutations(&self) -> &[MutationInstance] {
+        &self.mutations
+    }
+
+    /// The statistics counters the integrator declared.
+    pub fn stat_specs(&self) -> &[StatSpec] {
+        if self.info.stats.is_null() || self.info.stat_count == 0 {
+            return &[];
+        }
+        // SAFETY: static data of the loaded plugin, `stat_count` entries.
+        unsafe { std::slice::from_raw_parts(self.info.stats, self.info.stat_count) }
+    }
+
+    /// Runs the plugin's one-time preparation, the first time it is called. The scheduler
+    /// calls it before any unit, from one thread.
+    pub fn prepare_once(&self, tracer: &TracerTable) -> Result<(), PluginError> {
+        let mut prepared = self.prepared.lock().unwrap();
+        if *prepared {
+            return Ok(());
+        }
+        *prepared = true;
+        let mut err = ErrorBuf::default();
+        // SAFETY: the lock is held and no unit runs before preparation, so this is the only
+        // access to the instance (the plugin's `prepare` takes it mutably).
+        let status = unsafe { (self.table.prepare)(self.instance, tracer, &mut err) };
+        if status != Status::Ok {
+            return Err(self.plugin.call_error(status, &err));
+        }
+        Ok(())
+    }
+
+    /// Renders one work unit through the plugin; `stats` must hold [`STAT_SLOTS`] zeroed slots.
     pub fn render(
         &self,
         unit: &WorkUnit,
         tracer: &TracerTable,
         film: &FilmTable,
+        stats: &mut [f64; STAT_SLOTS],
     ) -> Result<(), PluginError> {
         let mut err = ErrorBuf::default();
         // SAFETY: all pointers are valid for the call; the instance is alive.
-        let status = unsafe { (self.table.render)(self.instance, unit, tracer, film, &mut err) };
+        let status =
+            unsafe { (self.table.render)(self.instance, unit, tracer, film, stats.as_mut_ptr(), &mut err) };
         if status != Status::Ok {
             return Err(self.plugin.call_error(status, &err));
         }
@@ -403,7 +517,8 @@ impl IntegratorInstance {
 
 impl Drop for IntegratorInstance {
     fn drop(&mut self) {
-        // SAFETY: created by this table's `create`, destroyed once.
+        // SAFETY: created by this table's `create`, destroyed once, before the mutation
+        // instances and the view it may point into (fields drop after this body).
         unsafe { (self.table.destroy)(self.instance) };
     }
 }

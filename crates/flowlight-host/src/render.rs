@@ -5,7 +5,8 @@ use crate::film::{Frame, TileAccumulator};
 use crate::intersector::{Intersector, UnitTracer};
 use crate::plugin::{IntegratorInstance, PluginError};
 use flowlight_scene::Scene;
-use flowlight_sdk::{Accumulator, WorkUnit};
+use flowlight_sdk::integrator::STAT_SLOTS;
+use flowlight_sdk::{AccumulationStyle, Accumulator, StatMerge, StatSpec, WorkUnit};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Mutex;
@@ -41,6 +42,9 @@ pub struct RenderStats {
     pub units: u64,
     /// True when the render stopped before its budget (Ctrl-C or a plugin error).
     pub interrupted: bool,
+    /// The integrator's own counters (declared in its `IntegratorInfo`), merged over units,
+    /// ratios resolved, in declaration order.
+    pub integrator: Vec<(String, f64)>,
 }
 
 impl RenderStats {
@@ -96,7 +100,25 @@ pub fn render(
     let threads = pool.current_num_threads();
     let layer_count = instance.info.layer_count;
     let frame = Mutex::new(Frame::new(width, height, layer_count));
-    let tiles = tiles(width, height, opts.tile_size);
+    // Integrators whose deposits stay in fixed K×K squares ask for tiles aligned to K.
+    let multiple = instance.info.tile_multiple.max(1);
+    let tile_size = opts.tile_size.max(1).div_ceil(multiple) * multiple;
+    let tiles = tiles(width, height, tile_size);
+    let specs = instance.stat_specs();
+    let (closest_prepare_rays, shadow_prepare_rays);
+    let merged_stats = Mutex::new(vec![0.0f64; specs.len()]);
+    {
+        let mut tracer = UnitTracer::new(scene, intersector);
+        if let Err(e) = instance.prepare_once(&tracer.table()) {
+            return Ok(RenderOutcome {
+                frame: Frame::new(width, height, instance.info.layer_count),
+                stats: RenderStats { interrupted: true, ..Default::default() },
+                error: Some(e),
+            });
+        }
+        closest_prepare_rays = tracer.counts.closest;
+        shadow_prepare_rays = tracer.counts.shadow;
+    }
     let start = Instant::now();
     let deadline = opts.time.map(|t| start + t);
     let planned = if opts.time.is_some() {
@@ -144,9 +166,15 @@ pub fn render(
                 sample_count: count,
                 seed: opts.seed,
             };
-            let mut tile = TileAccumulator::new(x0, y0, x1, y1, layer_count);
+            let flange = match instance.info.accumulation {
+                AccumulationStyle::Tile => 0,
+                AccumulationStyle::FlangedTile => instance.info.flange,
+                AccumulationStyle::FullFrame => width.max(height),
+            };
+            let mut tile = TileAccumulator::new(x0, y0, x1, y1, flange, width, height, layer_count);
             let mut tracer = UnitTracer::new(scene, intersector);
-            let result = instance.render(&unit, &tracer.table(), &tile.table());
+            let mut unit_stats = [0.0f64; STAT_SLOTS];
+            let result = instance.render(&unit, &tracer.table(), &tile.table(), &mut unit_stats);
             closest.fetch_add(tracer.counts.closest, Ordering::Relaxed);
             shadow.fetch_add(tracer.counts.shadow, Ordering::Relaxed);
             if let Err(e) = result {
@@ -157,6 +185,9 @@ pub fn render(
             invalid.fetch_add(tile.counts.invalid, Ordering::Relaxed);
             stray.fetch_add(tile.counts.stray, Ordering::Relaxed);
             frame.lock().unwrap().merge(&tile, count);
+            if !specs.is_empty() {
+                merge_stats(specs, &mut merged_stats.lock().unwrap(), &unit_stats);
+            }
             units.fetch_add(1, Ordering::Relaxed);
             let pixels = ((x1 - x0) * (y1 - y0)) as u64;
             let d =
@@ -180,12 +211,13 @@ pub fn render(
         wall: start.elapsed(),
         threads,
         pixel_samples,
-        closest_rays: closest.load(Ordering::Relaxed),
-        shadow_rays: shadow.load(Ordering::Relaxed),
+        closest_rays: closest.load(Ordering::Relaxed) + closest_prepare_rays,
+        shadow_rays: shadow.load(Ordering::Relaxed) + shadow_prepare_rays,
         invalid_deposits: invalid.load(Ordering::Relaxed),
         stray_deposits: stray.load(Ordering::Relaxed),
         units: units.load(Ordering::Relaxed),
         interrupted,
+        integrator: resolve_stats(specs, &merged_stats.into_inner().unwrap()),
     };
     Ok(RenderOutcome {
         frame: frame.into_inner().unwrap(),
@@ -194,9 +226,62 @@ pub fn render(
     })
 }
 
+/// Adds one unit's counters into the running totals.
+fn merge_stats(specs: &[StatSpec], total: &mut [f64], unit: &[f64]) {
+    for (i, s) in specs.iter().enumerate() {
+        match s.merge {
+            StatMerge::Sum => total[i] += unit[i],
+            StatMerge::Max => total[i] = total[i].max(unit[i]),
+            StatMerge::Ratio => {}
+        }
+    }
+}
+
+/// Names and values of the counters, ratios computed (0 where the denominator is 0).
+fn resolve_stats(specs: &[StatSpec], total: &[f64]) -> Vec<(String, f64)> {
+    specs
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            // SAFETY: static strings of the loaded plugin.
+            let name = unsafe { s.name.as_str() }.to_string();
+            let value = match s.merge {
+                StatMerge::Ratio => {
+                    let num = total.get(s.numerator as usize).copied().unwrap_or(0.0);
+                    let den = total.get(s.denominator as usize).copied().unwrap_or(0.0);
+                    if den != 0.0 {
+                        num / den
+                    } else {
+                        0.0
+                    }
+                }
+                _ => total[i],
+            };
+            (name, value)
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
-    use super::tiles;
+    use super::*;
+
+    #[test]
+    fn stats_merge_by_kind_and_ratios_resolve() {
+        let specs = [
+            flowlight_sdk::stat("events", StatMerge::Sum),
+            flowlight_sdk::stat("longest", StatMerge::Max),
+            flowlight_sdk::stat_ratio("mean", 1, 0),
+        ];
+        let mut total = vec![0.0; 3];
+        merge_stats(&specs, &mut total, &[2.0, 5.0, 99.0]);
+        merge_stats(&specs, &mut total, &[3.0, 4.0, 99.0]);
+        let r = resolve_stats(&specs, &total);
+        assert_eq!(r[0], ("events".to_string(), 5.0));
+        assert_eq!(r[1].1, 5.0);
+        assert_eq!(r[2].1, 1.0);
+    }
+
 
     #[test]
     fn tiles_cover_the_image_once() {

@@ -4,7 +4,8 @@
 use crate::film::Frame;
 use crate::intersector::{build_intersector, Intersector};
 use crate::output::{write_exr, write_png_preview, ExrMetadata, ImageLayer};
-use crate::plugin::{find_plugin, search_dirs, IntegratorInstance, PluginLibrary};
+use crate::plugin::{find_plugin, search_dirs, IntegratorInstance, MutationInstance, PluginLibrary};
+use flowlight_sdk::ParamKind;
 use crate::render::{render, Progress, RenderOptions, RenderOutcome};
 use flowlight_core::camera::Camera;
 use flowlight_core::material::Texture;
@@ -78,6 +79,7 @@ impl Session {
         let plugin = Arc::new(PluginLibrary::load(&plugin_path).map_err(|e| e.to_string())?);
 
         let textures = scene.texture_views();
+        let mutation_entries = take_mutations(&mut config.integrator_params, &config.path)?;
         let (bounds_min, bounds_max) = scene.bounds().unwrap_or((Vec3::ZERO, Vec3::ZERO));
         let view = SceneView {
             camera,
@@ -91,10 +93,27 @@ impl Session {
             bounds_min,
             bounds_max,
         };
+        let takes_mutations = plugin.param_specs().iter().any(|s| s.kind == ParamKind::MutationList);
+        if !mutation_entries.is_empty() && !takes_mutations {
+            return Err(format!(
+                "{}: integrator '{}' takes no [[integrator.mutations]]",
+                config.path.display(),
+                plugin.name
+            ));
+        }
+        let mut mutations = Vec::new();
+        for entry in &mutation_entries {
+            let path = find_plugin(&entry.plugin, &dirs).map_err(|e| e.to_string())?;
+            let lib = Arc::new(PluginLibrary::load(&path).map_err(|e| e.to_string())?);
+            // SAFETY: as for the integrator below.
+            let m = unsafe { MutationInstance::create(lib, &entry.params, entry.weight, &view) }
+                .map_err(|e| format!("{}: {e}", config.path.display()))?;
+            mutations.push(m);
+        }
         // SAFETY: the view points into `scene` and `textures`, which the session owns and
         // drops after the instance (field order); their heap buffers never move.
         let instance =
-            unsafe { IntegratorInstance::create(plugin, &config.integrator_params, view) }
+            unsafe { IntegratorInstance::create(plugin, &config.integrator_params, mutations, view) }
                 .map_err(|e| format!("{}: {e}", config.path.display()))?;
 
         // The command line replaces the config's budget: --time, else --spp, else the file's.
@@ -172,6 +191,18 @@ impl Session {
             let meta = self.metadata(outcome_stats);
             write_exr(path, w, h, &exr_layers, &meta).map_err(|e| e.to_string())?;
             written.push(path.clone());
+            if !outcome_stats.integrator.is_empty() {
+                let json_path = path.with_extension("stats.json");
+                let json = stats_json(&self.instance.plugin().name, outcome_stats);
+                crate::output::write_atomically(&json_path, |tmp| {
+                    std::fs::write(tmp, &json).map_err(|e| crate::output::OutputError::Io {
+                        path: json_path.clone(),
+                        source: e,
+                    })
+                })
+                .map_err(|e| e.to_string())?;
+                written.push(json_path);
+            }
         }
         if let Some(path) = &self.png_path {
             write_png_preview(path, w, h, &image, 0.0).map_err(|e| e.to_string())?;
@@ -223,4 +254,74 @@ impl Session {
             ],
         }
     }
+}
+
+/// One `[[integrator.mutations]]` entry.
+struct MutationEntry {
+    plugin: String,
+    weight: f64,
+    params: Vec<(String, toml::Value)>,
+}
+
+/// Removes `mutations` from the integrator's parameters and checks each entry: a `plugin`
+/// name, an optional positive `weight` (default 1), the rest are the plugin's parameters.
+fn take_mutations(params: &mut Vec<(String, toml::Value)>, config: &Path) -> Result<Vec<MutationEntry>, String> {
+    let Some(pos) = params.iter().position(|(k, _)| k == "mutations") else {
+        return Ok(Vec::new());
+    };
+    let (_, value) = params.remove(pos);
+    let at = |i: usize, msg: &str| format!("{}: integrator.mutations[{i}]: {msg}", config.display());
+    let toml::Value::Array(items) = value else {
+        return Err(format!(
+            "{}: integrator.mutations must be an array of tables ([[integrator.mutations]])",
+            config.display()
+        ));
+    };
+    let mut out = Vec::with_capacity(items.len());
+    for (i, item) in items.into_iter().enumerate() {
+        let toml::Value::Table(table) = item else {
+            return Err(at(i, "must be a table with a `plugin` key"));
+        };
+        let mut plugin = None;
+        let mut weight = 1.0;
+        let mut rest = Vec::new();
+        for (k, v) in table {
+            match k.as_str() {
+                "plugin" => plugin = Some(v.as_str().ok_or_else(|| at(i, "`plugin` must be a string"))?.to_string()),
+                "weight" => {
+                    weight = v
+                        .as_float()
+                        .or_else(|| v.as_integer().map(|n| n as f64))
+                        .ok_or_else(|| at(i, "`weight` must be a number"))?;
+                    if !(weight > 0.0 && weight.is_finite()) {
+                        return Err(at(i, &format!("`weight` must be positive and finite, got {weight}")));
+                    }
+                }
+                _ => rest.push((k, v)),
+            }
+        }
+        let plugin = plugin.ok_or_else(|| at(i, "missing `plugin`"))?;
+        out.push(MutationEntry { plugin, weight, params: rest });
+    }
+    Ok(out)
+}
+
+/// The render's counters as JSON: host statistics and the integrator's own (e.g. ERPT's
+/// quality norms), written next to the image.
+pub fn stats_json(integrator: &str, s: &crate::RenderStats) -> String {
+    let num = |v: f64| if v.is_finite() { format!("{v}") } else { "null".into() };
+    let mut out = String::from("{\n");
+    out += &format!("  \"integrator\": \"{integrator}\",\n");
+    out += &format!("  \"wall_seconds\": {},\n", num(s.wall.as_secs_f64()));
+    out += &format!("  \"pixel_samples\": {},\n", s.pixel_samples);
+    out += &format!("  \"closest_rays\": {},\n  \"shadow_rays\": {},\n", s.closest_rays, s.shadow_rays);
+    out += &format!("  \"invalid_deposits\": {},\n", s.invalid_deposits);
+    out += &format!("  \"interrupted\": {},\n", s.interrupted);
+    out += "  \"counters\": {";
+    for (i, (k, v)) in s.integrator.iter().enumerate() {
+        let key: String = k.chars().flat_map(|c| if c == '"' || c == '\\' { vec!['\\', c] } else { vec![c] }).collect();
+        out += &format!("{}\n    \"{key}\": {}", if i == 0 { "" } else { "," }, num(*v));
+    }
+    out += "\n  }\n}\n";
+    out
 }

@@ -207,6 +207,28 @@ pub enum AccumulationStyle {
     FullFrame = 2,
 }
 
+/// How the host merges a statistics counter over work units.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StatMerge {
+    Sum = 0,
+    Max = 1,
+    /// Not accumulated: the host reports `counter[numerator] / counter[denominator]`.
+    Ratio = 2,
+}
+
+/// A statistics counter an integrator declares. The host gives each work unit a zeroed
+/// array of `f64`, one per counter, merges the arrays and reports them (summary and JSON).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct StatSpec {
+    pub name: StrRef,
+    pub merge: StatMerge,
+    /// For [`StatMerge::Ratio`]: indices of the counters divided.
+    pub numerator: u32,
+    pub denominator: u32,
+}
+
 /// What an integrator instance tells the host after creation.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
@@ -219,6 +241,39 @@ pub struct IntegratorInfo {
     /// 1 when the estimator is biased (e.g. ERPT's consecutive sample filter); written to the
     /// output metadata.
     pub biased: u32,
+    /// Tile sides must be a multiple of this (0 or 1: any). ERPT's film-plane migration keeps
+    /// chains inside fixed K×K squares, so tiles aligned to K contain every deposit.
+    pub tile_multiple: u32,
+    /// Counters the integrator reports (static data of the plugin), `stat_count` of them.
+    pub stats: *const StatSpec,
+    pub stat_count: usize,
+}
+
+impl IntegratorInfo {
+    /// Info for an integrator with no layers, tile accumulation and no statistics.
+    pub const fn simple() -> IntegratorInfo {
+        IntegratorInfo {
+            layer_count: 0,
+            accumulation: AccumulationStyle::Tile,
+            flange: 0,
+            biased: 0,
+            tile_multiple: 0,
+            stats: std::ptr::null(),
+            stat_count: 0,
+        }
+    }
+}
+
+/// A mutation plugin instance handed to an integrator: the host created it from a
+/// `[[integrator.mutations]]` entry and keeps it alive longer than the integrator.
+#[repr(C)]
+#[derive(Clone, Copy)]
+pub struct MutationRef {
+    pub name: StrRef,
+    /// Selection weight from the config (the host normalises weights to sum to 1).
+    pub weight: f64,
+    pub table: *const MutationTable,
+    pub instance: *const c_void,
 }
 
 /// A coarse piece of work: `sample_count` samples per pixel for the pixels of a tile.
@@ -244,18 +299,29 @@ pub struct IntegratorTable {
     pub create: unsafe extern "C" fn(
         params: *const ParamValue,
         param_count: usize,
+        mutations: *const MutationRef,
+        mutation_count: usize,
         scene: *const SceneView,
         instance: *mut *mut c_void,
         info: *mut IntegratorInfo,
         err: *mut ErrorBuf,
     ) -> Status,
     pub destroy: unsafe extern "C" fn(instance: *mut c_void),
+    /// Called once before the first unit, on one thread, with ray queries available
+    /// (e.g. ERPT's whole-image deposition quantum pre-pass).
+    pub prepare: unsafe extern "C" fn(
+        instance: *mut c_void,
+        tracer: *const TracerTable,
+        err: *mut ErrorBuf,
+    ) -> Status,
     /// Renders one unit. Called concurrently from the host's threads with the same instance.
+    /// `stats` points to `stat_count` zeroed counters for this unit.
     pub render: unsafe extern "C" fn(
         instance: *const c_void,
         unit: *const WorkUnit,
         tracer: *const TracerTable,
         film: *const FilmTable,
+        stats: *mut f64,
         err: *mut ErrorBuf,
     ) -> Status,
 }
@@ -291,6 +357,15 @@ pub struct MutationTable {
         current: *const Path,
         proposal: *mut Path,
         out: *mut Proposal,
+        err: *mut ErrorBuf,
+    ) -> Status,
+    /// Transition density T(from → to) of this strategy (0 when it cannot propose `to`).
+    /// Mixtures of strategies need it for the mixture density Σ p(sᵢ)·T^{sᵢ} (thesis §5.4).
+    pub density: unsafe extern "C" fn(
+        instance: *const c_void,
+        from: *const Path,
+        to: *const Path,
+        out: *mut f64,
         err: *mut ErrorBuf,
     ) -> Status,
 }
@@ -338,6 +413,8 @@ pub const fn layout_hash() -> u64 {
         size_of::<Deposit>(),
         size_of::<FilmTable>(),
         size_of::<IntegratorInfo>(),
+        size_of::<StatSpec>(),
+        size_of::<MutationRef>(),
         size_of::<WorkUnit>(),
         size_of::<IntegratorTable>(),
         size_of::<Proposal>(),

@@ -17,17 +17,38 @@ pub mod scene;
 pub mod tracer;
 
 pub use abi::{
-    AccumulationStyle, Deposit, IntegratorInfo, PluginDeclaration, PluginKind, Proposal, WorkUnit,
+    AccumulationStyle, Deposit, IntegratorInfo, PluginDeclaration, PluginKind, Proposal, StatMerge,
+    StatSpec, WorkUnit,
 };
 pub use film::{Accumulator, Film};
 pub use flowlight_core as core;
 pub use integrator::Integrator;
-pub use mutation::Mutation;
+pub use mutation::{Mutation, MutationSet};
 pub use params::{param, ParamKind, Params};
 pub use scene::Scene;
 pub use tracer::Tracer;
 
 use abi::{IntegratorTable, MutationTable, ParamSpec, StrRef};
+
+/// Declares a statistics counter in an integrator's statistics list.
+pub const fn stat(name: &'static str, merge: StatMerge) -> StatSpec {
+    StatSpec {
+        name: StrRef::new(name),
+        merge,
+        numerator: 0,
+        denominator: 0,
+    }
+}
+
+/// Declares a derived counter: `counter[numerator] / counter[denominator]`.
+pub const fn stat_ratio(name: &'static str, numerator: u32, denominator: u32) -> StatSpec {
+    StatSpec {
+        name: StrRef::new(name),
+        merge: StatMerge::Ratio,
+        numerator,
+        denominator,
+    }
+}
 
 /// Builds a declaration for the current SDK; used by the export macros.
 pub const fn declaration(

@@ -10,6 +10,9 @@ pub enum ParamKind {
     Float = 1,
     Bool = 2,
     String = 3,
+    /// `[[integrator.mutations]]`: an array of tables, each naming a mutation plugin, its
+    /// `weight` and its parameters. The host loads those plugins and hands them to `create`.
+    MutationList = 4,
 }
 
 impl ParamKind {
@@ -19,6 +22,7 @@ impl ParamKind {
             ParamKind::Float => "float",
             ParamKind::Bool => "boolean",
             ParamKind::String => "string",
+            ParamKind::MutationList => "mutation list",
         }
     }
 }

@@ -29,8 +29,8 @@ use flowlight_core::Rgb;
 use flowlight_pathtrace::{entangled, untangled, PathSettings, SampleContributions, Variant};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::{
-    export_integrator, param, AccumulationStyle, Film, Integrator, IntegratorInfo, ParamKind,
-    Params, Scene, Tracer, WorkUnit,
+    export_integrator, param, Film, Integrator, IntegratorInfo, MutationSet,
+    ParamKind, Params, Scene, Tracer, WorkUnit,
 };
 use glam::Vec2;
 
@@ -60,19 +60,27 @@ impl Integrator for Mcpt {
     const DESCRIPTION: &'static str = "Monte Carlo path tracing, untangled or entangled (NEE + MIS), with depth-based termination";
     const PARAMS: &'static [ParamSpec] = &PARAMS;
 
-    fn create(params: &Params, scene: Scene<'static>) -> Result<(Self, IntegratorInfo), String> {
+    fn create(
+        params: &Params,
+        _mutations: MutationSet<'static>,
+        scene: Scene<'static>,
+    ) -> Result<(Self, IntegratorInfo), String> {
         let settings = PathSettings::from_params(params)?;
         let layers = params.boolean("layers", false)?;
         let info = IntegratorInfo {
             layer_count: if layers { settings.path_depth + 1 } else { 0 },
-            accumulation: AccumulationStyle::Tile,
-            flange: 0,
-            biased: 0,
+            ..IntegratorInfo::simple()
         };
         Ok((Mcpt { scene, settings }, info))
     }
 
-    fn render(&self, unit: &WorkUnit, tracer: &Tracer, film: &mut Film) -> Result<(), String> {
+    fn render(
+        &self,
+        unit: &WorkUnit,
+        tracer: &Tracer,
+        film: &mut Film,
+        _stats: &mut [f64],
+    ) -> Result<(), String> {
         let mut contributions = SampleContributions::default();
         for y in unit.y0..unit.y1 {
             for x in unit.x0..unit.x1 {

@@ -3,8 +3,8 @@
 
 use flowlight_sdk::abi::{IntegratorTable, ParamSpec, PluginDeclaration, ABI_VERSION};
 use flowlight_sdk::{
-    AccumulationStyle, Film, Integrator, IntegratorInfo, Params, PluginKind, Scene, Tracer,
-    WorkUnit,
+    Film, Integrator, IntegratorInfo, MutationSet, Params, PluginKind, Scene,
+    Tracer, WorkUnit,
 };
 
 pub struct NeverCalled;
@@ -14,17 +14,22 @@ impl Integrator for NeverCalled {
     const DESCRIPTION: &'static str = "test fixture with a wrong ABI version";
     const PARAMS: &'static [ParamSpec] = &[];
 
-    fn create(_: &Params, _: Scene<'static>) -> Result<(Self, IntegratorInfo), String> {
-        let info = IntegratorInfo {
-            layer_count: 0,
-            accumulation: AccumulationStyle::Tile,
-            flange: 0,
-            biased: 0,
-        };
+    fn create(
+        _: &Params,
+        _mutations: MutationSet<'static>,
+        _: Scene<'static>,
+    ) -> Result<(Self, IntegratorInfo), String> {
+        let info = IntegratorInfo::simple();
         Ok((NeverCalled, info))
     }
 
-    fn render(&self, _: &WorkUnit, _: &Tracer, _: &mut Film) -> Result<(), String> {
+    fn render(
+        &self,
+        _: &WorkUnit,
+        _: &Tracer,
+        _: &mut Film,
+        _stats: &mut [f64],
+    ) -> Result<(), String> {
         panic!("a plugin with a mismatched ABI must never be called")
     }
 }

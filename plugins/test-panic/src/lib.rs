@@ -5,8 +5,8 @@
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::core::Rgb;
 use flowlight_sdk::{
-    export_integrator, param, AccumulationStyle, Film, Integrator, IntegratorInfo, ParamKind,
-    Params, Scene, Tracer, WorkUnit,
+    export_integrator, param, Film, Integrator, IntegratorInfo, MutationSet,
+    ParamKind, Params, Scene, Tracer, WorkUnit,
 };
 
 pub struct Faulty;
@@ -21,20 +21,25 @@ impl Integrator for Faulty {
         "fail in create",
     )];
 
-    fn create(params: &Params, _: Scene<'static>) -> Result<(Self, IntegratorInfo), String> {
+    fn create(
+        params: &Params,
+        _mutations: MutationSet<'static>,
+        _: Scene<'static>,
+    ) -> Result<(Self, IntegratorInfo), String> {
         if params.boolean("fail_create", false)? {
             return Err("asked to fail in create".into());
         }
-        let info = IntegratorInfo {
-            layer_count: 0,
-            accumulation: AccumulationStyle::Tile,
-            flange: 0,
-            biased: 0,
-        };
+        let info = IntegratorInfo::simple();
         Ok((Faulty, info))
     }
 
-    fn render(&self, unit: &WorkUnit, _: &Tracer, film: &mut Film) -> Result<(), String> {
+    fn render(
+        &self,
+        unit: &WorkUnit,
+        _: &Tracer,
+        film: &mut Film,
+        _stats: &mut [f64],
+    ) -> Result<(), String> {
         if unit.x0 == 0 && unit.y0 == 0 {
             panic!("deliberate panic in render");
         }

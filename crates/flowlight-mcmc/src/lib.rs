@@ -1,0 +1,19 @@
+//! Path-space Markov chain machinery, compiled into the ERPT integrator and into every mutation
+//! plugin so that the target function and the transition densities agree exactly.
+//!
+//! * [`measure`]: the target function f(x) of a stored path and its weak type;
+//! * [`film`]: film-plane migration inside fixed K×K squares;
+//! * [`regenerate`]: the engine all unidirectional mutations of thesis §5.4–5.5 are made of —
+//!   regenerate the eye end of the path and reconnect to the original — with its transition
+//!   density;
+//! * [`norms`]: the acceptance/rejection/hit/miss strength and streak norms of §5.5.
+
+pub mod film;
+pub mod measure;
+pub mod norms;
+pub mod regenerate;
+pub mod strategy;
+
+pub use measure::{measurement, WeakNode};
+pub use regenerate::{Extension, Policy};
+pub use strategy::{Strategy, StrategyMutation};

@@ -1,0 +1,351 @@
+//! The prefix-regeneration engine behind every unidirectional mutation (thesis §5.4–5.5).
+//!
+//! A proposal y is built from the current path x from the eye: the raster position migrates
+//! inside its film square, the eye ray gives y₁, and then, vertex by vertex,
+//!
+//! * a Dirac vertex is followed deterministically (its lobe must match x's);
+//! * at a smooth vertex y_j the path either **reconnects** hard to x_{j+1} — y keeps x's
+//!   vertices from j+1 on (a Dirac step: T = 1) — with probability p_r, or is **extended** by
+//!   sampling a direction: from the BSDF (free extension) or uniformly in a spherical cap
+//!   around the direction to x_{j+1} (soft reconnection, a "drill" step);
+//! * reaching xₙ's position in the sequence, the extension must hit an emitter.
+//!
+//! Every new vertex must have x's weak node type, and the path keeps its length: otherwise the
+//! proposal is a domain miss. Reconnection needs smooth (or light) vertices on both ends.
+//!
+//! Densities are in the target function's measure ([`crate::measure`]): an extension step has
+//! T = (1 − p_r) · p_ω · J, with J the area Jacobian of the new vertex; a reconnection step
+//! has T = p_r. The reverse move regenerates x from y with the same rules: for the cap, the
+//! cap is centred on the direction from x_j to y_{j+1}. The strategies differ only by their
+//! [`Policy`].
+
+use crate::film;
+use crate::measure::{
+    area_jacobian, dirac_component, dirac_scatter, local_directions, side_consistent, vertex_bsdf, WeakNode,
+};
+use flowlight_core::bsdf::Bsdf;
+use flowlight_core::geometry::{Frame, SurfaceHit};
+use flowlight_core::path::{NodeType, Path, PathVertex};
+use flowlight_core::rng::Rng;
+use flowlight_core::sampling::{uniform_cone, uniform_cone_pdf};
+use flowlight_sdk::{Proposal, Scene, Tracer};
+use glam::Vec3;
+
+/// How an extension step chooses its direction.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Extension {
+    /// Sample the BSDF's smooth components (free extension).
+    Bsdf,
+    /// Uniform in the cap of half-angle acos(`cos_max`) around the direction to the original
+    /// path's next vertex (soft reconnection).
+    Cap { cos_max: f32 },
+}
+
+impl Extension {
+    /// A cap of the given half-angle in degrees.
+    pub fn cap_degrees(degrees: f32) -> Extension {
+        Extension::Cap { cos_max: degrees.to_radians().cos() }
+    }
+}
+
+/// What distinguishes one mutation strategy from another.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Policy {
+    /// Extensions to make before a reconnection may happen.
+    pub min_extensions: u32,
+    /// Probability of reconnecting at a smooth vertex once `min_extensions` are done.
+    pub p_reconnect: f32,
+    /// `None`: the strategy never extends (strict hard reconnection).
+    pub extension: Option<Extension>,
+    /// Never reconnect while the rest of the original path holds a Dirac vertex: caustic
+    /// paths are drilled until they reach the light.
+    pub drill_caustics: bool,
+}
+
+/// Probability of reconnecting at smooth vertex `j` of `x` after `extensions` extensions.
+fn p_reconnect(policy: &Policy, x: &[PathVertex], j: usize, extensions: u32) -> f32 {
+    let n = x.len() - 1;
+    if !WeakNode::of(&x[j + 1]).connectable() {
+        return 0.0;
+    }
+    if policy.extension.is_none() {
+        return 1.0;
+    }
+    if extensions < policy.min_extensions {
+        return 0.0;
+    }
+    if policy.drill_caustics && x[j + 1..n].iter().any(|v| WeakNode::of(v).is_dirac()) {
+        return 0.0;
+    }
+    policy.p_reconnect
+}
+
+/// Density of extending from `from` (with previous vertex `prev`) to `to`; for a cap, centred
+/// on the direction to `target`. Solid angle times the area Jacobian of `to`.
+fn extension_density(
+    scene: &Scene,
+    ext: Extension,
+    prev: &PathVertex,
+    from: &PathVertex,
+    to: &PathVertex,
+    target: Vec3,
+) -> f64 {
+    let Some((_, _, wi_w, wo, wi)) = local_directions(from, prev.p, to.p) else { return 0.0 };
+    let p_omega = match ext {
+        Extension::Bsdf => {
+            let Some(bsdf) = vertex_bsdf(scene, from) else { return 0.0 };
+            smooth_pdf(&bsdf, wo, wi)
+        }
+        Extension::Cap { cos_max } => {
+            let Some(axis) = (target - from.p).try_normalize() else { return 0.0 };
+            if axis.dot(wi_w) >= cos_max {
+                uniform_cone_pdf(cos_max)
+            } else {
+                0.0
+            }
+        }
+    };
+    p_omega as f64 * area_jacobian(from.p, to.p, to.ng) as f64
+}
+
+/// Sum of the smooth components' weights.
+fn smooth_weight(bsdf: &Bsdf) -> f32 {
+    bsdf.components().filter(|(c, _)| !c.is_delta()).map(|(_, w)| w).sum()
+}
+
+/// Density of the smooth part of the BSDF, renormalised: what [`sample_smooth`] draws from.
+fn smooth_pdf(bsdf: &Bsdf, wo: Vec3, wi: Vec3) -> f32 {
+    let w = smooth_weight(bsdf);
+    if w > 0.0 {
+        bsdf.pdf(wo, wi) / w
+    } else {
+        0.0
+    }
+}
+
+/// Samples a direction from the smooth components (chosen by weight); local frame.
+fn sample_smooth(bsdf: &Bsdf, wo: Vec3, rng: &mut Rng) -> Option<(Vec3, f32)> {
+    let total = smooth_weight(bsdf);
+    if total <= 0.0 {
+        return None;
+    }
+    let mut u = rng.uniform() * total;
+    let (mut chosen, mut last) = (None, None);
+    for (c, w) in bsdf.components().filter(|(c, _)| !c.is_delta()) {
+        last = Some(c);
+        if u < w {
+            chosen = Some(c);
+            break;
+        }
+        u -= w;
+    }
+    let c = chosen.or(last)?;
+    let s = c.sample_with(wo, rng.uniform(), rng.uniform2())?;
+    let pdf = smooth_pdf(bsdf, wo, s.wi);
+    (pdf > 0.0).then_some((s.wi, pdf))
+}
+
+fn vertex_from_hit(hit: &SurfaceHit, node: NodeType, component: u8) -> PathVertex {
+    PathVertex {
+        p: hit.p,
+        p_error: hit.p_error,
+        ng: hit.ng,
+        ns: hit.ns,
+        uv: hit.uv,
+        prim: hit.prim,
+        material: hit.material,
+        emitter: hit.emitter,
+        node,
+        component,
+    }
+}
+
+/// Checks that `hit` can stand in for `original` (same weak type) and builds the vertex.
+/// `prev` is the vertex the ray came from.
+fn matching_vertex(scene: &Scene, hit: &SurfaceHit, original: &PathVertex, prev: Vec3) -> Option<PathVertex> {
+    let kind = WeakNode::of(original);
+    if kind == WeakNode::Light {
+        let e = scene.lights.emitters.get(usize::try_from(hit.emitter).ok()?)?;
+        let towards = (prev - hit.p).try_normalize()?;
+        return (!e.radiance_towards(towards).is_black()).then(|| vertex_from_hit(hit, NodeType::Light, 0));
+    }
+    let m = scene.materials.get(hit.material as usize)?;
+    let bsdf = Bsdf::from_material(m, m.base_color_at(hit.uv, scene.textures));
+    match kind {
+        WeakNode::Smooth => bsdf.has_non_delta().then(|| vertex_from_hit(hit, original.node, original.component)),
+        WeakNode::DiracReflection | WeakNode::DiracTransmission => {
+            let wo = Frame::from_z(hit.ns).to_local((prev - hit.p).try_normalize()?);
+            let (c, _, _) = dirac_component(&bsdf, wo, kind == WeakNode::DiracTransmission)?;
+            Some(vertex_from_hit(hit, original.node, c as u8))
+        }
+        WeakNode::Eye | WeakNode::Light => None,
+    }
+}
+
+/// Image size the film squares are clipped to.
+fn film_size(scene: &Scene) -> (u32, u32) {
+    (scene.camera.width, scene.camera.height)
+}
+
+const MISS: Proposal = Proposal { valid: 0, transition_ratio: 0.0 };
+
+/// Builds a proposal `y` from `x` under `policy`. Returns the proposal's validity and its
+/// transition ratio T(y→x)/T(x→y), computed from the densities the sampling routines
+/// reported (forward) and evaluated (reverse).
+pub fn propose(scene: &Scene, tracer: &Tracer, rng: &mut Rng, policy: &Policy, x: &Path, y: &mut Path) -> Proposal {
+    let xv = x.vertices();
+    if xv.len() < 2 {
+        return MISS;
+    }
+    let n = xv.len() - 1;
+    let (w, h) = film_size(scene);
+    let Some(raster) = film::migrate(x.raster, x.film_window, w, h, rng) else { return MISS };
+    y.raster = raster;
+    y.film_window = x.film_window;
+    y.vertex_count = x.vertex_count;
+    y.layer = x.layer;
+    y.contribution = x.contribution;
+    y.vertices[0] = xv[0];
+
+    let Some(hit) = tracer.intersect(&scene.camera.generate_ray(y.raster)) else { return MISS };
+    let Some(v1) = matching_vertex(scene, &hit, &xv[1], xv[0].p) else { return MISS };
+    y.vertices[1] = v1;
+    let (mut fwd, mut rev) = (1.0f64, 1.0f64);
+    let mut extensions = 0u32;
+    if n > 1 && continue_from(scene, tracer, rng, policy, xv, y, 1, &mut extensions, &mut fwd, &mut rev).is_none() {
+        return MISS;
+    }
+    let ratio = rev / fwd;
+    if !(ratio.is_finite() && ratio >= 0.0) {
+        // A valid path with a degenerate density: reported, and rejected by the integrator.
+        return Proposal { valid: 1, transition_ratio: f32::NAN };
+    }
+    Proposal { valid: 1, transition_ratio: ratio as f32 }
+}
+
+/// Continues the regeneration from the already placed vertex `y[j]` (j < n) to the end,
+/// multiplying the forward and reverse densities of each step into `fwd` and `rev`.
+#[allow(clippy::too_many_arguments)]
+fn continue_from(
+    scene: &Scene,
+    tracer: &Tracer,
+    rng: &mut Rng,
+    policy: &Policy,
+    xv: &[PathVertex],
+    y: &mut Path,
+    mut j: usize,
+    extensions: &mut u32,
+    fwd: &mut f64,
+    rev: &mut f64,
+) -> Option<()> {
+    let n = xv.len() - 1;
+    loop {
+        let kind = WeakNode::of(&xv[j]);
+        let yj = y.vertices[j];
+        let frame = Frame::from_z(yj.ns);
+        let wo_w = (y.vertices[j - 1].p - yj.p).try_normalize()?;
+        let wo = frame.to_local(wo_w);
+        if !side_consistent(yj.ng, wo_w, wo) {
+            return None;
+        }
+        let next_hit;
+        if kind.is_dirac() {
+            let bsdf = vertex_bsdf(scene, &yj)?;
+            let (c, _) = bsdf.components().nth(yj.component as usize)?;
+            let (wi, _) = dirac_scatter(&c, wo, kind == WeakNode::DiracTransmission)?;
+            next_hit = tracer.intersect(&surface(&yj).spawn_ray(frame.to_world(wi)))?;
+            let next = matching_vertex(scene, &next_hit, &xv[j + 1], yj.p)?;
+            j += 1;
+            y.vertices[j] = next;
+        } else {
+            let p_r = p_reconnect(policy, xv, j, *extensions);
+            if p_r > 0.0 && rng.uniform() < p_r {
+                let target = &xv[j + 1];
+                let dir = (target.p - yj.p).try_normalize()?;
+                if !side_consistent(yj.ng, dir, frame.to_local(dir)) {
+                    return None;
+                }
+                if tracer.occluded(&surface(&yj).spawn_ray_to(target.p, target.p_error, target.ng)) {
+                    return None;
+                }
+                y.vertices[j + 1..=n].copy_from_slice(&xv[j + 1..=n]);
+                *fwd *= p_r as f64;
+                *rev *= p_r as f64;
+                return Some(());
+            }
+            let ext = policy.extension?;
+            let (dir, p_omega) = match ext {
+                Extension::Bsdf => {
+                    let bsdf = vertex_bsdf(scene, &yj)?;
+                    let (wi, pdf) = sample_smooth(&bsdf, wo, rng)?;
+                    (frame.to_world(wi), pdf)
+                }
+                Extension::Cap { cos_max } => {
+                    let axis = (xv[j + 1].p - yj.p).try_normalize()?;
+                    (Frame::from_z(axis).to_world(uniform_cone(rng.uniform2(), cos_max)), uniform_cone_pdf(cos_max))
+                }
+            };
+            if !side_consistent(yj.ng, dir, frame.to_local(dir)) {
+                return None;
+            }
+            next_hit = tracer.intersect(&surface(&yj).spawn_ray(dir))?;
+            let next = matching_vertex(scene, &next_hit, &xv[j + 1], yj.p)?;
+            *fwd *= (1.0 - p_r) as f64 * p_omega as f64 * area_jacobian(yj.p, next.p, next.ng) as f64;
+            *rev *= (1.0 - p_r) as f64 * extension_density(scene, ext, &xv[j - 1], &xv[j], &xv[j + 1], next.p);
+            *extensions += 1;
+            j += 1;
+            y.vertices[j] = next;
+        }
+        if j == n {
+            return Some(());
+        }
+    }
+}
+
+/// A stored vertex as a surface to spawn rays from.
+fn surface(v: &PathVertex) -> SurfaceHit {
+    SurfaceHit {
+        t: 0.0,
+        p: v.p,
+        p_error: v.p_error,
+        ng: v.ng,
+        ns: v.ns,
+        uv: v.uv,
+        prim: v.prim,
+        material: v.material,
+        emitter: v.emitter,
+    }
+}
+
+/// Transition density T(x → y) of `policy`, evaluated from the two paths alone (film term in
+/// raster measure, vertices in the target function's measure). 0 when `policy` cannot turn
+/// `x` into `y`.
+pub fn density(scene: &Scene, policy: &Policy, x: &Path, y: &Path) -> f64 {
+    let (xv, yv) = (x.vertices(), y.vertices());
+    if xv.len() != yv.len() || xv.len() < 2 || x.film_window != y.film_window {
+        return 0.0;
+    }
+    if xv.iter().zip(yv).any(|(a, b)| WeakNode::of(a) != WeakNode::of(b)) {
+        return 0.0;
+    }
+    let n = xv.len() - 1;
+    let (w, h) = film_size(scene);
+    let mut d = film::density(x.raster, y.raster, x.film_window, w, h);
+    let mut extensions = 0u32;
+    for j in 1..n {
+        if d == 0.0 {
+            return 0.0;
+        }
+        if WeakNode::of(&xv[j]).is_dirac() {
+            continue;
+        }
+        let p_r = p_reconnect(policy, xv, j, extensions);
+        if yv[j + 1..=n].iter().zip(&xv[j + 1..=n]).all(|(a, b)| a.p == b.p) {
+            return d * p_r as f64;
+        }
+        let Some(ext) = policy.extension else { return 0.0 };
+        d *= (1.0 - p_r) as f64 * extension_density(scene, ext, &yv[j - 1], &yv[j], &yv[j + 1], xv[j + 1].p);
+        extensions += 1;
+    }
+    d
+}

@@ -1,0 +1,67 @@
+//! Turns a [`Policy`] into a mutation plugin: each strategy crate declares its name and
+//! parameters and builds its policy; propose and density come from the shared engine.
+
+use crate::regenerate::{density, propose, Policy};
+use flowlight_core::path::Path;
+use flowlight_core::rng::Rng;
+use flowlight_sdk::abi::ParamSpec;
+use flowlight_sdk::{Mutation, Params, Proposal, Scene, Tracer};
+use std::marker::PhantomData;
+
+/// A named mutation strategy: its parameters and the policy they give.
+pub trait Strategy: Send + Sync + 'static {
+    const NAME: &'static str;
+    const DESCRIPTION: &'static str;
+    const PARAMS: &'static [ParamSpec];
+    fn policy(params: &Params) -> Result<Policy, String>;
+}
+
+/// The mutation plugin made from a [`Strategy`]; export it with
+/// `flowlight_sdk::export_mutation!(StrategyMutation<MyStrategy>)`.
+pub struct StrategyMutation<S: Strategy> {
+    scene: Scene<'static>,
+    policy: Policy,
+    _strategy: PhantomData<S>,
+}
+
+impl<S: Strategy> StrategyMutation<S> {
+    pub fn policy(&self) -> &Policy {
+        &self.policy
+    }
+}
+
+impl<S: Strategy> Mutation for StrategyMutation<S> {
+    const NAME: &'static str = S::NAME;
+    const DESCRIPTION: &'static str = S::DESCRIPTION;
+    const PARAMS: &'static [ParamSpec] = S::PARAMS;
+
+    fn create(params: &Params, scene: Scene<'static>) -> Result<Self, String> {
+        Ok(StrategyMutation { scene, policy: S::policy(params)?, _strategy: PhantomData })
+    }
+
+    fn propose(&self, tracer: &Tracer, rng: &mut Rng, current: &Path, proposal: &mut Path) -> Result<Proposal, String> {
+        Ok(propose(&self.scene, tracer, rng, &self.policy, current, proposal))
+    }
+
+    fn density(&self, from: &Path, to: &Path) -> f64 {
+        density(&self.scene, &self.policy, from, to)
+    }
+}
+
+/// Reads a cap half-angle in degrees, checking its range.
+pub fn cap_degrees(params: &Params, name: &str, default: f64) -> Result<f32, String> {
+    let d = params.float(name, default)?;
+    if !(d > 0.0 && d <= 90.0) {
+        return Err(format!("parameter '{name}' must be in (0, 90] degrees, got {d}"));
+    }
+    Ok(d as f32)
+}
+
+/// Reads a probability, checking its range.
+pub fn probability(params: &Params, name: &str, default: f64) -> Result<f32, String> {
+    let p = params.float(name, default)?;
+    if !(0.0..=1.0).contains(&p) {
+        return Err(format!("parameter '{name}' must be in [0, 1], got {p}"));
+    }
+    Ok(p as f32)
+}

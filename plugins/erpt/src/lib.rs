@@ -1,0 +1,196 @@
+//! # `erpt` — Energy Redistribution Path Tracing
+//!
+//! Cline, Talbot & Egbert 2005, as corrected and extended in thesis ch. 5. Initial Monte Carlo
+//! samples come from the untangled path tracer (`flowlight-pathtrace`, the MCPT plugin's own
+//! sampler); each spawns chains that redistribute its energy over nearby paths with the
+//! mutation strategies listed in the config, each its own plugin:
+//!
+//! ```toml
+//! [integrator]
+//! plugin = "erpt"
+//! mutations_per_sample = 64
+//! chain_length = 16
+//! [[integrator.mutations]]
+//! plugin = "drill"
+//! width = "narrow"
+//! weight = 0.3
+//! [[integrator.mutations]]
+//! plugin = "blow"
+//! weight = 0.7
+//! ```
+//!
+//! Per work unit (a tile × a range of samples per pixel): the deposition quantum
+//! e_d = lum(Σ X_f) / (count · M) is estimated from the unit's seeds (or once for the image,
+//! `quantum = "image"`), with M the expected number of mutations per initial sample (§5.2);
+//! then every seed runs the corrected Equal Deposition Flow ([`flow`]). Chains random-walk on
+//! the film in a `film_window`² window around their current position, so their deposits land
+//! around the seed's tile: units use flanged tiles (§5.9).
+//!
+//! | parameter | type | default | meaning |
+//! |---|---|---|---|
+//! | `mutations` | list | — | `[[integrator.mutations]]`: `plugin`, `weight` (default 1), the plugin's parameters |
+//! | `mutations_per_sample` | float | 64 | M: expected mutations per initial MC sample |
+//! | `chain_length` | int | 16 | N: steps of every chain |
+//! | `film_window` | int | 8 | K: side of the film-plane migration window (0: the raster position never moves) |
+//! | `quantum` | string | `"tile"` | `"tile"` or `"image"`: where e_d is estimated |
+//! | `mixture` | string | `"mixture"` | `"mixture"`: acceptance with Σ p(sᵢ)T^{sᵢ}; `"selected"`: the chosen strategy's ratio |
+//! | `max_chains_per_seed` | int | 1024 | cap on chains per seed; capped seeds deposit larger quanta (still unbiased) |
+//! | `max_consecutive` | int | 0 | consecutive sample filter, **biased**: at most this many consecutive deposits of a chain in one pixel |
+//! | `termination`, `path_depth`, `max_ray_depth` | | `"bxdf"`, 8, 32 | the seed sampler's (see `mcpt`) |
+//! | `layers` | bool | false | write lighting layers `layer0…layerN` |
+//!
+//! Seeds whose estimate is NaN, infinite or negative, or whose path the target function gives
+//! no energy, are skipped and counted; proposals with invalid densities or contributions are
+//! rejected and counted, never deposited. The quality norms of §5.5 (strength and streaks of
+//! acceptance, rejection, domain hit and miss, per strategy and in total), chains per seed and
+//! deposits per pixel are reported to the host, which prints them and writes them as JSON.
+
+mod flow;
+mod settings;
+mod stats;
+
+use flow::Flow;
+use flowlight_core::path::Path;
+use flowlight_core::rng::Rng;
+use flowlight_core::Rgb;
+use flowlight_pathtrace::untangled;
+use flowlight_sdk::abi::ParamSpec;
+use flowlight_sdk::integrator::STAT_SLOTS;
+use flowlight_sdk::{export_integrator, AccumulationStyle, Film, Integrator, IntegratorInfo, MutationSet, Params, Scene, Tracer, WorkUnit};
+use glam::Vec2;
+use settings::{ErptSettings, QuantumScope};
+
+pub struct Erpt {
+    scene: Scene<'static>,
+    mutations: MutationSet<'static>,
+    settings: ErptSettings,
+    /// e_d from the whole-image pre-pass (`quantum = "image"`).
+    image_quantum: Option<f64>,
+}
+
+/// Random streams of a seed: its path, and its chains.
+fn seed_rngs(seed: u64, x: u32, y: u32, s: u32) -> (Rng, Rng) {
+    let h = Rng::hash(&[seed, x as u64, y as u64, s as u64]);
+    (Rng::new(h, 0), Rng::new(h, 1))
+}
+
+impl Erpt {
+    /// Traces the seed of pixel (x, y), sample `s`, into `path`; returns its estimate X_f.
+    fn seed(&self, tracer: &Tracer, rng: &mut Rng, x: u32, y: u32, path: &mut Path) -> Rgb {
+        let raster = Vec2::new(x as f32, y as f32) + rng.uniform2();
+        let sample = untangled::trace(&self.scene, tracer, &self.settings.seeds, rng, raster, Some(path));
+        path.film_window = self.settings.film_window;
+        if path.vertex_count < 2 {
+            return if sample.value.is_black() { Rgb::ZERO } else { Rgb::splat(f32::NAN) };
+        }
+        sample.value
+    }
+
+    /// Algorithm 1: e_d = lum(Σ X_f) / (count · M), over valid estimates.
+    fn quantum(&self, sum: Rgb, count: u64) -> f64 {
+        if count == 0 {
+            return 0.0;
+        }
+        sum.luminance() as f64 / (count as f64 * self.settings.mutations_per_sample)
+    }
+}
+
+impl Integrator for Erpt {
+    const NAME: &'static str = "erpt";
+    const DESCRIPTION: &'static str = "Energy Redistribution Path Tracing with pluggable mutation strategies";
+    const PARAMS: &'static [ParamSpec] = &settings::PARAMS;
+
+    fn create(params: &Params, mutations: MutationSet<'static>, scene: Scene<'static>) -> Result<(Self, IntegratorInfo), String> {
+        let settings = ErptSettings::from_params(params)?;
+        if mutations.is_empty() {
+            return Err("erpt needs at least one [[integrator.mutations]] entry".into());
+        }
+        if mutations.len() > 8 {
+            return Err(format!("erpt takes at most 8 mutation strategies, got {}", mutations.len()));
+        }
+        let names: Vec<String> = (0..mutations.len())
+            .map(|i| {
+                let n = mutations.name(i);
+                let dup = (0..i).filter(|&j| mutations.name(j) == n).count();
+                if dup == 0 { n.to_string() } else { format!("{n}#{}", dup + 1) }
+            })
+            .collect();
+        let specs = stats::specs(&names);
+        debug_assert!(stats::slot_count(names.len()) <= STAT_SLOTS && specs.len() <= STAT_SLOTS);
+        let layers = params.boolean("layers", false)?;
+        let info = IntegratorInfo {
+            layer_count: if layers { settings.seeds.path_depth + 1 } else { 0 },
+            biased: (settings.max_consecutive > 0) as u32,
+            // Chains random-walk on the film by at most K/2 per step; a flange of 2K keeps most
+            // of their deposits in the unit's buffer (the host keeps the rest).
+            accumulation: AccumulationStyle::FlangedTile,
+            flange: 2 * settings.film_window,
+            stats: specs.as_ptr(),
+            stat_count: specs.len(),
+            ..IntegratorInfo::simple()
+        };
+        Ok((Erpt { scene, mutations, settings, image_quantum: None }, info))
+    }
+
+    fn prepare(&mut self, tracer: &Tracer) -> Result<(), String> {
+        if self.settings.quantum != QuantumScope::Image {
+            return Ok(());
+        }
+        // Algorithm 1 over the whole image: one seed per pixel.
+        let (w, h) = (self.scene.camera.width, self.scene.camera.height);
+        let mut path = Box::new(Path::empty());
+        let (mut sum, mut count) = (Rgb::ZERO, 0u64);
+        for y in 0..h {
+            for x in 0..w {
+                let (mut rng, _) = seed_rngs(0x5eed_0f_1a6e, x, y, 0);
+                let e = self.seed(tracer, &mut rng, x, y, &mut path);
+                if e.is_valid_radiance() {
+                    sum += e;
+                    count += 1;
+                }
+            }
+        }
+        self.image_quantum = Some(self.quantum(sum, count));
+        Ok(())
+    }
+
+    fn render(&self, unit: &WorkUnit, tracer: &Tracer, film: &mut Film, stats: &mut [f64]) -> Result<(), String> {
+        let mut path = Box::new(Path::empty());
+        let samples = unit.sample_begin..unit.sample_begin + unit.sample_count;
+        let pixels = || (unit.y0..unit.y1).flat_map(move |y| (unit.x0..unit.x1).map(move |x| (x, y)));
+        let quantum = match self.image_quantum {
+            Some(q) => q,
+            None => {
+                // Algorithm 1 over this unit's seeds; they are traced again below from the same
+                // random streams rather than stored.
+                let (mut sum, mut count) = (Rgb::ZERO, 0u64);
+                for (x, y) in pixels() {
+                    for s in samples.clone() {
+                        let (mut rng, _) = seed_rngs(unit.seed, x, y, s);
+                        let e = self.seed(tracer, &mut rng, x, y, &mut path);
+                        if e.is_valid_radiance() {
+                            sum += e;
+                            count += 1;
+                        }
+                    }
+                }
+                self.quantum(sum, count)
+            }
+        };
+        stats[stats::QUANTUM_SUM] += quantum;
+        stats[stats::UNITS] += 1.0;
+        stats[stats::IMAGE_PIXELS] = (self.scene.camera.width as f64) * (self.scene.camera.height as f64);
+        let mut flow = Flow::new(&self.scene, tracer, &self.settings, &self.mutations);
+        for (x, y) in pixels() {
+            for s in samples.clone() {
+                let (mut rng, mut chain_rng) = seed_rngs(unit.seed, x, y, s);
+                let estimate = self.seed(tracer, &mut rng, x, y, &mut path);
+                flow.run_seed(&path, estimate, quantum, &mut chain_rng, film, stats)?;
+            }
+        }
+        flow.report(stats);
+        Ok(())
+    }
+}
+
+export_integrator!(Erpt);

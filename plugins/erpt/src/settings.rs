@@ -1,0 +1,107 @@
+//! ERPT parameters.
+
+use flowlight_pathtrace::{PathSettings, Variant};
+use flowlight_sdk::abi::ParamSpec;
+use flowlight_sdk::{param, ParamKind, Params};
+
+/// Where the deposition quantum e_d is estimated (thesis Algorithm 1).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum QuantumScope {
+    /// From a one-sample-per-pixel pre-pass over the whole image.
+    Image,
+    /// From each work unit's own seeds: brighter tiles get a larger quantum, so dark tiles keep
+    /// their share of chains (§5.9).
+    Tile,
+}
+
+/// How the acceptance ratio treats several strategies.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MixtureRatio {
+    /// T = Σ p(sᵢ)·T^{sᵢ}: the mixture density of §5.4 (asks every strategy for its density).
+    Mixture,
+    /// Only the chosen strategy's own ratio (each kernel is reversible on its own).
+    Selected,
+}
+
+#[derive(Clone, Debug)]
+pub struct ErptSettings {
+    pub seeds: PathSettings,
+    pub mutations_per_sample: f64,
+    pub chain_length: u32,
+    pub film_window: u32,
+    pub quantum: QuantumScope,
+    pub mixture: MixtureRatio,
+    pub max_chains_per_seed: u32,
+    /// Consecutive-sample filter: 0 = off; else at most this many consecutive deposits of a
+    /// chain into one pixel (biased).
+    pub max_consecutive: u32,
+}
+
+pub const PARAMS: [ParamSpec; 12] = [
+    param("mutations", ParamKind::MutationList, "(required)", "[[integrator.mutations]] plugin = \"...\", weight = w, and that plugin's parameters"),
+    param("mutations_per_sample", ParamKind::Float, "64", "expected mutations per initial MC sample (M, §5.2): e_d = lum(ΣX_f) / (count · M)"),
+    param("chain_length", ParamKind::Int, "16", "mutations per chain (N); every chain of a seed has this length"),
+    param("film_window", ParamKind::Int, "8", "side K of the film-plane migration window around the current position (0: fixed raster position)"),
+    param("quantum", ParamKind::String, "\"tile\"", "where e_d is estimated: \"tile\" (per work unit) or \"image\" (1 spp pre-pass)"),
+    param("mixture", ParamKind::String, "\"mixture\"", "acceptance ratio with several strategies: \"mixture\" density (§5.4) or \"selected\" strategy's own"),
+    param("max_chains_per_seed", ParamKind::Int, "1024", "cap on chains per seed; a capped seed's chains carry a larger quantum (unbiased)"),
+    param("max_consecutive", ParamKind::Int, "0", "consecutive sample filter (BIASED): at most this many consecutive deposits of a chain in one pixel, 0 = off"),
+    param("termination", ParamKind::String, "\"bxdf\"", "seed sampler's termination distribution: \"bxdf\", \"equi\" or \"expo\""),
+    param("path_depth", ParamKind::Int, "8", "path-space depth N of the seeds (1..=32)"),
+    param("max_ray_depth", ParamKind::Int, "32", "maximal physical ray depth of the seeds (path_depth..=32)"),
+    param("layers", ParamKind::Bool, "false", "also write lighting layers layer0..layerN"),
+];
+
+impl ErptSettings {
+    pub fn from_params(p: &Params) -> Result<Self, String> {
+        let mut seeds = PathSettings::from_params(p)?;
+        seeds.variant = Variant::Untangled;
+        // Seeds are stored as paths (at most 34 vertices): a lower default and cap than MCPT.
+        let max_ray_depth = p.int("max_ray_depth", 32)?;
+        if max_ray_depth < seeds.path_depth as i64 || max_ray_depth > 32 {
+            return Err(format!(
+                "parameter 'max_ray_depth' must be in path_depth..=32 ({}..=32) for ERPT, got {max_ray_depth}",
+                seeds.path_depth
+            ));
+        }
+        seeds.max_ray_depth = max_ray_depth as u32;
+        let mutations_per_sample = p.float("mutations_per_sample", 64.0)?;
+        if !(mutations_per_sample > 0.0 && mutations_per_sample.is_finite()) {
+            return Err(format!("parameter 'mutations_per_sample' must be positive, got {mutations_per_sample}"));
+        }
+        let chain_length = p.int("chain_length", 16)?;
+        if !(1..=1_000_000).contains(&chain_length) {
+            return Err(format!("parameter 'chain_length' must be in 1..=1000000, got {chain_length}"));
+        }
+        let film_window = p.int("film_window", 8)?;
+        if !(0..=4096).contains(&film_window) {
+            return Err(format!("parameter 'film_window' must be in 0..=4096, got {film_window}"));
+        }
+        let quantum = match p.choice("quantum", "tile", &["tile", "image"])? {
+            "tile" => QuantumScope::Tile,
+            _ => QuantumScope::Image,
+        };
+        let mixture = match p.choice("mixture", "mixture", &["mixture", "selected"])? {
+            "mixture" => MixtureRatio::Mixture,
+            _ => MixtureRatio::Selected,
+        };
+        let max_chains_per_seed = p.int("max_chains_per_seed", 1024)?;
+        if !(1..=1_000_000).contains(&max_chains_per_seed) {
+            return Err(format!("parameter 'max_chains_per_seed' must be in 1..=1000000, got {max_chains_per_seed}"));
+        }
+        let max_consecutive = p.int("max_consecutive", 0)?;
+        if max_consecutive < 0 {
+            return Err(format!("parameter 'max_consecutive' must be >= 0, got {max_consecutive}"));
+        }
+        Ok(ErptSettings {
+            seeds,
+            mutations_per_sample,
+            chain_length: chain_length as u32,
+            film_window: film_window as u32,
+            quantum,
+            mixture,
+            max_chains_per_seed: max_chains_per_seed as u32,
+            max_consecutive: max_consecutive as u32,
+        })
+    }
+}

@@ -1,0 +1,42 @@
+//! # `soft-reconnection` — non-strict reconnection mutation
+//!
+//! Moves the eye ray inside its film square, and at the first smooth vertex y_k samples a
+//! direction uniformly in a spherical cap around the direction to the original x_{k+1}
+//! (thesis §5.4: "extension and termination through the soft reconnection"); the new vertex
+//! y_{k+1} lands near x_{k+1} or on another object. From y_{k+1} it reconnects hard to
+//! x_{k+2} when it can; on a light it ends the path. Ratio, in area measure:
+//!
+//! ```text
+//! T(y→x)/T(x→y) = p_cap(x_k → x_{k+1}) J(x_k→x_{k+1}) / (p_cap(y_k → y_{k+1}) J(y_k→y_{k+1}))
+//! ```
+//!
+//! with p_cap = 1/(2π(1 − cos α)) inside the cap (0 outside: the reverse cap is centred on the
+//! direction from x_k to y_{k+1}), so equal caps leave only the Jacobians.
+//!
+//! | parameter | type | default | meaning |
+//! |---|---|---|---|
+//! | `cap_degrees` | float | 5 | cap half-angle α |
+
+use flowlight_mcmc::strategy::cap_degrees;
+use flowlight_mcmc::{Extension, Policy, Strategy, StrategyMutation};
+use flowlight_sdk::abi::ParamSpec;
+use flowlight_sdk::{export_mutation, param, ParamKind, Params};
+
+pub struct SoftReconnection;
+
+impl Strategy for SoftReconnection {
+    const NAME: &'static str = "soft-reconnection";
+    const DESCRIPTION: &'static str = "film-plane migration + cap-sampled reconnection around x_{k+1}";
+    const PARAMS: &'static [ParamSpec] = &[param("cap_degrees", ParamKind::Float, "5.0", "cap half-angle in degrees")];
+
+    fn policy(p: &Params) -> Result<Policy, String> {
+        Ok(Policy {
+            min_extensions: 1,
+            p_reconnect: 1.0,
+            extension: Some(Extension::cap_degrees(cap_degrees(p, "cap_degrees", 5.0)?)),
+            drill_caustics: false,
+        })
+    }
+}
+
+export_mutation!(StrategyMutation<SoftReconnection>);
