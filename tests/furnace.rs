@@ -67,5 +67,5 @@ fn untangled_equi() {
 }
 #[test]
 fn untangled_expo() {
-    check("untangled", "expo", 6, 1024);
+    check("untangled", "expo", 6, 2048);
 }

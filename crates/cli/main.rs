@@ -3,6 +3,9 @@
 //! ```text
 //! flowlight render <config.toml> [--spp N | --time SECONDS] [--threads N] [--out FILE]
 //! flowlight plugins [--path DIR]...
+//! flowlight compare <a.exr> <reference.exr> [--out error.png]
+//! flowlight reference <config.toml> [--spp N | --time SECONDS] [--out FILE] | --from A.exr [--from B.exr]
+//! flowlight bench <suite.toml> [--out DIR] [--budgets 0.5,1] [--seeds 1,2] [--threads N]
 //! ```
 
 use anyhow::{anyhow, Result};
@@ -59,6 +62,71 @@ enum Command {
         #[arg(long)]
         path: Vec<PathBuf>,
     },
+    /// Compare an image with a reference: RMSE, relMSE, mean luminance ratio, error image.
+    Compare {
+        /// The image to judge.
+        a: PathBuf,
+        /// The reference (a `variance` layer, as `flowlight reference` writes, adds the
+        /// reference's own noise floor to the report).
+        b: PathBuf,
+        /// Write a false-colour PNG of the per-pixel relative squared error.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// The ε of relMSE = mean (a−b)²/(b²+ε).
+        #[arg(long, default_value_t = flowlight_host::metrics::REL_EPS)]
+        epsilon: f64,
+    },
+    /// Render a long reference (two independent halves, for a per-pixel variance estimate),
+    /// or make one from existing EXRs.
+    Reference {
+        /// The scene's render config (not needed with --from).
+        #[arg(required_unless_present = "from")]
+        config: Option<PathBuf>,
+        /// Total samples per pixel (default: the config's budget).
+        #[arg(long, conflicts_with = "time")]
+        spp: Option<u32>,
+        /// Total time budget in seconds.
+        #[arg(long)]
+        time: Option<f64>,
+        /// Output EXR (default: <config stem>.ref.exr beside the config).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Seed of the first half; the second uses seed + 1.
+        #[arg(long, default_value_t = 1_000_000)]
+        seed: u64,
+        /// Worker threads (0 = one per core).
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+        /// Set an integrator parameter, as for `render`.
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        /// Use existing renders instead: one EXR, or two independent renders of the same
+        /// scene (then the variance is estimated from their difference).
+        #[arg(long, conflicts_with_all = ["spp", "time", "set"])]
+        from: Vec<PathBuf>,
+    },
+    /// Run a benchmark suite: error against wall time per scene and method (docs/bench.md).
+    Bench {
+        suite: PathBuf,
+        /// Output folder (default: the suite's `bench.out`).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Time budgets in seconds, comma separated (replace the suite's).
+        #[arg(long, value_delimiter = ',')]
+        budgets: Option<Vec<f64>>,
+        /// Seeds, comma separated (replace the suite's).
+        #[arg(long, value_delimiter = ',')]
+        seeds: Option<Vec<u64>>,
+        /// Worker threads (0 = one per core).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Samples per pixel of references that have to be rendered.
+        #[arg(long)]
+        reference_spp: Option<u32>,
+        /// Render the references again even when their files exist.
+        #[arg(long)]
+        rebuild_references: bool,
+    },
 }
 
 fn main() {
@@ -96,6 +164,36 @@ fn main() {
             Err(e) => Err(e),
         },
         Command::Plugins { path } => plugins(&path),
+        Command::Compare { a, b, out, epsilon } => compare(&a, &b, out.as_deref(), epsilon),
+        Command::Reference {
+            config,
+            spp,
+            time,
+            out,
+            seed,
+            threads,
+            set,
+            from,
+        } => reference(config, spp, time, out, seed, threads, &set, &from),
+        Command::Bench {
+            suite,
+            out,
+            budgets,
+            seeds,
+            threads,
+            reference_spp,
+            rebuild_references,
+        } => bench(
+            &suite,
+            flowlight_host::bench::BenchOverrides {
+                out,
+                budgets,
+                seeds,
+                threads,
+                reference_spp,
+                rebuild_references,
+            },
+        ),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");
@@ -216,10 +314,11 @@ fn render(config: &std::path::Path, ov: &Overrides, quiet: bool) -> Result<()> {
     println!("  NaN/Inf samples {} discarded", s.invalid_deposits);
     if s.stray_deposits > 0 {
         println!(
-            "  stray deposits  {} outside their tile (plugin bug), discarded",
+            "  stray deposits  {} off the film (plugin bug), discarded",
             s.stray_deposits
         );
     }
+    print_integrator_stats(&s.integrator);
     if s.interrupted {
         println!("  interrupted     yes: the image holds the samples finished before the stop");
     }
@@ -230,6 +329,47 @@ fn render(config: &std::path::Path, ov: &Overrides, quiet: bool) -> Result<()> {
         return Err(anyhow!(e));
     }
     Ok(())
+}
+
+/// The integrator's counters: plain ones one per line; `group.name` ones (e.g. ERPT's quality
+/// norms per strategy) one line per group with strengths, mean and longest streaks.
+fn print_integrator_stats(stats: &[(String, f64)]) {
+    if stats.is_empty() {
+        return;
+    }
+    let fmt = |v: f64| {
+        if v.fract() == 0.0 && v.abs() < 1e15 {
+            format!("{v}")
+        } else {
+            format!("{v:.4}")
+        }
+    };
+    println!("  integrator statistics (all counters in the .stats.json beside the image)");
+    for (k, v) in stats.iter().filter(|(k, _)| !k.contains('.')) {
+        println!("    {k:<24}{}", fmt(*v));
+    }
+    let mut groups: Vec<&str> = Vec::new();
+    for (k, _) in stats {
+        if let Some((g, _)) = k.split_once('.') {
+            if !groups.contains(&g) {
+                groups.push(g);
+            }
+        }
+    }
+    for g in groups {
+        let shown: Vec<String> = stats
+            .iter()
+            .filter_map(|(k, v)| {
+                let name = k.strip_prefix(g)?.strip_prefix('.')?;
+                let keep = name == "mutations"
+                    || name.ends_with("_strength")
+                    || name.ends_with("_mean_streak")
+                    || name.ends_with("_streak_max");
+                keep.then(|| format!("{name} {}", fmt(*v)))
+            })
+            .collect();
+        println!("    {g}: {}", shown.join(", "));
+    }
 }
 
 fn plugins(extra: &[PathBuf]) -> Result<()> {
@@ -264,6 +404,183 @@ fn plugins(extra: &[PathBuf]) -> Result<()> {
             }
             Err(e) => println!("\n{}: refused: {e}", f.display()),
         }
+    }
+    Ok(())
+}
+
+fn compare(
+    a: &std::path::Path,
+    b: &std::path::Path,
+    out: Option<&std::path::Path>,
+    eps: f64,
+) -> Result<()> {
+    use flowlight_host::{bench, metrics};
+    let ra = bench::read_reference(a).map_err(|e| anyhow!(e))?;
+    let rb = bench::read_reference(b).map_err(|e| anyhow!(e))?;
+    if (ra.width, ra.height) != (rb.width, rb.height) {
+        return Err(anyhow!(
+            "{} is {}x{} but {} is {}x{}",
+            a.display(),
+            ra.width,
+            ra.height,
+            b.display(),
+            rb.width,
+            rb.height
+        ));
+    }
+    let e = metrics::compare_with(&ra.image, &rb.image, rb.variance.as_deref(), eps)
+        .map_err(|e| anyhow!("{} vs {}: {e}", a.display(), b.display()))?;
+    println!("compare {} against {}", a.display(), b.display());
+    println!(
+        "  pixels          {} ({}x{})",
+        e.pixels, ra.width, ra.height
+    );
+    if e.non_finite > 0 {
+        println!("  non-finite      {} pixels skipped", e.non_finite);
+    }
+    println!("  RMSE            {:.6e}", e.rmse);
+    println!(
+        "  relMSE          {:.6e}  (mean (a-b)^2/(b^2+eps), eps = {eps})",
+        e.relmse
+    );
+    if let Some(f) = e.reference_floor {
+        println!(
+            "  reference floor {f:.6e}  (the reference's own variance in relMSE units; {} spp)",
+            rb.spp
+        );
+    }
+    println!(
+        "  luminance ratio {:.6}  (mean {:.6} / {:.6})",
+        e.luminance_ratio, e.mean_luminance_a, e.mean_luminance_b
+    );
+    for k in 0.. {
+        match (ra.layer(k), rb.layer(k)) {
+            (Some(la), Some(lb)) => {
+                let le = metrics::compare_with(la, lb, None, eps).map_err(|e| anyhow!(e))?;
+                println!(
+                    "  layer{k:<9} relMSE {:.4e}  RMSE {:.4e}  luminance ratio {:.4}",
+                    le.relmse, le.rmse, le.luminance_ratio
+                );
+            }
+            _ => break,
+        }
+    }
+    if let Some(out) = out {
+        let map = metrics::relative_error_map(&ra.image, &rb.image, eps);
+        let (lo, hi) = metrics::FALSE_COLOUR_LOG10_RANGE;
+        metrics::write_rgb8_png(out, ra.width, ra.height, &metrics::false_colour(&map))
+            .map_err(|e| anyhow!(e))?;
+        println!(
+            "  wrote           {} (relative squared error, log scale 1e{lo}..1e{hi}: black..yellow-white; magenta = not finite)",
+            out.display()
+        );
+    }
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn reference(
+    config: Option<PathBuf>,
+    spp: Option<u32>,
+    time: Option<f64>,
+    out: Option<PathBuf>,
+    seed: u64,
+    threads: usize,
+    set: &[String],
+    from: &[PathBuf],
+) -> Result<()> {
+    use flowlight_host::bench::{self, Budget, RenderRequest};
+    let t0 = std::time::Instant::now();
+    let (r, out) = if !from.is_empty() {
+        let out = out.ok_or_else(|| anyhow!("--from needs --out"))?;
+        (
+            bench::reference_from_exrs(from).map_err(|e| anyhow!(e))?,
+            out,
+        )
+    } else {
+        let config = config.ok_or_else(|| anyhow!("a config is required"))?;
+        let cfg = flowlight_scene::config::load_config(&config).map_err(|e| anyhow!("{e}"))?;
+        let budget = match (spp, time, cfg.budget) {
+            (_, Some(t), _) if t > 0.0 && t.is_finite() => Budget::Time(t),
+            (_, Some(t), _) => {
+                return Err(anyhow!(
+                    "--time must be a positive number of seconds, got {t}"
+                ))
+            }
+            (Some(n), None, _) => Budget::Spp(n),
+            (None, None, flowlight_scene::config::SampleBudget::Spp(n)) => Budget::Spp(n),
+            (None, None, flowlight_scene::config::SampleBudget::Time(t)) => Budget::Time(t),
+        };
+        let out = out.unwrap_or_else(|| {
+            let stem = config
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "reference".into());
+            cfg.base_dir.join(format!("{stem}.ref.exr"))
+        });
+        let req = RenderRequest {
+            config,
+            plugin: None,
+            params: parse_sets(set)?,
+            width: None,
+            height: None,
+            budget,
+            seed,
+            threads,
+        };
+        let r = bench::render_reference(&req, &|m| eprintln!("flowlight reference: {m}"))
+            .map_err(|e| anyhow!(e))?;
+        (r, out)
+    };
+    bench::write_reference(&out, &r).map_err(|e| anyhow!(e))?;
+    println!("reference summary");
+    println!("  size            {}x{}", r.width, r.height);
+    println!("  samples         {} spp", r.spp);
+    if let Some(v) = &r.variance {
+        let n = v.len().max(1) as f64;
+        let mean_var = v.iter().map(|c| c.luminance() as f64).sum::<f64>() / n;
+        println!(
+            "  variance        mean per-pixel variance of the mean (luminance) {mean_var:.4e}"
+        );
+    } else {
+        println!("  variance        unknown (one image without a variance layer)");
+    }
+    if !r.layers.is_empty() {
+        println!("  layers          {}", r.layers.len());
+    }
+    println!("  wall time       {:.3} s", t0.elapsed().as_secs_f64());
+    println!("  wrote           {}", out.display());
+    Ok(())
+}
+
+fn bench(suite: &std::path::Path, ov: flowlight_host::bench::BenchOverrides) -> Result<()> {
+    use flowlight_host::bench;
+    let s = bench::load_suite(suite).map_err(|e| anyhow!(e))?;
+    if let Some(b) = &ov.budgets {
+        if b.is_empty() || b.iter().any(|t| !(*t > 0.0 && t.is_finite())) {
+            return Err(anyhow!("--budgets must be positive seconds"));
+        }
+    }
+    if ov.seeds.as_ref().is_some_and(|s| s.is_empty()) {
+        return Err(anyhow!("--seeds must not be empty"));
+    }
+    let report = bench::run_suite(&s, &ov, &|m| eprintln!("{m}")).map_err(|e| anyhow!(e))?;
+    println!(
+        "bench summary (efficiency = 1/(relMSE x wall time), relative to '{}')",
+        s.baseline
+    );
+    println!(
+        "  {:<16} {:<28} {:>8} {:>8} {:>11} {:>11} {:>8}",
+        "scene", "method", "budget", "wall", "relMSE", "RMSE", "vs base"
+    );
+    for r in &report.summary {
+        println!(
+            "  {:<16} {:<28} {:>8.2} {:>8.3} {:>11.4e} {:>11.4e} {:>8.2}",
+            r.scene, r.method, r.budget, r.wall, r.relmse, r.rmse, r.relative_efficiency
+        );
+    }
+    for f in &report.files {
+        println!("  wrote           {}", f.display());
     }
     Ok(())
 }

@@ -146,7 +146,16 @@ impl TileAccumulator {
     /// A buffer for tile [x0, x1) × [y0, y1) of a `width` × `height` film with `flange`
     /// pixels around it.
     #[allow(clippy::too_many_arguments)]
-    pub fn new(x0: u32, y0: u32, x1: u32, y1: u32, flange: u32, width: u32, height: u32, layer_count: u32) -> Self {
+    pub fn new(
+        x0: u32,
+        y0: u32,
+        x1: u32,
+        y1: u32,
+        flange: u32,
+        width: u32,
+        height: u32,
+        layer_count: u32,
+    ) -> Self {
         let (bx0, by0) = (x0.saturating_sub(flange), y0.saturating_sub(flange));
         let (bx1, by1) = ((x1 + flange).min(width), (y1 + flange).min(height));
         let n = ((bx1 - bx0) * (by1 - by0)) as usize;
@@ -184,10 +193,16 @@ impl Accumulator for TileAccumulator {
             let (px, py) = (fx as u32, fy as u32);
             if px < self.bx0 || py < self.by0 || px >= self.bx1 || py >= self.by1 {
                 self.counts.overflow += 1;
-                self.overflow.push(PixelDeposit { x: px, y: py, layer: d.layer, value: d.value });
+                self.overflow.push(PixelDeposit {
+                    x: px,
+                    y: py,
+                    layer: d.layer,
+                    value: d.value,
+                });
                 continue;
             }
-            let i = (py - self.by0) as usize * (self.bx1 - self.bx0) as usize + (px - self.bx0) as usize;
+            let i = (py - self.by0) as usize * (self.bx1 - self.bx0) as usize
+                + (px - self.bx0) as usize;
             self.main[i] += d.value;
             if let Some(layer) = self.layers.get_mut(d.layer as usize) {
                 layer[i] += d.value;
@@ -201,7 +216,12 @@ mod tests {
     use super::*;
 
     fn d(x: f32, y: f32, layer: u32, v: f32) -> Deposit {
-        Deposit { x, y, layer, value: Rgb::splat(v) }
+        Deposit {
+            x,
+            y,
+            layer,
+            value: Rgb::splat(v),
+        }
     }
 
     #[test]
@@ -232,7 +252,11 @@ mod tests {
     fn flange_and_overflow_deposits_are_merged_not_lost() {
         // Tile (4..6)², flange 1 → buffer (3..7)² of an 8×8 film.
         let mut t = TileAccumulator::new(4, 4, 6, 6, 1, 8, 8, 0);
-        t.deposit(&[d(4.5, 4.5, 0, 1.0), d(3.5, 6.5, 0, 2.0), d(0.5, 7.5, 0, 3.0)]);
+        t.deposit(&[
+            d(4.5, 4.5, 0, 1.0),
+            d(3.5, 6.5, 0, 2.0),
+            d(0.5, 7.5, 0, 3.0),
+        ]);
         assert_eq!(t.counts.overflow, 1);
         let mut f = Frame::new(8, 8, 0);
         f.merge(&t, 1);

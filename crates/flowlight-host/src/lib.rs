@@ -5,8 +5,10 @@
 //! owns the accumulators ([`film`]), counts statistics, and writes images atomically
 //! ([`output`]).
 
+pub mod bench;
 pub mod film;
 pub mod intersector;
+pub mod metrics;
 pub mod output;
 pub mod params;
 pub mod plugin;

@@ -2,8 +2,8 @@
 
 use crate::params::build_params;
 use flowlight_sdk::abi::{
-    self, ErrorBuf, FilmTable, IntegratorInfo, IntegratorTable, MutationRef, MutationTable, ParamSpec,
-    PluginDeclaration, SceneView, StatSpec, Status, StrRef, TracerTable, WorkUnit,
+    self, ErrorBuf, FilmTable, IntegratorInfo, IntegratorTable, MutationRef, MutationTable,
+    ParamSpec, PluginDeclaration, SceneView, StatSpec, Status, StrRef, TracerTable, WorkUnit,
 };
 use flowlight_sdk::integrator::STAT_SLOTS;
 use flowlight_sdk::{ParamKind, PluginKind};
@@ -347,7 +347,11 @@ impl MutationInstance {
     ) -> Result<MutationInstance, PluginError> {
         let table = Box::new(plugin.mutation_table()?);
         let list = build_params(&plugin.name, plugin.param_specs(), params).map_err(|message| {
-            PluginError::Call { name: plugin.name.clone(), path: plugin.path.clone(), message }
+            PluginError::Call {
+                name: plugin.name.clone(),
+                path: plugin.path.clone(),
+                message,
+            }
         })?;
         let mut instance = std::ptr::null_mut();
         let mut err = ErrorBuf::default();
@@ -362,7 +366,13 @@ impl MutationInstance {
             return Err(plugin.call_error(status, &err));
         }
         let name = plugin.name.clone();
-        Ok(MutationInstance { plugin, table, instance, name, weight })
+        Ok(MutationInstance {
+            plugin,
+            table,
+            instance,
+            name,
+            weight,
+        })
     }
 
     pub fn plugin(&self) -> &PluginLibrary {
@@ -412,7 +422,11 @@ impl IntegratorInstance {
         view: SceneView,
     ) -> Result<IntegratorInstance, PluginError> {
         let table = plugin.integrator_table()?;
-        let call_error = |message| PluginError::Call { name: plugin.name.clone(), path: plugin.path.clone(), message };
+        let call_error = |message| PluginError::Call {
+            name: plugin.name.clone(),
+            path: plugin.path.clone(),
+            message,
+        };
         let list = build_params(&plugin.name, plugin.param_specs(), params).map_err(call_error)?;
         let total: f64 = mutations.iter().map(|m| m.weight).sum();
         let refs: Vec<MutationRef> = mutations
@@ -455,7 +469,10 @@ impl IntegratorInstance {
             return Err(PluginError::Call {
                 name: inst.plugin.name.clone(),
                 path: inst.plugin.path.clone(),
-                message: format!("declares {} statistics, at most {STAT_SLOTS} are supported", inst.info.stat_count),
+                message: format!(
+                    "declares {} statistics, at most {STAT_SLOTS} are supported",
+                    inst.info.stat_count
+                ),
             });
         }
         Ok(inst)
@@ -467,6 +484,23 @@ impl IntegratorInstance {
 
     pub fn mutations(&self) -> &[MutationInstance] {
         &self.mutations
+    }
+
+    /// The mutation strategies as the integrator sees them (normalised weights), e.g. for
+    /// tests that drive strategies directly.
+    pub fn mutation_set(&self) -> flowlight_sdk::MutationSet<'_> {
+        // SAFETY: the refs and the instances they point to live as long as `self`.
+        unsafe {
+            flowlight_sdk::MutationSet::from_raw(
+                self._mutation_refs.as_ptr(),
+                self._mutation_refs.len(),
+            )
+        }
+    }
+
+    /// The scene view the integrator was created with.
+    pub fn view(&self) -> &SceneView {
+        &self._view
     }
 
     /// The statistics counters the integrator declared.
@@ -506,8 +540,16 @@ impl IntegratorInstance {
     ) -> Result<(), PluginError> {
         let mut err = ErrorBuf::default();
         // SAFETY: all pointers are valid for the call; the instance is alive.
-        let status =
-            unsafe { (self.table.render)(self.instance, unit, tracer, film, stats.as_mut_ptr(), &mut err) };
+        let status = unsafe {
+            (self.table.render)(
+                self.instance,
+                unit,
+                tracer,
+                film,
+                stats.as_mut_ptr(),
+                &mut err,
+            )
+        };
         if status != Status::Ok {
             return Err(self.plugin.call_error(status, &err));
         }

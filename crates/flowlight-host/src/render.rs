@@ -112,7 +112,10 @@ pub fn render(
         if let Err(e) = instance.prepare_once(&tracer.table()) {
             return Ok(RenderOutcome {
                 frame: Frame::new(width, height, instance.info.layer_count),
-                stats: RenderStats { interrupted: true, ..Default::default() },
+                stats: RenderStats {
+                    interrupted: true,
+                    ..Default::default()
+                },
                 error: Some(e),
             });
         }
@@ -281,7 +284,6 @@ mod tests {
         assert_eq!(r[1].1, 5.0);
         assert_eq!(r[2].1, 1.0);
     }
-
 
     #[test]
     fn tiles_cover_the_image_once() {

@@ -4,14 +4,16 @@
 use crate::film::Frame;
 use crate::intersector::{build_intersector, Intersector};
 use crate::output::{write_exr, write_png_preview, ExrMetadata, ImageLayer};
-use crate::plugin::{find_plugin, search_dirs, IntegratorInstance, MutationInstance, PluginLibrary};
-use flowlight_sdk::ParamKind;
+use crate::plugin::{
+    find_plugin, search_dirs, IntegratorInstance, MutationInstance, PluginLibrary,
+};
 use crate::render::{render, Progress, RenderOptions, RenderOutcome};
 use flowlight_core::camera::Camera;
 use flowlight_core::material::Texture;
 use flowlight_scene::config::{load_config, RenderConfig, SampleBudget};
 use flowlight_scene::{load_gltf, Scene};
 use flowlight_sdk::abi::SceneView;
+use flowlight_sdk::ParamKind;
 use glam::Vec3;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -93,7 +95,10 @@ impl Session {
             bounds_min,
             bounds_max,
         };
-        let takes_mutations = plugin.param_specs().iter().any(|s| s.kind == ParamKind::MutationList);
+        let takes_mutations = plugin
+            .param_specs()
+            .iter()
+            .any(|s| s.kind == ParamKind::MutationList);
         if !mutation_entries.is_empty() && !takes_mutations {
             return Err(format!(
                 "{}: integrator '{}' takes no [[integrator.mutations]]",
@@ -112,9 +117,10 @@ impl Session {
         }
         // SAFETY: the view points into `scene` and `textures`, which the session owns and
         // drops after the instance (field order); their heap buffers never move.
-        let instance =
-            unsafe { IntegratorInstance::create(plugin, &config.integrator_params, mutations, view) }
-                .map_err(|e| format!("{}: {e}", config.path.display()))?;
+        let instance = unsafe {
+            IntegratorInstance::create(plugin, &config.integrator_params, mutations, view)
+        }
+        .map_err(|e| format!("{}: {e}", config.path.display()))?;
 
         // The command line replaces the config's budget: --time, else --spp, else the file's.
         let (spp, time) = match (ov.time, ov.spp, config.budget) {
@@ -265,12 +271,16 @@ struct MutationEntry {
 
 /// Removes `mutations` from the integrator's parameters and checks each entry: a `plugin`
 /// name, an optional positive `weight` (default 1), the rest are the plugin's parameters.
-fn take_mutations(params: &mut Vec<(String, toml::Value)>, config: &Path) -> Result<Vec<MutationEntry>, String> {
+fn take_mutations(
+    params: &mut Vec<(String, toml::Value)>,
+    config: &Path,
+) -> Result<Vec<MutationEntry>, String> {
     let Some(pos) = params.iter().position(|(k, _)| k == "mutations") else {
         return Ok(Vec::new());
     };
     let (_, value) = params.remove(pos);
-    let at = |i: usize, msg: &str| format!("{}: integrator.mutations[{i}]: {msg}", config.display());
+    let at =
+        |i: usize, msg: &str| format!("{}: integrator.mutations[{i}]: {msg}", config.display());
     let toml::Value::Array(items) = value else {
         return Err(format!(
             "{}: integrator.mutations must be an array of tables ([[integrator.mutations]])",
@@ -287,21 +297,34 @@ fn take_mutations(params: &mut Vec<(String, toml::Value)>, config: &Path) -> Res
         let mut rest = Vec::new();
         for (k, v) in table {
             match k.as_str() {
-                "plugin" => plugin = Some(v.as_str().ok_or_else(|| at(i, "`plugin` must be a string"))?.to_string()),
+                "plugin" => {
+                    plugin = Some(
+                        v.as_str()
+                            .ok_or_else(|| at(i, "`plugin` must be a string"))?
+                            .to_string(),
+                    )
+                }
                 "weight" => {
                     weight = v
                         .as_float()
                         .or_else(|| v.as_integer().map(|n| n as f64))
                         .ok_or_else(|| at(i, "`weight` must be a number"))?;
                     if !(weight > 0.0 && weight.is_finite()) {
-                        return Err(at(i, &format!("`weight` must be positive and finite, got {weight}")));
+                        return Err(at(
+                            i,
+                            &format!("`weight` must be positive and finite, got {weight}"),
+                        ));
                     }
                 }
                 _ => rest.push((k, v)),
             }
         }
         let plugin = plugin.ok_or_else(|| at(i, "missing `plugin`"))?;
-        out.push(MutationEntry { plugin, weight, params: rest });
+        out.push(MutationEntry {
+            plugin,
+            weight,
+            params: rest,
+        });
     }
     Ok(out)
 }
@@ -309,18 +332,40 @@ fn take_mutations(params: &mut Vec<(String, toml::Value)>, config: &Path) -> Res
 /// The render's counters as JSON: host statistics and the integrator's own (e.g. ERPT's
 /// quality norms), written next to the image.
 pub fn stats_json(integrator: &str, s: &crate::RenderStats) -> String {
-    let num = |v: f64| if v.is_finite() { format!("{v}") } else { "null".into() };
+    let num = |v: f64| {
+        if v.is_finite() {
+            format!("{v}")
+        } else {
+            "null".into()
+        }
+    };
     let mut out = String::from("{\n");
     out += &format!("  \"integrator\": \"{integrator}\",\n");
     out += &format!("  \"wall_seconds\": {},\n", num(s.wall.as_secs_f64()));
     out += &format!("  \"pixel_samples\": {},\n", s.pixel_samples);
-    out += &format!("  \"closest_rays\": {},\n  \"shadow_rays\": {},\n", s.closest_rays, s.shadow_rays);
+    out += &format!(
+        "  \"closest_rays\": {},\n  \"shadow_rays\": {},\n",
+        s.closest_rays, s.shadow_rays
+    );
     out += &format!("  \"invalid_deposits\": {},\n", s.invalid_deposits);
     out += &format!("  \"interrupted\": {},\n", s.interrupted);
     out += "  \"counters\": {";
     for (i, (k, v)) in s.integrator.iter().enumerate() {
-        let key: String = k.chars().flat_map(|c| if c == '"' || c == '\\' { vec!['\\', c] } else { vec![c] }).collect();
-        out += &format!("{}\n    \"{key}\": {}", if i == 0 { "" } else { "," }, num(*v));
+        let key: String = k
+            .chars()
+            .flat_map(|c| {
+                if c == '"' || c == '\\' {
+                    vec!['\\', c]
+                } else {
+                    vec![c]
+                }
+            })
+            .collect();
+        out += &format!(
+            "{}\n    \"{key}\": {}",
+            if i == 0 { "" } else { "," },
+            num(*v)
+        );
     }
     out += "\n  }\n}\n";
     out

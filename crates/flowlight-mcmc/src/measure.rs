@@ -44,7 +44,10 @@ impl WeakNode {
     }
 
     pub fn is_dirac(self) -> bool {
-        matches!(self, WeakNode::DiracReflection | WeakNode::DiracTransmission)
+        matches!(
+            self,
+            WeakNode::DiracReflection | WeakNode::DiracTransmission
+        )
     }
 
     /// Whether a hard reconnection may end at (or start from) a vertex of this type.
@@ -64,7 +67,11 @@ pub fn dirac_scatter(component: &Component, wo: Vec3, transmission: bool) -> Opt
 }
 
 /// The first component of `bsdf` that has a Dirac lobe of the given kind.
-pub fn dirac_component(bsdf: &Bsdf, wo: Vec3, transmission: bool) -> Option<(usize, Component, f32)> {
+pub fn dirac_component(
+    bsdf: &Bsdf,
+    wo: Vec3,
+    transmission: bool,
+) -> Option<(usize, Component, f32)> {
     bsdf.components()
         .enumerate()
         .filter(|(_, (c, _))| c.is_delta())
@@ -75,15 +82,28 @@ pub fn dirac_component(bsdf: &Bsdf, wo: Vec3, transmission: bool) -> Option<(usi
 /// The BSDF at a stored vertex.
 pub fn vertex_bsdf(scene: &Scene, v: &PathVertex) -> Option<Bsdf> {
     let m = scene.materials.get(v.material as usize)?;
-    Some(Bsdf::from_material(m, m.base_color_at(v.uv, scene.textures)))
+    Some(Bsdf::from_material(
+        m,
+        m.base_color_at(v.uv, scene.textures),
+    ))
 }
 
 /// Directions at an interior vertex: local frame, wo (to the previous vertex), wi (to the next).
-pub fn local_directions(v: &PathVertex, prev: Vec3, next: Vec3) -> Option<(Frame, Vec3, Vec3, Vec3, Vec3)> {
+pub fn local_directions(
+    v: &PathVertex,
+    prev: Vec3,
+    next: Vec3,
+) -> Option<(Frame, Vec3, Vec3, Vec3, Vec3)> {
     let wo_w = (prev - v.p).try_normalize()?;
     let wi_w = (next - v.p).try_normalize()?;
     let frame = Frame::from_z(v.ns);
-    Some((frame, wo_w, wi_w, frame.to_local(wo_w), frame.to_local(wi_w)))
+    Some((
+        frame,
+        wo_w,
+        wi_w,
+        frame.to_local(wo_w),
+        frame.to_local(wi_w),
+    ))
 }
 
 /// Same side of the geometric and the shading normal (no light leaks through shading normals).
@@ -97,7 +117,8 @@ pub fn side_consistent(ng: Vec3, w_world: Vec3, w_local: Vec3) -> bool {
 pub fn area_jacobian(a: Vec3, b: Vec3, nb: Vec3) -> f32 {
     let d = b - a;
     let d2 = d.length_squared();
-    if !(d2 > 0.0) {
+    // NaN fails the comparison too.
+    if d2.is_nan() || d2 <= 0.0 {
         return 0.0;
     }
     nb.dot(d).abs() / (d2 * d2.sqrt())
@@ -115,15 +136,24 @@ pub fn measurement(scene: &Scene, path: &Path) -> Rgb {
     }
     let n = v.len() - 1;
     let light = &v[n];
-    let Some(emitter) = usize::try_from(light.emitter).ok().and_then(|e| scene.lights.emitters.get(e)) else {
+    let Some(emitter) = usize::try_from(light.emitter)
+        .ok()
+        .and_then(|e| scene.lights.emitters.get(e))
+    else {
         return Rgb::ZERO;
     };
-    let Some(to_prev) = (v[n - 1].p - light.p).try_normalize() else { return Rgb::ZERO };
+    let Some(to_prev) = (v[n - 1].p - light.p).try_normalize() else {
+        return Rgb::ZERO;
+    };
     let mut f = emitter.radiance_towards(to_prev);
     for k in 1..n {
         let x = &v[k];
-        let Some(bsdf) = vertex_bsdf(scene, x) else { return Rgb::ZERO };
-        let Some((_, wo_w, wi_w, wo, wi)) = local_directions(x, v[k - 1].p, v[k + 1].p) else { return Rgb::ZERO };
+        let Some(bsdf) = vertex_bsdf(scene, x) else {
+            return Rgb::ZERO;
+        };
+        let Some((_, wo_w, wi_w, wo, wi)) = local_directions(x, v[k - 1].p, v[k + 1].p) else {
+            return Rgb::ZERO;
+        };
         if !side_consistent(x.ng, wo_w, wo) || !side_consistent(x.ng, wi_w, wi) {
             return Rgb::ZERO;
         }
@@ -133,7 +163,9 @@ pub fn measurement(scene: &Scene, path: &Path) -> Rgb {
             }
             kind @ (WeakNode::DiracReflection | WeakNode::DiracTransmission) => {
                 let c = x.component as usize;
-                let Some((component, weight)) = bsdf.components().nth(c) else { return Rgb::ZERO };
+                let Some((component, weight)) = bsdf.components().nth(c) else {
+                    return Rgb::ZERO;
+                };
                 let Some((dir, coefficient)) =
                     dirac_scatter(&component, wo, kind == WeakNode::DiracTransmission)
                 else {

@@ -21,7 +21,8 @@
 
 use crate::film;
 use crate::measure::{
-    area_jacobian, dirac_component, dirac_scatter, local_directions, side_consistent, vertex_bsdf, WeakNode,
+    area_jacobian, dirac_component, dirac_scatter, local_directions, side_consistent, vertex_bsdf,
+    WeakNode,
 };
 use flowlight_core::bsdf::Bsdf;
 use flowlight_core::geometry::{Frame, SurfaceHit};
@@ -44,7 +45,9 @@ pub enum Extension {
 impl Extension {
     /// A cap of the given half-angle in degrees.
     pub fn cap_degrees(degrees: f32) -> Extension {
-        Extension::Cap { cos_max: degrees.to_radians().cos() }
+        Extension::Cap {
+            cos_max: degrees.to_radians().cos(),
+        }
     }
 }
 
@@ -90,14 +93,20 @@ fn extension_density(
     to: &PathVertex,
     target: Vec3,
 ) -> f64 {
-    let Some((_, _, wi_w, wo, wi)) = local_directions(from, prev.p, to.p) else { return 0.0 };
+    let Some((_, _, wi_w, wo, wi)) = local_directions(from, prev.p, to.p) else {
+        return 0.0;
+    };
     let p_omega = match ext {
         Extension::Bsdf => {
-            let Some(bsdf) = vertex_bsdf(scene, from) else { return 0.0 };
+            let Some(bsdf) = vertex_bsdf(scene, from) else {
+                return 0.0;
+            };
             smooth_pdf(&bsdf, wo, wi)
         }
         Extension::Cap { cos_max } => {
-            let Some(axis) = (target - from.p).try_normalize() else { return 0.0 };
+            let Some(axis) = (target - from.p).try_normalize() else {
+                return 0.0;
+            };
             if axis.dot(wi_w) >= cos_max {
                 uniform_cone_pdf(cos_max)
             } else {
@@ -110,7 +119,10 @@ fn extension_density(
 
 /// Sum of the smooth components' weights.
 fn smooth_weight(bsdf: &Bsdf) -> f32 {
-    bsdf.components().filter(|(c, _)| !c.is_delta()).map(|(_, w)| w).sum()
+    bsdf.components()
+        .filter(|(c, _)| !c.is_delta())
+        .map(|(_, w)| w)
+        .sum()
 }
 
 /// Density of the smooth part of the BSDF, renormalised: what [`sample_smooth`] draws from.
@@ -123,8 +135,9 @@ fn smooth_pdf(bsdf: &Bsdf, wo: Vec3, wi: Vec3) -> f32 {
     }
 }
 
-/// Samples a direction from the smooth components (chosen by weight); local frame.
-fn sample_smooth(bsdf: &Bsdf, wo: Vec3, rng: &mut Rng) -> Option<(Vec3, f32)> {
+/// Samples a direction from the smooth components (chosen by weight); local frame. Its
+/// density is [`smooth_pdf`].
+fn sample_smooth(bsdf: &Bsdf, wo: Vec3, rng: &mut Rng) -> Option<Vec3> {
     let total = smooth_weight(bsdf);
     if total <= 0.0 {
         return None;
@@ -141,8 +154,7 @@ fn sample_smooth(bsdf: &Bsdf, wo: Vec3, rng: &mut Rng) -> Option<(Vec3, f32)> {
     }
     let c = chosen.or(last)?;
     let s = c.sample_with(wo, rng.uniform(), rng.uniform2())?;
-    let pdf = smooth_pdf(bsdf, wo, s.wi);
-    (pdf > 0.0).then_some((s.wi, pdf))
+    (smooth_pdf(bsdf, wo, s.wi) > 0.0).then_some(s.wi)
 }
 
 fn vertex_from_hit(hit: &SurfaceHit, node: NodeType, component: u8) -> PathVertex {
@@ -162,17 +174,28 @@ fn vertex_from_hit(hit: &SurfaceHit, node: NodeType, component: u8) -> PathVerte
 
 /// Checks that `hit` can stand in for `original` (same weak type) and builds the vertex.
 /// `prev` is the vertex the ray came from.
-fn matching_vertex(scene: &Scene, hit: &SurfaceHit, original: &PathVertex, prev: Vec3) -> Option<PathVertex> {
+fn matching_vertex(
+    scene: &Scene,
+    hit: &SurfaceHit,
+    original: &PathVertex,
+    prev: Vec3,
+) -> Option<PathVertex> {
     let kind = WeakNode::of(original);
     if kind == WeakNode::Light {
-        let e = scene.lights.emitters.get(usize::try_from(hit.emitter).ok()?)?;
+        let e = scene
+            .lights
+            .emitters
+            .get(usize::try_from(hit.emitter).ok()?)?;
         let towards = (prev - hit.p).try_normalize()?;
-        return (!e.radiance_towards(towards).is_black()).then(|| vertex_from_hit(hit, NodeType::Light, 0));
+        return (!e.radiance_towards(towards).is_black())
+            .then(|| vertex_from_hit(hit, NodeType::Light, 0));
     }
     let m = scene.materials.get(hit.material as usize)?;
     let bsdf = Bsdf::from_material(m, m.base_color_at(hit.uv, scene.textures));
     match kind {
-        WeakNode::Smooth => bsdf.has_non_delta().then(|| vertex_from_hit(hit, original.node, original.component)),
+        WeakNode::Smooth => bsdf
+            .has_non_delta()
+            .then(|| vertex_from_hit(hit, original.node, original.component)),
         WeakNode::DiracReflection | WeakNode::DiracTransmission => {
             let wo = Frame::from_z(hit.ns).to_local((prev - hit.p).try_normalize()?);
             let (c, _, _) = dirac_component(&bsdf, wo, kind == WeakNode::DiracTransmission)?;
@@ -187,19 +210,31 @@ fn film_size(scene: &Scene) -> (u32, u32) {
     (scene.camera.width, scene.camera.height)
 }
 
-const MISS: Proposal = Proposal { valid: 0, transition_ratio: 0.0 };
+const MISS: Proposal = Proposal {
+    valid: 0,
+    transition_ratio: 0.0,
+};
 
 /// Builds a proposal `y` from `x` under `policy`. Returns the proposal's validity and its
 /// transition ratio T(y→x)/T(x→y), computed from the densities the sampling routines
 /// reported (forward) and evaluated (reverse).
-pub fn propose(scene: &Scene, tracer: &Tracer, rng: &mut Rng, policy: &Policy, x: &Path, y: &mut Path) -> Proposal {
+pub fn propose(
+    scene: &Scene,
+    tracer: &Tracer,
+    rng: &mut Rng,
+    policy: &Policy,
+    x: &Path,
+    y: &mut Path,
+) -> Proposal {
     let xv = x.vertices();
     if xv.len() < 2 {
         return MISS;
     }
     let n = xv.len() - 1;
     let (w, h) = film_size(scene);
-    let Some(raster) = film::migrate(x.raster, x.film_window, w, h, rng) else { return MISS };
+    let Some(raster) = film::migrate(x.raster, x.film_window, w, h, rng) else {
+        return MISS;
+    };
     y.raster = raster;
     y.film_window = x.film_window;
     y.vertex_count = x.vertex_count;
@@ -207,20 +242,44 @@ pub fn propose(scene: &Scene, tracer: &Tracer, rng: &mut Rng, policy: &Policy, x
     y.contribution = x.contribution;
     y.vertices[0] = xv[0];
 
-    let Some(hit) = tracer.intersect(&scene.camera.generate_ray(y.raster)) else { return MISS };
-    let Some(v1) = matching_vertex(scene, &hit, &xv[1], xv[0].p) else { return MISS };
+    let Some(hit) = tracer.intersect(&scene.camera.generate_ray(y.raster)) else {
+        return MISS;
+    };
+    let Some(v1) = matching_vertex(scene, &hit, &xv[1], xv[0].p) else {
+        return MISS;
+    };
     y.vertices[1] = v1;
     let (mut fwd, mut rev) = (1.0f64, 1.0f64);
     let mut extensions = 0u32;
-    if n > 1 && continue_from(scene, tracer, rng, policy, xv, y, 1, &mut extensions, &mut fwd, &mut rev).is_none() {
+    if n > 1
+        && continue_from(
+            scene,
+            tracer,
+            rng,
+            policy,
+            xv,
+            y,
+            1,
+            &mut extensions,
+            &mut fwd,
+            &mut rev,
+        )
+        .is_none()
+    {
         return MISS;
     }
     let ratio = rev / fwd;
     if !(ratio.is_finite() && ratio >= 0.0) {
         // A valid path with a degenerate density: reported, and rejected by the integrator.
-        return Proposal { valid: 1, transition_ratio: f32::NAN };
+        return Proposal {
+            valid: 1,
+            transition_ratio: f32::NAN,
+        };
     }
-    Proposal { valid: 1, transition_ratio: ratio as f32 }
+    Proposal {
+        valid: 1,
+        transition_ratio: ratio as f32,
+    }
 }
 
 /// Continues the regeneration from the already placed vertex `y[j]` (j < n) to the end,
@@ -265,7 +324,8 @@ fn continue_from(
                 if !side_consistent(yj.ng, dir, frame.to_local(dir)) {
                     return None;
                 }
-                if tracer.occluded(&surface(&yj).spawn_ray_to(target.p, target.p_error, target.ng)) {
+                if tracer.occluded(&surface(&yj).spawn_ray_to(target.p, target.p_error, target.ng))
+                {
                     return None;
                 }
                 y.vertices[j + 1..=n].copy_from_slice(&xv[j + 1..=n]);
@@ -274,15 +334,14 @@ fn continue_from(
                 return Some(());
             }
             let ext = policy.extension?;
-            let (dir, p_omega) = match ext {
+            let dir = match ext {
                 Extension::Bsdf => {
                     let bsdf = vertex_bsdf(scene, &yj)?;
-                    let (wi, pdf) = sample_smooth(&bsdf, wo, rng)?;
-                    (frame.to_world(wi), pdf)
+                    frame.to_world(sample_smooth(&bsdf, wo, rng)?)
                 }
                 Extension::Cap { cos_max } => {
                     let axis = (xv[j + 1].p - yj.p).try_normalize()?;
-                    (Frame::from_z(axis).to_world(uniform_cone(rng.uniform2(), cos_max)), uniform_cone_pdf(cos_max))
+                    Frame::from_z(axis).to_world(uniform_cone(rng.uniform2(), cos_max))
                 }
             };
             if !side_consistent(yj.ng, dir, frame.to_local(dir)) {
@@ -290,8 +349,13 @@ fn continue_from(
             }
             next_hit = tracer.intersect(&surface(&yj).spawn_ray(dir))?;
             let next = matching_vertex(scene, &next_hit, &xv[j + 1], yj.p)?;
-            *fwd *= (1.0 - p_r) as f64 * p_omega as f64 * area_jacobian(yj.p, next.p, next.ng) as f64;
-            *rev *= (1.0 - p_r) as f64 * extension_density(scene, ext, &xv[j - 1], &xv[j], &xv[j + 1], next.p);
+            // Densities are evaluated from the vertex positions, in the forward as in the reverse
+            // direction and in `density`: the sampled direction and the one the positions give
+            // differ by the ray-origin offset, which matters for close, grazing vertices.
+            *fwd *= (1.0 - p_r) as f64
+                * extension_density(scene, ext, &y.vertices[j - 1], &yj, &next, xv[j + 1].p);
+            *rev *= (1.0 - p_r) as f64
+                * extension_density(scene, ext, &xv[j - 1], &xv[j], &xv[j + 1], next.p);
             *extensions += 1;
             j += 1;
             y.vertices[j] = next;
@@ -325,7 +389,11 @@ pub fn density(scene: &Scene, policy: &Policy, x: &Path, y: &Path) -> f64 {
     if xv.len() != yv.len() || xv.len() < 2 || x.film_window != y.film_window {
         return 0.0;
     }
-    if xv.iter().zip(yv).any(|(a, b)| WeakNode::of(a) != WeakNode::of(b)) {
+    if xv
+        .iter()
+        .zip(yv)
+        .any(|(a, b)| WeakNode::of(a) != WeakNode::of(b))
+    {
         return 0.0;
     }
     let n = xv.len() - 1;
@@ -340,11 +408,18 @@ pub fn density(scene: &Scene, policy: &Policy, x: &Path, y: &Path) -> f64 {
             continue;
         }
         let p_r = p_reconnect(policy, xv, j, extensions);
-        if yv[j + 1..=n].iter().zip(&xv[j + 1..=n]).all(|(a, b)| a.p == b.p) {
+        if yv[j + 1..=n]
+            .iter()
+            .zip(&xv[j + 1..=n])
+            .all(|(a, b)| a.p == b.p)
+        {
             return d * p_r as f64;
         }
-        let Some(ext) = policy.extension else { return 0.0 };
-        d *= (1.0 - p_r) as f64 * extension_density(scene, ext, &yv[j - 1], &yv[j], &yv[j + 1], xv[j + 1].p);
+        let Some(ext) = policy.extension else {
+            return 0.0;
+        };
+        d *= (1.0 - p_r) as f64
+            * extension_density(scene, ext, &yv[j - 1], &yv[j], &yv[j + 1], xv[j + 1].p);
         extensions += 1;
     }
     d

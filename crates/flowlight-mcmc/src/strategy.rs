@@ -36,11 +36,28 @@ impl<S: Strategy> Mutation for StrategyMutation<S> {
     const PARAMS: &'static [ParamSpec] = S::PARAMS;
 
     fn create(params: &Params, scene: Scene<'static>) -> Result<Self, String> {
-        Ok(StrategyMutation { scene, policy: S::policy(params)?, _strategy: PhantomData })
+        Ok(StrategyMutation {
+            scene,
+            policy: S::policy(params)?,
+            _strategy: PhantomData,
+        })
     }
 
-    fn propose(&self, tracer: &Tracer, rng: &mut Rng, current: &Path, proposal: &mut Path) -> Result<Proposal, String> {
-        Ok(propose(&self.scene, tracer, rng, &self.policy, current, proposal))
+    fn propose(
+        &self,
+        tracer: &Tracer,
+        rng: &mut Rng,
+        current: &Path,
+        proposal: &mut Path,
+    ) -> Result<Proposal, String> {
+        Ok(propose(
+            &self.scene,
+            tracer,
+            rng,
+            &self.policy,
+            current,
+            proposal,
+        ))
     }
 
     fn density(&self, from: &Path, to: &Path) -> f64 {
@@ -52,7 +69,9 @@ impl<S: Strategy> Mutation for StrategyMutation<S> {
 pub fn cap_degrees(params: &Params, name: &str, default: f64) -> Result<f32, String> {
     let d = params.float(name, default)?;
     if !(d > 0.0 && d <= 90.0) {
-        return Err(format!("parameter '{name}' must be in (0, 90] degrees, got {d}"));
+        return Err(format!(
+            "parameter '{name}' must be in (0, 90] degrees, got {d}"
+        ));
     }
     Ok(d as f32)
 }

@@ -22,8 +22,19 @@ use flowlight_core::Rgb;
 use flowlight_sdk::{Scene, Tracer};
 use glam::Vec2;
 
-/// Probability of ending at an emitter that also scatters light (ζ_e in thesis §3.6).
-pub const EMISSION_TERMINATION: f32 = 0.5;
+/// Probability ζ_e of ending at an emitter that also scatters light (thesis §3.6): the share
+/// of the emitted radiance in emitted plus reflected, taking the reflected radiance as the
+/// BSDF albedo times a unit incident radiance, clamped to [0.05, 0.95]. A bright lamp thus
+/// almost always ends the path (its pixels are not noisy), a dim emitter that reflects
+/// strongly often continues. Any value in (0, 1) is unbiased: both branches are divided by
+/// their probability.
+pub fn emission_termination(emitted: Rgb, albedo: f32) -> f32 {
+    let e = emitted.luminance();
+    if albedo <= 0.0 {
+        return 1.0;
+    }
+    (e / (e + albedo)).clamp(0.05, 0.95)
+}
 
 /// One path sample: its estimate and its lighting layer. `value` is zero for paths that did
 /// not reach a light.
@@ -129,11 +140,7 @@ pub fn trace(
         if hit.emitter >= 0 && after_alpha {
             let le = scene.lights.emitters[hit.emitter as usize].radiance_towards(wo_world);
             if !le.is_black() {
-                let zeta = if bsdf.albedo() > 0.0 {
-                    EMISSION_TERMINATION
-                } else {
-                    1.0
-                };
+                let zeta = emission_termination(le, bsdf.albedo());
                 if rng.uniform() < zeta {
                     if !rec.push(vertex(&hit, NodeType::Light, 0)) {
                         return none;

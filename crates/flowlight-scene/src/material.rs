@@ -30,6 +30,9 @@ pub struct MaterialOverride {
     /// Emit from both faces instead of the front face only.
     #[serde(default)]
     pub two_sided_emission: Option<bool>,
+    /// Replaces the base colour factor (linear RGB, each in [0, 1]).
+    #[serde(default)]
+    pub base_color: Option<[f32; 3]>,
 }
 
 impl MaterialOverride {
@@ -42,6 +45,12 @@ impl MaterialOverride {
             (_, Some(s)) if !(0.0..=90.0).contains(&s) => {
                 Err(format!("`sigma_degrees` = {s} is outside [0, 90]"))
             }
+            _ => Ok(()),
+        }?;
+        match self.base_color {
+            Some(c) if !c.iter().all(|v| (0.0..=1.0).contains(v)) => Err(format!(
+                "`base_color` = {c:?} must have components in [0, 1]"
+            )),
             _ => Ok(()),
         }
     }
@@ -61,6 +70,9 @@ impl MaterialOverride {
         }
         if let Some(two) = self.two_sided_emission {
             m.two_sided_emission = two as u32;
+        }
+        if let Some(c) = self.base_color {
+            m.base_color = flowlight_core::Rgb::from_array(c);
         }
     }
 }

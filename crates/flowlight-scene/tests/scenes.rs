@@ -214,6 +214,7 @@ fn oren_nayar_from_extras_and_config_overrides() {
         MaterialOverride {
             diffuse: Some(DiffuseChoice::Lambert),
             two_sided_emission: None,
+            base_color: None,
             sigma_degrees: None,
         },
     );

@@ -23,11 +23,27 @@ pub struct Blow;
 
 impl Strategy for Blow {
     const NAME: &'static str = "blow";
-    const DESCRIPTION: &'static str = "expansion near the eye, random hard reconnection vs extension (corner-trap fix)";
+    const DESCRIPTION: &'static str =
+        "expansion near the eye, random hard reconnection vs extension (corner-trap fix)";
     const PARAMS: &'static [ParamSpec] = &[
-        param("width", ParamKind::String, "\"wide\"", "\"wide\" (BSDF extension) or \"narrow\" (cap extension)"),
-        param("cap_degrees", ParamKind::Float, "10.0", "cap half-angle for the narrow variant"),
-        param("p_reconnect", ParamKind::Float, "0.5", "probability of reconnecting at a smooth vertex"),
+        param(
+            "width",
+            ParamKind::String,
+            "\"wide\"",
+            "\"wide\" (BSDF extension) or \"narrow\" (cap extension)",
+        ),
+        param(
+            "cap_degrees",
+            ParamKind::Float,
+            "10.0",
+            "cap half-angle for the narrow variant",
+        ),
+        param(
+            "p_reconnect",
+            ParamKind::Float,
+            "0.5",
+            "probability of reconnecting at a smooth vertex",
+        ),
     ];
 
     fn policy(p: &Params) -> Result<Policy, String> {
@@ -37,9 +53,16 @@ impl Strategy for Blow {
         };
         let p_reconnect = probability(p, "p_reconnect", 0.5)?;
         if p_reconnect == 0.0 {
-            return Err("parameter 'p_reconnect' must be > 0: a blow must be able to reconnect".into());
+            return Err(
+                "parameter 'p_reconnect' must be > 0: a blow must be able to reconnect".into(),
+            );
         }
-        Ok(Policy { min_extensions: 0, p_reconnect, extension: Some(extension), drill_caustics: false })
+        Ok(Policy {
+            min_extensions: 0,
+            p_reconnect,
+            extension: Some(extension),
+            drill_caustics: false,
+        })
     }
 }
 

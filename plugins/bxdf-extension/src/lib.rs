@@ -22,11 +22,17 @@ pub struct BxdfExtension;
 
 impl Strategy for BxdfExtension {
     const NAME: &'static str = "bxdf-extension";
-    const DESCRIPTION: &'static str = "film-plane migration + one BSDF-sampled extension, then reconnection";
+    const DESCRIPTION: &'static str =
+        "film-plane migration + one BSDF-sampled extension, then reconnection";
     const PARAMS: &'static [ParamSpec] = &[];
 
     fn policy(_: &Params) -> Result<Policy, String> {
-        Ok(Policy { min_extensions: 1, p_reconnect: 1.0, extension: Some(Extension::Bsdf), drill_caustics: false })
+        Ok(Policy {
+            min_extensions: 1,
+            p_reconnect: 1.0,
+            extension: Some(Extension::Bsdf),
+            drill_caustics: false,
+        })
     }
 }
 

@@ -22,11 +22,27 @@ pub struct Drill;
 
 impl Strategy for Drill {
     const NAME: &'static str = "drill";
-    const DESCRIPTION: &'static str = "cap-sampled drilling along the original path; caustics drilled to the light";
+    const DESCRIPTION: &'static str =
+        "cap-sampled drilling along the original path; caustics drilled to the light";
     const PARAMS: &'static [ParamSpec] = &[
-        param("width", ParamKind::String, "\"narrow\"", "\"narrow\" (2 degree caps) or \"wide\" (10 degree caps)"),
-        param("cap_degrees", ParamKind::Float, "by width", "cap half-angle in degrees (overrides width)"),
-        param("p_stop", ParamKind::Float, "0.5", "probability of reconnecting at a smooth vertex (non-caustic remainder)"),
+        param(
+            "width",
+            ParamKind::String,
+            "\"narrow\"",
+            "\"narrow\" (2 degree caps) or \"wide\" (10 degree caps)",
+        ),
+        param(
+            "cap_degrees",
+            ParamKind::Float,
+            "by width",
+            "cap half-angle in degrees (overrides width)",
+        ),
+        param(
+            "p_stop",
+            ParamKind::Float,
+            "0.5",
+            "probability of reconnecting at a smooth vertex (non-caustic remainder)",
+        ),
     ];
 
     fn policy(p: &Params) -> Result<Policy, String> {
@@ -37,7 +53,11 @@ impl Strategy for Drill {
         Ok(Policy {
             min_extensions: 1,
             p_reconnect: probability(p, "p_stop", 0.5)?,
-            extension: Some(Extension::cap_degrees(cap_degrees(p, "cap_degrees", default_cap)?)),
+            extension: Some(Extension::cap_degrees(cap_degrees(
+                p,
+                "cap_degrees",
+                default_cap,
+            )?)),
             drill_caustics: true,
         })
     }

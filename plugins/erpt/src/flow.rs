@@ -54,7 +54,12 @@ impl Depositor<'_, '_> {
                 return; // the biased filter drops the excess
             }
         }
-        self.film.deposit(pixel.0 as f32 + 0.5, pixel.1 as f32 + 0.5, path.layer, value);
+        self.film.deposit(
+            pixel.0 as f32 + 0.5,
+            pixel.1 as f32 + 0.5,
+            path.layer,
+            value,
+        );
         self.deposits += 1;
     }
 }
@@ -108,7 +113,7 @@ impl<'a> Flow<'a> {
             stats[stats::SEEDS_SKIPPED] += 1.0;
             return Ok(());
         }
-        if lum_seed == 0.0 || !(quantum > 0.0) {
+        if lum_seed == 0.0 || quantum.is_nan() || quantum <= 0.0 {
             return Ok(());
         }
         let f_seed = measurement(self.scene, seed);
@@ -131,7 +136,13 @@ impl<'a> Flow<'a> {
             (wanted as u64, quantum)
         };
         let e = quantum as f32;
-        let mut dep = Depositor { film, max_consecutive: self.settings.max_consecutive, last_pixel: (i64::MIN, 0), run: 0, deposits: 0 };
+        let mut dep = Depositor {
+            film,
+            max_consecutive: self.settings.max_consecutive,
+            last_pixel: (i64::MIN, 0),
+            run: 0,
+            deposits: 0,
+        };
         for _ in 0..chains {
             stats[stats::CHAINS] += 1.0;
             *self.state = *seed;
@@ -139,9 +150,14 @@ impl<'a> Flow<'a> {
             dep.run = 0;
             dep.last_pixel = (i64::MIN, 0);
             for _ in 0..self.settings.chain_length {
-                let s = if self.mutations.len() > 1 { self.mutations.choose(rng.uniform()) } else { 0 };
+                let s = if self.mutations.len() > 1 {
+                    self.mutations.choose(rng.uniform())
+                } else {
+                    0
+                };
                 let proposal =
-                    self.mutations.propose(s, self.tracer, rng, &self.state, &mut self.proposal)?;
+                    self.mutations
+                        .propose(s, self.tracer, rng, &self.state, &mut self.proposal)?;
                 if proposal.valid == 0 {
                     dep.deposit(&self.state, colour(f_y) * e);
                     self.total.record(false, false);
@@ -158,7 +174,11 @@ impl<'a> Flow<'a> {
                     _ => proposal.transition_ratio as f64,
                 };
                 let lum_z = f_z.luminance() as f64;
-                let a = if !(ratio.is_finite() && ratio >= 0.0 && f_z.is_valid_radiance() && lum_z.is_finite()) {
+                let a = if !(ratio.is_finite()
+                    && ratio >= 0.0
+                    && f_z.is_valid_radiance()
+                    && lum_z.is_finite())
+                {
                     // Never deposit at, or move to, an invalid state: a counted rejection.
                     stats[stats::INVALID_PROPOSALS] += 1.0;
                     0.0

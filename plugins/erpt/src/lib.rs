@@ -56,7 +56,10 @@ use flowlight_core::Rgb;
 use flowlight_pathtrace::untangled;
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::integrator::STAT_SLOTS;
-use flowlight_sdk::{export_integrator, AccumulationStyle, Film, Integrator, IntegratorInfo, MutationSet, Params, Scene, Tracer, WorkUnit};
+use flowlight_sdk::{
+    export_integrator, AccumulationStyle, Film, Integrator, IntegratorInfo, MutationSet, Params,
+    Scene, Tracer, WorkUnit,
+};
 use glam::Vec2;
 use settings::{ErptSettings, QuantumScope};
 
@@ -78,10 +81,21 @@ impl Erpt {
     /// Traces the seed of pixel (x, y), sample `s`, into `path`; returns its estimate X_f.
     fn seed(&self, tracer: &Tracer, rng: &mut Rng, x: u32, y: u32, path: &mut Path) -> Rgb {
         let raster = Vec2::new(x as f32, y as f32) + rng.uniform2();
-        let sample = untangled::trace(&self.scene, tracer, &self.settings.seeds, rng, raster, Some(path));
+        let sample = untangled::trace(
+            &self.scene,
+            tracer,
+            &self.settings.seeds,
+            rng,
+            raster,
+            Some(path),
+        );
         path.film_window = self.settings.film_window;
         if path.vertex_count < 2 {
-            return if sample.value.is_black() { Rgb::ZERO } else { Rgb::splat(f32::NAN) };
+            return if sample.value.is_black() {
+                Rgb::ZERO
+            } else {
+                Rgb::splat(f32::NAN)
+            };
         }
         sample.value
     }
@@ -97,29 +111,45 @@ impl Erpt {
 
 impl Integrator for Erpt {
     const NAME: &'static str = "erpt";
-    const DESCRIPTION: &'static str = "Energy Redistribution Path Tracing with pluggable mutation strategies";
+    const DESCRIPTION: &'static str =
+        "Energy Redistribution Path Tracing with pluggable mutation strategies";
     const PARAMS: &'static [ParamSpec] = &settings::PARAMS;
 
-    fn create(params: &Params, mutations: MutationSet<'static>, scene: Scene<'static>) -> Result<(Self, IntegratorInfo), String> {
+    fn create(
+        params: &Params,
+        mutations: MutationSet<'static>,
+        scene: Scene<'static>,
+    ) -> Result<(Self, IntegratorInfo), String> {
         let settings = ErptSettings::from_params(params)?;
         if mutations.is_empty() {
             return Err("erpt needs at least one [[integrator.mutations]] entry".into());
         }
         if mutations.len() > 8 {
-            return Err(format!("erpt takes at most 8 mutation strategies, got {}", mutations.len()));
+            return Err(format!(
+                "erpt takes at most 8 mutation strategies, got {}",
+                mutations.len()
+            ));
         }
         let names: Vec<String> = (0..mutations.len())
             .map(|i| {
                 let n = mutations.name(i);
                 let dup = (0..i).filter(|&j| mutations.name(j) == n).count();
-                if dup == 0 { n.to_string() } else { format!("{n}#{}", dup + 1) }
+                if dup == 0 {
+                    n.to_string()
+                } else {
+                    format!("{n}#{}", dup + 1)
+                }
             })
             .collect();
         let specs = stats::specs(&names);
         debug_assert!(stats::slot_count(names.len()) <= STAT_SLOTS && specs.len() <= STAT_SLOTS);
         let layers = params.boolean("layers", false)?;
         let info = IntegratorInfo {
-            layer_count: if layers { settings.seeds.path_depth + 1 } else { 0 },
+            layer_count: if layers {
+                settings.seeds.path_depth + 1
+            } else {
+                0
+            },
             biased: (settings.max_consecutive > 0) as u32,
             // Chains random-walk on the film by at most K/2 per step; a flange of 2K keeps most
             // of their deposits in the unit's buffer (the host keeps the rest).
@@ -129,7 +159,15 @@ impl Integrator for Erpt {
             stat_count: specs.len(),
             ..IntegratorInfo::simple()
         };
-        Ok((Erpt { scene, mutations, settings, image_quantum: None }, info))
+        Ok((
+            Erpt {
+                scene,
+                mutations,
+                settings,
+                image_quantum: None,
+            },
+            info,
+        ))
     }
 
     fn prepare(&mut self, tracer: &Tracer) -> Result<(), String> {
@@ -142,7 +180,7 @@ impl Integrator for Erpt {
         let (mut sum, mut count) = (Rgb::ZERO, 0u64);
         for y in 0..h {
             for x in 0..w {
-                let (mut rng, _) = seed_rngs(0x5eed_0f_1a6e, x, y, 0);
+                let (mut rng, _) = seed_rngs(0x5eed_f1a6, x, y, 0);
                 let e = self.seed(tracer, &mut rng, x, y, &mut path);
                 if e.is_valid_radiance() {
                     sum += e;
@@ -154,10 +192,17 @@ impl Integrator for Erpt {
         Ok(())
     }
 
-    fn render(&self, unit: &WorkUnit, tracer: &Tracer, film: &mut Film, stats: &mut [f64]) -> Result<(), String> {
+    fn render(
+        &self,
+        unit: &WorkUnit,
+        tracer: &Tracer,
+        film: &mut Film,
+        stats: &mut [f64],
+    ) -> Result<(), String> {
         let mut path = Box::new(Path::empty());
         let samples = unit.sample_begin..unit.sample_begin + unit.sample_count;
-        let pixels = || (unit.y0..unit.y1).flat_map(move |y| (unit.x0..unit.x1).map(move |x| (x, y)));
+        let pixels =
+            || (unit.y0..unit.y1).flat_map(move |y| (unit.x0..unit.x1).map(move |x| (x, y)));
         let quantum = match self.image_quantum {
             Some(q) => q,
             None => {
@@ -179,7 +224,8 @@ impl Integrator for Erpt {
         };
         stats[stats::QUANTUM_SUM] += quantum;
         stats[stats::UNITS] += 1.0;
-        stats[stats::IMAGE_PIXELS] = (self.scene.camera.width as f64) * (self.scene.camera.height as f64);
+        stats[stats::IMAGE_PIXELS] =
+            (self.scene.camera.width as f64) * (self.scene.camera.height as f64);
         let mut flow = Flow::new(&self.scene, tracer, &self.settings, &self.mutations);
         for (x, y) in pixels() {
             for s in samples.clone() {

@@ -67,15 +67,21 @@ impl ErptSettings {
         seeds.max_ray_depth = max_ray_depth as u32;
         let mutations_per_sample = p.float("mutations_per_sample", 64.0)?;
         if !(mutations_per_sample > 0.0 && mutations_per_sample.is_finite()) {
-            return Err(format!("parameter 'mutations_per_sample' must be positive, got {mutations_per_sample}"));
+            return Err(format!(
+                "parameter 'mutations_per_sample' must be positive, got {mutations_per_sample}"
+            ));
         }
         let chain_length = p.int("chain_length", 16)?;
         if !(1..=1_000_000).contains(&chain_length) {
-            return Err(format!("parameter 'chain_length' must be in 1..=1000000, got {chain_length}"));
+            return Err(format!(
+                "parameter 'chain_length' must be in 1..=1000000, got {chain_length}"
+            ));
         }
         let film_window = p.int("film_window", 8)?;
         if !(0..=4096).contains(&film_window) {
-            return Err(format!("parameter 'film_window' must be in 0..=4096, got {film_window}"));
+            return Err(format!(
+                "parameter 'film_window' must be in 0..=4096, got {film_window}"
+            ));
         }
         let quantum = match p.choice("quantum", "tile", &["tile", "image"])? {
             "tile" => QuantumScope::Tile,
@@ -87,11 +93,15 @@ impl ErptSettings {
         };
         let max_chains_per_seed = p.int("max_chains_per_seed", 1024)?;
         if !(1..=1_000_000).contains(&max_chains_per_seed) {
-            return Err(format!("parameter 'max_chains_per_seed' must be in 1..=1000000, got {max_chains_per_seed}"));
+            return Err(format!(
+                "parameter 'max_chains_per_seed' must be in 1..=1000000, got {max_chains_per_seed}"
+            ));
         }
         let max_consecutive = p.int("max_consecutive", 0)?;
         if max_consecutive < 0 {
-            return Err(format!("parameter 'max_consecutive' must be >= 0, got {max_consecutive}"));
+            return Err(format!(
+                "parameter 'max_consecutive' must be >= 0, got {max_consecutive}"
+            ));
         }
         Ok(ErptSettings {
             seeds,

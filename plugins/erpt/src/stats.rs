@@ -38,34 +38,56 @@ pub fn specs(strategies: &[String]) -> &'static [StatSpec] {
         stat("units", StatMerge::Sum),
         stat("image_pixels", StatMerge::Max),
     ];
-    let groups: Vec<String> =
-        std::iter::once("total".to_string()).chain(strategies.iter().cloned()).collect();
+    let groups: Vec<String> = std::iter::once("total".to_string())
+        .chain(strategies.iter().cloned())
+        .collect();
     for g in &groups {
         out.push(stat(leak(format!("{g}.mutations")), StatMerge::Sum));
         for e in EVENTS {
             out.push(stat(leak(format!("{g}.{}", e.name())), StatMerge::Sum));
         }
         for e in EVENTS {
-            out.push(stat(leak(format!("{g}.{}_streaks", e.name())), StatMerge::Sum));
+            out.push(stat(
+                leak(format!("{g}.{}_streaks", e.name())),
+                StatMerge::Sum,
+            ));
         }
         for e in EVENTS {
-            out.push(stat(leak(format!("{g}.{}_streak_total", e.name())), StatMerge::Sum));
+            out.push(stat(
+                leak(format!("{g}.{}_streak_total", e.name())),
+                StatMerge::Sum,
+            ));
         }
         for e in EVENTS {
-            out.push(stat(leak(format!("{g}.{}_streak_max", e.name())), StatMerge::Max));
+            out.push(stat(
+                leak(format!("{g}.{}_streak_max", e.name())),
+                StatMerge::Max,
+            ));
         }
     }
     out.push(stat_ratio("chains_per_seed", CHAINS as u32, SEEDS as u32));
-    out.push(stat_ratio("deposits_per_pixel", DEPOSITS as u32, IMAGE_PIXELS as u32));
+    out.push(stat_ratio(
+        "deposits_per_pixel",
+        DEPOSITS as u32,
+        IMAGE_PIXELS as u32,
+    ));
     out.push(stat_ratio("mean_quantum", QUANTUM_SUM as u32, UNITS as u32));
     for (gi, g) in groups.iter().enumerate() {
         let b = base(gi) as u32;
         for (ei, e) in EVENTS.iter().enumerate() {
-            out.push(stat_ratio(leak(format!("{g}.{}_strength", e.name())), b + 1 + ei as u32, b));
+            out.push(stat_ratio(
+                leak(format!("{g}.{}_strength", e.name())),
+                b + 1 + ei as u32,
+                b,
+            ));
         }
         for (ei, e) in EVENTS.iter().enumerate() {
             let streaks = b + 5 + ei as u32;
-            out.push(stat_ratio(leak(format!("{g}.{}_mean_streak", e.name())), streaks + 4, streaks));
+            out.push(stat_ratio(
+                leak(format!("{g}.{}_mean_streak", e.name())),
+                streaks + 4,
+                streaks,
+            ));
         }
     }
     Box::leak(out.into_boxed_slice())

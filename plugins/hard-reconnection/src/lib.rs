@@ -17,11 +17,17 @@ pub struct HardReconnection;
 
 impl Strategy for HardReconnection {
     const NAME: &'static str = "hard-reconnection";
-    const DESCRIPTION: &'static str = "film-plane migration + strict reconnection y_k -> x_{k+1} (ratio 1)";
+    const DESCRIPTION: &'static str =
+        "film-plane migration + strict reconnection y_k -> x_{k+1} (ratio 1)";
     const PARAMS: &'static [ParamSpec] = &[];
 
     fn policy(_: &Params) -> Result<Policy, String> {
-        Ok(Policy { min_extensions: 0, p_reconnect: 1.0, extension: None, drill_caustics: false })
+        Ok(Policy {
+            min_extensions: 0,
+            p_reconnect: 1.0,
+            extension: None,
+            drill_caustics: false,
+        })
     }
 }
 

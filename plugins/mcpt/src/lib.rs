@@ -29,8 +29,8 @@ use flowlight_core::Rgb;
 use flowlight_pathtrace::{entangled, untangled, PathSettings, SampleContributions, Variant};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::{
-    export_integrator, param, Film, Integrator, IntegratorInfo, MutationSet,
-    ParamKind, Params, Scene, Tracer, WorkUnit,
+    export_integrator, param, Film, Integrator, IntegratorInfo, MutationSet, ParamKind, Params,
+    Scene, Tracer, WorkUnit,
 };
 use glam::Vec2;
 

@@ -26,8 +26,14 @@ pub struct SoftReconnection;
 
 impl Strategy for SoftReconnection {
     const NAME: &'static str = "soft-reconnection";
-    const DESCRIPTION: &'static str = "film-plane migration + cap-sampled reconnection around x_{k+1}";
-    const PARAMS: &'static [ParamSpec] = &[param("cap_degrees", ParamKind::Float, "5.0", "cap half-angle in degrees")];
+    const DESCRIPTION: &'static str =
+        "film-plane migration + cap-sampled reconnection around x_{k+1}";
+    const PARAMS: &'static [ParamSpec] = &[param(
+        "cap_degrees",
+        ParamKind::Float,
+        "5.0",
+        "cap half-angle in degrees",
+    )];
 
     fn policy(p: &Params) -> Result<Policy, String> {
         Ok(Policy {

@@ -3,8 +3,7 @@
 
 use flowlight_sdk::abi::{IntegratorTable, ParamSpec, PluginDeclaration, ABI_VERSION};
 use flowlight_sdk::{
-    Film, Integrator, IntegratorInfo, MutationSet, Params, PluginKind, Scene,
-    Tracer, WorkUnit,
+    Film, Integrator, IntegratorInfo, MutationSet, Params, PluginKind, Scene, Tracer, WorkUnit,
 };
 
 pub struct NeverCalled;

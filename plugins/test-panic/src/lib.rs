@@ -5,8 +5,8 @@
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::core::Rgb;
 use flowlight_sdk::{
-    export_integrator, param, Film, Integrator, IntegratorInfo, MutationSet,
-    ParamKind, Params, Scene, Tracer, WorkUnit,
+    export_integrator, param, Film, Integrator, IntegratorInfo, MutationSet, ParamKind, Params,
+    Scene, Tracer, WorkUnit,
 };
 
 pub struct Faulty;

@@ -1,0 +1,565 @@
+//! Embree 4 ray queries for the Flowlight host.
+//!
+//! The library the build provisioned (see `build.rs`) is opened at run time, once per
+//! process, and one Embree device is made from it ([`device`]). A scene is built and
+//! committed once ([`EmbreeScene::build`]) and then answers closest-hit and any-hit queries
+//! from any number of threads. Nothing of Embree crosses the plugin boundary: the host wraps
+//! [`EmbreeScene`] in its own intersector trait.
+//!
+//! Types come from `embree4-sys` (bindgen over the Embree **4.2** headers it ships). Where
+//! those differ from the 4.4 library, this crate has its own `#[repr(C)]` definitions: see
+//! [`abi`] and docs/embree.md.
+
+use embree4_sys::{
+    RTCBufferType, RTCBuildQuality, RTCDevice, RTCFormat, RTCGeometry, RTCGeometryType, RTCRay,
+    RTCScene, RTCSceneFlags,
+};
+use flowlight_bvh::TriangleHit;
+use flowlight_core::geometry::Ray;
+use glam::Vec3;
+use std::ffi::{c_char, c_uint, c_void};
+use std::sync::OnceLock;
+
+/// Where the build found Embree: `EMBREE_DIR`, `system` or the pinned wheel.
+pub const BUILD_SOURCE: &str = env!("FLOWLIGHT_EMBREE_SOURCE");
+/// The library file the build found, opened at run time.
+pub const BUILD_LIBRARY: &str = env!("FLOWLIGHT_EMBREE_LIB");
+
+/// Layouts of the structures that cross into Embree, as the 4.4 library uses them.
+pub mod abi {
+    use embree4_sys::RTCRay;
+
+    /// `RTCHit` of Embree ≥ 4.3 built with instance arrays (the default, and the 4.4 wheel):
+    /// `instPrimID[RTC_MAX_INSTANCE_LEVEL_COUNT]` follows `instID`. embree4-sys 0.0.12's
+    /// 4.2 `RTCHit` lacks it, so its `RTCRayHit` is 80 bytes where the library writes 96.
+    #[repr(C, align(16))]
+    #[derive(Clone, Copy, Debug)]
+    pub struct RTCHit {
+        pub ng_x: f32,
+        pub ng_y: f32,
+        pub ng_z: f32,
+        pub u: f32,
+        pub v: f32,
+        pub prim_id: u32,
+        pub geom_id: u32,
+        pub inst_id: [u32; 1],
+        pub inst_prim_id: [u32; 1],
+    }
+
+    /// `RTCRayHit` with the 4.4 hit.
+    #[repr(C, align(16))]
+    #[derive(Clone, Copy, Debug)]
+    pub struct RTCRayHit {
+        pub ray: RTCRay,
+        pub hit: RTCHit,
+    }
+
+    // What embree4-sys declares and what this crate relies on (checked at compile time).
+    const _: () = assert!(std::mem::size_of::<RTCRay>() == 48);
+    const _: () = assert!(std::mem::align_of::<RTCRay>() == 16);
+    const _: () = assert!(std::mem::size_of::<embree4_sys::RTCHit>() == 32);
+    const _: () = assert!(std::mem::size_of::<embree4_sys::RTCRayHit>() == 80);
+    const _: () = assert!(std::mem::size_of::<RTCHit>() == 48);
+    const _: () = assert!(std::mem::size_of::<RTCRayHit>() == 96);
+    const _: () = assert!(std::mem::offset_of!(RTCRayHit, hit) == 48);
+    const _: () = assert!(std::mem::size_of::<embree4_sys::RTCIntersectArguments>() == 32);
+    const _: () = assert!(embree4_sys::RTC_MAX_INSTANCE_LEVEL_COUNT == 1);
+}
+
+type Fn<A> = A;
+
+/// The Embree entry points this crate uses, resolved from the library at run time. Enum
+/// results are read as `c_uint`/`isize` so that a value unknown to the 4.2 headers is not UB.
+struct Api {
+    new_device: Fn<unsafe extern "C" fn(*const c_char) -> RTCDevice>,
+    get_device_error: Fn<unsafe extern "C" fn(RTCDevice) -> c_uint>,
+    get_device_property: Fn<unsafe extern "C" fn(RTCDevice, c_uint) -> isize>,
+    new_scene: Fn<unsafe extern "C" fn(RTCDevice) -> RTCScene>,
+    release_scene: Fn<unsafe extern "C" fn(RTCScene)>,
+    set_scene_flags: Fn<unsafe extern "C" fn(RTCScene, RTCSceneFlags)>,
+    set_scene_build_quality: Fn<unsafe extern "C" fn(RTCScene, RTCBuildQuality)>,
+    new_geometry: Fn<unsafe extern "C" fn(RTCDevice, RTCGeometryType) -> RTCGeometry>,
+    set_new_geometry_buffer: Fn<
+        unsafe extern "C" fn(
+            RTCGeometry,
+            RTCBufferType,
+            c_uint,
+            RTCFormat,
+            usize,
+            usize,
+        ) -> *mut c_void,
+    >,
+    set_geometry_build_quality: Fn<unsafe extern "C" fn(RTCGeometry, RTCBuildQuality)>,
+    commit_geometry: Fn<unsafe extern "C" fn(RTCGeometry)>,
+    attach_geometry: Fn<unsafe extern "C" fn(RTCScene, RTCGeometry) -> c_uint>,
+    release_geometry: Fn<unsafe extern "C" fn(RTCGeometry)>,
+    commit_scene: Fn<unsafe extern "C" fn(RTCScene)>,
+    intersect1: Fn<unsafe extern "C" fn(RTCScene, *mut abi::RTCRayHit, *mut c_void)>,
+    occluded1: Fn<unsafe extern "C" fn(RTCScene, *mut RTCRay, *mut c_void)>,
+}
+
+/// The process's one Embree device and the library it came from.
+pub struct Device {
+    api: Api,
+    handle: RTCDevice,
+    /// The file that was opened.
+    pub library: String,
+    /// `RTC_DEVICE_PROPERTY_VERSION`, e.g. 40400.
+    pub version: u32,
+    _lib: libloading::Library,
+}
+
+// SAFETY: an Embree device may be used from any thread; the handle is never released.
+unsafe impl Send for Device {}
+unsafe impl Sync for Device {}
+
+/// The library candidates, in order: `FLOWLIGHT_EMBREE_LIB` at run time, the file the build
+/// provisioned, a copy beside the executable, the system loader's search.
+fn candidates() -> Vec<String> {
+    let mut c = Vec::new();
+    if let Ok(p) = std::env::var("FLOWLIGHT_EMBREE_LIB") {
+        c.push(p);
+    }
+    c.push(BUILD_LIBRARY.to_string());
+    if let Some(dir) = std::env::current_exe()
+        .ok()
+        .and_then(|e| e.parent().map(|d| d.to_path_buf()))
+    {
+        let name = std::path::Path::new(BUILD_LIBRARY)
+            .file_name()
+            .unwrap_or_default();
+        c.push(dir.join(name).display().to_string());
+    }
+    c.push("libembree4.so.4".to_string());
+    c
+}
+
+fn open_device() -> Result<Device, String> {
+    let mut tried = Vec::new();
+    let (lib, path) = candidates()
+        .into_iter()
+        .find_map(|p| {
+            // SAFETY: loading Embree runs its (and TBB's) initialisers, which are sound.
+            match unsafe { libloading::Library::new(&p) } {
+                Ok(l) => Some((l, p)),
+                Err(e) => {
+                    tried.push(format!("{p}: {e}"));
+                    None
+                }
+            }
+        })
+        .ok_or_else(|| format!("could not open Embree 4 ({})", tried.join("; ")))?;
+    macro_rules! sym {
+        ($name:literal) => {
+            // SAFETY: the signature is Embree 4's (see the `abi` module for the structs).
+            *unsafe { lib.get(concat!($name, "\0").as_bytes()) }
+                .map_err(|e| format!("{path}: no symbol {}: {e}", $name))?
+        };
+    }
+    let api = Api {
+        new_device: sym!("rtcNewDevice"),
+        get_device_error: sym!("rtcGetDeviceError"),
+        get_device_property: sym!("rtcGetDeviceProperty"),
+        new_scene: sym!("rtcNewScene"),
+        release_scene: sym!("rtcReleaseScene"),
+        set_scene_flags: sym!("rtcSetSceneFlags"),
+        set_scene_build_quality: sym!("rtcSetSceneBuildQuality"),
+        new_geometry: sym!("rtcNewGeometry"),
+        set_new_geometry_buffer: sym!("rtcSetNewGeometryBuffer"),
+        set_geometry_build_quality: sym!("rtcSetGeometryBuildQuality"),
+        commit_geometry: sym!("rtcCommitGeometry"),
+        attach_geometry: sym!("rtcAttachGeometry"),
+        release_geometry: sym!("rtcReleaseGeometry"),
+        commit_scene: sym!("rtcCommitScene"),
+        intersect1: sym!("rtcIntersect1"),
+        occluded1: sym!("rtcOccluded1"),
+    };
+    // SAFETY: a NUL-terminated config string.
+    let handle = unsafe { (api.new_device)(c"verbose=0".as_ptr()) };
+    if handle.is_null() {
+        let err = unsafe { (api.get_device_error)(std::ptr::null_mut()) };
+        return Err(format!("{path}: rtcNewDevice failed (RTCError {err})"));
+    }
+    let version = unsafe { (api.get_device_property)(handle, 0) } as u32;
+    if !(40000..50000).contains(&version) {
+        return Err(format!("{path} is Embree {version}, not Embree 4"));
+    }
+    Ok(Device {
+        api,
+        handle,
+        library: path,
+        version,
+        _lib: lib,
+    })
+}
+
+static DEVICE: OnceLock<Result<Device, String>> = OnceLock::new();
+
+/// The process's Embree device, made on first use; an error when no Embree 4 library can
+/// be opened (the host's `auto` then uses the BVH).
+pub fn device() -> Result<&'static Device, String> {
+    DEVICE
+        .get_or_init(open_device)
+        .as_ref()
+        .map_err(Clone::clone)
+}
+
+impl Device {
+    fn check(&self, what: &str) -> Result<(), String> {
+        // SAFETY: a valid device; the error code is per thread.
+        let e = unsafe { (self.api.get_device_error)(self.handle) };
+        if e == 0 {
+            Ok(())
+        } else {
+            Err(format!("Embree: {what} failed (RTCError {e})"))
+        }
+    }
+
+    /// "4.4.0", from the version property.
+    pub fn version_string(&self) -> String {
+        let v = self.version;
+        format!("{}.{}.{}", v / 10000, v / 100 % 100, v % 100)
+    }
+}
+
+/// Embree's BVH build quality.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BuildQuality {
+    Low,
+    Medium,
+    High,
+}
+
+impl BuildQuality {
+    pub fn parse(s: &str) -> Result<Self, String> {
+        match s {
+            "low" => Ok(Self::Low),
+            "medium" => Ok(Self::Medium),
+            "high" => Ok(Self::High),
+            _ => Err(format!(
+                "unknown Embree build quality {s:?}; expected \"low\", \"medium\" or \"high\""
+            )),
+        }
+    }
+    fn raw(self) -> RTCBuildQuality {
+        match self {
+            Self::Low => RTCBuildQuality::LOW,
+            Self::Medium => RTCBuildQuality::MEDIUM,
+            Self::High => RTCBuildQuality::HIGH,
+        }
+    }
+}
+
+/// How a scene is built.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SceneOptions {
+    /// `RTC_SCENE_FLAG_ROBUST`: rays on shared edges and vertices never slip through.
+    pub robust: bool,
+    pub quality: BuildQuality,
+}
+
+impl Default for SceneOptions {
+    fn default() -> Self {
+        SceneOptions {
+            robust: true,
+            quality: BuildQuality::Medium,
+        }
+    }
+}
+
+impl SceneOptions {
+    /// The defaults (robust, medium quality), changed by `FLOWLIGHT_EMBREE_QUALITY`
+    /// (`low` | `medium` | `high`) and `FLOWLIGHT_EMBREE_ROBUST` (`0` | `1`).
+    pub fn from_env() -> Result<Self, String> {
+        let mut o = SceneOptions::default();
+        if let Ok(q) = std::env::var("FLOWLIGHT_EMBREE_QUALITY") {
+            o.quality =
+                BuildQuality::parse(&q).map_err(|e| format!("FLOWLIGHT_EMBREE_QUALITY: {e}"))?;
+        }
+        if let Ok(r) = std::env::var("FLOWLIGHT_EMBREE_ROBUST") {
+            o.robust = match r.as_str() {
+                "1" | "true" => true,
+                "0" | "false" => false,
+                _ => return Err(format!("FLOWLIGHT_EMBREE_ROBUST={r:?}: expected 0 or 1")),
+            };
+        }
+        Ok(o)
+    }
+}
+
+/// A committed Embree scene of one triangle mesh; `prim` of a hit indexes the triangles it
+/// was built from.
+pub struct EmbreeScene {
+    dev: &'static Device,
+    scene: RTCScene,
+    triangles: usize,
+}
+
+// SAFETY: a committed Embree scene is read-only and may be queried from any thread.
+unsafe impl Send for EmbreeScene {}
+unsafe impl Sync for EmbreeScene {}
+
+impl EmbreeScene {
+    /// Builds and commits the scene of `triangles` (indices into `positions`).
+    pub fn build(
+        positions: &[Vec3],
+        triangles: &[[u32; 3]],
+        options: SceneOptions,
+    ) -> Result<EmbreeScene, String> {
+        let dev = device()?;
+        let api = &dev.api;
+        if let Some(bad) = triangles
+            .iter()
+            .flatten()
+            .find(|&&i| i as usize >= positions.len())
+        {
+            return Err(format!(
+                "triangle index {bad} out of range ({} vertices)",
+                positions.len()
+            ));
+        }
+        // SAFETY: every call gets valid handles; buffers are written within their sizes.
+        unsafe {
+            let scene = (api.new_scene)(dev.handle);
+            dev.check("rtcNewScene")?;
+            let out = EmbreeScene {
+                dev,
+                scene,
+                triangles: triangles.len(),
+            };
+            let mut flags = RTCSceneFlags::NONE;
+            if options.robust {
+                flags |= RTCSceneFlags::ROBUST;
+            }
+            (api.set_scene_flags)(scene, flags);
+            (api.set_scene_build_quality)(scene, options.quality.raw());
+            if !triangles.is_empty() {
+                let geom = (api.new_geometry)(dev.handle, RTCGeometryType::TRIANGLE);
+                dev.check("rtcNewGeometry")?;
+                (api.set_geometry_build_quality)(geom, options.quality.raw());
+                let vb = (api.set_new_geometry_buffer)(
+                    geom,
+                    RTCBufferType::VERTEX,
+                    0,
+                    RTCFormat::FLOAT3,
+                    12,
+                    positions.len(),
+                ) as *mut f32;
+                let ib = (api.set_new_geometry_buffer)(
+                    geom,
+                    RTCBufferType::INDEX,
+                    0,
+                    RTCFormat::UINT3,
+                    12,
+                    triangles.len(),
+                ) as *mut u32;
+                if vb.is_null() || ib.is_null() {
+                    (api.release_geometry)(geom);
+                    dev.check("rtcSetNewGeometryBuffer")?;
+                    return Err("Embree: rtcSetNewGeometryBuffer returned no buffer".into());
+                }
+                let vs = std::slice::from_raw_parts_mut(vb, positions.len() * 3);
+                for (d, p) in vs.chunks_exact_mut(3).zip(positions) {
+                    d.copy_from_slice(&p.to_array());
+                }
+                let is = std::slice::from_raw_parts_mut(ib, triangles.len() * 3);
+                for (d, t) in is.chunks_exact_mut(3).zip(triangles) {
+                    d.copy_from_slice(t);
+                }
+                (api.commit_geometry)(geom);
+                (api.attach_geometry)(scene, geom);
+                (api.release_geometry)(geom);
+                dev.check("attaching the triangle mesh")?;
+            }
+            (api.commit_scene)(scene);
+            dev.check("rtcCommitScene")?;
+            Ok(out)
+        }
+    }
+
+    /// Builds from triangles given by their vertices (no sharing).
+    pub fn build_soup(tris: &[[Vec3; 3]], options: SceneOptions) -> Result<EmbreeScene, String> {
+        let positions: Vec<Vec3> = tris.iter().flatten().copied().collect();
+        let idx: Vec<[u32; 3]> = (0..tris.len() as u32)
+            .map(|i| [3 * i, 3 * i + 1, 3 * i + 2])
+            .collect();
+        Self::build(&positions, &idx, options)
+    }
+
+    pub fn triangle_count(&self) -> usize {
+        self.triangles
+    }
+
+    #[inline]
+    fn rtc_ray(ray: &Ray) -> RTCRay {
+        // Valid hits have 0 < t < t_max; Embree's interval [tnear, tfar] is closed.
+        let tfar = if ray.t_max.is_finite() && ray.t_max > 0.0 {
+            f32::from_bits(ray.t_max.to_bits() - 1)
+        } else if ray.t_max > 0.0 {
+            ray.t_max
+        } else {
+            -0.0
+        };
+        RTCRay {
+            org_x: ray.origin.x,
+            org_y: ray.origin.y,
+            org_z: ray.origin.z,
+            tnear: f32::MIN_POSITIVE,
+            dir_x: ray.dir.x,
+            dir_y: ray.dir.y,
+            dir_z: ray.dir.z,
+            time: 0.0,
+            tfar,
+            mask: u32::MAX,
+            id: 0,
+            flags: 0,
+        }
+    }
+
+    /// Closest hit with `0 < t < ray.t_max`.
+    #[inline]
+    pub fn intersect(&self, ray: &Ray) -> Option<TriangleHit> {
+        let mut rh = abi::RTCRayHit {
+            ray: Self::rtc_ray(ray),
+            hit: abi::RTCHit {
+                ng_x: 0.0,
+                ng_y: 0.0,
+                ng_z: 0.0,
+                u: 0.0,
+                v: 0.0,
+                prim_id: u32::MAX,
+                geom_id: u32::MAX,
+                inst_id: [u32::MAX],
+                inst_prim_id: [u32::MAX],
+            },
+        };
+        // SAFETY: a committed scene and a 4.4-layout ray/hit; NULL arguments = defaults.
+        unsafe { (self.dev.api.intersect1)(self.scene, &mut rh, std::ptr::null_mut()) };
+        (rh.hit.geom_id != u32::MAX).then_some(TriangleHit {
+            t: rh.ray.tfar,
+            prim: rh.hit.prim_id,
+            b1: rh.hit.u,
+            b2: rh.hit.v,
+        })
+    }
+
+    /// Whether anything lies at `0 < t < ray.t_max`.
+    #[inline]
+    pub fn occluded(&self, ray: &Ray) -> bool {
+        let mut r = Self::rtc_ray(ray);
+        // SAFETY: as in `intersect`; Embree sets tfar to -inf when the ray is blocked.
+        unsafe { (self.dev.api.occluded1)(self.scene, &mut r, std::ptr::null_mut()) };
+        r.tfar == f32::NEG_INFINITY
+    }
+
+    /// Raw `rtcIntersect1` into caller memory, for the ABI test: `buf` must be at least
+    /// 96 bytes, 16-aligned, and start with an `RTCRay`.
+    ///
+    /// # Safety
+    /// `buf` must point to writable, 16-byte aligned memory of at least 96 bytes.
+    #[doc(hidden)]
+    pub unsafe fn intersect_raw(&self, buf: *mut u8) {
+        (self.dev.api.intersect1)(self.scene, buf as *mut abi::RTCRayHit, std::ptr::null_mut())
+    }
+
+    /// The ray Embree is given for `ray` (for the ABI test).
+    #[doc(hidden)]
+    pub fn embree_ray(ray: &Ray) -> RTCRay {
+        Self::rtc_ray(ray)
+    }
+}
+
+impl Drop for EmbreeScene {
+    fn drop(&mut self) {
+        // SAFETY: the scene is not used after this.
+        unsafe { (self.dev.api.release_scene)(self.scene) }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn quad() -> (Vec<Vec3>, Vec<[u32; 3]>) {
+        (
+            vec![
+                Vec3::new(-1.0, -1.0, 0.0),
+                Vec3::new(1.0, -1.0, 0.0),
+                Vec3::new(1.0, 1.0, 0.0),
+                Vec3::new(-1.0, 1.0, 0.0),
+            ],
+            vec![[0, 1, 2], [0, 2, 3]],
+        )
+    }
+
+    #[test]
+    fn device_is_embree_4_4() {
+        let d = device().unwrap();
+        assert!(
+            d.version >= 40400,
+            "{} from {}",
+            d.version_string(),
+            d.library
+        );
+    }
+
+    #[test]
+    fn hits_and_barycentrics_and_t_range() {
+        let (p, t) = quad();
+        let s = EmbreeScene::build(&p, &t, SceneOptions::default()).unwrap();
+        let ray = Ray {
+            origin: Vec3::new(0.5, -0.25, -2.0),
+            dir: Vec3::Z,
+            t_max: f32::INFINITY,
+        };
+        let h = s.intersect(&ray).unwrap();
+        assert_eq!(h.prim, 0);
+        assert!((h.t - 2.0).abs() < 1e-6);
+        let q = p[0] * (1.0 - h.b1 - h.b2) + p[1] * h.b1 + p[2] * h.b2;
+        assert!((q - Vec3::new(0.5, -0.25, 0.0)).length() < 1e-6, "{q}");
+        assert!(s.occluded(&ray));
+        // t_max is exclusive: a hit exactly at t_max is not one.
+        let short = Ray { t_max: 2.0, ..ray };
+        assert!(s.intersect(&short).is_none());
+        assert!(!s.occluded(&short));
+        let longer = Ray {
+            t_max: 2.0001,
+            ..ray
+        };
+        assert!(s.intersect(&longer).is_some());
+        // Behind the origin: no hit.
+        let away = Ray {
+            dir: -Vec3::Z,
+            ..ray
+        };
+        assert!(s.intersect(&away).is_none());
+    }
+
+    #[test]
+    fn the_library_writes_the_4_4_hit_layout() {
+        // The library writes instPrimID right after instID: byte 80..84 of RTCRayHit, past
+        // the end of embree4-sys's 80-byte (4.2) struct.
+        let (p, t) = quad();
+        let s = EmbreeScene::build(&p, &t, SceneOptions::default()).unwrap();
+        #[repr(C, align(16))]
+        struct Buf([u8; 128]);
+        let mut buf = Buf([0xAB; 128]);
+        let ray = EmbreeScene::embree_ray(&Ray {
+            origin: Vec3::new(0.5, -0.25, -2.0),
+            dir: Vec3::Z,
+            t_max: f32::INFINITY,
+        });
+        unsafe {
+            std::ptr::write(buf.0.as_mut_ptr() as *mut RTCRay, ray);
+            s.intersect_raw(buf.0.as_mut_ptr());
+        }
+        let geom = u32::from_ne_bytes(buf.0[72..76].try_into().unwrap());
+        assert_eq!(geom, 0, "geomID at the 4.2 offset");
+        let written: Vec<usize> = (80..128).filter(|&i| buf.0[i] != 0xAB).collect();
+        assert_eq!(
+            written,
+            vec![80, 81, 82, 83],
+            "bytes written past the 4.2 RTCRayHit"
+        );
+    }
+}
