@@ -30,6 +30,7 @@ fn main() {
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rerun-if-env-changed=EMBREE_DIR");
     println!("cargo:rerun-if-env-changed=FLOWLIGHT_EMBREE_SKIP_SYSTEM");
+    println!("cargo:rerun-if-env-changed=PYTHON");
 
     let out = PathBuf::from(env::var("OUT_DIR").unwrap());
     let (source, link_dir, runtime_lib) = if let Some(dir) = env::var_os("EMBREE_DIR") {
@@ -84,24 +85,42 @@ fn from_embree_dir(dir: &Path) -> (&'static str, Option<PathBuf>, String) {
     ));
 }
 
-/// A `libembree4.so` on the C toolchain's default search path.
+/// A `libembree4.so` on the linker's default search path: the C compiler's library
+/// directories (`cc -print-file-name`), then `ld`'s `SEARCH_DIR`s (e.g. `/usr/local/lib`).
 fn system_embree() -> Option<(&'static str, Option<PathBuf>, String)> {
     let cc = env::var("CC").unwrap_or_else(|_| "cc".into());
-    let o = Command::new(cc)
+    let mut dirs = Vec::new();
+    if let Ok(o) = Command::new(cc)
         .arg("-print-file-name=libembree4.so")
         .output()
-        .ok()?;
-    let p = PathBuf::from(String::from_utf8_lossy(&o.stdout).trim());
-    if !p.is_absolute() || !p.exists() {
-        return None;
+    {
+        let p = PathBuf::from(String::from_utf8_lossy(&o.stdout).trim());
+        if let Some(d) = p
+            .is_absolute()
+            .then(|| p.parent().map(Path::to_path_buf))
+            .flatten()
+        {
+            dirs.push(d);
+        }
     }
-    let dir = p.canonicalize().ok()?.parent()?.to_path_buf();
+    if let Ok(o) = Command::new("ld").arg("--verbose").output() {
+        let text = String::from_utf8_lossy(&o.stdout);
+        for part in text.split("SEARCH_DIR(\"").skip(1) {
+            if let Some(d) = part.split('"').next() {
+                dirs.push(PathBuf::from(d.trim_start_matches('=')));
+            }
+        }
+    }
+    let dir = dirs
+        .into_iter()
+        .find(|d| d.join("libembree4.so").exists())?;
+    let dev = dir.join("libembree4.so");
     let rt = if dir.join("libembree4.so.4").exists() {
         dir.join("libembree4.so.4")
     } else {
-        p
+        dev
     };
-    Some(("system", None, rt.display().to_string()))
+    Some(("system", Some(dir), rt.display().to_string()))
 }
 
 fn from_wheel(out: &Path) -> (&'static str, Option<PathBuf>, String) {

@@ -140,6 +140,7 @@ pub fn render(
     let halted = AtomicBool::new(false);
     let out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
 
+    let tiled = instance.info.accumulation == AccumulationStyle::Tile;
     let mut sample_begin = 0u32;
     let mut pass_spp = 1u32;
     pool.install(|| loop {
@@ -157,7 +158,11 @@ pub fn render(
         }
         let count = pass_spp.min(remaining);
         tiles.par_iter().for_each(|&(x0, y0, x1, y1)| {
-            if stop.load(Ordering::Relaxed) || halted.load(Ordering::Relaxed) || out_of_time() {
+            // A time budget stops a tile-local integrator at any unit; a flanged one (whose units
+            // deposit into their neighbours) finishes the pass, so every pixel's neighbourhood
+            // has the same number of samples. Ctrl-C stops both at once.
+            let budget_over = tiled && out_of_time();
+            if stop.load(Ordering::Relaxed) || halted.load(Ordering::Relaxed) || budget_over {
                 return;
             }
             let unit = WorkUnit {
@@ -204,7 +209,12 @@ pub fn render(
         });
         sample_begin += count;
         // Short passes first for a quick preview, then longer ones to amortise scheduling.
-        pass_spp = (pass_spp * 2).min(16);
+        // Deposits of a flanged unit land in its neighbours too: a pass stopped half-way
+        // would leave them normalised by their own (smaller) sample counts, so such
+        // integrators keep one-sample passes and a stop costs at most that imbalance.
+        if tiled {
+            pass_spp = (pass_spp * 2).min(16);
+        }
     });
 
     let error = error.into_inner().unwrap();
