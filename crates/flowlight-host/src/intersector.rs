@@ -89,17 +89,28 @@ pub fn build_intersector(
     kind: IntersectorChoice,
     scene: &Scene,
 ) -> Result<(Box<dyn Intersector>, Duration), String> {
+    let options = flowlight_embree::SceneOptions::from_env()?;
+    build_intersector_with(kind, scene, options)
+}
+
+/// [`build_intersector`] with explicit Embree scene options (the config's `build_quality`
+/// and `robust`).
+pub fn build_intersector_with(
+    kind: IntersectorChoice,
+    scene: &Scene,
+    options: flowlight_embree::SceneOptions,
+) -> Result<(Box<dyn Intersector>, Duration), String> {
     match kind {
         IntersectorChoice::Bvh => {
             let (b, t) = BvhIntersector::build(scene);
             Ok((Box::new(b), t))
         }
         IntersectorChoice::Embree => {
-            let (e, t) = EmbreeIntersector::build(scene)
+            let (e, t) = EmbreeIntersector::build_with(scene, options)
                 .map_err(|e| format!("intersector = \"embree\": {e}"))?;
             Ok((Box::new(e), t))
         }
-        IntersectorChoice::Auto => match EmbreeIntersector::build(scene) {
+        IntersectorChoice::Auto => match EmbreeIntersector::build_with(scene, options) {
             Ok((e, t)) => Ok((Box::new(e), t)),
             Err(e) => {
                 tracing::warn!("Embree unavailable ({e}); using the BVH");

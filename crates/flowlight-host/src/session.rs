@@ -2,7 +2,7 @@
 //! integrator plugin, render, write the outputs.
 
 use crate::film::Frame;
-use crate::intersector::{build_intersector, Intersector};
+use crate::intersector::{build_intersector_with, Intersector};
 use crate::output::{write_exr, write_png_preview, ExrMetadata, ImageLayer};
 use crate::plugin::{
     find_plugin, search_dirs, IntegratorInstance, MutationInstance, PluginLibrary,
@@ -72,7 +72,12 @@ impl Session {
             load_gltf(&config.scene, &config.material_overrides).map_err(|e| e.to_string())?;
         let load_time = t0.elapsed();
         let camera = config.camera(&scene).map_err(|e| e.to_string())?;
-        let (intersector, build_time) = build_intersector(config.intersector, &scene)
+        let options = flowlight_embree::SceneOptions {
+            robust: config.robust,
+            quality: flowlight_embree::BuildQuality::parse(&config.build_quality)
+                .map_err(|e| format!("{}: render.build_quality: {e}", config.path.display()))?,
+        };
+        let (intersector, build_time) = build_intersector_with(config.intersector, &scene, options)
             .map_err(|e| format!("{}: {e}", config.path.display()))?;
 
         let dirs = search_dirs(&config.plugin_search_paths);

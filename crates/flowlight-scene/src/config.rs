@@ -15,6 +15,8 @@
 //! threads = 0         # 0 = all cores
 //! tile_size = 32
 //! intersector = "bvh" # "bvh" | "embree" | "auto" (default "auto")
+//! build_quality = "medium"  # Embree BVH quality: "low" | "medium" | "high" (large scenes)
+//! robust = true       # Embree robust mode (rays on shared edges do not slip through)
 //! [camera]            # optional, overrides the glTF camera key by key
 //! position = [0.278, 0.273, -0.8]
 //! look_at = [0.278, 0.273, 0.0]   # or forward = [...]
@@ -87,6 +89,10 @@ pub struct RenderConfig {
     pub threads: usize,
     pub tile_size: u32,
     pub intersector: Intersector,
+    /// Embree build quality: "low", "medium" (default) or "high".
+    pub build_quality: String,
+    /// Embree robust mode (default on).
+    pub robust: bool,
     pub camera_override: Option<CameraOverride>,
     pub integrator_plugin: String,
     /// The integrator's parameters (every key of `[integrator]` but `plugin`), in file order.
@@ -119,6 +125,12 @@ fn default_size() -> u32 {
 fn default_tile() -> u32 {
     32
 }
+fn default_quality() -> String {
+    "medium".into()
+}
+fn default_robust() -> bool {
+    true
+}
 fn default_intersector() -> String {
     "auto".into()
 }
@@ -140,6 +152,10 @@ struct RawRender {
     tile_size: u32,
     #[serde(default = "default_intersector")]
     intersector: String,
+    #[serde(default = "default_quality")]
+    build_quality: String,
+    #[serde(default = "default_robust")]
+    robust: bool,
 }
 
 impl Default for RawRender {
@@ -153,6 +169,8 @@ impl Default for RawRender {
             threads: 0,
             tile_size: default_tile(),
             intersector: default_intersector(),
+            build_quality: default_quality(),
+            robust: default_robust(),
         }
     }
 }
@@ -329,6 +347,15 @@ pub fn parse_config(path: &Path, text: &str) -> Result<RenderConfig, ConfigError
             ))
         }
     };
+    if !matches!(r.build_quality.as_str(), "low" | "medium" | "high") {
+        return Err(invalid(
+            "render.build_quality",
+            format!(
+                "\"{}\" is not one of \"low\", \"medium\", \"high\"",
+                r.build_quality
+            ),
+        ));
+    }
     let camera_override = match &raw.camera {
         None => None,
         Some(c) => {
@@ -396,6 +423,8 @@ pub fn parse_config(path: &Path, text: &str) -> Result<RenderConfig, ConfigError
         threads: r.threads,
         tile_size: r.tile_size,
         intersector,
+        build_quality: r.build_quality.clone(),
+        robust: r.robust,
         camera_override,
         integrator_plugin: raw.integrator.plugin,
         integrator_params: raw.integrator.params,

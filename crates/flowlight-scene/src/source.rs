@@ -114,6 +114,32 @@ impl GltfSource {
                 file: path.clone(),
                 reason: e.to_string(),
             })?;
+        // gltf-json's own validation indexes a primitive's accessors without checking them
+        // (a file without an `accessors` array panics there): check those indices first.
+        let accessor_count = root.accessors.len();
+        for (m, mesh) in root.meshes.iter().enumerate() {
+            for (p, prim) in mesh.primitives.iter().enumerate() {
+                let used = prim
+                    .attributes
+                    .iter()
+                    .map(|(semantic, index)| (format!("attributes.{semantic:?}"), index.value()))
+                    .chain(
+                        prim.indices
+                            .iter()
+                            .map(|index| ("indices".to_string(), index.value())),
+                    );
+                for (what, index) in used {
+                    if index >= accessor_count {
+                        return Err(SceneError::Validation {
+                            file: path,
+                            reason: format!(
+                                "meshes[{m}].primitives[{p}].{what}: accessor {index} is out of bounds (the file has {accessor_count} accessors)"
+                            ),
+                        });
+                    }
+                }
+            }
+        }
         // The crate's validation, less the POSITION min/max requirement, which many exporters
         // ignore and this loader does not need.
         let mut errors = Vec::new();

@@ -46,10 +46,6 @@ fn runner(cases: u32) -> TestRunner {
     })
 }
 
-fn strict() -> bool {
-    std::env::var("FLOWLIGHT_FUZZ_STRICT").is_ok_and(|v| v == "1")
-}
-
 fn scratch(tag: &str) -> PathBuf {
     static N: AtomicUsize = AtomicUsize::new(0);
     let d = std::env::temp_dir().join(format!(
@@ -77,18 +73,10 @@ fn check_load(file: &Path, bytes: &[u8]) -> Result<(), TestCaseError> {
                 prop_assert!((m as usize) < scene.materials.len());
             }
         }
-        Err(SceneError::Internal { reason, .. }) if strict() => {
+        Err(SceneError::Internal { reason, .. }) => {
             return Err(TestCaseError::fail(format!(
                 "the loader panicked: {reason}"
             )));
-        }
-        Err(e @ SceneError::Internal { .. }) => {
-            // Known: gltf-json 1.4.1's validation indexes `accessors` unchecked (see
-            // `known_bug_missing_accessors_array_panics_inside_gltf_json`). The loader's guard
-            // turns it into this one-line error naming the file; FLOWLIGHT_FUZZ_STRICT=1 makes
-            // it a failure.
-            let m = e.to_string();
-            prop_assert!(m.contains(&file.display().to_string()), "{m}");
         }
         Err(e) => {
             let m = e.to_string();
@@ -283,14 +271,11 @@ fn gltf_loader_survives_mutated_gltf_json() {
 }
 
 /// Found by `gltf_loader_survives_mutated_gltf_json`: a primitive whose POSITION refers to
-/// accessor 0 in a file without an `accessors` array makes gltf-json 1.4.1's validation hook
-/// (`mesh.rs:151`, `&root.accessors[index]`) panic. The loader catches it and reports
-/// "internal error while loading (malformed input?): index out of bounds…", but it should be
-/// an ordinary validation error. Ignored until the loader checks accessor indices itself
-/// before `gltf::Gltf` validation runs.
+/// accessor 0 in a file without an `accessors` array made gltf-json 1.4.1's validation hook
+/// (`mesh.rs:151`, `&root.accessors[index]`) panic. The loader now checks primitives'
+/// accessor indices before that validation runs, and names the primitive and the index.
 #[test]
-#[ignore = "known bug in the loader's validation path (gltf-json 1.4.1 panics, caught as Internal)"]
-fn known_bug_missing_accessors_array_panics_inside_gltf_json() {
+fn missing_accessors_array_is_a_validation_error_not_a_panic() {
     let dir = scratch("known-bug");
     let src = scenes().join("cornell-box");
     let text = std::fs::read_to_string(src.join("cornell-box.gltf")).unwrap();
