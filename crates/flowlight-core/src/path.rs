@@ -1,5 +1,6 @@
 //! Node and path types (thesis §3.3): Heckbert notation and the node-type classes.
 
+use crate::geometry::SurfaceHit;
 use crate::Rgb;
 use glam::{Vec2, Vec3};
 
@@ -85,6 +86,55 @@ pub struct PathVertex {
     pub component: u8,
 }
 
+impl PathVertex {
+    /// The vertex at a ray hit, scattered with `node` by BSDF `component`.
+    pub fn from_hit(hit: &SurfaceHit, node: NodeType, component: u8) -> PathVertex {
+        PathVertex {
+            p: hit.p,
+            p_error: hit.p_error,
+            ng: hit.ng,
+            ns: hit.ns,
+            uv: hit.uv,
+            prim: hit.prim,
+            material: hit.material,
+            emitter: hit.emitter,
+            node,
+            component,
+        }
+    }
+
+    /// The eye vertex of a pinhole camera at `position` looking along `forward`.
+    pub fn eye(position: Vec3, forward: Vec3) -> PathVertex {
+        PathVertex {
+            p: position,
+            p_error: Vec3::ZERO,
+            ng: forward,
+            ns: forward,
+            uv: Vec2::ZERO,
+            prim: u32::MAX,
+            material: u32::MAX,
+            emitter: -1,
+            node: NodeType::Eye,
+            component: 0,
+        }
+    }
+
+    /// The vertex as a surface to spawn rays from.
+    pub fn surface(&self) -> SurfaceHit {
+        SurfaceHit {
+            t: 0.0,
+            p: self.p,
+            p_error: self.p_error,
+            ng: self.ng,
+            ns: self.ns,
+            uv: self.uv,
+            prim: self.prim,
+            material: self.material,
+            emitter: self.emitter,
+        }
+    }
+}
+
 /// A complete eye-to-light path with its sampled contribution: the state of a Markov chain.
 /// Fixed capacity so it can cross the plugin boundary by pointer without allocation.
 #[repr(C)]
@@ -107,18 +157,7 @@ pub struct Path {
 impl Path {
     /// An empty path (no vertices).
     pub fn empty() -> Path {
-        let v = PathVertex {
-            p: Vec3::ZERO,
-            p_error: Vec3::ZERO,
-            ng: Vec3::Z,
-            ns: Vec3::Z,
-            uv: Vec2::ZERO,
-            prim: u32::MAX,
-            material: u32::MAX,
-            emitter: -1,
-            node: NodeType::Eye,
-            component: 0,
-        };
+        let v = PathVertex::eye(Vec3::ZERO, Vec3::Z);
         Path {
             raster: Vec2::ZERO,
             film_window: 0,

@@ -157,21 +157,6 @@ fn sample_smooth(bsdf: &Bsdf, wo: Vec3, rng: &mut Rng) -> Option<Vec3> {
     (smooth_pdf(bsdf, wo, s.wi) > 0.0).then_some(s.wi)
 }
 
-fn vertex_from_hit(hit: &SurfaceHit, node: NodeType, component: u8) -> PathVertex {
-    PathVertex {
-        p: hit.p,
-        p_error: hit.p_error,
-        ng: hit.ng,
-        ns: hit.ns,
-        uv: hit.uv,
-        prim: hit.prim,
-        material: hit.material,
-        emitter: hit.emitter,
-        node,
-        component,
-    }
-}
-
 /// Checks that `hit` can stand in for `original` (same weak type) and builds the vertex.
 /// `prev` is the vertex the ray came from.
 fn matching_vertex(
@@ -188,18 +173,18 @@ fn matching_vertex(
             .get(usize::try_from(hit.emitter).ok()?)?;
         let towards = (prev - hit.p).try_normalize()?;
         return (!e.radiance_towards(towards).is_black())
-            .then(|| vertex_from_hit(hit, NodeType::Light, 0));
+            .then(|| PathVertex::from_hit(hit, NodeType::Light, 0));
     }
     let m = scene.materials.get(hit.material as usize)?;
     let bsdf = Bsdf::from_material(m, m.base_color_at(hit.uv, scene.textures));
     match kind {
         WeakNode::Smooth => bsdf
             .has_non_delta()
-            .then(|| vertex_from_hit(hit, original.node, original.component)),
+            .then(|| PathVertex::from_hit(hit, original.node, original.component)),
         WeakNode::DiracReflection | WeakNode::DiracTransmission => {
             let wo = Frame::from_z(hit.ns).to_local((prev - hit.p).try_normalize()?);
             let (c, _, _) = dirac_component(&bsdf, wo, kind == WeakNode::DiracTransmission)?;
-            Some(vertex_from_hit(hit, original.node, c as u8))
+            Some(PathVertex::from_hit(hit, original.node, c as u8))
         }
         WeakNode::Eye | WeakNode::Light => None,
     }
@@ -312,7 +297,7 @@ fn continue_from(
             let bsdf = vertex_bsdf(scene, &yj)?;
             let (c, _) = bsdf.components().nth(yj.component as usize)?;
             let (wi, _) = dirac_scatter(&c, wo, kind == WeakNode::DiracTransmission)?;
-            next_hit = tracer.intersect(&surface(&yj).spawn_ray(frame.to_world(wi)))?;
+            next_hit = tracer.intersect(&yj.surface().spawn_ray(frame.to_world(wi)))?;
             let next = matching_vertex(scene, &next_hit, &xv[j + 1], yj.p)?;
             j += 1;
             y.vertices[j] = next;
@@ -324,8 +309,10 @@ fn continue_from(
                 if !side_consistent(yj.ng, dir, frame.to_local(dir)) {
                     return None;
                 }
-                if tracer.occluded(&surface(&yj).spawn_ray_to(target.p, target.p_error, target.ng))
-                {
+                if tracer.occluded(
+                    &yj.surface()
+                        .spawn_ray_to(target.p, target.p_error, target.ng),
+                ) {
                     return None;
                 }
                 y.vertices[j + 1..=n].copy_from_slice(&xv[j + 1..=n]);
@@ -347,7 +334,7 @@ fn continue_from(
             if !side_consistent(yj.ng, dir, frame.to_local(dir)) {
                 return None;
             }
-            next_hit = tracer.intersect(&surface(&yj).spawn_ray(dir))?;
+            next_hit = tracer.intersect(&yj.surface().spawn_ray(dir))?;
             let next = matching_vertex(scene, &next_hit, &xv[j + 1], yj.p)?;
             // Densities are evaluated from the vertex positions, in the forward as in the reverse
             // direction and in `density`: the sampled direction and the one the positions give
@@ -363,21 +350,6 @@ fn continue_from(
         if j == n {
             return Some(());
         }
-    }
-}
-
-/// A stored vertex as a surface to spawn rays from.
-fn surface(v: &PathVertex) -> SurfaceHit {
-    SurfaceHit {
-        t: 0.0,
-        p: v.p,
-        p_error: v.p_error,
-        ng: v.ng,
-        ns: v.ns,
-        uv: v.uv,
-        prim: v.prim,
-        material: v.material,
-        emitter: v.emitter,
     }
 }
 

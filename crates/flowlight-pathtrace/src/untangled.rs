@@ -44,21 +44,6 @@ pub struct PathSample {
     pub layer: u32,
 }
 
-fn vertex(hit: &flowlight_core::geometry::SurfaceHit, node: NodeType, component: u8) -> PathVertex {
-    PathVertex {
-        p: hit.p,
-        p_error: hit.p_error,
-        ng: hit.ng,
-        ns: hit.ns,
-        uv: hit.uv,
-        prim: hit.prim,
-        material: hit.material,
-        emitter: hit.emitter,
-        node,
-        component,
-    }
-}
-
 /// Records vertices into an optional [`Path`] (ERPT seeds keep them; MCPT does not).
 struct Recorder<'p> {
     path: Option<&'p mut Path>,
@@ -103,18 +88,7 @@ pub fn trace(
         value: Rgb::ZERO,
         layer: 0,
     };
-    let eye = PathVertex {
-        p: camera.position,
-        p_error: glam::Vec3::ZERO,
-        ng: camera.forward,
-        ns: camera.forward,
-        uv: Vec2::ZERO,
-        prim: u32::MAX,
-        material: u32::MAX,
-        emitter: -1,
-        node: NodeType::Eye,
-        component: 0,
-    };
+    let eye = PathVertex::eye(camera.position, camera.forward);
     rec.push(eye);
 
     let mut ray = camera.generate_ray(raster);
@@ -142,7 +116,7 @@ pub fn trace(
             if !le.is_black() {
                 let zeta = emission_termination(le, bsdf.albedo());
                 if rng.uniform() < zeta {
-                    if !rec.push(vertex(&hit, NodeType::Light, 0)) {
+                    if !rec.push(PathVertex::from_hit(&hit, NodeType::Light, 0)) {
                         return none;
                     }
                     return finish(&mut rec, beta * le / zeta, depth);
@@ -185,11 +159,10 @@ pub fn trace(
                     * conn.radiance
                     * (conn.wi_local.z.abs() * conn.geometry / (t * conn.pdf_area));
                 let node = component.node_type(shading.wo, conn.wi_local);
-                if !rec.push(vertex(&hit, node, c as u8)) {
+                if !rec.push(PathVertex::from_hit(&hit, node, c as u8)) {
                     return none;
                 }
-                let light = flowlight_core::geometry::SurfaceHit {
-                    t: 0.0,
+                let light = PathVertex {
                     p: ls.p,
                     p_error: ls.p_error,
                     ng: ls.n,
@@ -198,8 +171,10 @@ pub fn trace(
                     prim: scene.lights.emitters[ls.emitter as usize].prim,
                     material: u32::MAX,
                     emitter: ls.emitter as i32,
+                    node: NodeType::Light,
+                    component: 0,
                 };
-                if !rec.push(vertex(&light, NodeType::Light, 0)) {
+                if !rec.push(light) {
                     return none;
                 }
                 return finish(&mut rec, value, depth);
@@ -222,7 +197,7 @@ pub fn trace(
         if beta.is_black() {
             return none;
         }
-        if !rec.push(vertex(&hit, s.node, c as u8)) {
+        if !rec.push(PathVertex::from_hit(&hit, s.node, c as u8)) {
             return none;
         }
         after_alpha = class == NodeClass::Alpha;
