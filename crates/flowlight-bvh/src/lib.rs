@@ -175,46 +175,66 @@ impl Bvh {
         let slab = SlabRay::new(ray);
         let mut t_max = ray.t_max;
         let mut hit = None;
-        let mut stack = [0u32; STACK_SIZE];
+        slab.entry(&self.nodes[0], t_max)?;
+        // Children are tested at their parent, nearer first; the stack keeps each deferred
+        // child with its entry distance so it is skipped once a closer hit is known.
+        let mut stack = [(0u32, 0.0f32); STACK_SIZE];
         let mut sp = 0usize;
         let mut idx = 0usize;
         loop {
             let node = &self.nodes[idx];
-            if slab.hits(node, t_max) {
-                if node.count > 0 {
-                    let first = node.offset as usize;
-                    let last = first + node.count as usize;
-                    for (tri, &prim) in self.tris[first..last]
-                        .iter()
-                        .zip(&self.prim_ids[first..last])
-                    {
-                        *tests += 1;
-                        if let Some((t, b1, b2)) = wray.intersect(tri, t_max) {
-                            t_max = t;
-                            hit = Some(TriangleHit { t, prim, b1, b2 });
-                            if ANY_HIT {
-                                return hit;
-                            }
+            if node.count > 0 {
+                let first = node.offset as usize;
+                let last = first + node.count as usize;
+                for (tri, &prim) in self.tris[first..last]
+                    .iter()
+                    .zip(&self.prim_ids[first..last])
+                {
+                    *tests += 1;
+                    if let Some((t, b1, b2)) = wray.intersect(tri, t_max) {
+                        t_max = t;
+                        hit = Some(TriangleHit { t, prim, b1, b2 });
+                        if ANY_HIT {
+                            return hit;
                         }
                     }
-                } else {
-                    // Visit the child on the side the ray comes from first.
-                    let (near, far) = if slab.neg[node.axis as usize] {
-                        (node.offset as usize, idx + 1)
-                    } else {
-                        (idx + 1, node.offset as usize)
-                    };
-                    stack[sp] = far as u32;
-                    sp += 1;
-                    idx = near;
-                    continue;
+                }
+            } else {
+                let (a, b) = (idx + 1, node.offset as usize);
+                match (
+                    slab.entry(&self.nodes[a], t_max),
+                    slab.entry(&self.nodes[b], t_max),
+                ) {
+                    (Some(ta), Some(tb)) => {
+                        let (near, far, t_far) = if ta <= tb { (a, b, tb) } else { (b, a, ta) };
+                        stack[sp] = (far as u32, t_far);
+                        sp += 1;
+                        idx = near;
+                        continue;
+                    }
+                    (Some(_), None) => {
+                        idx = a;
+                        continue;
+                    }
+                    (None, Some(_)) => {
+                        idx = b;
+                        continue;
+                    }
+                    (None, None) => {}
                 }
             }
-            if sp == 0 {
-                return hit;
+            // Pop the next deferred child that may still hold a closer hit.
+            loop {
+                if sp == 0 {
+                    return hit;
+                }
+                sp -= 1;
+                let (i, t_entry) = stack[sp];
+                if t_entry < t_max {
+                    idx = i as usize;
+                    break;
+                }
             }
-            sp -= 1;
-            idx = stack[sp] as usize;
         }
     }
 
@@ -287,8 +307,6 @@ pub fn intersect_triangle(ray: &Ray, tri: &[Vec3; 3], prim: u32) -> Option<Trian
 #[derive(Clone, Copy, Debug)]
 pub struct WatertightRay {
     org: Vec3,
-    kx: u8,
-    ky: u8,
     kz: u8,
     sx: f32,
     sy: f32,
@@ -322,8 +340,6 @@ impl WatertightRay {
         let (sx, sy, sz) = (-d[kx] / dz, -d[ky] / dz, 1.0 / dz);
         Some(WatertightRay {
             org: ray.origin,
-            kx: kx as u8,
-            ky: ky as u8,
             kz: kz as u8,
             sx,
             sy,
@@ -342,12 +358,20 @@ impl WatertightRay {
     pub fn intersect(&self, tri: &[Vec3; 3], t_max: f32) -> Option<(f32, f32, f32)> {
         // Translate to the ray origin, permute, shear. Each vertex is transformed on its own,
         // so a vertex shared by two triangles gets bit-identical coordinates in both.
-        let p0 = (tri[0] - self.org).to_array();
-        let p1 = (tri[1] - self.org).to_array();
-        let p2 = (tri[2] - self.org).to_array();
-        let (kx, ky, kz) = (self.kx as usize, self.ky as usize, self.kz as usize);
-        let (p0z, p1z, p2z) = (p0[kz], p1[kz], p2[kz]);
-        let (q0x, q0y, q1x, q1y, q2x, q2y) = (p0[kx], p0[ky], p1[kx], p1[ky], p2[kx], p2[ky]);
+        // Permute with a branch on kz (the same for every triangle of a ray, so it predicts
+        // well) instead of indexing arrays by kx/ky/kz, which forces the vertices to memory.
+        let permute = |v: Vec3| -> Vec3 {
+            match self.kz {
+                0 => Vec3::new(v.y, v.z, v.x),
+                1 => Vec3::new(v.z, v.x, v.y),
+                _ => v,
+            }
+        };
+        let p0 = permute(tri[0] - self.org);
+        let p1 = permute(tri[1] - self.org);
+        let p2 = permute(tri[2] - self.org);
+        let (p0z, p1z, p2z) = (p0.z, p1.z, p2.z);
+        let (q0x, q0y, q1x, q1y, q2x, q2y) = (p0.x, p0.y, p1.x, p1.y, p2.x, p2.y);
         let p0x = q0x + self.sx * p0z;
         let p0y = q0y + self.sy * p0z;
         let p1x = q1x + self.sx * p1z;
@@ -443,7 +467,14 @@ impl SlabRay {
     /// distance is NaN (origin exactly on the slab's plane, direction component zero) does
     /// not constrain the interval: `f32::min`/`max` ignore NaN operands.
     #[inline(always)]
+    #[cfg(test)]
     fn hits(&self, node: &Node, t_max: f32) -> bool {
+        self.entry(node, t_max).is_some()
+    }
+
+    /// Entry distance (clamped to 0) of a ray that hits `node`'s box before `t_max`.
+    #[inline(always)]
+    fn entry(&self, node: &Node, t_max: f32) -> Option<f32> {
         let mut t0 = f32::NEG_INFINITY;
         let mut t1 = f32::INFINITY;
         for a in 0..3 {
@@ -456,7 +487,7 @@ impl SlabRay {
             t1 = t1.min((hi - self.org[a]) * self.inv[a]);
         }
         t1 *= 1.0 + 2.0 * gamma(3);
-        t0 <= t1 && t0 < t_max && t1 > 0.0
+        (t0 <= t1 && t0 < t_max && t1 > 0.0).then_some(t0.max(0.0))
     }
 }
 
