@@ -175,66 +175,46 @@ impl Bvh {
         let slab = SlabRay::new(ray);
         let mut t_max = ray.t_max;
         let mut hit = None;
-        slab.entry(&self.nodes[0], t_max)?;
-        // Children are tested at their parent, nearer first; the stack keeps each deferred
-        // child with its entry distance so it is skipped once a closer hit is known.
-        let mut stack = [(0u32, 0.0f32); STACK_SIZE];
+        let mut stack = [0u32; STACK_SIZE];
         let mut sp = 0usize;
         let mut idx = 0usize;
         loop {
             let node = &self.nodes[idx];
-            if node.count > 0 {
-                let first = node.offset as usize;
-                let last = first + node.count as usize;
-                for (tri, &prim) in self.tris[first..last]
-                    .iter()
-                    .zip(&self.prim_ids[first..last])
-                {
-                    *tests += 1;
-                    if let Some((t, b1, b2)) = wray.intersect(tri, t_max) {
-                        t_max = t;
-                        hit = Some(TriangleHit { t, prim, b1, b2 });
-                        if ANY_HIT {
-                            return hit;
+            if slab.hits(node, t_max) {
+                if node.count > 0 {
+                    let first = node.offset as usize;
+                    let last = first + node.count as usize;
+                    for (tri, &prim) in self.tris[first..last]
+                        .iter()
+                        .zip(&self.prim_ids[first..last])
+                    {
+                        *tests += 1;
+                        if let Some((t, b1, b2)) = wray.intersect(tri, t_max) {
+                            t_max = t;
+                            hit = Some(TriangleHit { t, prim, b1, b2 });
+                            if ANY_HIT {
+                                return hit;
+                            }
                         }
                     }
-                }
-            } else {
-                let (a, b) = (idx + 1, node.offset as usize);
-                match (
-                    slab.entry(&self.nodes[a], t_max),
-                    slab.entry(&self.nodes[b], t_max),
-                ) {
-                    (Some(ta), Some(tb)) => {
-                        let (near, far, t_far) = if ta <= tb { (a, b, tb) } else { (b, a, ta) };
-                        stack[sp] = (far as u32, t_far);
-                        sp += 1;
-                        idx = near;
-                        continue;
-                    }
-                    (Some(_), None) => {
-                        idx = a;
-                        continue;
-                    }
-                    (None, Some(_)) => {
-                        idx = b;
-                        continue;
-                    }
-                    (None, None) => {}
+                } else {
+                    // Visit the child on the side the ray comes from first.
+                    let (near, far) = if slab.neg[node.axis as usize] {
+                        (node.offset as usize, idx + 1)
+                    } else {
+                        (idx + 1, node.offset as usize)
+                    };
+                    stack[sp] = far as u32;
+                    sp += 1;
+                    idx = near;
+                    continue;
                 }
             }
-            // Pop the next deferred child that may still hold a closer hit.
-            loop {
-                if sp == 0 {
-                    return hit;
-                }
-                sp -= 1;
-                let (i, t_entry) = stack[sp];
-                if t_entry < t_max {
-                    idx = i as usize;
-                    break;
-                }
+            if sp == 0 {
+                return hit;
             }
+            sp -= 1;
+            idx = stack[sp] as usize;
         }
     }
 
@@ -467,7 +447,6 @@ impl SlabRay {
     /// distance is NaN (origin exactly on the slab's plane, direction component zero) does
     /// not constrain the interval: `f32::min`/`max` ignore NaN operands.
     #[inline(always)]
-    #[cfg(test)]
     fn hits(&self, node: &Node, t_max: f32) -> bool {
         self.entry(node, t_max).is_some()
     }
