@@ -29,7 +29,7 @@
 //! | parameter | type | default | meaning |
 //! |---|---|---|---|
 //! | `mutations` | list | — | `[[integrator.mutations]]`: `plugin`, `weight` (default 1), the plugin's parameters |
-//! | `mutations_per_sample` | float | 64 | M: expected mutations per initial MC sample |
+//! | `mutations_per_sample` | float | 8 | M: expected mutations per initial MC sample |
 //! | `chain_length` | int | 16 | N: steps of every chain |
 //! | `film_window` | int | 8 | K: side of the film-plane migration window (0: the raster position never moves) |
 //! | `quantum` | string | `"tile"` | `"tile"` or `"image"`: where e_d is estimated |

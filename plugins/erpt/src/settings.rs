@@ -39,7 +39,7 @@ pub struct ErptSettings {
 
 pub const PARAMS: [ParamSpec; 12] = [
     param("mutations", ParamKind::MutationList, "(required)", "[[integrator.mutations]] plugin = \"...\", weight = w, and that plugin's parameters"),
-    param("mutations_per_sample", ParamKind::Float, "64", "expected mutations per initial MC sample (M, §5.2): e_d = lum(ΣX_f) / (count · M)"),
+    param("mutations_per_sample", ParamKind::Float, "8", "expected mutations per initial MC sample (M, §5.2): e_d = lum(ΣX_f) / (count · M)"),
     param("chain_length", ParamKind::Int, "16", "mutations per chain (N); every chain of a seed has this length"),
     param("film_window", ParamKind::Int, "8", "side K of the film-plane migration window around the current position (0: fixed raster position)"),
     param("quantum", ParamKind::String, "\"tile\"", "where e_d is estimated: \"tile\" (per work unit) or \"image\" (1 spp pre-pass)"),
@@ -65,7 +65,7 @@ impl ErptSettings {
             ));
         }
         seeds.max_ray_depth = max_ray_depth as u32;
-        let mutations_per_sample = p.float("mutations_per_sample", 64.0)?;
+        let mutations_per_sample = p.float("mutations_per_sample", 8.0)?;
         if !(mutations_per_sample > 0.0 && mutations_per_sample.is_finite()) {
             return Err(format!(
                 "parameter 'mutations_per_sample' must be positive, got {mutations_per_sample}"
