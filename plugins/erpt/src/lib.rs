@@ -69,6 +69,8 @@ pub struct Erpt {
     settings: ErptSettings,
     /// e_d from the whole-image pre-pass (`quantum = "image"`).
     image_quantum: Option<f64>,
+    /// The counters' specs, which the host reads through `IntegratorInfo::stats`.
+    _stats: stats::StatTable,
 }
 
 /// Random streams of a seed: its path, and its chains.
@@ -141,7 +143,8 @@ impl Integrator for Erpt {
                 }
             })
             .collect();
-        let specs = stats::specs(&names);
+        let stat_table = stats::StatTable::new(&names);
+        let specs = stat_table.specs();
         debug_assert!(stats::slot_count(names.len()) <= STAT_SLOTS && specs.len() <= STAT_SLOTS);
         let layers = params.boolean("layers", false)?;
         let info = IntegratorInfo {
@@ -165,6 +168,7 @@ impl Integrator for Erpt {
                 mutations,
                 settings,
                 image_quantum: None,
+                _stats: stat_table,
             },
             info,
         ))

@@ -3,7 +3,8 @@
 
 use flowlight_mcmc::norms::{Tally, EVENTS};
 use flowlight_sdk::abi::StatSpec;
-use flowlight_sdk::{stat, stat_ratio, StatMerge};
+use flowlight_sdk::abi::StrRef;
+use flowlight_sdk::StatMerge;
 
 pub const SEEDS: usize = 0;
 pub const SEEDS_SKIPPED: usize = 1;
@@ -23,74 +24,110 @@ fn base(g: usize) -> usize {
     GLOBALS + g * PER_GROUP
 }
 
-/// Builds the counter list for the given strategy names. The specs live as long as the
-/// plugin (leaked once per integrator instance: the host reads them through a pointer).
-pub fn specs(strategies: &[String]) -> &'static [StatSpec] {
-    let leak = |s: String| -> &'static str { Box::leak(s.into_boxed_str()) };
-    let mut out = vec![
-        stat("seeds", StatMerge::Sum),
-        stat("seeds_skipped_invalid", StatMerge::Sum),
-        stat("seeds_capped", StatMerge::Sum),
-        stat("chains", StatMerge::Sum),
-        stat("deposits", StatMerge::Sum),
-        stat("proposals_invalid", StatMerge::Sum),
-        stat("quantum_sum", StatMerge::Sum),
-        stat("units", StatMerge::Sum),
-        stat("image_pixels", StatMerge::Max),
-    ];
-    let groups: Vec<String> = std::iter::once("total".to_string())
-        .chain(strategies.iter().cloned())
+/// The counters of one ERPT instance. The instance owns the names the specs point to, so the
+/// host can read them for the instance's whole life.
+pub struct StatTable {
+    _names: Vec<Box<str>>,
+    specs: Vec<StatSpec>,
+}
+
+// SAFETY: the specs only point into `_names`, which is immutable and owned alongside.
+unsafe impl Send for StatTable {}
+unsafe impl Sync for StatTable {}
+
+impl StatTable {
+    pub fn specs(&self) -> &[StatSpec] {
+        &self.specs
+    }
+
+    /// The counter list for the given strategy names.
+    pub fn new(strategies: &[String]) -> StatTable {
+        // (name, merge, numerator, denominator)
+        let mut list: Vec<(String, StatMerge, u32, u32)> = [
+            "seeds",
+            "seeds_skipped_invalid",
+            "seeds_capped",
+            "chains",
+            "deposits",
+            "proposals_invalid",
+            "quantum_sum",
+            "units",
+        ]
+        .iter()
+        .map(|n| (n.to_string(), StatMerge::Sum, 0, 0))
         .collect();
-    for g in &groups {
-        out.push(stat(leak(format!("{g}.mutations")), StatMerge::Sum));
-        for e in EVENTS {
-            out.push(stat(leak(format!("{g}.{}", e.name())), StatMerge::Sum));
+        list.push(("image_pixels".into(), StatMerge::Max, 0, 0));
+        let groups: Vec<String> = std::iter::once("total".to_string())
+            .chain(strategies.iter().cloned())
+            .collect();
+        for g in &groups {
+            list.push((format!("{g}.mutations"), StatMerge::Sum, 0, 0));
+            for suffix in ["", "_streaks", "_streak_total"] {
+                for e in EVENTS {
+                    list.push((format!("{g}.{}{suffix}", e.name()), StatMerge::Sum, 0, 0));
+                }
+            }
+            for e in EVENTS {
+                list.push((format!("{g}.{}_streak_max", e.name()), StatMerge::Max, 0, 0));
+            }
         }
-        for e in EVENTS {
-            out.push(stat(
-                leak(format!("{g}.{}_streaks", e.name())),
-                StatMerge::Sum,
-            ));
+        list.push((
+            "chains_per_seed".into(),
+            StatMerge::Ratio,
+            CHAINS as u32,
+            SEEDS as u32,
+        ));
+        list.push((
+            "deposits_per_pixel".into(),
+            StatMerge::Ratio,
+            DEPOSITS as u32,
+            IMAGE_PIXELS as u32,
+        ));
+        list.push((
+            "mean_quantum".into(),
+            StatMerge::Ratio,
+            QUANTUM_SUM as u32,
+            UNITS as u32,
+        ));
+        for (gi, g) in groups.iter().enumerate() {
+            let b = base(gi) as u32;
+            for (ei, e) in EVENTS.iter().enumerate() {
+                list.push((
+                    format!("{g}.{}_strength", e.name()),
+                    StatMerge::Ratio,
+                    b + 1 + ei as u32,
+                    b,
+                ));
+            }
+            for (ei, e) in EVENTS.iter().enumerate() {
+                let streaks = b + 5 + ei as u32;
+                list.push((
+                    format!("{g}.{}_mean_streak", e.name()),
+                    StatMerge::Ratio,
+                    streaks + 4,
+                    streaks,
+                ));
+            }
         }
-        for e in EVENTS {
-            out.push(stat(
-                leak(format!("{g}.{}_streak_total", e.name())),
-                StatMerge::Sum,
-            ));
-        }
-        for e in EVENTS {
-            out.push(stat(
-                leak(format!("{g}.{}_streak_max", e.name())),
-                StatMerge::Max,
-            ));
+        let names: Vec<Box<str>> = list
+            .iter()
+            .map(|(n, ..)| n.clone().into_boxed_str())
+            .collect();
+        let specs = names
+            .iter()
+            .zip(&list)
+            .map(|(name, &(_, merge, numerator, denominator))| StatSpec {
+                name: StrRef::new(name),
+                merge,
+                numerator,
+                denominator,
+            })
+            .collect();
+        StatTable {
+            _names: names,
+            specs,
         }
     }
-    out.push(stat_ratio("chains_per_seed", CHAINS as u32, SEEDS as u32));
-    out.push(stat_ratio(
-        "deposits_per_pixel",
-        DEPOSITS as u32,
-        IMAGE_PIXELS as u32,
-    ));
-    out.push(stat_ratio("mean_quantum", QUANTUM_SUM as u32, UNITS as u32));
-    for (gi, g) in groups.iter().enumerate() {
-        let b = base(gi) as u32;
-        for (ei, e) in EVENTS.iter().enumerate() {
-            out.push(stat_ratio(
-                leak(format!("{g}.{}_strength", e.name())),
-                b + 1 + ei as u32,
-                b,
-            ));
-        }
-        for (ei, e) in EVENTS.iter().enumerate() {
-            let streaks = b + 5 + ei as u32;
-            out.push(stat_ratio(
-                leak(format!("{g}.{}_mean_streak", e.name())),
-                streaks + 4,
-                streaks,
-            ));
-        }
-    }
-    Box::leak(out.into_boxed_slice())
 }
 
 /// Adds a tally into group `g`'s counters.
