@@ -102,8 +102,27 @@ impl Erpt {
         sample.value
     }
 
-    /// Algorithm 1: e_d = lum(Σ X_f) / (count · M), over valid estimates.
-    fn quantum(&self, sum: Rgb, count: u64) -> f64 {
+    /// Algorithm 1: e_d = lum(Σ X_f) / (count · M) over the valid estimates of the seeds of
+    /// `pixels` × `samples` (random streams from `seed`, so they can be traced again).
+    fn quantum(
+        &self,
+        tracer: &Tracer,
+        seed: u64,
+        pixels: impl Iterator<Item = (u32, u32)>,
+        samples: std::ops::Range<u32>,
+        path: &mut Path,
+    ) -> f64 {
+        let (mut sum, mut count) = (Rgb::ZERO, 0u64);
+        for (x, y) in pixels {
+            for s in samples.clone() {
+                let (mut rng, _) = seed_rngs(seed, x, y, s);
+                let e = self.seed(tracer, &mut rng, x, y, path);
+                if e.is_valid_radiance() {
+                    sum += e;
+                    count += 1;
+                }
+            }
+        }
         if count == 0 {
             return 0.0;
         }
@@ -180,19 +199,9 @@ impl Integrator for Erpt {
         }
         // Algorithm 1 over the whole image: one seed per pixel.
         let (w, h) = (self.scene.camera.width, self.scene.camera.height);
-        let mut path = Box::new(Path::empty());
-        let (mut sum, mut count) = (Rgb::ZERO, 0u64);
-        for y in 0..h {
-            for x in 0..w {
-                let (mut rng, _) = seed_rngs(0x5eed_f1a6, x, y, 0);
-                let e = self.seed(tracer, &mut rng, x, y, &mut path);
-                if e.is_valid_radiance() {
-                    sum += e;
-                    count += 1;
-                }
-            }
-        }
-        self.image_quantum = Some(self.quantum(sum, count));
+        let pixels = (0..h).flat_map(|y| (0..w).map(move |x| (x, y)));
+        let q = self.quantum(tracer, 0x5eed_f1a6, pixels, 0..1, &mut Path::empty());
+        self.image_quantum = Some(q);
         Ok(())
     }
 
@@ -209,22 +218,9 @@ impl Integrator for Erpt {
             || (unit.y0..unit.y1).flat_map(move |y| (unit.x0..unit.x1).map(move |x| (x, y)));
         let quantum = match self.image_quantum {
             Some(q) => q,
-            None => {
-                // Algorithm 1 over this unit's seeds; they are traced again below from the same
-                // random streams rather than stored.
-                let (mut sum, mut count) = (Rgb::ZERO, 0u64);
-                for (x, y) in pixels() {
-                    for s in samples.clone() {
-                        let (mut rng, _) = seed_rngs(unit.seed, x, y, s);
-                        let e = self.seed(tracer, &mut rng, x, y, &mut path);
-                        if e.is_valid_radiance() {
-                            sum += e;
-                            count += 1;
-                        }
-                    }
-                }
-                self.quantum(sum, count)
-            }
+            // Algorithm 1 over this unit's seeds; they are traced again below from the same
+            // random streams rather than stored.
+            None => self.quantum(tracer, unit.seed, pixels(), samples.clone(), &mut path),
         };
         stats[stats::QUANTUM_SUM] += quantum;
         stats[stats::UNITS] += 1.0;
