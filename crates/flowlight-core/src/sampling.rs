@@ -31,6 +31,27 @@ pub fn cosine_hemisphere_pdf(cos_theta: f32) -> f32 {
     cos_theta.max(0.0) * FRAC_1_PI
 }
 
+/// Cosine-weighted direction on the hemisphere of `wo` (local frame, z = normal): the
+/// sampling of two-sided diffuse lobes. Returns the direction and its density.
+#[inline]
+pub fn two_sided_cosine(wo: Vec3, u: Vec2) -> Option<(Vec3, f32)> {
+    let mut wi = cosine_hemisphere(u);
+    if wo.z < 0.0 {
+        wi.z = -wi.z;
+    }
+    let pdf = cosine_hemisphere_pdf(wi.z.abs());
+    (pdf > 0.0 && wo.z != 0.0).then_some((wi, pdf))
+}
+
+/// Density of [`two_sided_cosine`]: `|cos θ_i| / π` on the side of `wo`, else 0.
+#[inline]
+pub fn two_sided_cosine_pdf(wo: Vec3, wi: Vec3) -> f32 {
+    if wo.z * wi.z <= 0.0 {
+        return 0.0;
+    }
+    cosine_hemisphere_pdf(wi.z.abs())
+}
+
 /// Uniform direction on the unit sphere; density `1 / 4π`.
 #[inline]
 pub fn uniform_sphere(u: Vec2) -> Vec3 {

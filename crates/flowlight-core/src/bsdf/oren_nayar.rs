@@ -8,7 +8,7 @@
 
 use super::BsdfSample;
 use crate::path::NodeType;
-use crate::sampling::{cosine_hemisphere, cosine_hemisphere_pdf};
+use crate::sampling::{two_sided_cosine, two_sided_cosine_pdf};
 use crate::Rgb;
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
@@ -62,20 +62,13 @@ impl OrenNayar {
 
     #[inline]
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        if wo.z * wi.z <= 0.0 {
-            return 0.0;
-        }
-        cosine_hemisphere_pdf(wi.z.abs())
+        two_sided_cosine_pdf(wo, wi)
     }
 
     #[inline]
     pub fn sample(&self, wo: Vec3, u: Vec2) -> Option<BsdfSample> {
-        let mut wi = cosine_hemisphere(u);
-        if wo.z < 0.0 {
-            wi.z = -wi.z;
-        }
-        let pdf = cosine_hemisphere_pdf(wi.z.abs());
-        (pdf > 0.0 && wo.z != 0.0).then(|| BsdfSample {
+        let (wi, pdf) = two_sided_cosine(wo, u)?;
+        Some(BsdfSample {
             wi,
             f: self.albedo * (FRAC_1_PI * self.factor(wo, wi)),
             pdf,
