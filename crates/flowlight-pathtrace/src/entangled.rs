@@ -2,6 +2,11 @@
 //! and a BSDF-sampled extension, whose emitter hits are combined with the connections by
 //! the power heuristic (Veach 1997). Depth-based termination decides after each vertex
 //! whether the path goes on; survivors are divided by 1 − T_k.
+//!
+//! Where the path cannot go on (T_k = 1 at the path-space depth N, or the physical depth cap)
+//! the vertex's BSDF sample is still traced, for emission only: its light connection was
+//! weighted against that sample, so without it layer N would lose the BSDF-sampled share
+//! (in the white furnace of albedo ½ at N = 1: 1.245 instead of 1.5).
 
 use crate::settings::PathSettings;
 use crate::shading::{connect_light, side_consistent, Shading};
@@ -31,6 +36,7 @@ pub fn trace(
     let mut prev_pdf = 0.0f32;
     let mut prev_p = ray.origin;
 
+    let mut last = false; // the previous vertex was the path's last: emission only
     loop {
         let Some(hit) = tracer.intersect(&ray) else {
             return;
@@ -53,6 +59,9 @@ pub fn trace(
                 };
                 out.add(depth, beta * le * w);
             }
+        }
+        if last {
+            return;
         }
 
         let bsdf = scene.bsdf(&hit);
@@ -88,15 +97,23 @@ pub fn trace(
             }
         }
 
-        if depth > 0 {
-            let t = settings.termination.probability(depth, bsdf.albedo());
+        // The light sample above was MIS-weighted against a BSDF sample of the same vertex, so
+        // that BSDF sample must be traced whenever it can be drawn, also when the path cannot
+        // go on (T_k = 1 at the deepest layer, or the physical depth cap): then the extension
+        // only looks for emission (which belongs to this vertex's layer, Dirac lobes included)
+        // and the path ends there. A random stop (T_k < 1) is fine: survivors are divided by
+        // 1 − T_k.
+        let t = if depth > 0 {
+            settings.termination.probability(depth, bsdf.albedo())
+        } else {
+            0.0
+        };
+        last = t >= 1.0 || physical >= settings.max_ray_depth;
+        if !last && t > 0.0 {
             if rng.uniform() < t {
                 return;
             }
             beta /= 1.0 - t;
-        }
-        if physical >= settings.max_ray_depth {
-            return;
         }
 
         let Some(s) = bsdf.sample(shading.wo, rng.uniform(), rng.uniform2()) else {

@@ -1,5 +1,6 @@
 //! Parameters of the path samplers.
 
+use flowlight_core::bsdf::NARROW_GLOSSY_ALPHA;
 use flowlight_core::termination::{TerminationDistribution, TerminationSchedule};
 use flowlight_sdk::{param, ParamKind, Params};
 
@@ -18,6 +19,9 @@ pub struct PathSettings {
     /// Maximal ray-trace depth: cap on physical scattering events, mirrors included.
     pub max_ray_depth: u32,
     pub termination: TerminationSchedule,
+    /// GGX α below which the untangled sampler treats a glossy lobe as Λα (no light
+    /// connection there; light is found only by hitting it). MCPT's `narrow_glossy_alpha`.
+    pub narrow_glossy_alpha: f32,
 }
 
 /// Parameters every path-sampling plugin accepts (user documentation in each plugin header).
@@ -52,8 +56,17 @@ impl PathSettings {
                 "parameter 'max_ray_depth' must be in path_depth..=1024 ({path_depth}..=1024), got {max_ray_depth}"
             ));
         }
+        // Only MCPT declares this parameter: ERPT's mutations classify vertices with the
+        // default, and its seeds must agree with them.
+        let narrow_glossy_alpha = p.float("narrow_glossy_alpha", NARROW_GLOSSY_ALPHA as f64)?;
+        if !(0.0..=1.0).contains(&narrow_glossy_alpha) {
+            return Err(format!(
+                "parameter 'narrow_glossy_alpha' must be in [0, 1], got {narrow_glossy_alpha}"
+            ));
+        }
         Ok(PathSettings {
             variant,
+            narrow_glossy_alpha: narrow_glossy_alpha as f32,
             path_depth: path_depth as u32,
             max_ray_depth: max_ray_depth as u32,
             termination: TerminationSchedule::new(termination, path_depth as u32),

@@ -129,7 +129,7 @@ pub fn trace(
         let shading = Shading::new(&hit, wo_world);
         let (c, _p_select) = bsdf.choose_component(rng.uniform());
         let component = bsdf.component(c);
-        let class = component.class();
+        let class = component.class_with(settings.narrow_glossy_alpha);
         // A Λα vertex before any lighting vertex belongs to the primordial mirror chain.
         let next_depth = if depth == 0 && class == NodeClass::Alpha {
             0

@@ -17,6 +17,7 @@
 //! | `termination` | string | `"bxdf"` | `"bxdf"` (albedo roulette), `"equi"` (T_k = 1/(N−k+1)), `"expo"` (layer shares double with depth) — §3.8 |
 //! | `path_depth` | int | 8 | path-space depth N: deepest lighting layer; a chain of mirrors seen from the eye does not use it up (virtual depth, §2) |
 //! | `max_ray_depth` | int | 64 | physical ray depth cap, every bounce counted |
+//! | `narrow_glossy_alpha` | float | 0.05 | untangled only: a glossy lobe with GGX α below it is Λα — no light connection there, light is found only by hitting it. A small lamp seen in a surface of roughness 0.2 (α = 0.04) is then nearly black; set 0 to connect at every non-Dirac vertex. Entangled MCPT connects at every non-Dirac vertex regardless |
 //! | `layers` | bool | false | also write lighting layers 0..=N (layer k = paths of virtual length k+1) as EXR layers `layer0`…; they sum to the image |
 //!
 //! Each pixel sample uses its own PCG32 stream seeded from (seed, pixel, sample index), so an
@@ -39,7 +40,7 @@ pub struct Mcpt {
     settings: PathSettings,
 }
 
-const PARAMS: [ParamSpec; 5] = {
+const PARAMS: [ParamSpec; 6] = {
     let p = flowlight_pathtrace::settings::PATH_PARAMS;
     [
         p[0],
@@ -51,6 +52,12 @@ const PARAMS: [ParamSpec; 5] = {
             ParamKind::Bool,
             "false",
             "write per-depth lighting layers layer0..layerN as extra EXR layers",
+        ),
+        param(
+            "narrow_glossy_alpha",
+            ParamKind::Float,
+            "0.05",
+            "untangled only: GGX alpha below which a glossy vertex gets no light connection (0 = connect at every non-Dirac vertex)",
         ),
     ]
 };

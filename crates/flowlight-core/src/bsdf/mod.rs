@@ -140,12 +140,19 @@ impl Component {
     /// Λα for Dirac and narrow glossy lobes (α < [`NARROW_GLOSSY_ALPHA`]), Λβ otherwise.
     #[inline]
     pub fn class(&self) -> NodeClass {
+        self.class_with(NARROW_GLOSSY_ALPHA)
+    }
+
+    /// [`Component::class`] with the narrow-glossy threshold `narrow_alpha` as a parameter:
+    /// Λα for Dirac lobes and GGX lobes with α < `narrow_alpha`.
+    #[inline]
+    pub fn class_with(&self, narrow_alpha: f32) -> NodeClass {
         let alpha = match self {
             Component::Lambert(_) | Component::OrenNayar(_) => return NodeClass::Beta,
             Component::Conductor(c) => c.alpha,
             Component::Dielectric(c) => c.alpha,
         };
-        if self.is_delta() || alpha < NARROW_GLOSSY_ALPHA {
+        if self.is_delta() || alpha < narrow_alpha {
             NodeClass::Alpha
         } else {
             NodeClass::Beta
