@@ -270,7 +270,10 @@ mod tests {
             assert!((centre.origin - cam.position).length() < 1e-5);
             // Behind the camera (or the film plane) and off the film: no raster position.
             assert_eq!(cam.project(cam.position - cam.forward), None);
-            assert_eq!(cam.project(cam.position + cam.forward * 2.0 + cam.up * 1e3), None);
+            assert_eq!(
+                cam.project(cam.position + cam.forward * 2.0 + cam.up * 1e3),
+                None
+            );
         }
     }
 
