@@ -219,7 +219,7 @@ impl Camera {
     pub fn project(&self, p: Vec3) -> Option<Vec2> {
         let d = p - self.position;
         let z = d.dot(self.forward);
-        if !(z > 0.0) {
+        if z.is_nan() || z <= 0.0 {
             return None;
         }
         let e = self.half_extent();
