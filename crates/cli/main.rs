@@ -42,7 +42,8 @@ enum Command {
         /// Worker threads (0 = one per core).
         #[arg(long)]
         threads: Option<usize>,
-        /// Output EXR file (overrides the config).
+        /// Output EXR file (overrides the config); the config's PNG preview, if it has one,
+        /// is written beside it with the extension .png.
         #[arg(long)]
         out: Option<PathBuf>,
         /// Render seed (overrides the config).

@@ -67,11 +67,13 @@ impl Session {
                 None => config.integrator_params.push((k.clone(), v.clone())),
             }
         }
+        let (exr_path, png_path) = output_paths(&config, ov.out.as_deref())?;
         let t0 = Instant::now();
         let scene =
             load_gltf(&config.scene, &config.material_overrides).map_err(|e| e.to_string())?;
         let load_time = t0.elapsed();
         let camera = config.camera(&scene).map_err(|e| e.to_string())?;
+        tracing::debug!(?camera, "camera");
         let options = flowlight_embree::SceneOptions {
             robust: config.robust,
             quality: flowlight_embree::BuildQuality::parse(&config.build_quality)
@@ -143,8 +145,6 @@ impl Session {
             tile_size: config.tile_size,
             seed: ov.seed.unwrap_or(config.seed),
         };
-        let exr_path = Some(ov.out.clone().unwrap_or_else(|| config.output_exr.clone()));
-        let png_path = config.output_png.clone();
         Ok(Session {
             instance,
             intersector,
@@ -265,6 +265,32 @@ impl Session {
             ],
         }
     }
+}
+
+/// The EXR and PNG paths of a render: the config's, or with `--out FILE` the EXR at FILE and
+/// the PNG preview (when the config asks for one) beside it as FILE with the extension
+/// `.png`, so that `--out` never overwrites the config's own preview.
+pub fn output_paths(
+    config: &RenderConfig,
+    out: Option<&Path>,
+) -> Result<(Option<PathBuf>, Option<PathBuf>), String> {
+    let Some(out) = out else {
+        return Ok((Some(config.output_exr.clone()), config.output_png.clone()));
+    };
+    if out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+    {
+        return Err(format!(
+            "--out {}: --out names the EXR image (e.g. x.exr); the PNG preview is written beside it",
+            out.display()
+        ));
+    }
+    let png = config
+        .output_png
+        .as_ref()
+        .map(|_| out.with_extension("png"));
+    Ok((Some(out.to_path_buf()), png))
 }
 
 /// One `[[integrator.mutations]]` entry.

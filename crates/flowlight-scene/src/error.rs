@@ -91,6 +91,4 @@ pub enum ConfigError {
         key: String,
         reason: String,
     },
-    #[error("{}: no camera: the scene has no perspective camera and the config has no [camera] table", file.display())]
-    NoCamera { file: PathBuf },
 }
