@@ -100,6 +100,16 @@ fn item1_broken_libraries_are_refused_with_the_reason() {
     let dir = common::scratch("hardening-plugins");
     let good = std::fs::read(plugin_file("mcpt")).unwrap();
     let exe = std::fs::read(env!("CARGO_BIN_EXE_flowlight")).unwrap();
+    // Well formed, but it needs a library that is not there: dlopen itself fails.
+    let missing_dep = {
+        let mut f = good.clone();
+        let at = f
+            .windows(14)
+            .position(|w| w == b"libgcc_s.so.1\0")
+            .expect("the plugin needs libgcc_s");
+        f[at..at + 13].copy_from_slice(b"libflowlight0");
+        f
+    };
     let mut other_machine = good.clone();
     other_machine[18..20].copy_from_slice(&243u16.to_le_bytes());
     let table: Vec<(&str, Vec<u8>, &str)> = vec![
@@ -127,6 +137,11 @@ fn item1_broken_libraries_are_refused_with_the_reason() {
             "executable",
             exe,
             "does not export `flowlight_plugin_declaration`",
+        ),
+        (
+            "missing-dep",
+            missing_dep,
+            "dlopen failed: libflowlight0: cannot open",
         ),
     ];
     for (name, bytes, _) in &table {

@@ -55,6 +55,18 @@ fn declaration_name() -> &'static str {
     std::str::from_utf8(&bytes[..bytes.len() - 1]).unwrap_or_default()
 }
 
+/// An error and its sources on one line: libloading's `dlopen failed` keeps the loader's
+/// reason (`dlerror`) in its source.
+fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut msg = e.to_string();
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        msg = format!("{msg}: {c}");
+        cause = c.source();
+    }
+    msg.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
 /// "an integrator", "a mutation": a plugin kind with its article, for messages.
 fn kind_phrase(kind: PluginKind) -> &'static str {
     match kind {
@@ -201,7 +213,7 @@ impl PluginLibrary {
         // chose in the config (docs/architecture.md, "Trust boundary").
         let library = unsafe { Library::new(&path) }.map_err(|e| PluginError::Load {
             path: path.clone(),
-            message: format!("dlopen failed: {e}"),
+            message: error_chain(&e),
         })?;
         // SAFETY: the symbol's type is fixed by the ABI.
         let decl = unsafe {

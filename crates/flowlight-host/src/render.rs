@@ -446,6 +446,34 @@ mod tests {
     }
 
     #[test]
+    fn frame_bytes_counts_frame_pass_and_output_buffers_without_overflow() {
+        // Per pixel: 2·(24 + 4 + 24L) + 12·(1 + L)·3 + 3 = 95 + 84L.
+        assert_eq!(frame_bytes(1, 1, 0), Some(95));
+        assert_eq!(frame_bytes(512, 512, 9), Some(512 * 512 * (95 + 84 * 9)));
+        assert_eq!(frame_bytes(100_000, 100_000, 0), Some(950_000_000_000));
+        assert_eq!(frame_bytes(u32::MAX, u32::MAX, 0), None);
+        // 4294967295 · (95 + 84·4294967295) > 2⁶⁴.
+        assert_eq!(frame_bytes(u32::MAX, 1, u32::MAX), None);
+        assert_eq!(frame_bytes(u32::MAX, 1, 1000), Some(4_294_967_295 * 84_095));
+        let e = check_frame_memory(u32::MAX, u32::MAX, 3).unwrap_err();
+        assert!(
+            e.contains("4294967295x4294967295") && e.contains("3 lighting layers"),
+            "{e}"
+        );
+        assert!(check_frame_memory(64, 64, 2).is_ok());
+    }
+
+    #[test]
+    fn threads_are_clamped_to_four_per_core() {
+        let cores = std::thread::available_parallelism().unwrap().get();
+        assert_eq!(effective_threads(0), 0);
+        assert_eq!(effective_threads(cores), cores);
+        assert_eq!(effective_threads(4 * cores), 4 * cores);
+        assert_eq!(effective_threads(4 * cores + 1), 4 * cores);
+        assert_eq!(effective_threads(usize::MAX), 4 * cores);
+    }
+
+    #[test]
     fn tiles_cover_the_image_once() {
         let t = tiles(70, 33, 32);
         assert_eq!(t.len(), 3 * 2);
