@@ -345,6 +345,12 @@ fn locate(text: &str, err: &toml::de::Error) -> (usize, String) {
     (line_no, key)
 }
 
+/// The toml crate's message on one line (its `Display` adds a multi-line excerpt of the
+/// file; the line number is already in [`ConfigError::Parse`]).
+fn one_line(msg: &str) -> String {
+    msg.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
 /// Parses `text` as the config at `path` (used for messages and to resolve relative paths).
 pub fn parse_config(path: &Path, text: &str) -> Result<RenderConfig, ConfigError> {
     let file = path.to_path_buf();
@@ -354,7 +360,7 @@ pub fn parse_config(path: &Path, text: &str) -> Result<RenderConfig, ConfigError
             file: file.clone(),
             line,
             key,
-            message: e.to_string().trim_end().to_string(),
+            message: one_line(e.message()),
         }
     })?;
     let invalid = |key: &str, reason: String| ConfigError::Invalid {

@@ -76,8 +76,7 @@ pub enum ConfigError {
         #[source]
         source: std::io::Error,
     },
-    /// A TOML syntax, unknown-key or type error. `message` is the toml crate's report, which
-    /// quotes the offending line.
+    /// A TOML syntax, unknown-key or type error, on one line: `file:line: key `k`: message`.
     #[error("{}:{line}: key `{key}`: {message}", file.display())]
     Parse {
         file: PathBuf,
