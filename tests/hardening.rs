@@ -293,11 +293,13 @@ fn item5_aliased_outputs_are_refused() {
         ("png-config", "png = \"c.toml\"", None, "is the config"),
         ("out-config", "", Some("c.toml"), "is the config"),
         ("out-scene", "", Some("furnace.gltf"), "is the scene"),
+        // --out moves the PNG beside the EXR (x.exr → x.png), so it cannot alias the
+        // config's PNG; an --out that names a PNG is refused instead.
         (
             "out-png",
-            "png = \"x.exr\"",
-            Some("x.exr"),
-            "are the same file",
+            "png = \"x.png\"",
+            Some("x.png"),
+            "--out names the EXR image",
         ),
     ] {
         let c = case(&format!("alias-{name}"), "", "plugin = \"mcpt\"", output);
