@@ -214,10 +214,10 @@ impl Loader<'_> {
             || forward.cross(up).length_squared() < 1e-12
             || !position.is_finite()
         {
-            return Err(err(format!(
-                "cameras[{index}]: the transform of node {} that places it is degenerate",
-                node.index()
-            )));
+            // A zero scale is valid glTF (it hides a node): such a camera cannot look anywhere,
+            // so it is left out with a warning rather than failing the whole file.
+            tracing::warn!(file = %self.src.file.display(), "node {} places cameras[{index}] with a degenerate transform (zero scale or a collapsed axis); that camera node is skipped", node.index());
+            return Ok(());
         }
         self.scene.cameras.push(CameraDesc {
             index,

@@ -308,3 +308,19 @@ fn no_camera_anywhere_frames_the_bounding_sphere() {
         }
     }
 }
+
+#[test]
+fn a_camera_node_with_zero_scale_is_skipped_not_fatal() {
+    let (dir, s) = scene_with(
+        "zeroscale",
+        &[
+            r#"{"camera": 0, "scale": [0, 0, 0]}"#,
+            r#"{"camera": 0, "translation": [0, 0, 7]}"#,
+        ],
+        r#"{"type": "perspective", "perspective": {"yfov": 0.5, "znear": 0.1}}"#,
+    );
+    let got: Vec<usize> = s.cameras.iter().map(|c| c.node).collect();
+    assert_eq!(got, [2]);
+    let c = camera(&dir, &s, "").unwrap();
+    assert!((c.position - Vec3::new(0.0, 0.0, 7.0)).length() < 1e-6);
+}
