@@ -68,6 +68,18 @@ pub fn segment_transmittance(m: &Material, ng: Vec3, dir: Vec3, distance: f32) -
     }
 }
 
+/// Absorption coefficient of the volume that a ray leaving a surface of material `m`
+/// (winding-oriented geometric normal `ng`) in world direction `dir` runs through: `Some(σ_a)`
+/// when it goes into an absorbing volume. Path tracers keep it with the ray and apply
+/// [`transmittance`] with the hit distance.
+#[inline]
+pub fn entered(m: &Material, ng: Vec3, dir: Vec3) -> Option<Rgb> {
+    if ng.dot(dir) >= 0.0 {
+        return None;
+    }
+    absorption(m)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -100,6 +112,12 @@ mod tests {
         let m = water();
         // Leaving through the front face: outside.
         assert_eq!(segment_transmittance(&m, Vec3::Z, Vec3::Z, 5.0), Rgb::ONE);
+        assert!(entered(&m, Vec3::Z, Vec3::Z).is_none());
+        let sigma = entered(&m, Vec3::Z, -Vec3::Z).unwrap();
+        assert_eq!(
+            transmittance(sigma, 2.0),
+            segment_transmittance(&m, Vec3::Z, -Vec3::Z, 2.0)
+        );
         // Thin-walled or no distance: no absorption.
         let thin = Material {
             thickness: 0.0,
