@@ -223,7 +223,7 @@ pub fn convert(m: &gltf::Material) -> Result<Material, String> {
                 ));
             }
             let d = v.attenuation_distance();
-            if !(d > 0.0) {
+            if d.is_nan() || d <= 0.0 {
                 return Err(format!(
                     "KHR_materials_volume.attenuationDistance = {d} must be > 0"
                 ));

@@ -24,7 +24,8 @@ use glam::Vec3;
 #[inline]
 pub fn absorption(m: &Material) -> Option<Rgb> {
     let d = m.attenuation_distance;
-    if !(m.thickness > 0.0) || !(d > 0.0) || d.is_infinite() {
+    let positive = |x: f32| x > 0.0; // false for NaN too
+    if !positive(m.thickness) || !positive(d) || d.is_infinite() {
         return None;
     }
     let sigma = |c: f32| {
