@@ -294,6 +294,11 @@ impl Builder {
                         r#""KHR_materials_transmission":{{"transmissionFactor":{t}}}"#
                     ));
                     ext.push(format!(r#""KHR_materials_ior":{{"ior":{ior}}}"#));
+                    // Solid glass: a closed volume that refracts (glTF is thin-walled without).
+                    ext.push(r#""KHR_materials_volume":{"thicknessFactor":1}"#.to_string());
+                } else if m.metallic == 0.0 {
+                    // The analytic checks assume a Lambertian: no dielectric specular layer.
+                    ext.push(r#""KHR_materials_specular":{"specularFactor":0}"#.to_string());
                 }
                 let ext = if ext.is_empty() {
                     String::new()
@@ -308,7 +313,7 @@ impl Builder {
             .collect();
         format!(
             r#"{{"asset":{{"version":"2.0","generator":"flowlight tests/stability.rs"}},
-"extensionsUsed":["KHR_materials_emissive_strength","KHR_materials_transmission","KHR_materials_ior"],
+"extensionsUsed":["KHR_materials_emissive_strength","KHR_materials_transmission","KHR_materials_ior","KHR_materials_volume","KHR_materials_specular"],
 "scene":0,"scenes":[{{"nodes":[{}]}}],"nodes":[{}],"meshes":[{}],"materials":[{}],
 "accessors":[{}],"bufferViews":[{}],
 "buffers":[{{"byteLength":{},"uri":"data:application/octet-stream;base64,{}"}}]}}"#,

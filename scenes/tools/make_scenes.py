@@ -53,7 +53,7 @@ class Builder:
         self.extensions = set()
 
     def material(self, name, base=(0.8, 0.8, 0.8), metallic=0.0, roughness=1.0,
-                 emission=None, transmission=None, ior=None):
+                 emission=None, transmission=None, ior=None, thickness=None):
         m = {
             "name": name,
             "pbrMetallicRoughness": {
@@ -72,6 +72,9 @@ class Builder:
             ext["KHR_materials_transmission"] = {"transmissionFactor": transmission}
         if ior is not None:
             ext["KHR_materials_ior"] = {"ior": ior}
+        if thickness is not None:
+            # A closed volume: transmission refracts (without it glTF is thin-walled).
+            ext["KHR_materials_volume"] = {"thicknessFactor": thickness}
         if ext:
             m["extensions"] = ext
             self.extensions.update(ext.keys())
@@ -259,7 +262,7 @@ def glass_caustic():
     b = Builder("flowlight scenes/tools/make_scenes.py: glass-caustic")
     b.material("floor", (0.7, 0.7, 0.7))
     b.material("wall", (0.6, 0.6, 0.65))
-    b.material("glass", (1, 1, 1), roughness=0.0, transmission=1.0, ior=1.5)
+    b.material("glass", (1, 1, 1), roughness=0.0, transmission=1.0, ior=1.5, thickness=1.0)
     b.material("lamp", (0, 0, 0), emission=((1.0, 0.95, 0.85), 120.0))
     b.quad("floor", [-2, 0, -2], [2, 0, -2], [2, 0, 2], [-2, 0, 2], facing=[0, 1, 0])
     b.quad("wall", [-2, 0, 2], [2, 0, 2], [2, 2.5, 2], [-2, 2.5, 2], facing=[0, 0, -1])

@@ -39,6 +39,26 @@ pub struct Material {
     /// it (every surface scatters on both sides anyway): a lamp a hair below a ceiling would
     /// otherwise light the gap above it. Set it with extras `{"flowlight": {"two_sided_emission": true}}`.
     pub two_sided_emission: u32,
+    // glTF BRDF extension parameters
+    /// KHR_materials_specular specularFactor in [0, 1]: strength of the dielectric specular
+    /// layer (f90 = specular, f0 = min(F0(ior) · specular_color, 1) · specular). 1 by default.
+    pub specular: f32,
+    /// KHR_materials_specular specularColorFactor (linear, may exceed 1): tints the dielectric
+    /// F0. White by default.
+    pub specular_color: Rgb,
+    /// KHR_materials_volume thicknessFactor: 0 (default) is thin-walled (transmission passes
+    /// straight through); > 0 makes transmission refract and the mesh a closed volume.
+    pub thickness: f32,
+    /// KHR_materials_volume attenuationColor: colour that white light has after travelling
+    /// `attenuation_distance` inside the volume. White by default.
+    pub attenuation_color: Rgb,
+    /// KHR_materials_volume attenuationDistance (world units); infinite (default): no
+    /// absorption.
+    pub attenuation_distance: f32,
+    /// KHR_materials_clearcoat clearcoatFactor in [0, 1] (0: no coat).
+    pub clearcoat: f32,
+    /// KHR_materials_clearcoat clearcoatRoughnessFactor in [0, 1]; GGX α = roughness².
+    pub clearcoat_roughness: f32,
 }
 
 impl Default for Material {
@@ -54,6 +74,13 @@ impl Default for Material {
             ior: 1.5,
             emission: Rgb::ZERO,
             two_sided_emission: 0,
+            specular: 1.0,
+            specular_color: Rgb::ONE,
+            thickness: 0.0,
+            attenuation_color: Rgb::ONE,
+            attenuation_distance: f32::INFINITY,
+            clearcoat: 0.0,
+            clearcoat_roughness: 0.0,
         }
     }
 }

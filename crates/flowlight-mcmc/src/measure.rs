@@ -14,7 +14,7 @@
 //! f(x)/p(x) with p in the same measure, so BSDF-sampled steps contribute f_s|cos|/p_ω exactly
 //! as in path tracing (the Jacobian cancels).
 
-use flowlight_core::bsdf::{Bsdf, Component};
+use flowlight_core::bsdf::{volume, Bsdf, Component};
 use flowlight_core::geometry::Frame;
 use flowlight_core::path::{NodeType, Path, PathVertex};
 use flowlight_core::Rgb;
@@ -177,6 +177,10 @@ pub fn measurement(scene: &Scene, path: &Path) -> Rgb {
                 f *= coefficient * weight;
             }
             WeakNode::Eye | WeakNode::Light => return Rgb::ZERO,
+        }
+        // Beer–Lambert absorption when the segment to the next vertex runs inside a volume.
+        if let Some(m) = scene.materials.get(x.material as usize) {
+            f *= volume::segment_transmittance(m, x.ng, wi_w, (v[k + 1].p - x.p).length());
         }
         if f.is_black() {
             return f;

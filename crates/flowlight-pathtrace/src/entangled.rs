@@ -11,6 +11,7 @@
 use crate::settings::PathSettings;
 use crate::shading::{connect_light, side_consistent, Shading};
 use crate::SampleContributions;
+use flowlight_core::bsdf::volume;
 use flowlight_core::light::area_to_solid_angle;
 use flowlight_core::rng::Rng;
 use flowlight_core::sampling::power_heuristic;
@@ -30,6 +31,8 @@ pub fn trace(
 ) {
     let mut ray = scene.camera.generate_ray(raster);
     let mut beta = Rgb::ONE;
+    // σ_a of the absorbing volume the current ray runs through, if any.
+    let mut inside: Option<Rgb> = None;
     let mut depth = 0u32;
     let mut physical = 0u32;
     let mut prev_delta = true; // the pinhole eye is a Dirac: no MIS for the first hit
@@ -41,6 +44,10 @@ pub fn trace(
         let Some(hit) = tracer.intersect(&ray) else {
             return;
         };
+        // Beer–Lambert absorption when the segment ran inside a volumetric material.
+        if let Some(sigma) = inside.take() {
+            beta *= volume::transmittance(sigma, hit.t);
+        }
         let wo_world = -ray.dir;
 
         if hit.emitter >= 0 {
@@ -130,6 +137,7 @@ pub fn trace(
         prev_delta = s.delta;
         prev_pdf = s.pdf;
         prev_p = hit.p;
+        inside = volume::entered(scene.material(&hit), hit.ng, wi_world);
         ray = hit.spawn_ray(wi_world);
     }
 }

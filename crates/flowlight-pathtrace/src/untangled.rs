@@ -15,6 +15,7 @@
 
 use crate::settings::PathSettings;
 use crate::shading::{connect_light, side_consistent, Shading};
+use flowlight_core::bsdf::volume;
 use flowlight_core::camera::Camera;
 use flowlight_core::path::{NodeClass, NodeType, Path, PathVertex};
 use flowlight_core::rng::Rng;
@@ -94,6 +95,8 @@ pub fn trace(
     rec.push(eye);
 
     let mut beta = Rgb::ONE;
+    // σ_a of the absorbing volume the current ray runs through, if any.
+    let mut inside: Option<Rgb> = None;
     let mut depth = 0u32; // lighting (virtual) depth of the last vertex
     let mut physical = 0u32;
     let mut after_alpha = true; // the eye behaves like a specular vertex
@@ -109,6 +112,10 @@ pub fn trace(
         let Some(hit) = tracer.intersect(&ray) else {
             return none;
         };
+        // Beer–Lambert absorption when the segment ran inside a volumetric material.
+        if let Some(sigma) = inside.take() {
+            beta *= volume::transmittance(sigma, hit.t);
+        }
         let wo_world = -ray.dir;
         let bsdf = scene.bsdf(&hit);
 
@@ -202,6 +209,7 @@ pub fn trace(
             return none;
         }
         after_alpha = class == NodeClass::Alpha;
+        inside = volume::entered(scene.material(&hit), hit.ng, wi_world);
         ray = hit.spawn_ray(wi_world);
     }
 }

@@ -1,5 +1,8 @@
-//! glTF metallic-roughness materials (with the transmission, IOR and emissive-strength
-//! extensions) to [`flowlight_core::material::Material`], and per-material diffuse overrides.
+//! glTF metallic-roughness materials (with the `KHR_materials_ior`, `_specular`,
+//! `_transmission`, `_volume`, `_clearcoat` and `_emissive_strength` extensions) to
+//! [`flowlight_core::material::Material`], and per-material diffuse overrides. The BSDF these
+//! parameters stand for is `flowlight_core::bsdf::gltf`; `docs/gltf.md` ("Materials") lists
+//! what is supported.
 //!
 //! The diffuse model comes from, in increasing priority: Lambert by default; the material's
 //! glTF extras `{"flowlight": {"diffuse": "oren-nayar", "sigma_degrees": 20}}`; a
@@ -101,8 +104,65 @@ fn check_unit(name: &str, v: f32) -> Result<f32, String> {
     Ok(v)
 }
 
+fn check_rgb_unit(name: &str, c: [f32; 3]) -> Result<Rgb, String> {
+    for (ch, v) in ["r", "g", "b"].iter().zip(c) {
+        check_unit(&format!("{name}.{ch}"), v)?;
+    }
+    Ok(Rgb::from_array(c))
+}
+
+/// The material's name for messages.
+fn label(m: &gltf::Material) -> String {
+    match (m.index(), m.name()) {
+        (None, _) => "default".to_string(),
+        (Some(_), Some(n)) => n.to_string(),
+        (Some(i), None) => format!("material{i}"),
+    }
+}
+
+/// The scalar factors of `KHR_materials_clearcoat` (clearcoatFactor, clearcoatRoughnessFactor),
+/// read from the raw extension object (the gltf crate has no type for it).
+fn clearcoat(m: &gltf::Material) -> Result<(f32, f32), String> {
+    let Some(v) = m.extension_value("KHR_materials_clearcoat") else {
+        return Ok((0.0, 0.0));
+    };
+    let obj = v
+        .as_object()
+        .ok_or("KHR_materials_clearcoat is not a JSON object")?;
+    let factor = |key: &str| -> Result<f32, String> {
+        match obj.get(key) {
+            None => Ok(0.0),
+            Some(x) => {
+                let f = x
+                    .as_f64()
+                    .ok_or(format!("KHR_materials_clearcoat.{key} is not a number"))?;
+                check_unit(&format!("KHR_materials_clearcoat.{key}"), f as f32)
+            }
+        }
+    };
+    let c = factor("clearcoatFactor")?;
+    let r = factor("clearcoatRoughnessFactor")?;
+    let textures: Vec<&str> = [
+        "clearcoatTexture",
+        "clearcoatRoughnessTexture",
+        "clearcoatNormalTexture",
+    ]
+    .into_iter()
+    .filter(|k| obj.contains_key(*k))
+    .collect();
+    if !textures.is_empty() {
+        tracing::warn!(
+            "material '{}': KHR_materials_clearcoat {} not applied (the factors are)",
+            label(m),
+            textures.join(", ")
+        );
+    }
+    Ok((c, r))
+}
+
 /// Converts the scalar parts of a glTF material (everything but the texture index, which the
-/// loader assigns) and checks every value.
+/// loader assigns) and checks every value. Material extensions this renderer does not know are
+/// ignored with a warning naming them, and so are the textures of the BRDF extensions.
 pub fn convert(m: &gltf::Material) -> Result<Material, String> {
     let pbr = m.pbr_metallic_roughness();
     let [r, g, b, a] = pbr.base_color_factor();
@@ -111,19 +171,72 @@ pub fn convert(m: &gltf::Material) -> Result<Material, String> {
     }
     let metallic = check_unit("metallicFactor", pbr.metallic_factor())?;
     let roughness = check_unit("roughnessFactor", pbr.roughness_factor())?;
+    let mut ignored_textures = Vec::new();
     let transmission = match m.transmission() {
-        Some(t) => check_unit(
-            "KHR_materials_transmission.transmissionFactor",
-            t.transmission_factor(),
-        )?,
+        Some(t) => {
+            if t.transmission_texture().is_some() {
+                ignored_textures.push("KHR_materials_transmission.transmissionTexture");
+            }
+            check_unit(
+                "KHR_materials_transmission.transmissionFactor",
+                t.transmission_factor(),
+            )?
+        }
         None => 0.0,
     };
     let ior = m.ior().unwrap_or(1.5);
-    if !(ior.is_finite() && ior >= 1.0) {
+    if !(ior.is_finite() && (ior >= 1.0 || ior == 0.0)) {
         return Err(format!(
-            "KHR_materials_ior.ior = {ior} must be finite and >= 1"
+            "KHR_materials_ior.ior = {ior} must be finite and 0 or >= 1"
         ));
     }
+    let (specular, specular_color) = match m.specular() {
+        Some(s) => {
+            if s.specular_texture().is_some() {
+                ignored_textures.push("KHR_materials_specular.specularTexture");
+            }
+            if s.specular_color_texture().is_some() {
+                ignored_textures.push("KHR_materials_specular.specularColorTexture");
+            }
+            let f = check_unit("KHR_materials_specular.specularFactor", s.specular_factor())?;
+            let c = s.specular_color_factor();
+            for (ch, v) in ["r", "g", "b"].iter().zip(c) {
+                if !(v.is_finite() && v >= 0.0) {
+                    return Err(format!(
+                        "KHR_materials_specular.specularColorFactor.{ch} = {v} must be finite and >= 0"
+                    ));
+                }
+            }
+            (f, Rgb::from_array(c))
+        }
+        None => (1.0, Rgb::ONE),
+    };
+    let (thickness, attenuation_color, attenuation_distance) = match m.volume() {
+        Some(v) => {
+            if v.thickness_texture().is_some() {
+                ignored_textures.push("KHR_materials_volume.thicknessTexture");
+            }
+            let t = v.thickness_factor();
+            if !(t.is_finite() && t >= 0.0) {
+                return Err(format!(
+                    "KHR_materials_volume.thicknessFactor = {t} must be finite and >= 0"
+                ));
+            }
+            let d = v.attenuation_distance();
+            if d.is_nan() || d <= 0.0 {
+                return Err(format!(
+                    "KHR_materials_volume.attenuationDistance = {d} must be > 0"
+                ));
+            }
+            let c = check_rgb_unit(
+                "KHR_materials_volume.attenuationColor",
+                v.attenuation_color(),
+            )?;
+            (t, c, d)
+        }
+        None => (0.0, Rgb::ONE, f32::INFINITY),
+    };
+    let (clearcoat, clearcoat_roughness) = clearcoat(m)?;
     let strength = m.emissive_strength().unwrap_or(1.0);
     if !(strength.is_finite() && strength >= 0.0) {
         return Err(format!(
@@ -138,6 +251,27 @@ pub fn convert(m: &gltf::Material) -> Result<Material, String> {
     if !emission.is_valid_radiance() {
         return Err("emissive factor × strength overflows".into());
     }
+    if !ignored_textures.is_empty() {
+        tracing::warn!(
+            "material '{}': {} not applied (the factors are)",
+            label(m),
+            ignored_textures.join(", ")
+        );
+    }
+    if let Some(others) = m.extensions() {
+        let unknown: Vec<&str> = others
+            .keys()
+            .map(String::as_str)
+            .filter(|k| *k != "KHR_materials_clearcoat")
+            .collect();
+        if !unknown.is_empty() {
+            tracing::warn!(
+                "material '{}': extension {} not supported; ignored",
+                label(m),
+                unknown.join(", ")
+            );
+        }
+    }
     let mut out = Material {
         base_color: Rgb::new(r, g, b),
         base_color_texture: -1,
@@ -147,6 +281,13 @@ pub fn convert(m: &gltf::Material) -> Result<Material, String> {
         ior,
         emission,
         two_sided_emission: 0,
+        specular,
+        specular_color,
+        thickness,
+        attenuation_color,
+        attenuation_distance,
+        clearcoat,
+        clearcoat_roughness,
         ..Material::default()
     };
     if let Some(o) = extras_override(m.extras())? {
