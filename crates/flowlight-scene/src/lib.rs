@@ -6,6 +6,7 @@
 //! - [`gltf_loader`]: walking a glTF document into a [`Scene`];
 //! - [`source`]: reading `.gltf`/`.glb` files and their buffers (external files, data URIs);
 //! - [`accessor`]: validated reading of glTF accessors;
+//! - [`extensions`]: the glTF extensions the loader knows, and the check of a file's list;
 //! - [`material`]: glTF materials to [`flowlight_core::material::Material`], overrides;
 //! - [`texture`]: image decoding and sRGB → linear conversion;
 //! - [`config`]: the TOML render configuration;
@@ -14,6 +15,7 @@
 pub mod accessor;
 pub mod config;
 pub mod error;
+pub mod extensions;
 pub mod gltf_loader;
 pub mod material;
 pub mod scene;

@@ -9,6 +9,9 @@ pub struct GltfSource {
     pub file: PathBuf,
     pub base_dir: PathBuf,
     pub document: gltf::Document,
+    /// Warning lines about the file's extensions (ignored or unknown optional ones), already
+    /// logged by [`GltfSource::open`]; kept for callers and tests.
+    pub warnings: Vec<String>,
     blob: Option<Vec<u8>>,
     buffers: Vec<Option<Vec<u8>>>,
 }
@@ -114,6 +117,16 @@ impl GltfSource {
                 file: path.clone(),
                 reason: e.to_string(),
             })?;
+        // Extensions: our own table decides (gltf-json refuses every required extension that
+        // is not one of its enabled features, naming none of the ones it does not know).
+        let warnings = crate::extensions::check(&root.extensions_used, &root.extensions_required)
+            .map_err(|reason| SceneError::Validation {
+                file: path.clone(),
+                reason,
+            })?;
+        for w in &warnings {
+            tracing::warn!(file = %path.display(), "{w}");
+        }
         // gltf-json's own validation indexes a primitive's accessors without checking them
         // (a file without an `accessors` array panics there): check those indices first.
         let accessor_count = root.accessors.len();
@@ -141,14 +154,18 @@ impl GltfSource {
             }
         }
         // The crate's validation, less the POSITION min/max requirement, which many exporters
-        // ignore and this loader does not need.
+        // ignore and this loader does not need, and less its check of `extensionsRequired`
+        // (done above).
         let mut errors = Vec::new();
         {
             use gltf::json::validation::{Error as VError, Validate};
             root.validate(&root, gltf::json::Path::new, &mut |path, error| {
                 let p = path();
                 let minmax = p.as_str().ends_with(".min") || p.as_str().ends_with(".max");
-                if !(minmax && matches!(error, VError::Missing)) {
+                let required = p.as_str().starts_with("extensionsRequired");
+                if !(minmax && matches!(error, VError::Missing))
+                    && !(required && matches!(error, VError::Unsupported))
+                {
                     errors.push(format!("{p}: {error}"));
                 }
             });
@@ -166,6 +183,7 @@ impl GltfSource {
             file: path,
             base_dir,
             document,
+            warnings,
             blob,
             buffers,
         })

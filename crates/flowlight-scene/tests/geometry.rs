@@ -1,0 +1,286 @@
+//! Geometry, compression and instancing: KHR_mesh_quantization, EXT_meshopt_compression,
+//! KHR_draco_mesh_compression, the extension table, EXT_mesh_gpu_instancing.
+
+mod common;
+
+use common::*;
+use flowlight_scene::source::GltfSource;
+use flowlight_scene::{load_gltf, Scene, SceneError};
+use glam::{Vec2, Vec3};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// Builds a one-buffer glTF whose binary data is a base64 data URI.
+#[derive(Default)]
+struct Builder {
+    bin: Vec<u8>,
+    views: Vec<String>,
+    accessors: Vec<String>,
+    /// Extra top-level JSON members, e.g. `"extensionsUsed": [...]`.
+    top: Vec<String>,
+    /// Extra buffers after buffer 0 (JSON objects).
+    buffers: Vec<String>,
+}
+
+impl Builder {
+    /// Appends `bytes` (4-aligned) as a buffer view; `extra` is spliced into the view object.
+    fn view(&mut self, bytes: &[u8], extra: &str) -> usize {
+        while self.bin.len() % 4 != 0 {
+            self.bin.push(0);
+        }
+        let off = self.bin.len();
+        self.bin.extend_from_slice(bytes);
+        self.views.push(format!(
+            r#"{{"buffer": 0, "byteOffset": {off}, "byteLength": {}{extra}}}"#,
+            bytes.len()
+        ));
+        self.views.len() - 1
+    }
+
+    /// Appends raw bytes to buffer 0 (4-aligned) without a view; returns the offset.
+    fn raw(&mut self, bytes: &[u8]) -> usize {
+        while self.bin.len() % 4 != 0 {
+            self.bin.push(0);
+        }
+        let off = self.bin.len();
+        self.bin.extend_from_slice(bytes);
+        off
+    }
+
+    /// A view object given verbatim.
+    fn view_json(&mut self, json: String) -> usize {
+        self.views.push(json);
+        self.views.len() - 1
+    }
+
+    fn accessor(&mut self, json: String) -> usize {
+        self.accessors.push(json);
+        self.accessors.len() - 1
+    }
+
+    /// The document with `nodes`, `meshes` (JSON array bodies) and scene 0 listing `roots`.
+    fn json(&self, nodes: &str, meshes: &str, roots: &str) -> String {
+        let mut bin = self.bin.clone();
+        while bin.len() % 4 != 0 {
+            bin.push(0);
+        }
+        let mut buffers = vec![format!(
+            r#"{{"uri": "data:application/octet-stream;base64,{}", "byteLength": {}}}"#,
+            base64(&bin),
+            bin.len()
+        )];
+        buffers.extend(self.buffers.iter().cloned());
+        let mut top = String::new();
+        for t in &self.top {
+            top.push_str(t);
+            top.push_str(",\n");
+        }
+        format!(
+            r#"{{
+  {top}"asset": {{"version": "2.0"}},
+  "scene": 0,
+  "scenes": [{{"nodes": [{roots}]}}],
+  "nodes": [{nodes}],
+  "meshes": [{meshes}],
+  "accessors": [{}],
+  "bufferViews": [{}],
+  "buffers": [{}]
+}}"#,
+            self.accessors.join(",\n"),
+            self.views.join(",\n"),
+            buffers.join(",\n")
+        )
+    }
+}
+
+fn write(tag: &str, json: &str) -> PathBuf {
+    let p = temp_dir(tag).join("scene.gltf");
+    std::fs::write(&p, json).unwrap();
+    p
+}
+
+fn load(p: &Path) -> Result<Scene, SceneError> {
+    load_gltf(p, &BTreeMap::new())
+}
+
+fn le<T: Copy, const N: usize>(v: &[T], f: impl Fn(T) -> [u8; N]) -> Vec<u8> {
+    v.iter().flat_map(|&x| f(x)).collect()
+}
+
+const QUANT: &str =
+    r#""extensionsUsed": ["KHR_mesh_quantization"], "extensionsRequired": ["KHR_mesh_quantization"]"#;
+
+// ---------------------------------------------------------------------------------------------
+// KHR_mesh_quantization
+
+/// The spec's normalisation (glTF 2.0 §3.11, "Animations" table, also used by accessors):
+/// signed: max(c / (2^(b-1) - 1), -1); unsigned: c / (2^b - 1).
+fn snorm16(c: i16) -> f32 {
+    (c as f32 / 32767.0).max(-1.0)
+}
+fn snorm8(c: i8) -> f32 {
+    (c as f32 / 127.0).max(-1.0)
+}
+fn unorm16(c: u16) -> f32 {
+    c as f32 / 65535.0
+}
+
+#[test]
+fn quantized_normalized_short_positions_byte_normals_ushort_uvs() {
+    // Four vertices of a quad, i16 normalized positions (padded to 8 bytes per vertex as
+    // the spec requires 4-byte alignment of each element), i8 normalized normals (padded to
+    // 4), u16 normalized texcoords.
+    let pos: [[i16; 3]; 4] = [
+        [-32768, -32767, 0],
+        [32767, -32767, 0],
+        [32767, 16384, 100],
+        [-16384, 16384, 100],
+    ];
+    let nrm: [[i8; 3]; 4] = [[0, 0, 127], [0, -127, 127], [-128, 0, 127], [0, 0, 127]];
+    let uv: [[u16; 2]; 4] = [[0, 0], [65535, 0], [65535, 32768], [1, 65535]];
+    let mut b = Builder::default();
+    let mut pb = Vec::new();
+    for p in pos {
+        for c in p {
+            pb.extend_from_slice(&c.to_le_bytes());
+        }
+        pb.extend_from_slice(&[0, 0]);
+    }
+    let mut nb = Vec::new();
+    for n in nrm {
+        nb.extend(n.map(|c| c as u8));
+        nb.push(0);
+    }
+    let ub = le(&uv.concat(), u16::to_le_bytes);
+    let ib = le(&[0u32, 1, 2, 0, 2, 3], u32::to_le_bytes);
+    let pv = b.view(&pb, r#", "byteStride": 8"#);
+    let nv = b.view(&nb, r#", "byteStride": 4"#);
+    let uvv = b.view(&ub, "");
+    let iv = b.view(&ib, "");
+    b.accessor(format!(
+        r#"{{"bufferView": {pv}, "componentType": 5122, "normalized": true, "count": 4, "type": "VEC3", "min": [-32768, -32767, 0], "max": [32767, 16384, 100]}}"#
+    ));
+    b.accessor(format!(
+        r#"{{"bufferView": {nv}, "componentType": 5120, "normalized": true, "count": 4, "type": "VEC3"}}"#
+    ));
+    b.accessor(format!(
+        r#"{{"bufferView": {uvv}, "componentType": 5123, "normalized": true, "count": 4, "type": "VEC2"}}"#
+    ));
+    b.accessor(format!(
+        r#"{{"bufferView": {iv}, "componentType": 5125, "count": 6, "type": "SCALAR"}}"#
+    ));
+    b.top.push(QUANT.into());
+    // The dequantisation transform gltfpack writes: a node scale and translation.
+    let json = b.json(
+        r#"{"mesh": 0, "scale": [2, 2, 2], "translation": [1, 0, 0]}"#,
+        r#"{"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2}, "indices": 3}]}"#,
+        "0",
+    );
+    let s = load(&write("quant", &json)).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.positions.len(), 4);
+    for (i, p) in pos.iter().enumerate() {
+        let want = Vec3::new(snorm16(p[0]), snorm16(p[1]), snorm16(p[2])) * 2.0 + Vec3::X;
+        assert!(
+            (s.positions[i] - want).abs().max_element() < 1e-6,
+            "vertex {i}: {} vs {want}",
+            s.positions[i]
+        );
+    }
+    // -32768 clamps to exactly -1, not -1.00003.
+    assert_eq!(s.positions[0].x, -2.0 + 1.0);
+    for (i, n) in nrm.iter().enumerate() {
+        let want = Vec3::new(snorm8(n[0]), snorm8(n[1]), snorm8(n[2])).normalize();
+        assert!(
+            (s.normals[i] - want).abs().max_element() < 1e-6,
+            "normal {i}: {} vs {want}",
+            s.normals[i]
+        );
+    }
+    for (i, t) in uv.iter().enumerate() {
+        let want = Vec2::new(unorm16(t[0]), unorm16(t[1]));
+        assert!((s.uvs[i] - want).abs().max_element() < 1e-7, "uv {i}");
+    }
+    assert_eq!(s.triangles.len(), 2);
+}
+
+#[test]
+fn quantized_unnormalized_byte_positions_are_plain_integers() {
+    let pos: [[u8; 3]; 3] = [[0, 0, 7], [200, 0, 7], [0, 255, 7]];
+    let mut b = Builder::default();
+    let mut pb = Vec::new();
+    for p in pos {
+        pb.extend_from_slice(&p);
+        pb.push(0);
+    }
+    let pv = b.view(&pb, r#", "byteStride": 4"#);
+    b.accessor(format!(
+        r#"{{"bufferView": {pv}, "componentType": 5121, "count": 3, "type": "VEC3", "min": [0, 0, 7], "max": [200, 255, 7]}}"#
+    ));
+    b.top.push(QUANT.into());
+    let json = b.json(
+        r#"{"mesh": 0}"#,
+        r#"{"primitives": [{"attributes": {"POSITION": 0}}]}"#,
+        "0",
+    );
+    let s = load(&write("quant-u8", &json)).unwrap_or_else(|e| panic!("{e}"));
+    let got: Vec<Vec3> = s.triangles[0]
+        .iter()
+        .map(|&i| s.positions[i as usize])
+        .collect();
+    assert_eq!(
+        got,
+        vec![
+            Vec3::new(0.0, 0.0, 7.0),
+            Vec3::new(200.0, 0.0, 7.0),
+            Vec3::new(0.0, 255.0, 7.0)
+        ]
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// Extension table
+
+fn triangle_builder() -> Builder {
+    let mut b = Builder::default();
+    let pv = b.view(
+        &mesh_bytes(&[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], &[]),
+        "",
+    );
+    b.accessor(format!(
+        r#"{{"bufferView": {pv}, "componentType": 5126, "count": 3, "type": "VEC3"}}"#
+    ));
+    b
+}
+
+fn one_mesh(b: &Builder) -> String {
+    b.json(
+        r#"{"mesh": 0}"#,
+        r#"{"primitives": [{"attributes": {"POSITION": 0}}]}"#,
+        "0",
+    )
+}
+
+#[test]
+fn unknown_optional_extensions_warn_once_each_required_ones_fail_naming_them() {
+    let mut b = triangle_builder();
+    b.top.push(
+        r#""extensionsUsed": ["EXT_made_up_a", "KHR_mesh_quantization", "EXT_made_up_b"]"#.into(),
+    );
+    let p = write("ext-used", &one_mesh(&b));
+    let src = GltfSource::open(&p).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(src.warnings.len(), 2, "{:?}", src.warnings);
+    assert!(src.warnings[0].contains("EXT_made_up_a"));
+    assert!(src.warnings[1].contains("EXT_made_up_b"));
+    load(&p).unwrap_or_else(|e| panic!("{e}"));
+
+    let mut b = triangle_builder();
+    b.top.push(
+        r#""extensionsUsed": ["EXT_made_up_a"], "extensionsRequired": ["EXT_made_up_a"]"#.into(),
+    );
+    let e = load(&write("ext-req", &one_mesh(&b))).unwrap_err().to_string();
+    assert!(
+        e.contains("EXT_made_up_a") && e.contains("extensionsRequired") && e.contains("scene.gltf"),
+        "{e}"
+    );
+    assert_eq!(e.lines().count(), 1, "{e}");
+}
