@@ -270,7 +270,10 @@ mod tests {
         assert_eq!(w.len(), 1);
         assert!(w[0].contains("EXT_foo"), "{w:?}");
         let e = check(&s(&["EXT_foo"]), &s(&["EXT_foo"])).unwrap_err();
-        assert!(e.contains("EXT_foo") && e.contains("extensionsRequired"), "{e}");
+        assert!(
+            e.contains("EXT_foo") && e.contains("extensionsRequired"),
+            "{e}"
+        );
     }
 
     #[test]

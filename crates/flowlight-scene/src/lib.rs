@@ -6,6 +6,7 @@
 //! - [`gltf_loader`]: walking a glTF document into a [`Scene`];
 //! - [`source`]: reading `.gltf`/`.glb` files and their buffers (external files, data URIs);
 //! - [`accessor`]: validated reading of glTF accessors;
+//! - [`compression`]: `EXT_meshopt_compression` buffer views;
 //! - [`extensions`]: the glTF extensions the loader knows, and the check of a file's list;
 //! - [`material`]: glTF materials to [`flowlight_core::material::Material`], overrides;
 //! - [`texture`]: image decoding and sRGB → linear conversion;
@@ -13,6 +14,7 @@
 //! - [`error`]: the error types.
 
 pub mod accessor;
+pub mod compression;
 pub mod config;
 pub mod error;
 pub mod extensions;

@@ -1,7 +1,9 @@
 //! Reading a glTF asset from disk: `.gltf` JSON or `.glb` container, validation, and the
 //! buffers it references (the GLB binary chunk, external files, base64 data URIs).
 
+use crate::compression::MeshoptView;
 use crate::error::SceneError;
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 /// A parsed and validated glTF document with the means to fetch its buffers on demand.
@@ -14,6 +16,8 @@ pub struct GltfSource {
     pub warnings: Vec<String>,
     blob: Option<Vec<u8>>,
     buffers: Vec<Option<Vec<u8>>>,
+    /// Decoded `EXT_meshopt_compression` buffer views, by view index.
+    decoded: HashMap<usize, Vec<u8>>,
 }
 
 const GLB_MAGIC: &[u8; 4] = b"glTF";
@@ -121,9 +125,9 @@ impl GltfSource {
         // is not one of its enabled features, naming none of the ones it does not know).
         let warnings = crate::extensions::check(&root.extensions_used, &root.extensions_required)
             .map_err(|reason| SceneError::Validation {
-                file: path.clone(),
-                reason,
-            })?;
+            file: path.clone(),
+            reason,
+        })?;
         for w in &warnings {
             tracing::warn!(file = %path.display(), "{w}");
         }
@@ -186,6 +190,7 @@ impl GltfSource {
             warnings,
             blob,
             buffers,
+            decoded: HashMap::new(),
         })
     }
 
@@ -239,8 +244,13 @@ impl GltfSource {
         Ok(self.buffers[index].as_deref().expect("just loaded"))
     }
 
-    /// Bytes of buffer view `view`, bounds-checked.
+    /// Bytes of buffer view `view`, bounds-checked; decoded first when the view is compressed
+    /// with `EXT_meshopt_compression`.
     pub fn view_bytes(&mut self, view: &gltf::buffer::View) -> Result<&[u8], SceneError> {
+        if let Some(ext) = view.extension_value("EXT_meshopt_compression") {
+            let ext = ext.clone();
+            return self.meshopt_view(view, &ext);
+        }
         let (buffer, offset, length) = (view.buffer().index(), view.offset(), view.length());
         let declared = view.buffer().length();
         let available = self.buffer(buffer)?.len();
@@ -258,6 +268,60 @@ impl GltfSource {
                 ),
             }),
         }
+    }
+
+    /// The decoded bytes of a view compressed with `EXT_meshopt_compression`, decoded once.
+    fn meshopt_view(
+        &mut self,
+        view: &gltf::buffer::View,
+        ext: &gltf::json::Value,
+    ) -> Result<&[u8], SceneError> {
+        let index = view.index();
+        if !self.decoded.contains_key(&index) {
+            let err = |file: &Path, reason: String| SceneError::Validation {
+                file: file.to_path_buf(),
+                reason: format!(
+                    "bufferViews[{index}].extensions.EXT_meshopt_compression: {reason}"
+                ),
+            };
+            let m = MeshoptView::parse(ext).map_err(|r| err(&self.file, r))?;
+            if m.decoded_len() < view.length() {
+                return Err(err(
+                    &self.file,
+                    format!(
+                        "count {} × byteStride {} = {} bytes is less than the view's byteLength {}",
+                        m.count,
+                        m.byte_stride,
+                        m.decoded_len(),
+                        view.length()
+                    ),
+                ));
+            }
+            if m.buffer >= self.buffers.len() {
+                return Err(err(
+                    &self.file,
+                    format!("buffer {} does not exist", m.buffer),
+                ));
+            }
+            let data = self.buffer(m.buffer)?;
+            let Some(compressed) = m
+                .byte_offset
+                .checked_add(m.byte_length)
+                .and_then(|end| data.get(m.byte_offset..end))
+            else {
+                let n = data.len();
+                return Err(err(
+                    &self.file,
+                    format!(
+                        "byteOffset {} + byteLength {} runs past buffer {} ({n} bytes)",
+                        m.byte_offset, m.byte_length, m.buffer
+                    ),
+                ));
+            };
+            let bytes = m.decode(compressed).map_err(|r| err(&self.file, r))?;
+            self.decoded.insert(index, bytes);
+        }
+        Ok(&self.decoded[&index][..view.length()])
     }
 
     /// Reads a URI relative to the asset: a `data:` URI or a (percent-encoded) relative path.

@@ -107,8 +107,7 @@ fn le<T: Copy, const N: usize>(v: &[T], f: impl Fn(T) -> [u8; N]) -> Vec<u8> {
     v.iter().flat_map(|&x| f(x)).collect()
 }
 
-const QUANT: &str =
-    r#""extensionsUsed": ["KHR_mesh_quantization"], "extensionsRequired": ["KHR_mesh_quantization"]"#;
+const QUANT: &str = r#""extensionsUsed": ["KHR_mesh_quantization"], "extensionsRequired": ["KHR_mesh_quantization"]"#;
 
 // ---------------------------------------------------------------------------------------------
 // KHR_mesh_quantization
@@ -277,10 +276,211 @@ fn unknown_optional_extensions_warn_once_each_required_ones_fail_naming_them() {
     b.top.push(
         r#""extensionsUsed": ["EXT_made_up_a"], "extensionsRequired": ["EXT_made_up_a"]"#.into(),
     );
-    let e = load(&write("ext-req", &one_mesh(&b))).unwrap_err().to_string();
+    let e = load(&write("ext-req", &one_mesh(&b)))
+        .unwrap_err()
+        .to_string();
     assert!(
         e.contains("EXT_made_up_a") && e.contains("extensionsRequired") && e.contains("scene.gltf"),
         "{e}"
     );
     assert_eq!(e.lines().count(), 1, "{e}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// EXT_meshopt_compression
+
+/// A 5 × 5 grid on a bumpy surface with analytic normals; indices of its 32 triangles.
+fn grid() -> (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<u32>) {
+    let (mut p, mut n, mut idx) = (Vec::new(), Vec::new(), Vec::new());
+    for j in 0..5 {
+        for i in 0..5 {
+            let (x, y) = (i as f32 * 0.25 - 0.5, j as f32 * 0.25 - 0.5);
+            let z = 0.3 * (3.0 * x).sin() * (2.0 * y).cos();
+            p.push([x, y, z]);
+            let g = Vec3::new(
+                -0.9 * (3.0 * x).cos() * (2.0 * y).cos(),
+                0.6 * (3.0 * x).sin() * (2.0 * y).sin(),
+                1.0,
+            )
+            .normalize();
+            n.push(g.to_array());
+        }
+    }
+    for j in 0..4u32 {
+        for i in 0..4u32 {
+            let a = j * 5 + i;
+            idx.extend_from_slice(&[a, a + 1, a + 6, a, a + 6, a + 5]);
+        }
+    }
+    (p, n, idx)
+}
+
+#[test]
+fn meshopt_attributes_triangles_indices_and_filters_decode_to_the_source_mesh() {
+    let (pos, nrm, idx) = grid();
+    let mut b = Builder::default();
+    // Buffer 1 is the fallback: no data at all; every view's `buffer` names it.
+    let mut fallback_len = 0usize;
+    let mut compressed_view = |b: &mut Builder,
+                               enc: &[u8],
+                               stride: usize,
+                               count: usize,
+                               mode: &str,
+                               filter: &str,
+                               target: bool| {
+        let off = b.raw(enc);
+        let len = stride * count;
+        let v = b.view_json(format!(
+            r#"{{"buffer": 1, "byteOffset": {fallback_len}, "byteLength": {len}{}{}, "extensions": {{"EXT_meshopt_compression": {{"buffer": 0, "byteOffset": {off}, "byteLength": {}, "byteStride": {stride}, "count": {count}, "mode": "{mode}"{filter}}}}}}}"#,
+            if mode == "ATTRIBUTES" { format!(r#", "byteStride": {stride}"#) } else { String::new() },
+            if target { r#", "target": 34962"# } else { "" },
+            enc.len()
+        ));
+        fallback_len += len.next_multiple_of(4);
+        v
+    };
+    // Primitive 0: plain f32 positions, octahedral 16-bit normals, TRIANGLES u32 indices.
+    let p0 = compressed_view(
+        &mut b,
+        &meshopt::encode_vertex_buffer(&pos).unwrap(),
+        12,
+        25,
+        "ATTRIBUTES",
+        "",
+        true,
+    );
+    let oct: Vec<[f32; 4]> = nrm.iter().map(|n| [n[0], n[1], n[2], 0.0]).collect();
+    let oct = meshopt::encode_filter_oct::<i16>(&oct, 16);
+    let n0 = compressed_view(
+        &mut b,
+        &meshopt::encode_vertex_buffer(&oct).unwrap(),
+        8,
+        25,
+        "ATTRIBUTES",
+        r#", "filter": "OCTAHEDRAL""#,
+        true,
+    );
+    let i0 = compressed_view(
+        &mut b,
+        &meshopt::encode_index_buffer(&idx, 25).unwrap(),
+        4,
+        idx.len(),
+        "TRIANGLES",
+        "",
+        false,
+    );
+    // Primitive 1: exponential-filtered positions, INDICES u16 indices.
+    let exp = meshopt::encode_filter_exp(&pos, 20, meshopt::EncodeExpMode::SharedVector);
+    let p1 = compressed_view(
+        &mut b,
+        &meshopt::encode_vertex_buffer(&exp).unwrap(),
+        12,
+        25,
+        "ATTRIBUTES",
+        r#", "filter": "EXPONENTIAL""#,
+        true,
+    );
+    let i1 = compressed_view(
+        &mut b,
+        &meshopt::encode_index_sequence(&idx, 25).unwrap(),
+        2,
+        idx.len(),
+        "INDICES",
+        "",
+        false,
+    );
+    b.buffers.push(format!(
+        r#"{{"byteLength": {fallback_len}, "extensions": {{"EXT_meshopt_compression": {{"fallback": true}}}}}}"#
+    ));
+    let vec3 = |v: usize, ty: u32, norm: bool| {
+        format!(
+            r#"{{"bufferView": {v}, "componentType": {ty}, "normalized": {norm}, "count": 25, "type": "VEC3"}}"#
+        )
+    };
+    let ap0 = b.accessor(vec3(p0, 5126, false));
+    let an0 = b.accessor(vec3(n0, 5122, true));
+    let ai0 = b.accessor(format!(
+        r#"{{"bufferView": {i0}, "componentType": 5125, "count": {}, "type": "SCALAR"}}"#,
+        idx.len()
+    ));
+    let ap1 = b.accessor(vec3(p1, 5126, false));
+    let ai1 = b.accessor(format!(
+        r#"{{"bufferView": {i1}, "componentType": 5123, "count": {}, "type": "SCALAR"}}"#,
+        idx.len()
+    ));
+    b.top.push(
+        r#""extensionsUsed": ["EXT_meshopt_compression", "KHR_mesh_quantization"], "extensionsRequired": ["EXT_meshopt_compression", "KHR_mesh_quantization"]"#
+            .into(),
+    );
+    let json = b.json(
+        r#"{"mesh": 0}"#,
+        &format!(
+            r#"{{"primitives": [
+                {{"attributes": {{"POSITION": {ap0}, "NORMAL": {an0}}}, "indices": {ai0}}},
+                {{"attributes": {{"POSITION": {ap1}, "NORMAL": {an0}}}, "indices": {ai1}}}]}}"#
+        ),
+        "0",
+    );
+    let s = load(&write("meshopt", &json)).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.positions.len(), 50);
+    assert_eq!(s.triangles.len(), 64);
+    for k in 0..25 {
+        assert_eq!(s.positions[k], Vec3::from_array(pos[k]), "plain vertex {k}");
+        // 20-bit mantissas with a shared exponent: relative error below 2^-19 of the largest
+        // component.
+        let d = (s.positions[25 + k] - Vec3::from_array(pos[k]))
+            .abs()
+            .max_element();
+        assert!(d < 2e-6, "exponential vertex {k}: off by {d}");
+        // 16-bit octahedral normals: within 1e-4 rad.
+        let want = Vec3::from_array(nrm[k]);
+        for base in [0, 25] {
+            let got = s.normals[base + k];
+            assert!(
+                got.angle_between(want) < 1e-3,
+                "normal {k}: {got} vs {want}"
+            );
+        }
+    }
+    // Triangle connectivity: the index codec may rotate a triangle's corners (it keeps the
+    // winding), so compare each triangle as a rotation of the source one.
+    for prim in 0..2 {
+        for (t, want) in idx.chunks_exact(3).enumerate() {
+            let got = s.triangles[prim * 32 + t].map(|i| i - 25 * prim as u32);
+            let rotations = [
+                [want[0], want[1], want[2]],
+                [want[1], want[2], want[0]],
+                [want[2], want[0], want[1]],
+            ];
+            assert!(
+                rotations.contains(&got),
+                "primitive {prim} triangle {t}: {got:?} vs {want:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn meshopt_bad_stream_is_an_error_naming_the_view() {
+    let (pos, _, _) = grid();
+    let mut b = Builder::default();
+    let mut enc = meshopt::encode_vertex_buffer(&pos).unwrap();
+    enc.truncate(enc.len() / 2);
+    let off = b.raw(&enc);
+    let v = b.view_json(format!(
+        r#"{{"buffer": 1, "byteLength": 300, "byteStride": 12, "extensions": {{"EXT_meshopt_compression": {{"buffer": 0, "byteOffset": {off}, "byteLength": {}, "byteStride": 12, "count": 25, "mode": "ATTRIBUTES"}}}}}}"#,
+        enc.len()
+    ));
+    b.buffers.push(r#"{"byteLength": 300}"#.into());
+    b.accessor(format!(
+        r#"{{"bufferView": {v}, "componentType": 5126, "count": 25, "type": "VEC3"}}"#
+    ));
+    b.top.push(r#""extensionsUsed": ["EXT_meshopt_compression"], "extensionsRequired": ["EXT_meshopt_compression"]"#.into());
+    let e = load(&write("meshopt-bad", &one_mesh(&b)))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("bufferViews[0].extensions.EXT_meshopt_compression") && e.contains("decode"),
+        "{e}"
+    );
 }
