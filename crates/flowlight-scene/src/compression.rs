@@ -1,4 +1,7 @@
-//! Decoding of compressed buffer views: `EXT_meshopt_compression`.
+//! Decoding of compressed geometry: `EXT_meshopt_compression` buffer views and
+//! `KHR_draco_mesh_compression` primitives.
+//!
+//! ## EXT_meshopt_compression
 //!
 //! A compressed view carries `extensions.EXT_meshopt_compression = { buffer, byteOffset,
 //! byteLength, byteStride, count, mode, filter }`: `byteLength` bytes at `byteOffset` of
@@ -17,6 +20,17 @@
 //!
 //! The codecs are meshoptimizer's own (the `meshopt` crate), which are safe on untrusted input
 //! (they may decode garbage, never read out of bounds); the lengths are checked here first.
+//!
+//! ## KHR_draco_mesh_compression
+//!
+//! A compressed primitive carries `extensions.KHR_draco_mesh_compression = { bufferView,
+//! attributes: { SEMANTIC: uniqueId } }`: the buffer view holds one Draco mesh bitstream; each
+//! listed attribute's accessor (which has no `bufferView`) takes the values of the Draco
+//! attribute with that unique id, one per Draco point, and the indices accessor takes the
+//! faces' point indices. The accessors' `count`, `type` and `componentType` describe the
+//! decoded data (extension spec, "Conformance"). Decoded with `draco-core`, a pure-Rust port
+//! of Google's decoder. Only float attributes are taken from the stream (what Blender,
+//! gltf-transform and gltfpack write for Draco); an integer attribute is an error naming it.
 
 use gltf::json::Value;
 
@@ -237,6 +251,121 @@ fn decode_vertices(data: &[u8], count: usize, stride: usize) -> meshopt::Result<
     strides!(4 8 12 16 20 24 28 32 36 40 44 48 52 56 60 64 68 72 76 80 84 88 92 96 100 104 108
         112 116 120 124 128 132 136 140 144 148 152 156 160 164 168 172 176 180 184 188 192 196
         200 204 208 212 216 220 224 228 232 236 240 244 248 252 256)
+}
+
+/// The parsed `KHR_draco_mesh_compression` object of one primitive.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct DracoPrimitive {
+    pub buffer_view: usize,
+    /// (glTF semantic, Draco unique attribute id).
+    pub attributes: Vec<(String, u32)>,
+}
+
+impl DracoPrimitive {
+    pub fn parse(obj: &Value) -> Result<DracoPrimitive, String> {
+        let buffer_view = uint(obj, "bufferView", None)?;
+        let attrs = obj
+            .get("attributes")
+            .and_then(Value::as_object)
+            .ok_or("missing `attributes` object")?;
+        let mut attributes = Vec::new();
+        for (k, v) in attrs {
+            let id = v
+                .as_u64()
+                .and_then(|x| u32::try_from(x).ok())
+                .ok_or_else(|| format!("attributes.{k} must be a non-negative integer id"))?;
+            attributes.push((k.clone(), id));
+        }
+        Ok(DracoPrimitive {
+            buffer_view,
+            attributes,
+        })
+    }
+}
+
+/// What one accessor of a Draco primitive takes from the decoded mesh.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DracoPart {
+    /// The attribute with this unique id.
+    Attribute(u32),
+    /// The faces' point indices.
+    Indices,
+}
+
+/// A decoded Draco mesh.
+pub struct DracoMesh(draco_core::Mesh);
+
+impl DracoMesh {
+    pub fn decode(data: &[u8]) -> Result<DracoMesh, String> {
+        let mut buffer = draco_core::DecoderBuffer::new(data);
+        let mut mesh = draco_core::Mesh::new();
+        draco_core::MeshDecoder::new()
+            .decode(&mut buffer, &mut mesh)
+            .map_err(|e| {
+                format!(
+                    "the Draco bitstream does not decode ({e}); re-export without Draco, e.g. `gltf-transform copy in.glb out.glb` or `gltfpack -i in.glb -o out.glb` (without -cc)"
+                )
+            })?;
+        Ok(DracoMesh(mesh))
+    }
+
+    /// `count` elements of `components` little-endian f32 values (for attributes) or u32
+    /// indices written as `index_size`-byte integers (for indices), tightly packed.
+    pub fn bytes(
+        &self,
+        part: DracoPart,
+        count: usize,
+        components: usize,
+        index_size: usize,
+    ) -> Result<Vec<u8>, String> {
+        let mesh = &self.0;
+        match part {
+            DracoPart::Attribute(id) => {
+                let attr = mesh
+                    .attribute_by_unique_id(id)
+                    .ok_or_else(|| format!("the Draco stream has no attribute with id {id}"))?;
+                let n = mesh.num_points();
+                if n != count {
+                    return Err(format!(
+                        "the Draco stream has {n} points but the accessor's count is {count}"
+                    ));
+                }
+                let values = attr.read_f32s(n, components);
+                Ok(values.iter().flat_map(|v| v.to_le_bytes()).collect())
+            }
+            DracoPart::Indices => {
+                let n = mesh.num_faces() * 3;
+                if n != count {
+                    return Err(format!(
+                        "the Draco stream has {} faces ({n} indices) but the accessor's count is {count}",
+                        mesh.num_faces()
+                    ));
+                }
+                let mut out = Vec::with_capacity(n * index_size);
+                for face in mesh.faces() {
+                    for p in face {
+                        let i = p.0;
+                        match index_size {
+                            1 => out.push(u8::try_from(i).map_err(|_| {
+                                format!("index {i} does not fit the accessor's unsigned byte")
+                            })?),
+                            2 => out.extend_from_slice(
+                                &u16::try_from(i)
+                                    .map_err(|_| {
+                                        format!(
+                                            "index {i} does not fit the accessor's unsigned short"
+                                        )
+                                    })?
+                                    .to_le_bytes(),
+                            ),
+                            _ => out.extend_from_slice(&i.to_le_bytes()),
+                        }
+                    }
+                }
+                Ok(out)
+            }
+        }
+    }
 }
 
 #[cfg(test)]

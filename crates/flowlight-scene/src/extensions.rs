@@ -67,8 +67,8 @@ pub const KNOWN: &[Extension] = &[
     ),
     ext(
         "KHR_draco_mesh_compression",
-        Status::Refused,
-        "Draco-compressed primitives are not decoded; re-export without Draco, e.g. `gltf-transform copy in.glb out.glb` or `gltfpack -i in.glb -o out.glb` (without -cc)",
+        Status::Supported,
+        "decoded with draco-core (pure Rust); float attributes and indices; an accessor with uncompressed fallback data is read as it is",
     ),
     ext(
         "EXT_mesh_gpu_instancing",

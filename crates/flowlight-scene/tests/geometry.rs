@@ -484,3 +484,116 @@ fn meshopt_bad_stream_is_an_error_naming_the_view() {
         "{e}"
     );
 }
+
+// ---------------------------------------------------------------------------------------------
+// KHR_draco_mesh_compression
+
+fn draco_grid() -> (Vec<u8>, Vec<[f32; 3]>, Vec<u32>, u32, u32) {
+    use draco_core::{
+        DataType, EncoderBuffer, EncoderOptions, FaceIndex, GeometryAttributeType, Mesh,
+        MeshEncoder, PointAttribute,
+    };
+    let (pos, nrm, idx) = grid();
+    let mut mesh = Mesh::new();
+    let attr = |ty, data: &[[f32; 3]]| {
+        let mut a = PointAttribute::new();
+        a.init(ty, 3, DataType::Float32, false, data.len());
+        for (i, v) in data.iter().enumerate() {
+            for (c, x) in v.iter().enumerate() {
+                a.buffer_mut().write((i * 3 + c) * 4, &x.to_le_bytes());
+            }
+        }
+        a
+    };
+    let pa = attr(GeometryAttributeType::Position, &pos);
+    let na = attr(GeometryAttributeType::Normal, &nrm);
+    let pid = mesh.add_attribute(pa) as u32;
+    let nid = mesh.add_attribute(na) as u32;
+    mesh.set_num_faces(idx.len() / 3);
+    for (f, t) in idx.chunks_exact(3).enumerate() {
+        mesh.set_face(FaceIndex(f as u32), [t[0].into(), t[1].into(), t[2].into()]);
+    }
+    let mut options = EncoderOptions::new();
+    options.set_attribute_int(0, "quantization_bits", 16);
+    options.set_attribute_int(1, "quantization_bits", 12);
+    let mut encoder = MeshEncoder::new();
+    encoder.set_mesh(mesh);
+    let mut buffer = EncoderBuffer::new();
+    encoder.encode(&options, &mut buffer).unwrap();
+    (buffer.data().to_vec(), pos, idx, pid, nid)
+}
+
+fn draco_gltf(stream: &[u8], points: usize, indices: usize, pid: u32, nid: u32) -> String {
+    let mut b = Builder::default();
+    let v = b.view(stream, "");
+    b.accessor(format!(
+        r#"{{"componentType": 5126, "count": {points}, "type": "VEC3", "min": [-0.5, -0.5, -0.3], "max": [0.5, 0.5, 0.3]}}"#
+    ));
+    b.accessor(format!(
+        r#"{{"componentType": 5126, "count": {points}, "type": "VEC3"}}"#
+    ));
+    b.accessor(format!(
+        r#"{{"componentType": 5125, "count": {indices}, "type": "SCALAR"}}"#
+    ));
+    b.top.push(r#""extensionsUsed": ["KHR_draco_mesh_compression"], "extensionsRequired": ["KHR_draco_mesh_compression"]"#.into());
+    b.json(
+        r#"{"mesh": 0}"#,
+        &format!(
+            r#"{{"primitives": [{{"attributes": {{"POSITION": 0, "NORMAL": 1}}, "indices": 2,
+                "extensions": {{"KHR_draco_mesh_compression": {{"bufferView": {v}, "attributes": {{"POSITION": {pid}, "NORMAL": {nid}}}}}}}}}]}}"#
+        ),
+        "0",
+    )
+}
+
+#[test]
+fn draco_primitive_decodes_to_the_source_triangles() {
+    let (stream, pos, idx, pid, nid) = draco_grid();
+    // Draco renumbers points (EdgeBreaker order): find the decoded point count from the source
+    // mesh, which has no duplicated points.
+    let json = draco_gltf(&stream, pos.len(), idx.len(), pid, nid);
+    let s = load(&write("draco", &json)).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.triangles.len(), idx.len() / 3);
+    // Every decoded triangle is a source triangle (same corners within the 16-bit
+    // quantisation step of a 1-unit box, same winding up to rotation), and all are found.
+    let tol = 2.0 / 65535.0;
+    let mut found = vec![false; idx.len() / 3];
+    for t in &s.triangles {
+        let got = t.map(|i| s.positions[i as usize]);
+        let hit = idx.chunks_exact(3).position(|w| {
+            let want = [0, 1, 2].map(|k| Vec3::from_array(pos[w[k] as usize]));
+            (0..3).any(|r| (0..3).all(|k| (got[k] - want[(k + r) % 3]).abs().max_element() < tol))
+        });
+        let h = hit.unwrap_or_else(|| panic!("decoded triangle {got:?} is not a source triangle"));
+        found[h] = true;
+    }
+    assert!(found.iter().all(|&f| f));
+    // Normals come from the stream too (12-bit octahedral): each vertex's normal is the
+    // source normal of the source vertex at that position.
+    let (_, nrm, _) = grid();
+    for (v, p) in s.positions.iter().enumerate() {
+        let k = pos
+            .iter()
+            .position(|q| (Vec3::from_array(*q) - *p).abs().max_element() < tol)
+            .unwrap();
+        assert!(
+            s.normals[v].angle_between(Vec3::from_array(nrm[k])) < 0.01,
+            "vertex {v}"
+        );
+    }
+}
+
+#[test]
+fn draco_bad_stream_is_an_error_naming_draco_and_the_way_out() {
+    let (mut stream, pos, idx, pid, nid) = draco_grid();
+    stream.truncate(20);
+    let json = draco_gltf(&stream, pos.len(), idx.len(), pid, nid);
+    let e = load(&write("draco-bad", &json)).unwrap_err().to_string();
+    assert!(
+        e.contains("KHR_draco_mesh_compression")
+            && e.contains("gltf-transform")
+            && e.contains("gltfpack"),
+        "{e}"
+    );
+    assert_eq!(e.lines().count(), 1);
+}
