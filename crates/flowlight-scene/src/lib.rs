@@ -4,6 +4,7 @@
 //! One file per concept:
 //! - [`scene`]: the loaded, world-space [`Scene`] and its hit reconstruction;
 //! - [`gltf_loader`]: walking a glTF document into a [`Scene`];
+//! - [`instancing`]: `EXT_mesh_gpu_instancing` placements;
 //! - [`source`]: reading `.gltf`/`.glb` files and their buffers (external files, data URIs);
 //! - [`accessor`]: validated reading of glTF accessors;
 //! - [`compression`]: `EXT_meshopt_compression` buffer views;
@@ -19,6 +20,7 @@ pub mod config;
 pub mod error;
 pub mod extensions;
 pub mod gltf_loader;
+pub mod instancing;
 pub mod material;
 pub mod scene;
 pub mod source;

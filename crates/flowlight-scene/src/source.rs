@@ -405,12 +405,14 @@ impl GltfSource {
         };
         let ty = accessor.data_type();
         let index_size = match part {
-            DracoPart::Attribute(_) if ty != gltf::accessor::DataType::F32 => return Err(err(
-                &self.file,
-                format!(
+            DracoPart::Attribute(_) if ty != gltf::accessor::DataType::F32 => {
+                return Err(err(
+                    &self.file,
+                    format!(
                     "component type {ty:?}: only float attributes are decoded from Draco streams"
                 ),
-            )),
+                ))
+            }
             DracoPart::Attribute(_) => 4,
             DracoPart::Indices => ty.size(),
         };

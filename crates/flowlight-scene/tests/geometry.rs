@@ -597,3 +597,106 @@ fn draco_bad_stream_is_an_error_naming_draco_and_the_way_out() {
     );
     assert_eq!(e.lines().count(), 1);
 }
+
+// ---------------------------------------------------------------------------------------------
+// EXT_mesh_gpu_instancing
+
+/// 27 instances of one triangle on a 3 × 3 × 3 lattice: translation 10·(i, j, k), a rotation
+/// of (i + j + k) quarter turns about Z stored as normalized shorts, scale 1 + k.
+fn instanced_json() -> (String, Vec<[Vec3; 3]>) {
+    let tri = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    let mut b = Builder::default();
+    let pv = b.view(&mesh_bytes(&tri, &[]), "");
+    b.accessor(format!(
+        r#"{{"bufferView": {pv}, "componentType": 5126, "count": 3, "type": "VEC3"}}"#
+    ));
+    let (mut t, mut r, mut s) = (Vec::new(), Vec::new(), Vec::new());
+    let mut want = Vec::new();
+    let node_t = Vec3::new(0.5, -2.0, 3.0);
+    let h = std::f32::consts::FRAC_1_SQRT_2;
+    // Quarter turns about Z as (x, y, z, w): identity, 90°, 180°, 270°.
+    let quats: [[f32; 4]; 4] = [
+        [0.0, 0.0, 0.0, 1.0],
+        [0.0, 0.0, h, h],
+        [0.0, 0.0, 1.0, 0.0],
+        [0.0, 0.0, h, -h],
+    ];
+    for k in 0..3 {
+        for j in 0..3 {
+            for i in 0..3 {
+                let tr = Vec3::new(i as f32, j as f32, k as f32) * 10.0;
+                let turns = (i + j + k) % 4;
+                let sc = 1.0 + k as f32;
+                t.push(tr.to_array());
+                r.push(quats[turns].map(|c| (c * 32767.0).round() as i16));
+                s.push([sc; 3]);
+                // By hand: scale, then turn (x, y) → (−y, x) `turns` times, then translate.
+                want.push(tri.map(|p| {
+                    let mut q = Vec3::from_array(p) * sc;
+                    for _ in 0..turns {
+                        q = Vec3::new(-q.y, q.x, q.z);
+                    }
+                    node_t + tr + q
+                }));
+            }
+        }
+    }
+    let tv = b.view(&le(&t.concat(), f32::to_le_bytes), "");
+    let rv = b.view(&le(&r.concat(), i16::to_le_bytes), "");
+    let sv = b.view(&le(&s.concat(), f32::to_le_bytes), "");
+    let at = b.accessor(format!(
+        r#"{{"bufferView": {tv}, "componentType": 5126, "count": 27, "type": "VEC3"}}"#
+    ));
+    let ar = b.accessor(format!(r#"{{"bufferView": {rv}, "componentType": 5122, "normalized": true, "count": 27, "type": "VEC4"}}"#));
+    let asc = b.accessor(format!(
+        r#"{{"bufferView": {sv}, "componentType": 5126, "count": 27, "type": "VEC3"}}"#
+    ));
+    b.top.push(r#""extensionsUsed": ["EXT_mesh_gpu_instancing", "KHR_mesh_quantization"], "extensionsRequired": ["EXT_mesh_gpu_instancing"]"#.into());
+    let json = b.json(
+        &format!(
+            r#"{{"mesh": 0, "translation": [0.5, -2.0, 3.0], "extensions": {{"EXT_mesh_gpu_instancing": {{"attributes": {{"TRANSLATION": {at}, "ROTATION": {ar}, "SCALE": {asc}}}}}}}}}"#
+        ),
+        r#"{"primitives": [{"attributes": {"POSITION": 0}}]}"#,
+        "0",
+    );
+    (json, want)
+}
+
+#[test]
+fn gpu_instancing_renders_every_instance_where_the_spec_puts_it() {
+    let (json, want) = instanced_json();
+    let s = load(&write("instancing", &json)).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.stats.mesh_instances, 27);
+    assert_eq!(s.triangles.len(), 27);
+    for (i, w) in want.iter().enumerate() {
+        let got = s.triangles[i].map(|v| s.positions[v as usize]);
+        for c in 0..3 {
+            // Rotations are 16-bit normalized: error ≤ 1/32767 per component, times the
+            // scaled vertex (≤ 3).
+            assert!(
+                (got[c] - w[c]).abs().max_element() < 3e-4,
+                "instance {i} corner {c}: {} vs {}",
+                got[c],
+                w[c]
+            );
+        }
+    }
+}
+
+#[test]
+fn gpu_instancing_with_mismatched_counts_is_an_error_naming_the_node() {
+    let (json, _) = instanced_json();
+    // Make the SCALE accessor claim 26 instances.
+    let json = json.replacen(
+        r#""componentType": 5126, "count": 27, "type": "VEC3"}"#,
+        r#""componentType": 5126, "count": 26, "type": "VEC3"}"#,
+        2,
+    );
+    let e = load(&write("instancing-bad", &json))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("node 0") && e.contains("EXT_mesh_gpu_instancing") && e.contains("counts"),
+        "{e}"
+    );
+}
