@@ -141,7 +141,7 @@ impl TwoLevelBvh {
 
     #[inline(always)]
     fn traverse<const ANY_HIT: bool>(&self, ray: &Ray) -> Option<InstanceHit> {
-        if self.nodes.is_empty() || !(ray.t_max > 0.0) {
+        if self.nodes.is_empty() || ray.t_max.is_nan() || ray.t_max <= 0.0 {
             return None;
         }
         let slab = SlabRay::new(ray);

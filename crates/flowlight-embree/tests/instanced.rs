@@ -65,7 +65,7 @@ fn embree_instances_agree_with_the_two_level_bvh() {
             }
             let m = Mat4::from_scale_rotation_translation(
                 s,
-                Quat::from_axis_angle(dir(&mut rng), rng.uniform() * 6.28),
+                Quat::from_axis_angle(dir(&mut rng), rng.uniform() * std::f32::consts::TAU),
                 (v(&mut rng) - 0.5) * 30.0,
             );
             ((i % 2) as u32, m)

@@ -111,7 +111,7 @@ impl MeshoptView {
         };
         let s = m.byte_stride;
         match m.mode {
-            Mode::Attributes if s == 0 || s % 4 != 0 || s > 256 => {
+            Mode::Attributes if s == 0 || !s.is_multiple_of(4) || s > 256 => {
                 return Err(format!(
                     "ATTRIBUTES needs a byteStride that is a multiple of 4 up to 256, found {s}"
                 ))
@@ -119,7 +119,7 @@ impl MeshoptView {
             Mode::Triangles | Mode::Indices if s != 2 && s != 4 => {
                 return Err(format!("{:?} needs byteStride 2 or 4, found {s}", m.mode))
             }
-            Mode::Triangles if m.count % 3 != 0 => {
+            Mode::Triangles if !m.count.is_multiple_of(3) => {
                 return Err(format!(
                     "TRIANGLES needs a count divisible by 3, found {}",
                     m.count

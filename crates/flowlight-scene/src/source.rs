@@ -228,10 +228,12 @@ impl GltfSource {
                 let draco = draco_accessors
                     .keys()
                     .any(|a| p.as_str() == format!("accessors[{a}].bufferView"));
-                if !(minmax && matches!(error, VError::Missing))
-                    && !(required && matches!(error, VError::Unsupported))
-                    && !(draco && matches!(error, VError::Missing))
-                {
+                let skipped = match error {
+                    VError::Missing => minmax || draco,
+                    VError::Unsupported => required,
+                    _ => false,
+                };
+                if !skipped {
                     errors.push(format!("{p}: {error}"));
                 }
             });

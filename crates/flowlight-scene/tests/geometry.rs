@@ -25,7 +25,7 @@ struct Builder {
 impl Builder {
     /// Appends `bytes` (4-aligned) as a buffer view; `extra` is spliced into the view object.
     fn view(&mut self, bytes: &[u8], extra: &str) -> usize {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         let off = self.bin.len();
@@ -39,7 +39,7 @@ impl Builder {
 
     /// Appends raw bytes to buffer 0 (4-aligned) without a view; returns the offset.
     fn raw(&mut self, bytes: &[u8]) -> usize {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         let off = self.bin.len();
@@ -61,7 +61,7 @@ impl Builder {
     /// The document with `nodes`, `meshes` (JSON array bodies) and scene 0 listing `roots`.
     fn json(&self, nodes: &str, meshes: &str, roots: &str) -> String {
         let mut bin = self.bin.clone();
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         let mut buffers = vec![format!(
