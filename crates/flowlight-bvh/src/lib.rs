@@ -23,12 +23,18 @@
 //!   term so that grazing hits are kept (see [`WatertightRay::intersect`]). Rays through an
 //!   edge or vertex shared by triangles of a closed mesh hit at least one of them.
 //!
+//! Instancing: [`TwoLevelBvh`] is a hierarchy over instances (affine transforms) of per-mesh
+//! [`Bvh`]s; see the `instanced` module.
+//!
 //! Degenerate triangles (zero area, repeated vertices, collinear vertices, NaN or infinite
 //! coordinates) are left out of the tree and never reported as hits.
 
 use flowlight_core::geometry::Ray;
 use glam::Vec3;
 use rayon::prelude::*;
+
+mod instanced;
+pub use instanced::{Instance, InstanceHit, TwoLevelBvh};
 
 /// Largest number of triangles in a leaf.
 pub const MAX_LEAF_SIZE: usize = 4;

@@ -14,9 +14,9 @@ use embree4_sys::{
     RTCBufferType, RTCBuildQuality, RTCDevice, RTCFormat, RTCGeometry, RTCGeometryType, RTCRay,
     RTCScene, RTCSceneFlags,
 };
-use flowlight_bvh::TriangleHit;
+use flowlight_bvh::{InstanceHit, TriangleHit};
 use flowlight_core::geometry::Ray;
-use glam::Vec3;
+use glam::{Mat4, Vec3};
 use std::ffi::{c_char, c_uint, c_void};
 use std::sync::OnceLock;
 
@@ -94,6 +94,8 @@ struct Api {
     attach_geometry: Fn<unsafe extern "C" fn(RTCScene, RTCGeometry) -> c_uint>,
     release_geometry: Fn<unsafe extern "C" fn(RTCGeometry)>,
     commit_scene: Fn<unsafe extern "C" fn(RTCScene)>,
+    set_geometry_instanced_scene: Fn<unsafe extern "C" fn(RTCGeometry, RTCScene)>,
+    set_geometry_transform: Fn<unsafe extern "C" fn(RTCGeometry, c_uint, RTCFormat, *const c_void)>,
     intersect1: Fn<unsafe extern "C" fn(RTCScene, *mut abi::RTCRayHit, *mut c_void)>,
     occluded1: Fn<unsafe extern "C" fn(RTCScene, *mut RTCRay, *mut c_void)>,
 }
@@ -184,6 +186,8 @@ fn open_device() -> Result<Device, String> {
         attach_geometry: sym!("rtcAttachGeometry"),
         release_geometry: sym!("rtcReleaseGeometry"),
         commit_scene: sym!("rtcCommitScene"),
+        set_geometry_instanced_scene: sym!("rtcSetGeometryInstancedScene"),
+        set_geometry_transform: sym!("rtcSetGeometryTransform"),
         intersect1: sym!("rtcIntersect1"),
         occluded1: sym!("rtcOccluded1"),
     };
@@ -479,6 +483,146 @@ impl EmbreeScene {
     #[doc(hidden)]
     pub fn embree_ray(ray: &Ray) -> RTCRay {
         Self::rtc_ray(ray)
+    }
+}
+
+/// A committed two-level Embree scene: one Embree scene per mesh ([`EmbreeScene`]) and a top
+/// scene of `RTC_GEOMETRY_TYPE_INSTANCE` geometries, one per instance, each pointing at its
+/// mesh's scene with an object-to-world transform. A mesh placed many times is stored once.
+/// Hits name the instance (Embree's `instID`, the instance geometry's id in the top scene,
+/// which is its index) and the triangle of its mesh (`primID`); Embree moves the ray to
+/// object space without normalising its direction, so `t` is the world-space parameter.
+pub struct EmbreeInstancedScene {
+    dev: &'static Device,
+    top: RTCScene,
+    /// Kept alive while the top scene refers to them.
+    meshes: Vec<EmbreeScene>,
+    instances: usize,
+}
+
+// SAFETY: as for `EmbreeScene`: committed scenes are read-only.
+unsafe impl Send for EmbreeInstancedScene {}
+unsafe impl Sync for EmbreeInstancedScene {}
+
+impl EmbreeInstancedScene {
+    /// Builds one Embree scene per mesh (`positions`, `triangles`) and the top scene of
+    /// `instances` (mesh index, affine object-to-world matrix).
+    pub fn build(
+        meshes: &[(Vec<Vec3>, Vec<[u32; 3]>)],
+        instances: &[(u32, Mat4)],
+        options: SceneOptions,
+    ) -> Result<EmbreeInstancedScene, String> {
+        let dev = device()?;
+        let api = &dev.api;
+        let built = meshes
+            .iter()
+            .map(|(p, t)| EmbreeScene::build(p, t, options))
+            .collect::<Result<Vec<_>, _>>()?;
+        for (i, (m, x)) in instances.iter().enumerate() {
+            if *m as usize >= built.len() {
+                return Err(format!(
+                    "instance {i}: mesh {m} does not exist ({} meshes)",
+                    built.len()
+                ));
+            }
+            if !x.is_finite() || x.row(3) != glam::Vec4::W {
+                return Err(format!(
+                    "instance {i}: transform is not a finite affine matrix"
+                ));
+            }
+        }
+        // SAFETY: valid handles; the transform is 16 column-major floats read during the call.
+        unsafe {
+            let top = (api.new_scene)(dev.handle);
+            dev.check("rtcNewScene")?;
+            let out = EmbreeInstancedScene {
+                dev,
+                top,
+                meshes: built,
+                instances: instances.len(),
+            };
+            let mut flags = RTCSceneFlags::NONE;
+            if options.robust {
+                flags |= RTCSceneFlags::ROBUST;
+            }
+            (api.set_scene_flags)(top, flags);
+            (api.set_scene_build_quality)(top, options.quality.raw());
+            for (i, (m, x)) in instances.iter().enumerate() {
+                let geom = (api.new_geometry)(dev.handle, RTCGeometryType::INSTANCE);
+                dev.check("rtcNewGeometry(INSTANCE)")?;
+                (api.set_geometry_instanced_scene)(geom, out.meshes[*m as usize].scene);
+                let cols = x.to_cols_array();
+                (api.set_geometry_transform)(
+                    geom,
+                    0,
+                    RTCFormat::FLOAT4X4_COLUMN_MAJOR,
+                    cols.as_ptr() as *const c_void,
+                );
+                (api.commit_geometry)(geom);
+                let id = (api.attach_geometry)(top, geom);
+                (api.release_geometry)(geom);
+                dev.check("attaching an instance")?;
+                if id as usize != i {
+                    return Err(format!("Embree gave instance {i} the geometry id {id}"));
+                }
+            }
+            (api.commit_scene)(top);
+            dev.check("rtcCommitScene (instances)")?;
+            Ok(out)
+        }
+    }
+
+    /// Triangles stored: each mesh's once.
+    pub fn stored_triangle_count(&self) -> usize {
+        self.meshes.iter().map(EmbreeScene::triangle_count).sum()
+    }
+
+    pub fn instance_count(&self) -> usize {
+        self.instances
+    }
+
+    /// Closest hit with `0 < t < ray.t_max`.
+    #[inline]
+    pub fn intersect(&self, ray: &Ray) -> Option<InstanceHit> {
+        let mut rh = abi::RTCRayHit {
+            ray: EmbreeScene::rtc_ray(ray),
+            hit: abi::RTCHit {
+                ng_x: 0.0,
+                ng_y: 0.0,
+                ng_z: 0.0,
+                u: 0.0,
+                v: 0.0,
+                prim_id: u32::MAX,
+                geom_id: u32::MAX,
+                inst_id: [u32::MAX],
+                inst_prim_id: [u32::MAX],
+            },
+        };
+        // SAFETY: a committed scene and a 4.4-layout ray/hit; NULL arguments = defaults.
+        unsafe { (self.dev.api.intersect1)(self.top, &mut rh, std::ptr::null_mut()) };
+        (rh.hit.geom_id != u32::MAX).then_some(InstanceHit {
+            t: rh.ray.tfar,
+            instance: rh.hit.inst_id[0],
+            prim: rh.hit.prim_id,
+            b1: rh.hit.u,
+            b2: rh.hit.v,
+        })
+    }
+
+    /// Whether anything lies at `0 < t < ray.t_max`.
+    #[inline]
+    pub fn occluded(&self, ray: &Ray) -> bool {
+        let mut r = EmbreeScene::rtc_ray(ray);
+        // SAFETY: as in `intersect`.
+        unsafe { (self.dev.api.occluded1)(self.top, &mut r, std::ptr::null_mut()) };
+        r.tfar == f32::NEG_INFINITY
+    }
+}
+
+impl Drop for EmbreeInstancedScene {
+    fn drop(&mut self) {
+        // SAFETY: the top scene is not used after this; the mesh scenes drop after it.
+        unsafe { (self.dev.api.release_scene)(self.top) }
     }
 }
 

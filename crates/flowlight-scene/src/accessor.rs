@@ -1,11 +1,20 @@
 //! Validated reading of glTF accessors: every offset, stride and count is checked against the
 //! buffer view and buffer before a byte is read, so malformed files give errors, not panics.
+//!
+//! Component types (glTF 2.0 §3.6.2, and `KHR_mesh_quantization`, which allows byte and short
+//! POSITION, NORMAL, TANGENT and TEXCOORD): float as it is; a `normalized` integer c with b
+//! bits maps to c / (2^b − 1) when unsigned and max(c / (2^(b−1) − 1), −1) when signed, so
+//! −128 and −127 both give −1; a non-normalized integer is its plain value (a quantized
+//! position is dequantized by its node's transform). An accessor without a buffer view is
+//! zeros, unless a `KHR_draco_mesh_compression` stream fills it ([`GltfSource::draco_bytes`]);
+//! a view compressed with `EXT_meshopt_compression` is decoded by [`GltfSource::view_bytes`].
 
 use crate::error::SceneError;
 use crate::source::GltfSource;
 use gltf::accessor::{DataType, Dimensions};
 
-fn dims_count(d: Dimensions) -> usize {
+/// Components per element.
+pub fn dims_count(d: Dimensions) -> usize {
     match d {
         Dimensions::Scalar => 1,
         Dimensions::Vec2 => 2,
@@ -122,7 +131,11 @@ fn read_elements<T: Clone>(
                 .map(|i| f(&bytes[offset + i * stride..offset + i * stride + elem]))
                 .collect()
         }
-        None => vec![zero; count],
+        None => match src.draco_bytes(accessor)? {
+            // Filled by a KHR_draco_mesh_compression stream, tightly packed.
+            Some(bytes) => bytes.chunks_exact(elem).map(&mut f).collect(),
+            None => vec![zero; count],
+        },
     };
     if let Some(sparse) = accessor.sparse() {
         let n = sparse.count();

@@ -16,6 +16,7 @@
 
 use crate::accessor::{read_floats, read_indices};
 use crate::error::SceneError;
+use crate::instancing::instance_transforms;
 use crate::material::{convert, MaterialOverride};
 use crate::scene::{triangle_area, triangle_normal, CameraDesc, CameraProjection, Scene};
 use crate::source::GltfSource;
@@ -132,9 +133,12 @@ impl Loader<'_> {
                 self.camera(&cam, &node, world)?;
             }
             if let Some(mesh) = node.mesh() {
-                self.scene.stats.mesh_instances += 1;
-                for prim in mesh.primitives() {
-                    self.primitive(&mesh, &prim, world)?;
+                // One placement, or one per EXT_mesh_gpu_instancing instance.
+                for placed in instance_transforms(&mut self.src, &node, world)? {
+                    self.scene.stats.mesh_instances += 1;
+                    for prim in mesh.primitives() {
+                        self.primitive(&mesh, &prim, placed)?;
+                    }
                 }
             }
             on_path[idx] = true;

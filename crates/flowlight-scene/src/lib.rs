@@ -4,17 +4,23 @@
 //! One file per concept:
 //! - [`scene`]: the loaded, world-space [`Scene`] and its hit reconstruction;
 //! - [`gltf_loader`]: walking a glTF document into a [`Scene`];
+//! - [`instancing`]: `EXT_mesh_gpu_instancing` placements;
 //! - [`source`]: reading `.gltf`/`.glb` files and their buffers (external files, data URIs);
 //! - [`accessor`]: validated reading of glTF accessors;
+//! - [`compression`]: `EXT_meshopt_compression` buffer views;
+//! - [`extensions`]: the glTF extensions the loader knows, and the check of a file's list;
 //! - [`material`]: glTF materials to [`flowlight_core::material::Material`], overrides;
 //! - [`texture`]: image decoding and sRGB → linear conversion;
 //! - [`config`]: the TOML render configuration;
 //! - [`error`]: the error types.
 
 pub mod accessor;
+pub mod compression;
 pub mod config;
 pub mod error;
+pub mod extensions;
 pub mod gltf_loader;
+pub mod instancing;
 pub mod material;
 pub mod scene;
 pub mod source;

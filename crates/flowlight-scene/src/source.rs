@@ -1,7 +1,9 @@
 //! Reading a glTF asset from disk: `.gltf` JSON or `.glb` container, validation, and the
 //! buffers it references (the GLB binary chunk, external files, base64 data URIs).
 
+use crate::compression::{DracoMesh, DracoPart, DracoPrimitive, MeshoptView};
 use crate::error::SceneError;
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 /// A parsed and validated glTF document with the means to fetch its buffers on demand.
@@ -9,8 +11,18 @@ pub struct GltfSource {
     pub file: PathBuf,
     pub base_dir: PathBuf,
     pub document: gltf::Document,
+    /// Warning lines about the file's extensions (ignored or unknown optional ones), already
+    /// logged by [`GltfSource::open`]; kept for callers and tests.
+    pub warnings: Vec<String>,
     blob: Option<Vec<u8>>,
     buffers: Vec<Option<Vec<u8>>>,
+    /// Decoded `EXT_meshopt_compression` buffer views, by view index.
+    decoded: HashMap<usize, Vec<u8>>,
+    /// Accessors without a buffer view that a `KHR_draco_mesh_compression` primitive fills:
+    /// accessor index to (compressed buffer view, part).
+    draco_accessors: HashMap<usize, (usize, DracoPart)>,
+    /// Decoded Draco meshes, by buffer view index.
+    draco_meshes: HashMap<usize, DracoMesh>,
 }
 
 const GLB_MAGIC: &[u8; 4] = b"glTF";
@@ -114,6 +126,16 @@ impl GltfSource {
                 file: path.clone(),
                 reason: e.to_string(),
             })?;
+        // Extensions: our own table decides (gltf-json refuses every required extension that
+        // is not one of its enabled features, naming none of the ones it does not know).
+        let warnings = crate::extensions::check(&root.extensions_used, &root.extensions_required)
+            .map_err(|reason| SceneError::Validation {
+            file: path.clone(),
+            reason,
+        })?;
+        for w in &warnings {
+            tracing::warn!(file = %path.display(), "{w}");
+        }
         // gltf-json's own validation indexes a primitive's accessors without checking them
         // (a file without an `accessors` array panics there): check those indices first.
         let accessor_count = root.accessors.len();
@@ -140,15 +162,78 @@ impl GltfSource {
                 }
             }
         }
+        // Draco primitives: which accessors their streams fill (those have no bufferView).
+        let mut draco_accessors = HashMap::new();
+        for (m, mesh) in root.meshes.iter().enumerate() {
+            for (p, prim) in mesh.primitives.iter().enumerate() {
+                let Some(ext) = prim
+                    .extensions
+                    .as_ref()
+                    .and_then(|e| e.others.get("KHR_draco_mesh_compression"))
+                else {
+                    continue;
+                };
+                let at =
+                    format!("meshes[{m}].primitives[{p}].extensions.KHR_draco_mesh_compression");
+                let verr = |reason: String| SceneError::Validation {
+                    file: path.clone(),
+                    reason: format!("{at}: {reason}"),
+                };
+                let d = DracoPrimitive::parse(ext).map_err(verr)?;
+                if d.buffer_view >= root.buffer_views.len() {
+                    return Err(verr(format!("bufferView {} does not exist", d.buffer_view)));
+                }
+                let mut parts: Vec<(usize, DracoPart)> = Vec::new();
+                for (semantic, id) in &d.attributes {
+                    if let Some((_, acc)) = prim
+                        .attributes
+                        .iter()
+                        .find(|(k, _)| k.to_string() == *semantic)
+                    {
+                        parts.push((acc.value(), DracoPart::Attribute(*id)));
+                    }
+                }
+                if let Some(acc) = &prim.indices {
+                    parts.push((acc.value(), DracoPart::Indices));
+                }
+                for (acc, part) in parts {
+                    let has_view = root
+                        .accessors
+                        .get(acc)
+                        .is_some_and(|a| a.buffer_view.is_some());
+                    if has_view {
+                        continue; // uncompressed fallback data: read as it is
+                    }
+                    if let Some(&old) = draco_accessors.get(&acc) {
+                        if old != (d.buffer_view, part) {
+                            return Err(verr(format!(
+                                "accessor {acc} is filled by two different Draco streams or attributes"
+                            )));
+                        }
+                    }
+                    draco_accessors.insert(acc, (d.buffer_view, part));
+                }
+            }
+        }
         // The crate's validation, less the POSITION min/max requirement, which many exporters
-        // ignore and this loader does not need.
+        // ignore and this loader does not need, and less its check of `extensionsRequired`
+        // (done above).
         let mut errors = Vec::new();
         {
             use gltf::json::validation::{Error as VError, Validate};
             root.validate(&root, gltf::json::Path::new, &mut |path, error| {
                 let p = path();
                 let minmax = p.as_str().ends_with(".min") || p.as_str().ends_with(".max");
-                if !(minmax && matches!(error, VError::Missing)) {
+                let required = p.as_str().starts_with("extensionsRequired");
+                let draco = draco_accessors
+                    .keys()
+                    .any(|a| p.as_str() == format!("accessors[{a}].bufferView"));
+                let skipped = match error {
+                    VError::Missing => minmax || draco,
+                    VError::Unsupported => required,
+                    _ => false,
+                };
+                if !skipped {
                     errors.push(format!("{p}: {error}"));
                 }
             });
@@ -166,8 +251,12 @@ impl GltfSource {
             file: path,
             base_dir,
             document,
+            warnings,
             blob,
             buffers,
+            decoded: HashMap::new(),
+            draco_accessors,
+            draco_meshes: HashMap::new(),
         })
     }
 
@@ -221,8 +310,13 @@ impl GltfSource {
         Ok(self.buffers[index].as_deref().expect("just loaded"))
     }
 
-    /// Bytes of buffer view `view`, bounds-checked.
+    /// Bytes of buffer view `view`, bounds-checked; decoded first when the view is compressed
+    /// with `EXT_meshopt_compression`.
     pub fn view_bytes(&mut self, view: &gltf::buffer::View) -> Result<&[u8], SceneError> {
+        if let Some(ext) = view.extension_value("EXT_meshopt_compression") {
+            let ext = ext.clone();
+            return self.meshopt_view(view, &ext);
+        }
         let (buffer, offset, length) = (view.buffer().index(), view.offset(), view.length());
         let declared = view.buffer().length();
         let available = self.buffer(buffer)?.len();
@@ -240,6 +334,102 @@ impl GltfSource {
                 ),
             }),
         }
+    }
+
+    /// The decoded bytes of a view compressed with `EXT_meshopt_compression`, decoded once.
+    fn meshopt_view(
+        &mut self,
+        view: &gltf::buffer::View,
+        ext: &gltf::json::Value,
+    ) -> Result<&[u8], SceneError> {
+        let index = view.index();
+        if !self.decoded.contains_key(&index) {
+            let err = |file: &Path, reason: String| SceneError::Validation {
+                file: file.to_path_buf(),
+                reason: format!(
+                    "bufferViews[{index}].extensions.EXT_meshopt_compression: {reason}"
+                ),
+            };
+            let m = MeshoptView::parse(ext).map_err(|r| err(&self.file, r))?;
+            if m.decoded_len() < view.length() {
+                return Err(err(
+                    &self.file,
+                    format!(
+                        "count {} × byteStride {} = {} bytes is less than the view's byteLength {}",
+                        m.count,
+                        m.byte_stride,
+                        m.decoded_len(),
+                        view.length()
+                    ),
+                ));
+            }
+            if m.buffer >= self.buffers.len() {
+                return Err(err(
+                    &self.file,
+                    format!("buffer {} does not exist", m.buffer),
+                ));
+            }
+            let data = self.buffer(m.buffer)?;
+            let Some(compressed) = m
+                .byte_offset
+                .checked_add(m.byte_length)
+                .and_then(|end| data.get(m.byte_offset..end))
+            else {
+                let n = data.len();
+                return Err(err(
+                    &self.file,
+                    format!(
+                        "byteOffset {} + byteLength {} runs past buffer {} ({n} bytes)",
+                        m.byte_offset, m.byte_length, m.buffer
+                    ),
+                ));
+            };
+            let bytes = m.decode(compressed).map_err(|r| err(&self.file, r))?;
+            self.decoded.insert(index, bytes);
+        }
+        Ok(&self.decoded[&index][..view.length()])
+    }
+
+    /// For an accessor that a `KHR_draco_mesh_compression` stream fills: its elements, tightly
+    /// packed in the accessor's layout (f32 components for attributes). `None` for any other
+    /// accessor.
+    pub fn draco_bytes(
+        &mut self,
+        accessor: &gltf::Accessor,
+    ) -> Result<Option<Vec<u8>>, SceneError> {
+        let Some(&(view_index, part)) = self.draco_accessors.get(&accessor.index()) else {
+            return Ok(None);
+        };
+        let err = |file: &Path, reason: String| SceneError::Accessor {
+            file: file.to_path_buf(),
+            accessor: accessor.index(),
+            reason: format!("KHR_draco_mesh_compression: {reason}"),
+        };
+        let ty = accessor.data_type();
+        let index_size = match part {
+            DracoPart::Attribute(_) if ty != gltf::accessor::DataType::F32 => {
+                return Err(err(
+                    &self.file,
+                    format!(
+                    "component type {ty:?}: only float attributes are decoded from Draco streams"
+                ),
+                ))
+            }
+            DracoPart::Attribute(_) => 4,
+            DracoPart::Indices => ty.size(),
+        };
+        if !self.draco_meshes.contains_key(&view_index) {
+            let document = self.document.clone();
+            let view = document.views().nth(view_index).expect("checked in open");
+            let mesh = DracoMesh::decode(self.view_bytes(&view)?)
+                .map_err(|r| err(&self.file, format!("bufferView {view_index}: {r}")))?;
+            self.draco_meshes.insert(view_index, mesh);
+        }
+        let components = crate::accessor::dims_count(accessor.dimensions());
+        self.draco_meshes[&view_index]
+            .bytes(part, accessor.count(), components, index_size)
+            .map(Some)
+            .map_err(|r| err(&self.file, r))
     }
 
     /// Reads a URI relative to the asset: a `data:` URI or a (percent-encoded) relative path.

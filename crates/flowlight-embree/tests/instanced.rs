@@ -1,0 +1,133 @@
+//! Embree's two-level scene (RTC_GEOMETRY_TYPE_INSTANCE) against flowlight-bvh's TwoLevelBvh
+//! on random instanced scenes: same hits up to rounding, same instance and triangle ids.
+
+use flowlight_bvh::{Bvh, Instance, TwoLevelBvh};
+use flowlight_core::geometry::Ray;
+use flowlight_core::rng::Rng;
+use flowlight_embree::{EmbreeInstancedScene, SceneOptions};
+use glam::{Mat4, Quat, Vec3};
+
+fn v(rng: &mut Rng) -> Vec3 {
+    Vec3::new(rng.uniform(), rng.uniform(), rng.uniform())
+}
+
+fn dir(rng: &mut Rng) -> Vec3 {
+    loop {
+        let d = v(rng) * 2.0 - 1.0;
+        if d.length_squared() > 1e-4 && d.length_squared() <= 1.0 {
+            return d.normalize();
+        }
+    }
+}
+
+/// A unit cube (12 triangles) and a soup of 100 random triangles in the unit box.
+fn meshes(rng: &mut Rng) -> Vec<(Vec<Vec3>, Vec<[u32; 3]>)> {
+    let cube_v: Vec<Vec3> = (0..8)
+        .map(|c| Vec3::new((c & 1) as f32, (c >> 1 & 1) as f32, (c >> 2 & 1) as f32))
+        .collect();
+    let cube_f = vec![
+        [0, 2, 1],
+        [1, 2, 3],
+        [4, 5, 6],
+        [5, 7, 6],
+        [0, 1, 4],
+        [1, 5, 4],
+        [2, 6, 3],
+        [3, 6, 7],
+        [0, 4, 2],
+        [2, 4, 6],
+        [1, 3, 5],
+        [3, 7, 5],
+    ];
+    let mut soup_v = Vec::new();
+    for _ in 0..100 {
+        let c = v(rng);
+        for _ in 0..3 {
+            soup_v.push(c + (v(rng) - 0.5) * 0.4);
+        }
+    }
+    let soup_f = (0..100u32).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
+    vec![(cube_v, cube_f), (soup_v, soup_f)]
+}
+
+#[test]
+fn embree_instances_agree_with_the_two_level_bvh() {
+    if let Err(e) = flowlight_embree::device() {
+        panic!("Embree is provisioned by the build and must open: {e}");
+    }
+    let mut rng = Rng::new(42, 1);
+    let meshes = meshes(&mut rng);
+    let instances: Vec<(u32, Mat4)> = (0..50)
+        .map(|i| {
+            let mut s = Vec3::new(0.3, 0.3, 0.3) + v(&mut rng) * 2.5;
+            if i % 5 == 0 {
+                s.y = -s.y;
+            }
+            let m = Mat4::from_scale_rotation_translation(
+                s,
+                Quat::from_axis_angle(dir(&mut rng), rng.uniform() * std::f32::consts::TAU),
+                (v(&mut rng) - 0.5) * 30.0,
+            );
+            ((i % 2) as u32, m)
+        })
+        .collect();
+    let embree = EmbreeInstancedScene::build(&meshes, &instances, SceneOptions::default()).unwrap();
+    assert_eq!(embree.stored_triangle_count(), 112);
+    assert_eq!(embree.instance_count(), 50);
+    let bvhs = meshes
+        .iter()
+        .map(|(p, f)| {
+            Bvh::build(
+                &f.iter()
+                    .map(|t| t.map(|i| p[i as usize]))
+                    .collect::<Vec<_>>(),
+            )
+        })
+        .collect();
+    let two = TwoLevelBvh::build(
+        bvhs,
+        instances
+            .iter()
+            .map(|&(mesh, object_to_world)| Instance {
+                mesh,
+                object_to_world,
+            })
+            .collect(),
+    )
+    .unwrap();
+    let n = 20_000;
+    let (mut hits, mut mismatches) = (0, 0);
+    for k in 0..n {
+        let o = (v(&mut rng) - 0.5) * 50.0;
+        let d = if k % 2 == 0 {
+            dir(&mut rng)
+        } else {
+            let (m, x) = instances[rng.next_u32() as usize % instances.len()];
+            let c = x.transform_point3(meshes[m as usize].0[0] + Vec3::splat(0.3));
+            (c - o).normalize()
+        };
+        let ray = Ray::new(o, d, if k % 3 == 0 { 25.0 } else { f32::INFINITY });
+        let a = embree.intersect(&ray);
+        let b = two.intersect(&ray);
+        assert_eq!(
+            embree.occluded(&ray),
+            a.is_some(),
+            "ray {k}: occluded vs closest"
+        );
+        match (a, b) {
+            (None, None) => {}
+            (Some(a), Some(b)) => {
+                hits += 1;
+                let rel = (a.t - b.t).abs() / b.t.max(1e-3);
+                if (a.instance, a.prim) == (b.instance, b.prim) {
+                    assert!(rel < 1e-3, "ray {k}: t {} vs {}", a.t, b.t);
+                } else if rel >= 1e-4 {
+                    mismatches += 1;
+                }
+            }
+            _ => mismatches += 1,
+        }
+    }
+    assert!(hits > n / 4, "only {hits} hits");
+    assert!(mismatches * 500 < n, "{mismatches} of {n} rays disagree");
+}

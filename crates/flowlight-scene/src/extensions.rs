@@ -1,0 +1,293 @@
+//! The glTF extensions this loader knows, as data, and the check of a file's
+//! `extensionsUsed` / `extensionsRequired` against them.
+//!
+//! glTF 2.0 §3.12: every extension a file uses is listed in `extensionsUsed`; those a loader
+//! must understand to load the file at all are also in `extensionsRequired`. So:
+//!
+//! * an extension in [`KNOWN`] with [`Status::Supported`] is honoured;
+//! * one with [`Status::Ignored`] is skipped with one warning line naming it when it is
+//!   optional, and refused with an error when it is required (a required extension cannot be
+//!   ignored: the file's data is wrong without it);
+//! * one with [`Status::Refused`] is an error whether optional or required, with its note
+//!   saying what to do instead;
+//! * an unknown optional extension gives one warning line naming it; an unknown required one is
+//!   an error naming it.
+//!
+//! `docs/gltf.md` ("Geometry, compression and instancing" and the sections after it) lists the
+//! same names and statuses; `tests/extensions_doc.rs` checks that the two agree.
+
+/// What the loader does with an extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Status {
+    /// Decoded or honoured.
+    Supported,
+    /// Skipped with a warning when optional; an error when required.
+    Ignored,
+    /// Always an error, with the note saying what to do.
+    Refused,
+}
+
+impl Status {
+    /// The word used in `docs/gltf.md`.
+    pub fn doc_name(self) -> &'static str {
+        match self {
+            Status::Supported => "supported",
+            Status::Ignored => "ignored-with-warning",
+            Status::Refused => "refused",
+        }
+    }
+}
+
+/// One known extension.
+#[derive(Clone, Copy, Debug)]
+pub struct Extension {
+    pub name: &'static str,
+    pub status: Status,
+    /// One line for the docs and for warnings.
+    pub note: &'static str,
+}
+
+const fn ext(name: &'static str, status: Status, note: &'static str) -> Extension {
+    Extension { name, status, note }
+}
+
+/// Every extension the loader knows. Material, texture, light and camera entries are kept
+/// here too so that one table decides; their owners update the status as support lands.
+pub const KNOWN: &[Extension] = &[
+    // Geometry, compression and instancing.
+    ext(
+        "KHR_mesh_quantization",
+        Status::Supported,
+        "(normalized) byte/short POSITION, NORMAL, TANGENT, TEXCOORD; normalized to [-1,1]/[0,1] as the spec says, otherwise plain integer values",
+    ),
+    ext(
+        "EXT_meshopt_compression",
+        Status::Supported,
+        "buffer views decoded with meshoptimizer (modes ATTRIBUTES, TRIANGLES, INDICES; filters NONE, OCTAHEDRAL, QUATERNION, EXPONENTIAL); the fallback buffer is never read",
+    ),
+    ext(
+        "KHR_draco_mesh_compression",
+        Status::Supported,
+        "decoded with draco-core (pure Rust); float attributes and indices; an accessor with uncompressed fallback data is read as it is",
+    ),
+    ext(
+        "EXT_mesh_gpu_instancing",
+        Status::Supported,
+        "TRANSLATION / ROTATION / SCALE per instance, composed after the node's world transform; every instance renders",
+    ),
+    // Materials (owned by the material helper).
+    ext(
+        "KHR_materials_emissive_strength",
+        Status::Supported,
+        "multiplies emissiveFactor",
+    ),
+    ext(
+        "KHR_materials_ior",
+        Status::Supported,
+        "see the materials section",
+    ),
+    ext(
+        "KHR_materials_transmission",
+        Status::Supported,
+        "see the materials section",
+    ),
+    ext(
+        "KHR_materials_volume",
+        Status::Ignored,
+        "see the materials section",
+    ),
+    ext(
+        "KHR_materials_specular",
+        Status::Ignored,
+        "see the materials section",
+    ),
+    ext(
+        "KHR_materials_clearcoat",
+        Status::Ignored,
+        "see the materials section",
+    ),
+    ext(
+        "KHR_materials_sheen",
+        Status::Ignored,
+        "sheen layer not modelled",
+    ),
+    ext(
+        "KHR_materials_iridescence",
+        Status::Ignored,
+        "thin-film interference not modelled",
+    ),
+    ext(
+        "KHR_materials_anisotropy",
+        Status::Ignored,
+        "anisotropic GGX not modelled",
+    ),
+    ext(
+        "KHR_materials_dispersion",
+        Status::Ignored,
+        "renders in RGB, no dispersion",
+    ),
+    ext(
+        "KHR_materials_diffuse_transmission",
+        Status::Ignored,
+        "not modelled",
+    ),
+    ext(
+        "KHR_materials_unlit",
+        Status::Ignored,
+        "a path tracer lights every surface; unlit materials shade as lit ones",
+    ),
+    ext(
+        "KHR_materials_variants",
+        Status::Ignored,
+        "the default material of each primitive is used",
+    ),
+    ext(
+        "KHR_materials_pbrSpecularGlossiness",
+        Status::Ignored,
+        "archived extension; the metallic-roughness fallback is used",
+    ),
+    // Textures (owned by the texture helper).
+    ext(
+        "KHR_texture_transform",
+        Status::Ignored,
+        "see the textures section",
+    ),
+    ext(
+        "KHR_texture_basisu",
+        Status::Ignored,
+        "KTX2/Basis images are not decoded; the fallback image is used when there is one",
+    ),
+    ext(
+        "EXT_texture_webp",
+        Status::Ignored,
+        "WebP images are not decoded; the fallback image is used when there is one",
+    ),
+    ext(
+        "EXT_texture_avif",
+        Status::Ignored,
+        "AVIF images are not decoded; the fallback image is used when there is one",
+    ),
+    ext(
+        "MSFT_texture_dds",
+        Status::Ignored,
+        "DDS images are not decoded; the fallback image is used when there is one",
+    ),
+    // Lights (owned by the lights helper).
+    ext(
+        "KHR_lights_punctual",
+        Status::Ignored,
+        "see the lights section",
+    ),
+    // Metadata and animation: nothing to render.
+    ext(
+        "KHR_xmp_json_ld",
+        Status::Ignored,
+        "metadata only",
+    ),
+    ext(
+        "KHR_animation_pointer",
+        Status::Ignored,
+        "a still image renders the rest pose",
+    ),
+];
+
+/// The entry for `name`, if the loader knows it.
+pub fn lookup(name: &str) -> Option<&'static Extension> {
+    KNOWN.iter().find(|e| e.name == name)
+}
+
+/// Checks a file's `extensionsUsed` and `extensionsRequired`. Returns the warning lines to log
+/// (one per ignored or unknown optional extension, in file order), or the error reason for the
+/// first extension that cannot be loaded.
+pub fn check(used: &[String], required: &[String]) -> Result<Vec<String>, String> {
+    for name in required {
+        match lookup(name) {
+            None => {
+                return Err(format!(
+                    "extensionsRequired: unknown extension {name}; the file cannot be loaded without it"
+                ))
+            }
+            Some(e) if e.status == Status::Supported => {}
+            Some(e) => {
+                return Err(format!(
+                    "extensionsRequired: extension {name} is not supported ({})",
+                    e.note
+                ))
+            }
+        }
+    }
+    let mut warnings = Vec::new();
+    let mut seen = Vec::new();
+    for name in used.iter().chain(required) {
+        if seen.contains(&name) || required.contains(name) {
+            continue;
+        }
+        seen.push(name);
+        match lookup(name) {
+            None => warnings.push(format!(
+                "extensionsUsed: unknown optional extension {name} is ignored"
+            )),
+            Some(e) => match e.status {
+                Status::Supported => {}
+                Status::Ignored => warnings.push(format!(
+                    "extensionsUsed: optional extension {name} is ignored ({})",
+                    e.note
+                )),
+                Status::Refused => {
+                    return Err(format!(
+                        "extensionsUsed: extension {name} is not supported ({})",
+                        e.note
+                    ))
+                }
+            },
+        }
+    }
+    Ok(warnings)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn s(v: &[&str]) -> Vec<String> {
+        v.iter().map(|x| x.to_string()).collect()
+    }
+
+    #[test]
+    fn names_are_unique() {
+        for (i, a) in KNOWN.iter().enumerate() {
+            assert!(
+                KNOWN[i + 1..].iter().all(|b| b.name != a.name),
+                "{} listed twice",
+                a.name
+            );
+        }
+    }
+
+    #[test]
+    fn unknown_optional_warns_once_unknown_required_fails() {
+        let w = check(&s(&["EXT_foo", "KHR_mesh_quantization", "EXT_foo"]), &[]).unwrap();
+        assert_eq!(w.len(), 1);
+        assert!(w[0].contains("EXT_foo"), "{w:?}");
+        let e = check(&s(&["EXT_foo"]), &s(&["EXT_foo"])).unwrap_err();
+        assert!(
+            e.contains("EXT_foo") && e.contains("extensionsRequired"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn supported_required_passes_ignored_required_fails() {
+        assert_eq!(
+            check(
+                &s(&["KHR_mesh_quantization"]),
+                &s(&["KHR_mesh_quantization"])
+            )
+            .unwrap(),
+            Vec::<String>::new()
+        );
+        let w = check(&s(&["KHR_materials_sheen"]), &[]).unwrap();
+        assert!(w[0].contains("KHR_materials_sheen"), "{w:?}");
+        assert!(check(&[], &s(&["KHR_materials_sheen"])).is_err());
+    }
+}
