@@ -8,6 +8,8 @@
 //! - [`accessor`]: validated reading of glTF accessors;
 //! - [`material`]: glTF materials to [`flowlight_core::material::Material`], overrides;
 //! - [`texture`]: image decoding and sRGB → linear conversion;
+//! - [`lights`]: punctual lights, the emission integral of emitters, the environment and the
+//!   power CDF over all lights;
 //! - [`config`]: the TOML render configuration;
 //! - [`error`]: the error types.
 
@@ -15,13 +17,15 @@ pub mod accessor;
 pub mod config;
 pub mod error;
 pub mod gltf_loader;
+pub mod lights;
 pub mod material;
 pub mod scene;
 pub mod source;
 pub mod texture;
 
 pub use config::{
-    load_config, parse_config, CameraOverride, Intersector, RenderConfig, SampleBudget,
+    load_config, parse_config, CameraOverride, EnvironmentConfig, Intersector, RenderConfig,
+    SampleBudget,
 };
 pub use error::{ConfigError, SceneError};
 pub use gltf_loader::load_gltf;
