@@ -263,11 +263,41 @@ fn constant_environment_over_an_open_plane_gives_albedo_times_sky() {
 }
 
 #[test]
-fn a_scene_without_light_still_renders() {
+fn a_scene_without_light_renders_with_one_warning() {
     let gltf = quads_gltf(&[FLOOR], LAMBERT, &[], "");
     let s = session_from("no-light", &gltf, &config("entangled", 2, ""), 2);
     let img = render(&s).frame.image();
     assert!(img.iter().all(|c| c.is_black()));
+    // The command line says so, once, and still succeeds.
+    let dir = common::scratch("no-light-cli");
+    std::fs::write(dir.join("scene.gltf"), &gltf).unwrap();
+    let cfg = dir.join("scene.toml");
+    std::fs::write(
+        &cfg,
+        format!("scene = \"scene.gltf\"\n{}", config("entangled", 1, "")),
+    )
+    .unwrap();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_flowlight"))
+        .args(["render", cfg.to_str().unwrap(), "--spp", "1", "-q"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert_eq!(stderr.matches("has no light").count(), 1, "{stderr}");
+    // With a light, no such line.
+    std::fs::write(
+        &cfg,
+        format!(
+            "scene = \"scene.gltf\"\n{}",
+            config("entangled", 1, "[environment]\ncolor = [1.0, 1.0, 1.0]\n")
+        ),
+    )
+    .unwrap();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_flowlight"))
+        .args(["render", cfg.to_str().unwrap(), "--spp", "1", "-q"])
+        .output()
+        .unwrap();
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("has no light"));
 }
 
 #[test]
