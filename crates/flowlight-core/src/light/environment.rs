@@ -224,7 +224,7 @@ impl Environment {
 
     /// World direction to map-local direction (inverse rotation about +Y).
     #[inline]
-    fn to_local(&self, d: Vec3) -> Vec3 {
+    fn world_to_map(&self, d: Vec3) -> Vec3 {
         Vec3::new(
             self.rot_cos * d.x - self.rot_sin * d.z,
             d.y,
@@ -233,7 +233,7 @@ impl Environment {
     }
 
     #[inline]
-    fn to_world(&self, d: Vec3) -> Vec3 {
+    fn map_to_world(&self, d: Vec3) -> Vec3 {
         Vec3::new(
             self.rot_cos * d.x + self.rot_sin * d.z,
             d.y,
@@ -294,7 +294,7 @@ impl Environment {
                 if !self.map_ready() {
                     return Rgb::ZERO;
                 }
-                let (x, y) = self.texel_index(Self::local_to_uv(self.to_local(dir)));
+                let (x, y) = self.texel_index(Self::local_to_uv(self.world_to_map(dir)));
                 self.texel(x, y) * self.color
             }
         }
@@ -310,7 +310,7 @@ impl Environment {
                 if !self.map_ready() || self.func_mean <= 0.0 {
                     return 0.0;
                 }
-                let uv = Self::local_to_uv(self.to_local(dir));
+                let uv = Self::local_to_uv(self.world_to_map(dir));
                 let sin_theta = (PI * uv.y).sin();
                 if sin_theta <= 0.0 {
                     return 0.0;
@@ -353,7 +353,7 @@ impl Environment {
                 let lo = if x == 0 { 0.0 } else { row[x - 1] };
                 let du = ((u.x - lo) / px).clamp(0.0, 0.999_999);
                 let uv = Vec2::new((x as f32 + du) / w as f32, (y as f32 + dv) / h as f32);
-                let dir = self.to_world(Self::uv_to_local(uv));
+                let dir = self.map_to_world(Self::uv_to_local(uv));
                 // Density and radiance of the texel drawn (a round trip through `dir` could
                 // land in the neighbouring texel at an edge).
                 let sin_theta = (PI * uv.y).sin();
@@ -441,7 +441,7 @@ mod tests {
         let n = 400_000;
         for _ in 0..n {
             let s = env.sample(r.uniform2()).unwrap();
-            let uv = Environment::local_to_uv(env.to_local(s.dir));
+            let uv = Environment::local_to_uv(env.world_to_map(s.dir));
             let (x, y) = env.texel_index(uv);
             // Away from texel edges, sampling and evaluation agree.
             let frac = uv * Vec2::new(w as f32, h as f32);
