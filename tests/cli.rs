@@ -138,3 +138,126 @@ fn interrupt_saves_what_has_accumulated() {
     assert!(lit > 0, "the partial image is empty");
     assert!(layers[0].1.iter().all(|c| c.is_valid_radiance()));
 }
+
+/// The furnace scene copied into `dir` with a config `f.toml` that writes `f.exr` and a PNG
+/// preview `preview.png`.
+fn furnace_copy(dir: &std::path::Path) -> std::path::PathBuf {
+    let gltf = std::fs::read_to_string(common::scene_config("furnace/furnace.gltf")).unwrap();
+    std::fs::write(dir.join("f.gltf"), gltf).unwrap();
+    let cfg = dir.join("f.toml");
+    std::fs::write(
+        &cfg,
+        "scene = \"f.gltf\"\n[render]\nwidth = 16\nheight = 12\n[integrator]\nplugin = \"mcpt\"\npath_depth = 2\n[output]\nexr = \"f.exr\"\npng = \"preview.png\"\n",
+    )
+    .unwrap();
+    cfg
+}
+
+#[test]
+fn out_moves_the_png_preview_beside_the_exr() {
+    let dir = common::scratch("cli-out-png");
+    let cfg = furnace_copy(&dir);
+    let out = dir.join("elsewhere/x.exr");
+    let o = flowlight()
+        .args(["render", cfg.to_str().unwrap(), "--spp", "1", "-q", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let png = dir.join("elsewhere/x.png");
+    assert!(out.exists() && png.exists(), "{stdout}");
+    assert!(stdout.contains(&png.display().to_string()), "{stdout}");
+    // The config's own outputs are left alone.
+    assert!(!dir.join("preview.png").exists() && !dir.join("f.exr").exists());
+    // A PNG of the render's size: the IHDR chunk's big-endian width and height.
+    let bytes = std::fs::read(&png).unwrap();
+    assert_eq!(&bytes[1..4], b"PNG");
+    let be = |i: usize| u32::from_be_bytes(bytes[i..i + 4].try_into().unwrap());
+    assert_eq!((be(16), be(20)), (16, 12));
+
+    // Without --out, the config's paths.
+    let o = flowlight()
+        .args(["render", cfg.to_str().unwrap(), "--spp", "1", "-q"])
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    assert!(dir.join("preview.png").exists() && dir.join("f.exr").exists());
+
+    // --out naming a PNG would put both images in one file: refused before rendering.
+    let o = flowlight()
+        .args(["render", cfg.to_str().unwrap(), "--spp", "1", "-q", "--out"])
+        .arg(dir.join("y.png"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("y.png") && err.contains("EXR"), "{err}");
+}
+
+#[test]
+fn a_scene_without_a_camera_renders_through_the_automatic_camera() {
+    // An emitting quad [−1, 1]² in z = 0 facing +Z (radiance 1), no camera, no [camera].
+    let dir = common::scratch("cli-auto-camera");
+    let mut bin = Vec::new();
+    for p in [
+        [-1f32, -1.0, 0.0],
+        [1.0, -1.0, 0.0],
+        [1.0, 1.0, 0.0],
+        [-1.0, 1.0, 0.0],
+    ] {
+        for c in p {
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    for i in [0u32, 1, 2, 0, 2, 3] {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    std::fs::write(dir.join("q.bin"), &bin).unwrap();
+    std::fs::write(
+        dir.join("q.gltf"),
+        r#"{"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+            "nodes": [{"mesh": 0}],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}],
+            "materials": [{"emissiveFactor": [1, 1, 1]}],
+            "accessors": [
+              {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+               "min": [-1, -1, 0], "max": [1, 1, 0]},
+              {"bufferView": 1, "componentType": 5125, "count": 6, "type": "SCALAR"}],
+            "bufferViews": [{"buffer": 0, "byteLength": 48}, {"buffer": 0, "byteOffset": 48, "byteLength": 24}],
+            "buffers": [{"uri": "q.bin", "byteLength": 72}]}"#,
+    )
+    .unwrap();
+    let cfg = dir.join("q.toml");
+    std::fs::write(
+        &cfg,
+        "scene = \"q.gltf\"\n[render]\nwidth = 24\nheight = 16\n[integrator]\nplugin = \"mcpt\"\n",
+    )
+    .unwrap();
+    let o = flowlight()
+        .args(["render", cfg.to_str().unwrap(), "--spp", "4", "-q"])
+        .env("FLOWLIGHT_LOG", "info")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert_eq!(
+        err.matches("automatic perspective camera").count(),
+        1,
+        "one info line: {err}"
+    );
+    // The camera looks at the quad's centre from the front: the centre pixels see radiance
+    // 1; the corners lie outside the bounding sphere's image and see nothing.
+    let (w, h, layers) = flowlight_host::output::read_exr_rgb(&dir.join("q.exr")).unwrap();
+    let px = |x: usize, y: usize| layers[0].1[y * w + x];
+    for (x, y) in [(w / 2, h / 2), (w / 2 - 1, h / 2 - 1)] {
+        assert!((px(x, y).luminance() - 1.0).abs() < 1e-3, "{:?}", px(x, y));
+    }
+    for (x, y) in [(0, 0), (w - 1, 0), (0, h - 1), (w - 1, h - 1)] {
+        assert_eq!(px(x, y).luminance(), 0.0);
+    }
+}

@@ -42,7 +42,8 @@ enum Command {
         /// Worker threads (0 = one per core).
         #[arg(long)]
         threads: Option<usize>,
-        /// Output EXR file (overrides the config).
+        /// Output EXR file (overrides the config); the config's PNG preview, if it has one,
+        /// is written beside it with the extension .png.
         #[arg(long)]
         out: Option<PathBuf>,
         /// Render seed (overrides the config).
@@ -229,6 +230,8 @@ fn render(config: &std::path::Path, ov: &Overrides, quiet: bool) -> Result<()> {
         return Err(anyhow!("--spp must be at least 1"));
     }
     let session = Session::prepare(config, ov).map_err(|e| anyhow!(e))?;
+    // Before any work: the outputs must be writable and must not overwrite an input.
+    session.check_outputs().map_err(|e| anyhow!(e))?;
     let stop = Arc::new(AtomicBool::new(false));
     {
         let stop = stop.clone();
@@ -282,6 +285,10 @@ fn render(config: &std::path::Path, ov: &Overrides, quiet: bool) -> Result<()> {
     };
     let outcome = session.render(&stop, &progress).map_err(|e| anyhow!(e))?;
     bar.finish_and_clear();
+    if let Some(e) = outcome.error {
+        // A failed render is not a result: keep whatever the outputs held before.
+        return Err(anyhow!("{e}; nothing was written"));
+    }
 
     let s = &outcome.stats;
     let secs = s.wall.as_secs_f64().max(1e-9);
@@ -322,11 +329,14 @@ fn render(config: &std::path::Path, ov: &Overrides, quiet: bool) -> Result<()> {
     if s.interrupted {
         println!("  interrupted     yes: the image holds the samples finished before the stop");
     }
+    if s.discarded_samples > 0 {
+        println!(
+            "  dropped         {} samples of a pass cut short (a partial pass would bias the image)",
+            s.discarded_samples
+        );
+    }
     for p in &written {
         println!("  wrote           {}", p.display());
-    }
-    if let Some(e) = outcome.error {
-        return Err(anyhow!(e));
     }
     Ok(())
 }

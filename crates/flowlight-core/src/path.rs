@@ -103,7 +103,8 @@ impl PathVertex {
         }
     }
 
-    /// The eye vertex of a pinhole camera at `position` looking along `forward`.
+    /// The eye vertex at `position` (the camera ray's origin: the pinhole, or a point of an
+    /// orthographic film, `Camera::eye_point`) looking along `forward`.
     pub fn eye(position: Vec3, forward: Vec3) -> PathVertex {
         PathVertex {
             p: position,

@@ -113,12 +113,14 @@ pub struct Device {
 unsafe impl Send for Device {}
 unsafe impl Sync for Device {}
 
-/// The library candidates, in order: `FLOWLIGHT_EMBREE_LIB` at run time, the file the build
+/// The library candidates, in order: `FLOWLIGHT_EMBREE_LIB` at run time (then the only one), the file the build
 /// provisioned, a copy beside the executable, the system loader's search.
 fn candidates() -> Vec<String> {
     let mut c = Vec::new();
     if let Ok(p) = std::env::var("FLOWLIGHT_EMBREE_LIB") {
+        // The user named the library: no silent fallback to another one.
         c.push(p);
+        return c;
     }
     c.push(BUILD_LIBRARY.to_string());
     if let Some(dir) = std::env::current_exe()
@@ -139,6 +141,17 @@ fn open_device() -> Result<Device, String> {
     let (lib, path) = candidates()
         .into_iter()
         .find_map(|p| {
+            // A file path is checked before it is mapped: a truncated or foreign library
+            // would crash the process inside dlopen (SIGBUS). A bare name is the system
+            // loader's to resolve.
+            if p.contains('/') && std::path::Path::new(&p).exists() {
+                if let Err(e) =
+                    flowlight_elf::check_library(std::path::Path::new(&p), "rtcNewDevice")
+                {
+                    tried.push(format!("{p}: refused before loading: {e}"));
+                    return None;
+                }
+            }
             // SAFETY: loading Embree runs its (and TBB's) initialisers, which are sound.
             match unsafe { libloading::Library::new(&p) } {
                 Ok(l) => Some((l, p)),

@@ -66,6 +66,35 @@ impl Frame {
         }
     }
 
+    /// Adds another frame of the same size (a finished pass): its sums and sample counts.
+    pub fn add_frame(&mut self, other: &Frame) {
+        debug_assert_eq!((self.width, self.height), (other.width, other.height));
+        for (a, b) in self.main.iter_mut().zip(&other.main) {
+            for c in 0..3 {
+                a[c] += b[c];
+            }
+        }
+        for (la, lb) in self.layers.iter_mut().zip(&other.layers) {
+            for (a, b) in la.iter_mut().zip(lb) {
+                for c in 0..3 {
+                    a[c] += b[c];
+                }
+            }
+        }
+        for (a, b) in self.samples.iter_mut().zip(&other.samples) {
+            *a += b;
+        }
+    }
+
+    /// Zeroes every sum and count, keeping the buffers.
+    pub fn clear(&mut self) {
+        self.main.fill([0.0; 3]);
+        for l in &mut self.layers {
+            l.fill([0.0; 3]);
+        }
+        self.samples.fill(0);
+    }
+
     pub fn samples(&self) -> &[u32] {
         &self.samples
     }

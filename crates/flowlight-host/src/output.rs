@@ -351,18 +351,80 @@ pub fn write_exr(
     );
     let image = Image::from_layer(layer);
 
+    // Encode in memory, then put the header's attributes in name order: the exr crate keeps
+    // them in a HashMap, whose order changes from run to run.
+    let mut bytes = io::Cursor::new(Vec::new());
+    image
+        .write()
+        .to_buffered(&mut bytes)
+        .map_err(|source| OutputError::ExrEncode {
+            path: path.to_owned(),
+            source,
+        })?;
+    let mut bytes = bytes.into_inner();
+    sort_header_attributes(&mut bytes).map_err(|reason| OutputError::Unsupported {
+        path: path.to_owned(),
+        reason,
+    })?;
     write_atomically(path, |tmp| {
-        image.write().to_file(tmp).map_err(|source| match source {
-            exr::error::Error::Io(source) => OutputError::Io {
-                path: path.to_owned(),
-                source,
-            },
-            source => OutputError::ExrEncode {
-                path: path.to_owned(),
-                source,
-            },
+        fs::write(tmp, &bytes).map_err(|source| OutputError::Io {
+            path: path.to_owned(),
+            source,
         })
     })
+}
+
+/// Rewrites the header of a single-part EXR file so that its attributes follow in byte order
+/// of their names. The header keeps its length, so the offset table after it stays valid;
+/// identical images with identical metadata then give identical files.
+///
+/// Header layout (OpenEXR file layout, "Header"): magic (4 bytes), version (4), then
+/// attributes `name\0 type\0 size:i32le value[size]`, ended by a single `\0`.
+pub fn sort_header_attributes(file: &mut [u8]) -> Result<(), String> {
+    const START: usize = 8;
+    if file.len() < START || file[..4] != [0x76, 0x2f, 0x31, 0x01] {
+        return Err("not an OpenEXR file".into());
+    }
+    if file[5] & 0x10 != 0 {
+        return Err("multi-part header ordering is not supported".into());
+    }
+    let mut attrs: Vec<(Vec<u8>, std::ops::Range<usize>)> = Vec::new();
+    let mut at = START;
+    let cstr = |from: usize| -> Result<usize, String> {
+        file.get(from..)
+            .and_then(|r| r.iter().position(|&b| b == 0))
+            .map(|n| from + n)
+            .ok_or_else(|| "unterminated attribute name".to_string())
+    };
+    loop {
+        match file.get(at) {
+            None => return Err("header without end".into()),
+            Some(0) => break,
+            Some(_) => {}
+        }
+        let name_end = cstr(at)?;
+        let type_end = cstr(name_end + 1)?;
+        let size_at = type_end + 1;
+        let size = file
+            .get(size_at..size_at + 4)
+            .map(|b| i32::from_le_bytes(b.try_into().unwrap()))
+            .ok_or("attribute size past the end")?;
+        let end = usize::try_from(size)
+            .ok()
+            .and_then(|n| (size_at + 4).checked_add(n))
+            .filter(|&e| e <= file.len())
+            .ok_or("attribute value past the end")?;
+        attrs.push((file[at..name_end].to_vec(), at..end));
+        at = end;
+    }
+    let mut sorted = attrs.clone();
+    sorted.sort_by(|a, b| a.0.cmp(&b.0));
+    let mut header = Vec::with_capacity(at - START);
+    for (_, r) in &sorted {
+        header.extend_from_slice(&file[r.clone()]);
+    }
+    file[START..at].copy_from_slice(&header);
+    Ok(())
 }
 
 fn smallvec_of_channels(capacity: usize) -> exr::prelude::SmallVec<[AnyChannel<FlatSamples>; 4]> {
@@ -585,6 +647,126 @@ pub fn write_png_preview(
     })
 }
 
+/// The temporary-file prefix of `path`'s writes: `.{file name}.tmp-`.
+fn temp_prefix(path: &Path) -> Option<String> {
+    let name = path.file_name()?.to_str()?;
+    Some(format!(".{name}.tmp-"))
+}
+
+/// Whether process `pid` is alive, where that can be told (Linux: `/proc/PID`).
+fn process_alive(pid: u32) -> Option<bool> {
+    if !Path::new("/proc/self").exists() {
+        return None;
+    }
+    Some(Path::new("/proc").join(pid.to_string()).exists())
+}
+
+/// Removes temporary files `.{file name}.tmp-{pid}-{n}` of this output left by writes that
+/// never finished (a process killed during the write, a second Ctrl-C): those whose process
+/// is no longer alive. Files of live processes (this one included) and anything that does
+/// not match the pattern are left alone. Returns the files removed.
+pub fn clean_stale_temps(path: &Path) -> Vec<PathBuf> {
+    let Some(prefix) = temp_prefix(path) else {
+        return Vec::new();
+    };
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
+        _ => PathBuf::from("."),
+    };
+    let Ok(entries) = fs::read_dir(&dir) else {
+        return Vec::new();
+    };
+    let mut removed = Vec::new();
+    for e in entries.flatten() {
+        let name = e.file_name();
+        let Some(rest) = name.to_str().and_then(|n| n.strip_prefix(&prefix)) else {
+            continue;
+        };
+        let Some((pid, n)) = rest.split_once('-') else {
+            continue;
+        };
+        let (Ok(pid), true) = (
+            pid.parse::<u32>(),
+            !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()),
+        ) else {
+            continue;
+        };
+        if pid == std::process::id() || process_alive(pid) != Some(false) {
+            continue;
+        }
+        if e.file_type().is_ok_and(|t| t.is_file()) && fs::remove_file(e.path()).is_ok() {
+            removed.push(e.path());
+        }
+    }
+    removed
+}
+
+/// Checks, without leaving anything behind, that `path` can be written later: it is not a
+/// directory, and its folder (or, if that does not exist yet, the nearest existing ancestor,
+/// where the writer will create it) accepts a new file. Renders call this for each output
+/// before they start, so a bad output path costs nothing.
+pub fn check_writable(path: &Path) -> Result<(), OutputError> {
+    let io_err = |source| OutputError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    if path.file_name().is_none() {
+        return Err(io_err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            "path has no file name",
+        )));
+    }
+    if path.is_dir() {
+        return Err(io_err(io::Error::new(
+            io::ErrorKind::IsADirectory,
+            "is a directory",
+        )));
+    }
+    let mut dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
+        _ => PathBuf::from("."),
+    };
+    while !dir.exists() {
+        match dir.parent() {
+            Some(p) if !p.as_os_str().is_empty() => dir = p.to_owned(),
+            _ => dir = PathBuf::from("."),
+        }
+        if dir == Path::new(".") {
+            break;
+        }
+    }
+    if !dir.is_dir() {
+        return Err(OutputError::CreateDir {
+            path: path.to_owned(),
+            dir: dir.clone(),
+            source: io::Error::new(io::ErrorKind::NotADirectory, "not a directory"),
+        });
+    }
+    let probe = dir.join(format!(
+        ".{}.tmp-{}-probe",
+        path.file_name().unwrap_or_default().to_string_lossy(),
+        std::process::id()
+    ));
+    match fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&probe)
+    {
+        Ok(_) => {
+            let _ = fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e) if e.kind() == io::ErrorKind::AlreadyExists => Ok(()),
+        Err(source) => Err(OutputError::Io {
+            path: path.to_owned(),
+            source: io::Error::new(
+                source.kind(),
+                format!("folder {} is not writable: {source}", dir.display()),
+            ),
+        }),
+    }
+}
+
 /// Removes the temporary file when dropped, unless disarmed.
 struct TempGuard<'a> {
     path: &'a Path,
@@ -637,6 +819,9 @@ pub fn write_atomically(
         COUNTER.fetch_add(1, Ordering::Relaxed)
     ));
     let tmp = dir.join(tmp_name);
+    for stale in clean_stale_temps(path) {
+        tracing::info!("removed {}, left by an interrupted write", stale.display());
+    }
     let mut guard = TempGuard {
         path: &tmp,
         armed: true,

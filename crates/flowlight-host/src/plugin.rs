@@ -22,6 +22,8 @@ pub enum PluginError {
     },
     #[error("cannot load plugin {path}: {message}")]
     Load { path: PathBuf, message: String },
+    #[error("plugin {path} was refused before loading: {message}")]
+    Invalid { path: PathBuf, message: String },
     #[error(
         "plugin {path} does not export `flowlight_plugin_declaration`; is it a Flowlight plugin?"
     )]
@@ -33,7 +35,7 @@ pub enum PluginError {
         plugin: String,
         host: String,
     },
-    #[error("plugin {path} is a {found:?} plugin, but the config uses it as {expected:?}")]
+    #[error("plugin {path} is {} plugin, but the config uses it as {}", kind_phrase(*found), kind_phrase(*expected))]
     WrongKind {
         path: PathBuf,
         expected: PluginKind,
@@ -45,6 +47,32 @@ pub enum PluginError {
         path: PathBuf,
         message: String,
     },
+}
+
+/// [`abi::DECLARATION_SYMBOL`] without its NUL, as the ELF check looks it up.
+fn declaration_name() -> &'static str {
+    let bytes = abi::DECLARATION_SYMBOL;
+    std::str::from_utf8(&bytes[..bytes.len() - 1]).unwrap_or_default()
+}
+
+/// An error and its sources on one line: libloading's `dlopen failed` keeps the loader's
+/// reason (`dlerror`) in its source.
+fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut msg = e.to_string();
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        msg = format!("{msg}: {c}");
+        cause = c.source();
+    }
+    msg.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+/// "an integrator", "a mutation": a plugin kind with its article, for messages.
+fn kind_phrase(kind: PluginKind) -> &'static str {
+    match kind {
+        PluginKind::Integrator => "an integrator",
+        PluginKind::Mutation => "a mutation",
+    }
 }
 
 /// A parameter as listed by `flowlight plugins`.
@@ -169,11 +197,23 @@ impl PluginLibrary {
     /// ABI version, layout hash, SDK version and rustc version must all equal the host's.
     pub fn load(path: &Path) -> Result<PluginLibrary, PluginError> {
         let path = path.to_path_buf();
+        // Before anything is mapped: a truncated or foreign file would crash the process
+        // inside dlopen (SIGBUS) instead of being refused.
+        flowlight_elf::check_library(&path, declaration_name()).map_err(|e| {
+            if e.0.starts_with("does not export") {
+                PluginError::NoDeclaration { path: path.clone() }
+            } else {
+                PluginError::Invalid {
+                    path: path.clone(),
+                    message: e.0,
+                }
+            }
+        })?;
         // SAFETY: loading a library runs its initialisers; plugins are trusted code the user
-        // chose in the config.
+        // chose in the config (docs/architecture.md, "Trust boundary").
         let library = unsafe { Library::new(&path) }.map_err(|e| PluginError::Load {
             path: path.clone(),
-            message: e.to_string(),
+            message: error_chain(&e),
         })?;
         // SAFETY: the symbol's type is fixed by the ABI.
         let decl = unsafe {

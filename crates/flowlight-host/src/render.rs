@@ -1,5 +1,32 @@
 //! The scheduler: splits the image into tiles and passes of samples, runs the work units on
 //! the host's one rayon pool, merges finished tiles, and stops cleanly when asked.
+//!
+//! # Time budgets and partial passes
+//!
+//! A render with a time budget `T` starts no work unit after `T` (the clock starts before the
+//! integrator's one-time `prepare`, which counts against the budget); units in flight finish,
+//! so the overrun is at most one unit per thread. How the samples finished by then are
+//! normalised depends on where a unit deposits:
+//!
+//! * tile-local integrators (MCPT): every pixel's value is the mean of its own finished
+//!   samples, sum / nᵢ, so stopping between any two units leaves every pixel unbiased;
+//! * flanged integrators (ERPT), whose chains deposit into neighbouring tiles: a pixel's
+//!   value is only unbiased when every tile around it has run the same passes. Units of a
+//!   pass therefore accumulate into a pass buffer that joins the image only when the whole
+//!   pass has finished; a pass cut short by the budget (or Ctrl-C) is dropped, wasting at
+//!   most one pass. Only when no pass at all has finished is the partial pass kept, so that
+//!   the image is not empty; it is then marked `flowlight.partial_pass = true` and
+//!   `flowlight.biased = true` (pixels near unfinished tiles lack their neighbours'
+//!   deposits, and unfinished tiles are black). Under a time budget such integrators run
+//!   units of at most [`FLANGED_TIME_TILE`]² pixels, so the units in flight at the deadline
+//!   are short.
+//!
+//! # Limits
+//!
+//! * Threads: at most [`MAX_THREADS_PER_CORE`] × the cores; more are clamped with a
+//!   warning (they only add scheduling and contention).
+//! * Memory: [`frame_bytes`] estimates the frame, pass and output buffers; a render that
+//!   would need more than `MemAvailable` (`/proc/meminfo`) is refused before allocating.
 
 use crate::film::{Frame, TileAccumulator};
 use crate::intersector::{Intersector, UnitTracer};
@@ -42,6 +69,11 @@ pub struct RenderStats {
     pub units: u64,
     /// True when the render stopped before its budget (Ctrl-C or a plugin error).
     pub interrupted: bool,
+    /// True when a flanged integrator's image holds a pass that did not finish (no pass
+    /// had finished when the render stopped): pixels near unfinished tiles are biased.
+    pub partial_pass: bool,
+    /// Samples of a pass cut short and dropped (flanged integrators), not in `pixel_samples`.
+    pub discarded_samples: u64,
     /// The integrator's own counters (declared in its `IntegratorInfo`), merged over units,
     /// ratios resolved, in declaration order.
     pub integrator: Vec<(String, f64)>,
@@ -71,6 +103,81 @@ pub struct RenderOutcome {
     pub error: Option<PluginError>,
 }
 
+/// Threads per core beyond which `threads` is clamped.
+pub const MAX_THREADS_PER_CORE: usize = 4;
+
+/// Side of the tiles of a flanged integrator under a time budget (before rounding up to its
+/// `tile_multiple`).
+pub const FLANGED_TIME_TILE: u32 = 8;
+
+/// The pool size for `requested` threads (0: one per core), clamped to
+/// [`MAX_THREADS_PER_CORE`] × the cores with a warning.
+pub fn effective_threads(requested: usize) -> usize {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let max = MAX_THREADS_PER_CORE * cores;
+    if requested > max {
+        tracing::warn!(
+            "{requested} threads requested on {cores} cores: clamped to {max} ({MAX_THREADS_PER_CORE} per core); more only add overhead"
+        );
+        max
+    } else {
+        requested
+    }
+}
+
+/// Bytes a `width` × `height` render with `layers` lighting layers needs for its image
+/// buffers, or `None` beyond 2⁶⁴: per pixel, the frame (f64 RGB sums for the image and each
+/// layer, 24 B each, plus a u32 sample count), the same again for the pass buffer, and at
+/// write time the resolved f32 images, the EXR channel copies and encoded data (12 B each
+/// per layer and image) and 3 B of PNG: 2·(28 + 24L) + 36·(1 + L) + 3 = 95 + 84L bytes.
+pub fn frame_bytes(width: u32, height: u32, layers: u32) -> Option<u64> {
+    let per_pixel = 95u64.checked_add(84u64.checked_mul(layers as u64)?)?;
+    (width as u64)
+        .checked_mul(height as u64)?
+        .checked_mul(per_pixel)
+}
+
+/// `MemAvailable` of `/proc/meminfo` in bytes, where there is one.
+pub fn available_memory() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    kb.checked_mul(1024)
+}
+
+fn human_bytes(b: u64) -> String {
+    let units = ["B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"];
+    let mut v = b as f64;
+    let mut i = 0;
+    while v >= 1024.0 && i + 1 < units.len() {
+        v /= 1024.0;
+        i += 1;
+    }
+    format!("{v:.1} {}", units[i])
+}
+
+/// Refuses a render whose image buffers ([`frame_bytes`]) exceed the available memory (or
+/// the address space), before anything is allocated.
+pub fn check_frame_memory(width: u32, height: u32, layers: u32) -> Result<(), String> {
+    let what = format!("a {width}x{height} image with {layers} lighting layers");
+    let Some(need) = frame_bytes(width, height, layers).filter(|&b| b <= isize::MAX as u64) else {
+        return Err(format!(
+            "{what} needs more than {} bytes of buffers, beyond this machine's address space; lower render.width/render.height",
+            isize::MAX
+        ));
+    };
+    if let Some(avail) = available_memory() {
+        if need > avail {
+            return Err(format!(
+                "{what} needs about {} ({need} bytes) of buffers but {} is available; lower render.width/render.height",
+                human_bytes(need),
+                human_bytes(avail)
+            ));
+        }
+    }
+    Ok(())
+}
+
 fn tiles(width: u32, height: u32, size: u32) -> Vec<(u32, u32, u32, u32)> {
     let size = size.max(1);
     let mut out = Vec::new();
@@ -92,18 +199,27 @@ pub fn render(
     progress: &(dyn Fn(&Progress) + Sync),
 ) -> Result<RenderOutcome, String> {
     let (width, height) = (opts.width, opts.height);
+    let layer_count = instance.info.layer_count;
+    check_frame_memory(width, height, layer_count)?;
     let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(opts.threads)
+        .num_threads(effective_threads(opts.threads))
         .thread_name(|i| format!("flowlight-worker-{i}"))
         .build()
         .map_err(|e| format!("cannot start the thread pool: {e}"))?;
     let threads = pool.current_num_threads();
-    let layer_count = instance.info.layer_count;
+    let tiled = instance.info.accumulation == AccumulationStyle::Tile;
     let frame = Mutex::new(Frame::new(width, height, layer_count));
+    // Flanged units deposit into a pass buffer that joins the frame when the pass is whole.
+    let pass_frame = (!tiled).then(|| Mutex::new(Frame::new(width, height, layer_count)));
     // Integrators whose deposits stay in fixed K×K squares ask for tiles aligned to K.
     let multiple = instance.info.tile_multiple.max(1);
-    let tile_size = opts.tile_size.max(1).div_ceil(multiple) * multiple;
+    let mut tile_size = opts.tile_size.max(1);
+    if opts.time.is_some() && instance.info.accumulation == AccumulationStyle::FlangedTile {
+        tile_size = tile_size.min(FLANGED_TIME_TILE);
+    }
+    let tile_size = tile_size.div_ceil(multiple) * multiple;
     let tiles = tiles(width, height, tile_size);
+    let start = Instant::now();
     let specs = instance.stat_specs();
     let (closest_prepare_rays, shadow_prepare_rays);
     let merged_stats = Mutex::new(vec![0.0f64; specs.len()]);
@@ -122,7 +238,6 @@ pub fn render(
         closest_prepare_rays = tracer.counts.closest;
         shadow_prepare_rays = tracer.counts.shadow;
     }
-    let start = Instant::now();
     let deadline = opts.time.map(|t| start + t);
     let planned = if opts.time.is_some() {
         0
@@ -140,9 +255,11 @@ pub fn render(
     let halted = AtomicBool::new(false);
     let out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
 
-    let tiled = instance.info.accumulation == AccumulationStyle::Tile;
     let mut sample_begin = 0u32;
     let mut pass_spp = 1u32;
+    let mut passes_done = 0u32;
+    let mut partial_pass = false;
+    let mut discarded = 0u64;
     pool.install(|| loop {
         let remaining = if opts.time.is_some() {
             u32::MAX
@@ -157,12 +274,13 @@ pub fn render(
             break;
         }
         let count = pass_spp.min(remaining);
+        let skipped = AtomicBool::new(false);
+        let pass_done = AtomicU64::new(0);
         tiles.par_iter().for_each(|&(x0, y0, x1, y1)| {
-            // A time budget stops a tile-local integrator at any unit; a flanged one (whose units
-            // deposit into their neighbours) finishes the pass, so every pixel's neighbourhood
-            // has the same number of samples. Ctrl-C stops both at once.
-            let budget_over = tiled && out_of_time();
-            if stop.load(Ordering::Relaxed) || halted.load(Ordering::Relaxed) || budget_over {
+            // The budget and Ctrl-C stop every integrator between units; a flanged pass cut
+            // short is dropped below (see the module documentation).
+            if stop.load(Ordering::Relaxed) || halted.load(Ordering::Relaxed) || out_of_time() {
+                skipped.store(true, Ordering::Relaxed);
                 return;
             }
             let unit = WorkUnit {
@@ -187,26 +305,48 @@ pub fn render(
             shadow.fetch_add(tracer.counts.shadow, Ordering::Relaxed);
             if let Err(e) = result {
                 halted.store(true, Ordering::Relaxed);
+                skipped.store(true, Ordering::Relaxed);
                 error.lock().unwrap().get_or_insert(e);
                 return;
             }
             invalid.fetch_add(tile.counts.invalid, Ordering::Relaxed);
             stray.fetch_add(tile.counts.stray, Ordering::Relaxed);
-            frame.lock().unwrap().merge(&tile, count);
+            match &pass_frame {
+                Some(p) => p.lock().unwrap().merge(&tile, count),
+                None => frame.lock().unwrap().merge(&tile, count),
+            }
             if !specs.is_empty() {
                 merge_stats(specs, &mut merged_stats.lock().unwrap(), &unit_stats);
             }
             units.fetch_add(1, Ordering::Relaxed);
-            let pixels = ((x1 - x0) * (y1 - y0)) as u64;
-            let d =
-                done.fetch_add(pixels * count as u64, Ordering::Relaxed) + pixels * count as u64;
+            let pixels = (x1 - x0) as u64 * (y1 - y0) as u64;
+            let d = pixels * count as u64;
+            let p = pass_done.fetch_add(d, Ordering::Relaxed) + d;
             progress(&Progress {
-                pixel_samples: d,
+                pixel_samples: done.load(Ordering::Relaxed) + p,
                 planned,
                 elapsed: start.elapsed(),
                 budget: opts.time,
             });
         });
+        let pass_samples = pass_done.load(Ordering::Relaxed);
+        let whole = !skipped.load(Ordering::Relaxed);
+        if let Some(p) = &pass_frame {
+            let mut p = p.lock().unwrap();
+            if whole || (passes_done == 0 && error.lock().unwrap().is_none()) {
+                frame.lock().unwrap().add_frame(&p);
+                done.fetch_add(pass_samples, Ordering::Relaxed);
+                partial_pass = !whole;
+            } else {
+                discarded += pass_samples;
+            }
+            p.clear();
+        } else {
+            done.fetch_add(pass_samples, Ordering::Relaxed);
+        }
+        if whole {
+            passes_done += 1;
+        }
         sample_begin += count;
         // Short passes first for a quick preview, then longer ones to amortise scheduling.
         // Deposits of a flanged unit land in its neighbours too: a pass stopped half-way
@@ -219,7 +359,15 @@ pub fn render(
 
     let error = error.into_inner().unwrap();
     let pixel_samples = done.load(Ordering::Relaxed);
-    let interrupted = error.is_some() || (opts.time.is_none() && pixel_samples < planned);
+    let interrupted = error.is_some()
+        || partial_pass
+        || (opts.time.is_none() && pixel_samples < planned)
+        || (opts.time.is_some() && stop.load(Ordering::Relaxed));
+    if partial_pass {
+        tracing::warn!(
+            "the render stopped inside its first pass: unfinished tiles are black and pixels near them are biased (marked in the EXR); give it more time"
+        );
+    }
     let stats = RenderStats {
         wall: start.elapsed(),
         threads,
@@ -230,6 +378,8 @@ pub fn render(
         stray_deposits: stray.load(Ordering::Relaxed),
         units: units.load(Ordering::Relaxed),
         interrupted,
+        partial_pass,
+        discarded_samples: discarded,
         integrator: resolve_stats(specs, &merged_stats.into_inner().unwrap()),
     };
     Ok(RenderOutcome {
@@ -293,6 +443,34 @@ mod tests {
         assert_eq!(r[0], ("events".to_string(), 5.0));
         assert_eq!(r[1].1, 5.0);
         assert_eq!(r[2].1, 1.0);
+    }
+
+    #[test]
+    fn frame_bytes_counts_frame_pass_and_output_buffers_without_overflow() {
+        // Per pixel: 2·(24 + 4 + 24L) + 12·(1 + L)·3 + 3 = 95 + 84L.
+        assert_eq!(frame_bytes(1, 1, 0), Some(95));
+        assert_eq!(frame_bytes(512, 512, 9), Some(512 * 512 * (95 + 84 * 9)));
+        assert_eq!(frame_bytes(100_000, 100_000, 0), Some(950_000_000_000));
+        assert_eq!(frame_bytes(u32::MAX, u32::MAX, 0), None);
+        // 4294967295 · (95 + 84·4294967295) > 2⁶⁴.
+        assert_eq!(frame_bytes(u32::MAX, 1, u32::MAX), None);
+        assert_eq!(frame_bytes(u32::MAX, 1, 1000), Some(4_294_967_295 * 84_095));
+        let e = check_frame_memory(u32::MAX, u32::MAX, 3).unwrap_err();
+        assert!(
+            e.contains("4294967295x4294967295") && e.contains("3 lighting layers"),
+            "{e}"
+        );
+        assert!(check_frame_memory(64, 64, 2).is_ok());
+    }
+
+    #[test]
+    fn threads_are_clamped_to_four_per_core() {
+        let cores = std::thread::available_parallelism().unwrap().get();
+        assert_eq!(effective_threads(0), 0);
+        assert_eq!(effective_threads(cores), cores);
+        assert_eq!(effective_threads(4 * cores), 4 * cores);
+        assert_eq!(effective_threads(4 * cores + 1), 4 * cores);
+        assert_eq!(effective_threads(usize::MAX), 4 * cores);
     }
 
     #[test]

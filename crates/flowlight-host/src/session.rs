@@ -51,6 +51,39 @@ pub struct Session {
     /// The power CDF over all lights the view points into.
     _light_cdf: Vec<f32>,
     pub scene: Scene,
+    /// The plugin libraries loaded (integrator first), for the output checks.
+    plugin_files: Vec<PathBuf>,
+}
+
+/// A plugin named by a relative file path is relative to the config's folder, like every
+/// other path in the config; a bare name is looked up on the search path.
+fn relative_to(name: &str, base: &Path) -> String {
+    let looks_like_path =
+        name.contains(std::path::MAIN_SEPARATOR) || name.ends_with(std::env::consts::DLL_SUFFIX);
+    if looks_like_path && Path::new(name).is_relative() {
+        base.join(name).display().to_string()
+    } else {
+        name.to_string()
+    }
+}
+
+/// `p` in a form two names of one file share: canonical where the file (or its folder)
+/// exists, else absolute.
+fn comparable_path(p: &Path) -> PathBuf {
+    if let Ok(c) = p.canonicalize() {
+        return c;
+    }
+    if let (Some(dir), Some(name)) = (p.parent(), p.file_name()) {
+        let dir = if dir.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            dir
+        };
+        if let Ok(d) = dir.canonicalize() {
+            return d.join(name);
+        }
+    }
+    std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf())
 }
 
 impl Session {
@@ -72,11 +105,17 @@ impl Session {
                 None => config.integrator_params.push((k.clone(), v.clone())),
             }
         }
+        let (exr_path, png_path) = output_paths(&config, ov.out.as_deref())?;
+        // Refuse an image that cannot fit before anything big is loaded (layers are known
+        // once the integrator exists; checked again then).
+        crate::render::check_frame_memory(config.width, config.height, 0)
+            .map_err(|e| format!("{}: {e}", config.path.display()))?;
         let t0 = Instant::now();
         let scene =
             load_gltf(&config.scene, &config.material_overrides).map_err(|e| e.to_string())?;
         let load_time = t0.elapsed();
         let camera = config.camera(&scene).map_err(|e| e.to_string())?;
+        tracing::debug!(?camera, "camera");
         let options = flowlight_embree::SceneOptions {
             robust: config.robust,
             quality: flowlight_embree::BuildQuality::parse(&config.build_quality)
@@ -86,8 +125,11 @@ impl Session {
             .map_err(|e| format!("{}: {e}", config.path.display()))?;
 
         let dirs = search_dirs(&config.plugin_search_paths);
-        let plugin_path =
-            find_plugin(&config.integrator_plugin, &dirs).map_err(|e| e.to_string())?;
+        let plugin_path = find_plugin(
+            &relative_to(&config.integrator_plugin, &config.base_dir),
+            &dirs,
+        )
+        .map_err(|e| format!("{}: integrator.plugin: {e}", config.path.display()))?;
         let plugin = Arc::new(PluginLibrary::load(&plugin_path).map_err(|e| e.to_string())?);
 
         let textures = scene.texture_views();
@@ -136,8 +178,11 @@ impl Session {
             ));
         }
         let mut mutations = Vec::new();
+        let mut plugin_files = vec![plugin_path.clone()];
         for entry in &mutation_entries {
-            let path = find_plugin(&entry.plugin, &dirs).map_err(|e| e.to_string())?;
+            let path = find_plugin(&relative_to(&entry.plugin, &config.base_dir), &dirs)
+                .map_err(|e| format!("{}: integrator.mutations: {e}", config.path.display()))?;
+            plugin_files.push(path.clone());
             let lib = Arc::new(PluginLibrary::load(&path).map_err(|e| e.to_string())?);
             // SAFETY: as for the integrator below.
             let m = unsafe { MutationInstance::create(lib, &entry.params, entry.weight, &view) }
@@ -150,6 +195,8 @@ impl Session {
             IntegratorInstance::create(plugin, &config.integrator_params, mutations, view)
         }
         .map_err(|e| format!("{}: {e}", config.path.display()))?;
+        crate::render::check_frame_memory(config.width, config.height, instance.info.layer_count)
+            .map_err(|e| format!("{}: {e}", config.path.display()))?;
 
         // The command line replaces the config's budget: --time, else --spp, else the file's.
         let (spp, time) = match (ov.time, ov.spp, config.budget) {
@@ -167,9 +214,7 @@ impl Session {
             tile_size: config.tile_size,
             seed: ov.seed.unwrap_or(config.seed),
         };
-        let exr_path = Some(ov.out.clone().unwrap_or_else(|| config.output_exr.clone()));
-        let png_path = config.output_png.clone();
-        Ok(Session {
+        let session = Session {
             instance,
             intersector,
             build_time,
@@ -183,7 +228,53 @@ impl Session {
             _light_cdf: light_cdf,
             scene,
             config,
-        })
+            plugin_files,
+        };
+        session.check_outputs()?;
+        Ok(session)
+    }
+
+    /// The files the render will write: the EXR, its `.stats.json` and the PNG preview.
+    pub fn output_paths(&self) -> Vec<(&'static str, PathBuf)> {
+        let mut out = Vec::new();
+        if let Some(p) = &self.exr_path {
+            out.push(("the EXR output", p.clone()));
+            out.push(("the statistics file", p.with_extension("stats.json")));
+        }
+        if let Some(p) = &self.png_path {
+            out.push(("the PNG preview", p.clone()));
+        }
+        out
+    }
+
+    /// Checks the outputs before anything is rendered: none may be one of the inputs (the
+    /// config, the scene, a plugin) or another output, and each one's folder must accept a
+    /// new file. Call again after changing `exr_path` or `png_path`.
+    pub fn check_outputs(&self) -> Result<(), String> {
+        let cfg = self.config.path.display();
+        let mut inputs: Vec<(&str, PathBuf)> = vec![
+            ("the config", self.config.path.clone()),
+            ("the scene", self.config.scene.clone()),
+        ];
+        inputs.extend(self.plugin_files.iter().map(|p| ("a plugin", p.clone())));
+        let outputs = self.output_paths();
+        for (i, (what, out)) in outputs.iter().enumerate() {
+            let key = comparable_path(out);
+            if let Some((input, _)) = inputs.iter().find(|(_, p)| comparable_path(p) == key) {
+                return Err(format!(
+                    "{cfg}: {what} {} is {input}; refusing to overwrite an input",
+                    out.display()
+                ));
+            }
+            if let Some((other, _)) = outputs[..i].iter().find(|(_, p)| comparable_path(p) == key) {
+                return Err(format!(
+                    "{cfg}: {what} and {other} are the same file {}; give them different paths",
+                    out.display()
+                ));
+            }
+            crate::output::check_writable(out).map_err(|e| format!("{cfg}: {what}: {e}"))?;
+        }
+        Ok(())
     }
 
     /// Renders until the budget is spent or `stop` is set.
@@ -203,6 +294,8 @@ impl Session {
     }
 
     /// Writes the EXR (main image plus lighting layers) and the PNG preview, each atomically.
+    /// Callers write only a render that succeeded or was interrupted (then
+    /// `flowlight.interrupted = true` marks the EXR), never one a plugin failed.
     pub fn write_outputs(
         &self,
         frame: &Frame,
@@ -282,15 +375,45 @@ impl Session {
                 ),
                 (
                     "flowlight.biased".into(),
-                    (self.instance.info.biased != 0).to_string(),
+                    (self.instance.info.biased != 0 || stats.partial_pass).to_string(),
                 ),
                 (
                     "flowlight.interrupted".into(),
                     stats.interrupted.to_string(),
                 ),
+                (
+                    "flowlight.partial_pass".into(),
+                    stats.partial_pass.to_string(),
+                ),
             ],
         }
     }
+}
+
+/// The EXR and PNG paths of a render: the config's, or with `--out FILE` the EXR at FILE and
+/// the PNG preview (when the config asks for one) beside it as FILE with the extension
+/// `.png`, so that `--out` never overwrites the config's own preview.
+pub fn output_paths(
+    config: &RenderConfig,
+    out: Option<&Path>,
+) -> Result<(Option<PathBuf>, Option<PathBuf>), String> {
+    let Some(out) = out else {
+        return Ok((Some(config.output_exr.clone()), config.output_png.clone()));
+    };
+    if out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+    {
+        return Err(format!(
+            "--out {}: --out names the EXR image (e.g. x.exr); the PNG preview is written beside it",
+            out.display()
+        ));
+    }
+    let png = config
+        .output_png
+        .as_ref()
+        .map(|_| out.with_extension("png"));
+    Ok((Some(out.to_path_buf()), png))
 }
 
 /// One `[[integrator.mutations]]` entry.

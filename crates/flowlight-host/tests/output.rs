@@ -411,3 +411,86 @@ fn png_preview_applies_srgb_and_clamps() {
         "failed write changed the file"
     );
 }
+
+/// A header `magic version attr… 0` followed by `tail`, attributes in the given order.
+fn exr_header(attrs: &[(&str, &str, &[u8])], tail: &[u8]) -> Vec<u8> {
+    let mut f = vec![0x76, 0x2f, 0x31, 0x01, 2, 0, 0, 0];
+    for (name, kind, value) in attrs {
+        f.extend_from_slice(name.as_bytes());
+        f.push(0);
+        f.extend_from_slice(kind.as_bytes());
+        f.push(0);
+        f.extend_from_slice(&(value.len() as i32).to_le_bytes());
+        f.extend_from_slice(value);
+    }
+    f.push(0);
+    f.extend_from_slice(tail);
+    f
+}
+
+#[test]
+fn header_attributes_are_sorted_in_place() {
+    use flowlight_host::output::sort_header_attributes;
+    let tail = [9u8, 8, 7, 6];
+    let a = ("channels", "chlist", &b"RGB"[..]);
+    let b = ("flowlight.seed", "string", &b"7"[..]);
+    let c = ("compression", "compression", &[3u8][..]);
+    let d = ("flowlight.integrator", "string", &b"mcpt"[..]);
+    let mut one = exr_header(&[b, a, d, c], &tail);
+    let mut two = exr_header(&[d, c, a, b], &tail);
+    sort_header_attributes(&mut one).unwrap();
+    sort_header_attributes(&mut two).unwrap();
+    assert_eq!(one, two);
+    assert_eq!(one, exr_header(&[a, c, d, b], &tail));
+    // Damaged headers are errors, not panics.
+    for cut in 0..one.len() - tail.len() - 1 {
+        assert!(
+            sort_header_attributes(&mut one.clone()[..cut].to_vec()).is_err(),
+            "{cut}"
+        );
+    }
+}
+
+#[test]
+fn written_exr_bytes_do_not_depend_on_metadata_order() {
+    let dir = ScratchDir::new("det");
+    let pixels = test_pixels(0.5);
+    let layers = [ImageLayer {
+        name: String::new(),
+        pixels: &pixels,
+    }];
+    let mut meta = sample_meta();
+    let mut files = Vec::new();
+    for i in 0..4 {
+        meta.entries.rotate_left(1);
+        let p = dir.path().join(format!("{i}.exr"));
+        write_exr(&p, W, H, &layers, &meta).unwrap();
+        files.push(fs::read(&p).unwrap());
+    }
+    assert!(files.windows(2).all(|w| w[0] == w[1]));
+    let mut expected = meta.entries.clone();
+    expected.sort();
+    assert_eq!(
+        read_exr_metadata(&dir.path().join("0.exr"))
+            .unwrap()
+            .entries,
+        expected
+    );
+}
+
+#[test]
+fn check_writable_names_the_folder_and_leaves_nothing() {
+    use flowlight_host::output::check_writable;
+    let dir = ScratchDir::new("writable");
+    fs::write(dir.path().join("file"), "x").unwrap();
+    assert!(check_writable(&dir.path().join("a.exr")).is_ok());
+    assert!(check_writable(&dir.path().join("new/deeper/a.exr")).is_ok());
+    assert!(!dir.path().join("new").exists());
+    let e = check_writable(&dir.path().join("file/a.exr"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("not a directory") && e.contains("file"), "{e}");
+    let e = check_writable(dir.path()).unwrap_err().to_string();
+    assert!(e.contains("is a directory"), "{e}");
+    assert_eq!(dir_entries(dir.path()), vec!["file".to_string()]);
+}

@@ -229,12 +229,14 @@ pub fn propose(
     y.vertex_count = x.vertex_count;
     y.layer = x.layer;
     y.contribution = x.contribution;
-    y.vertices[0] = xv[0];
+    // The eye vertex moves with the raster position on an orthographic film.
+    let eye_ray = scene.camera.generate_ray(y.raster);
+    y.vertices[0] = PathVertex::eye(eye_ray.origin, scene.camera.forward);
 
-    let Some(hit) = tracer.intersect(&scene.camera.generate_ray(y.raster)) else {
+    let Some(hit) = tracer.intersect(&eye_ray) else {
         return MISS;
     };
-    let Some(v1) = matching_vertex(scene, &hit, &xv[1], xv[0].p) else {
+    let Some(v1) = matching_vertex(scene, &hit, &xv[1], eye_ray.origin) else {
         return MISS;
     };
     y.vertices[1] = v1;

@@ -113,10 +113,11 @@ pub fn trace(
         value: Rgb::ZERO,
         layer: 0,
     };
-    let eye = PathVertex::eye(camera.position, camera.forward);
+    let mut ray = camera.generate_ray(raster);
+    // The ray's origin: the pinhole, or this raster position's point on an orthographic film.
+    let eye = PathVertex::eye(ray.origin, camera.forward);
     rec.push(eye);
 
-    let mut ray = camera.generate_ray(raster);
     let mut beta = Rgb::ONE;
     let mut depth = 0u32; // lighting (virtual) depth of the last vertex
     let mut physical = 0u32;

@@ -82,8 +82,7 @@ pub enum ConfigError {
         #[source]
         source: std::io::Error,
     },
-    /// A TOML syntax, unknown-key or type error. `message` is the toml crate's report, which
-    /// quotes the offending line.
+    /// A TOML syntax, unknown-key or type error, on one line: `file:line: key `k`: message`.
     #[error("{}:{line}: key `{key}`: {message}", file.display())]
     Parse {
         file: PathBuf,
@@ -97,6 +96,4 @@ pub enum ConfigError {
         key: String,
         reason: String,
     },
-    #[error("{}: no camera: the scene has no perspective camera and the config has no [camera] table", file.display())]
-    NoCamera { file: PathBuf },
 }

@@ -14,14 +14,14 @@
 //!   non-zero becomes an [`Emitter`] ([`crate::lights::mean_emission`]).
 //! - `KHR_lights_punctual` lights become [`flowlight_core::light::PunctualLight`]s placed by
 //!   their node's world transform.
-//! - The camera is the first node, in traversal order, that carries one; it must be
-//!   perspective.
+//! - Every node that places a camera (perspective or orthographic) is recorded in traversal
+//!   order; the render config picks one ([`crate::config`], default: the first).
 
 use crate::accessor::{read_floats, read_indices};
 use crate::error::SceneError;
 use crate::lights::{mean_emission, punctual_light};
 use crate::material::{convert, MaterialOverride};
-use crate::scene::{triangle_area, triangle_normal, CameraDesc, Scene};
+use crate::scene::{triangle_area, triangle_normal, CameraDesc, CameraProjection, Scene};
 use crate::source::GltfSource;
 use crate::texture::load_image;
 use flowlight_core::light::Emitter;
@@ -133,7 +133,7 @@ impl Loader<'_> {
                 });
             }
             if let Some(cam) = node.camera() {
-                self.camera(&cam, world)?;
+                self.camera(&cam, &node, world)?;
             }
             if let Some(light) = node.light() {
                 let l = punctual_light(&self.src.file, &light, world)?;
@@ -157,51 +157,88 @@ impl Loader<'_> {
         Ok(())
     }
 
-    fn camera(&mut self, cam: &gltf::Camera, world: Mat4) -> Result<(), SceneError> {
-        if self.scene.camera.is_some() {
-            return Ok(());
-        }
+    /// Records the camera that `node` places (world transform `world`). Every camera node is
+    /// kept, in traversal order; the render config chooses one ([`crate::config`]).
+    fn camera(
+        &mut self,
+        cam: &gltf::Camera,
+        node: &gltf::Node,
+        world: Mat4,
+    ) -> Result<(), SceneError> {
         let err = |reason: String| SceneError::Camera {
             file: self.file(),
             reason,
         };
-        let persp = match cam.projection() {
-            gltf::camera::Projection::Perspective(p) => p,
-            gltf::camera::Projection::Orthographic(_) => {
-                return Err(err(format!(
-                    "camera {}: orthographic cameras are not supported",
-                    cam.index()
-                )));
+        let index = cam.index();
+        let (projection, aspect) = match cam.projection() {
+            gltf::camera::Projection::Perspective(p) => {
+                let yfov = p.yfov();
+                if !(yfov > 0.0 && yfov < std::f32::consts::PI) {
+                    return Err(err(format!(
+                        "cameras[{index}].perspective.yfov: {yfov} is not in (0, π)"
+                    )));
+                }
+                let aspect = p.aspect_ratio();
+                if aspect.is_some_and(|a| !(a > 0.0 && a.is_finite())) {
+                    return Err(err(format!(
+                        "cameras[{index}].perspective.aspectRatio must be positive"
+                    )));
+                }
+                (
+                    CameraProjection::Perspective {
+                        fov_y_degrees: yfov.to_degrees(),
+                    },
+                    aspect,
+                )
+            }
+            gltf::camera::Projection::Orthographic(o) => {
+                // The spec: xmag and ymag MUST NOT be zero and SHOULD NOT be negative; a
+                // negative one would mirror the image, so only its magnitude is used.
+                let mut mag = [0.0f32; 2];
+                for (k, (key, v)) in [("xmag", o.xmag()), ("ymag", o.ymag())]
+                    .into_iter()
+                    .enumerate()
+                {
+                    if !(v != 0.0 && v.is_finite()) {
+                        return Err(err(format!(
+                            "cameras[{index}].orthographic.{key}: {v} must be finite and not zero"
+                        )));
+                    }
+                    if v < 0.0 {
+                        tracing::warn!(file = %self.src.file.display(), "cameras[{index}].orthographic.{key} is negative ({v}); its magnitude is used");
+                    }
+                    mag[k] = v.abs();
+                }
+                (
+                    CameraProjection::Orthographic {
+                        half_height: mag[1],
+                    },
+                    Some(mag[0] / mag[1]),
+                )
             }
         };
-        let yfov = persp.yfov();
-        if !(yfov > 0.0 && yfov < std::f32::consts::PI) {
-            return Err(err(format!(
-                "camera {}: yfov {yfov} is not in (0, π)",
-                cam.index()
-            )));
-        }
-        let aspect = persp.aspect_ratio();
-        if aspect.is_some_and(|a| !(a > 0.0 && a.is_finite())) {
-            return Err(err(format!(
-                "camera {}: aspectRatio must be positive",
-                cam.index()
-            )));
-        }
         let position = world.transform_point3(Vec3::ZERO);
         let forward = world.transform_vector3(-Vec3::Z).normalize_or_zero();
         let up = world.transform_vector3(Vec3::Y).normalize_or_zero();
-        if forward == Vec3::ZERO || up == Vec3::ZERO || !position.is_finite() {
+        if forward == Vec3::ZERO
+            || up == Vec3::ZERO
+            || forward.cross(up).length_squared() < 1e-12
+            || !position.is_finite()
+        {
             return Err(err(format!(
-                "camera {}: its node transform is degenerate",
-                cam.index()
+                "cameras[{index}]: the transform of node {} that places it is degenerate",
+                node.index()
             )));
         }
-        self.scene.camera = Some(CameraDesc {
+        self.scene.cameras.push(CameraDesc {
+            index,
+            name: cam.name().map(str::to_string),
+            node: node.index(),
+            node_name: node.name().map(str::to_string),
             position,
             forward,
             up,
-            fov_y_degrees: yfov.to_degrees(),
+            projection,
             aspect,
         });
         Ok(())

@@ -30,4 +30,4 @@ pub use config::{
 pub use error::{ConfigError, SceneError};
 pub use gltf_loader::load_gltf;
 pub use material::{DiffuseChoice, MaterialOverride};
-pub use scene::{CameraDesc, LoadStats, Scene, TextureData};
+pub use scene::{CameraDesc, CameraProjection, LoadStats, Scene, TextureData};

@@ -26,17 +26,54 @@ impl TextureData {
     }
 }
 
-/// A perspective camera found in the glTF file.
+/// How a glTF camera projects.
 #[derive(Clone, Copy, Debug, PartialEq)]
+pub enum CameraProjection {
+    /// `perspective.yfov`, in degrees.
+    Perspective { fov_y_degrees: f32 },
+    /// `orthographic.ymag`: half the height of the view in world units.
+    Orthographic { half_height: f32 },
+}
+
+/// A camera node found in the glTF file: a node that references one of its `cameras`.
+#[derive(Clone, Debug, PartialEq)]
 pub struct CameraDesc {
+    /// Index into the file's `cameras` array (what `[camera] index` selects).
+    pub index: usize,
+    /// The camera's `name`, if it has one.
+    pub name: Option<String>,
+    /// Index of the node that places it.
+    pub node: usize,
+    /// That node's `name`, if it has one.
+    pub node_name: Option<String>,
     pub position: Vec3,
     /// Unit viewing direction (the camera node's local −Z in world space).
     pub forward: Vec3,
     /// Unit up vector (the camera node's local +Y in world space).
     pub up: Vec3,
-    pub fov_y_degrees: f32,
-    /// glTF `aspectRatio`, when given.
+    pub projection: CameraProjection,
+    /// The aspect ratio the file asks for: `aspectRatio` (perspective, optional) or
+    /// `xmag / ymag` (orthographic). The render config's image size wins.
     pub aspect: Option<f32>,
+}
+
+impl CameraDesc {
+    /// `0 "Main" (node 3 "CameraNode")`: how errors and logs name this camera.
+    pub fn label(&self) -> String {
+        let quoted =
+            |n: &Option<String>| n.as_ref().map(|n| format!(" \"{n}\"")).unwrap_or_default();
+        format!(
+            "{}{} (node {}{}, {})",
+            self.index,
+            quoted(&self.name),
+            self.node,
+            quoted(&self.node_name),
+            match self.projection {
+                CameraProjection::Perspective { .. } => "perspective",
+                CameraProjection::Orthographic { .. } => "orthographic",
+            }
+        )
+    }
 }
 
 /// What the loader saw and dropped.
@@ -87,7 +124,8 @@ pub struct Scene {
     pub materials: Vec<Material>,
     pub material_names: Vec<String>,
     pub textures: Vec<TextureData>,
-    pub camera: Option<CameraDesc>,
+    /// Every camera node of the scene, in traversal order (the first is the default camera).
+    pub cameras: Vec<CameraDesc>,
     pub emitters: Vec<Emitter>,
     /// CDF over `Emitter::power()`; empty when there are no emitters.
     pub emitter_power_cdf: Vec<f32>,

@@ -170,17 +170,17 @@ fn degenerate_triangles_are_dropped_and_counted() {
 }
 
 #[test]
-fn orthographic_camera_is_rejected() {
+fn orthographic_camera_with_zero_magnification_is_rejected() {
     let dir = temp_dir("ortho");
     let p = dir.join("ortho.gltf");
     let json = embedded_gltf(&TRI, &[0, 1, 2], "", "").replace(
         r#""nodes": [{"mesh": 0}]"#,
-        r#""nodes": [{"mesh": 0, "camera": 0}], "cameras": [{"type": "orthographic", "orthographic": {"xmag": 1, "ymag": 1, "znear": 0.1, "zfar": 10}}]"#,
+        r#""nodes": [{"mesh": 0, "camera": 0}], "cameras": [{"type": "orthographic", "orthographic": {"xmag": 1, "ymag": 0, "znear": 0.1, "zfar": 10}}]"#,
     );
     std::fs::write(&p, json).unwrap();
     let (e, m) = err(&p);
     assert!(matches!(e, SceneError::Camera { .. }), "{m}");
-    assert!(m.contains("orthographic cameras are not supported"), "{m}");
+    assert!(m.contains("cameras[0].orthographic.ymag"), "{m}");
 }
 
 #[test]

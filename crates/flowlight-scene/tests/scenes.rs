@@ -5,7 +5,7 @@ mod common;
 use common::*;
 use flowlight_core::geometry::Ray;
 use flowlight_core::Rgb;
-use flowlight_scene::{load_config, load_gltf, Scene};
+use flowlight_scene::{load_config, load_gltf, CameraProjection, Scene};
 use glam::{Vec2, Vec3};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -87,11 +87,15 @@ fn cornell_box_gltf_and_glb_agree_and_match_the_source_note() {
         assert_eq!(s.emitter_power_cdf.len(), 2);
         assert_eq!(*s.emitter_power_cdf.last().unwrap(), 1.0);
 
-        let cam = s.camera.expect("camera");
+        assert_eq!(s.cameras.len(), 1);
+        let cam = &s.cameras[0];
         assert!((cam.position - Vec3::new(0.278, 0.273, -0.8)).length() < 1e-6);
         assert!((cam.forward - Vec3::Z).length() < 1e-6, "{}", cam.forward);
         assert!((cam.up - Vec3::Y).length() < 1e-6);
-        assert!((cam.fov_y_degrees - 39.3077).abs() < 1e-3);
+        let CameraProjection::Perspective { fov_y_degrees } = cam.projection else {
+            panic!("{:?}", cam.projection)
+        };
+        assert!((fov_y_degrees - 39.3077).abs() < 1e-3);
 
         let (lo, hi) = s.bounds().unwrap();
         assert!(lo.abs().max_element() < 1e-6);
