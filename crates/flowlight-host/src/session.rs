@@ -11,6 +11,7 @@ use crate::render::{render, Progress, RenderOptions, RenderOutcome};
 use flowlight_core::camera::Camera;
 use flowlight_core::material::Texture;
 use flowlight_scene::config::{load_config, RenderConfig, SampleBudget};
+use flowlight_scene::lights::{light_power_cdf, load_environment, EnvironmentData};
 use flowlight_scene::{load_gltf, Scene};
 use flowlight_sdk::abi::SceneView;
 use flowlight_sdk::ParamKind;
@@ -45,6 +46,10 @@ pub struct Session {
     pub png_path: Option<PathBuf>,
     pub camera: Camera,
     _textures: Vec<Texture>,
+    /// The environment map and its sampling tables the view points into.
+    _environment: EnvironmentData,
+    /// The power CDF over all lights the view points into.
+    _light_cdf: Vec<f32>,
     pub scene: Scene,
     /// The plugin libraries loaded (integrator first), for the output checks.
     plugin_files: Vec<PathBuf>,
@@ -130,6 +135,18 @@ impl Session {
         let textures = scene.texture_views();
         let mutation_entries = take_mutations(&mut config.integrator_params, &config.path)?;
         let (bounds_min, bounds_max) = scene.bounds().unwrap_or((Vec3::ZERO, Vec3::ZERO));
+        let environment = match &config.environment {
+            Some(e) => load_environment(&config.path, e).map_err(|e| e.to_string())?,
+            None => EnvironmentData::default(),
+        };
+        let env_view = environment.view();
+        let light_cdf = light_power_cdf(&scene, &env_view);
+        if light_cdf.is_empty() {
+            tracing::warn!(
+                "{}: the scene has no light (no emissive triangle, no KHR_lights_punctual light, no [environment]): the image will be black; add e.g. `[environment] color = [1, 1, 1]` to the config",
+                config.path.display()
+            );
+        }
         let view = SceneView {
             camera,
             materials: scene.materials.as_ptr(),
@@ -138,7 +155,14 @@ impl Session {
             texture_count: textures.len(),
             emitters: scene.emitters.as_ptr(),
             emitter_count: scene.emitters.len(),
-            emitter_power_cdf: scene.emitter_power_cdf.as_ptr(),
+            punctual_lights: scene.punctual_lights.as_ptr(),
+            punctual_count: scene.punctual_lights.len(),
+            environment: if light_cdf.is_empty() {
+                flowlight_core::light::Environment::none()
+            } else {
+                env_view
+            },
+            light_power_cdf: light_cdf.as_ptr(),
             bounds_min,
             bounds_max,
         };
@@ -200,6 +224,8 @@ impl Session {
             png_path,
             camera,
             _textures: textures,
+            _environment: environment,
+            _light_cdf: light_cdf,
             scene,
             config,
             plugin_files,

@@ -16,6 +16,7 @@
 
 use flowlight_core::bsdf::{volume, Bsdf, Component};
 use flowlight_core::geometry::Frame;
+use flowlight_core::light::LightKind;
 use flowlight_core::path::{NodeType, Path, PathVertex};
 use flowlight_core::Rgb;
 use flowlight_sdk::Scene;
@@ -136,16 +137,34 @@ pub fn measurement(scene: &Scene, path: &Path) -> Rgb {
     }
     let n = v.len() - 1;
     let light = &v[n];
-    let Some(emitter) = usize::try_from(light.emitter)
-        .ok()
-        .and_then(|e| scene.lights.emitters.get(e))
-    else {
-        return Rgb::ZERO;
-    };
     let Some(to_prev) = (v[n - 1].p - light.p).try_normalize() else {
         return Rgb::ZERO;
     };
-    let mut f = emitter.radiance_towards(to_prev);
+    // The light end: emitted radiance towards x_{n-1} and the measure factor of the last step
+    // (the area Jacobian for an area light; 1/d² for a point or spot light, whose position is
+    // a Dirac and no free coordinate). Distant lights are not part of this path space.
+    let Some(li) = usize::try_from(light.emitter)
+        .ok()
+        .filter(|&i| i < scene.lights.count())
+    else {
+        return Rgb::ZERO;
+    };
+    let (mut f, light_factor) = match scene.lights.kind(li) {
+        LightKind::Area => (
+            scene.lights.emitted(li, light.p, to_prev),
+            area_jacobian(v[n - 1].p, light.p, light.ng),
+        ),
+        LightKind::Positional => {
+            let Some(l) = scene.lights.punctual_at(li) else {
+                return Rgb::ZERO;
+            };
+            (
+                l.intensity_towards(to_prev),
+                1.0 / (v[n - 1].p - light.p).length_squared(),
+            )
+        }
+        LightKind::Directional | LightKind::Environment => return Rgb::ZERO,
+    };
     for k in 1..n {
         let x = &v[k];
         let Some(bsdf) = vertex_bsdf(scene, x) else {
@@ -159,7 +178,12 @@ pub fn measurement(scene: &Scene, path: &Path) -> Rgb {
         }
         match WeakNode::of(x) {
             WeakNode::Smooth => {
-                f *= bsdf.eval(wo, wi) * (wi.z.abs() * area_jacobian(x.p, v[k + 1].p, v[k + 1].ng));
+                let jacobian = if k + 1 == n {
+                    light_factor
+                } else {
+                    area_jacobian(x.p, v[k + 1].p, v[k + 1].ng)
+                };
+                f *= bsdf.eval(wo, wi) * (wi.z.abs() * jacobian);
             }
             kind @ (WeakNode::DiracReflection | WeakNode::DiracTransmission) => {
                 let c = x.component as usize;

@@ -167,12 +167,16 @@ fn matching_vertex(
 ) -> Option<PathVertex> {
     let kind = WeakNode::of(original);
     if kind == WeakNode::Light {
-        let e = scene
-            .lights
-            .emitters
-            .get(usize::try_from(hit.emitter).ok()?)?;
+        // Only an area light can be hit, and only an area light may replace one: a point
+        // light's vertex is never moved (and paths on it are in another measure).
+        let i = usize::try_from(hit.emitter).ok()?;
+        let original_area =
+            usize::try_from(original.emitter).is_ok_and(|o| o < scene.lights.emitters.len());
+        if !original_area || i >= scene.lights.emitters.len() {
+            return None;
+        }
         let towards = (prev - hit.p).try_normalize()?;
-        return (!e.radiance_towards(towards).is_black())
+        return (!scene.lights.emitted(i, hit.p, towards).is_black())
             .then(|| PathVertex::from_hit(hit, NodeType::Light, 0));
     }
     let m = scene.materials.get(hit.material as usize)?;

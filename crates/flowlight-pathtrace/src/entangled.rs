@@ -1,6 +1,7 @@
 //! Entangled MCPT (thesis §3.7): at every vertex a light connection (next-event estimation)
-//! and a BSDF-sampled extension, whose emitter hits are combined with the connections by
-//! the power heuristic (Veach 1997). Depth-based termination decides after each vertex
+//! and a BSDF-sampled extension, whose emitter hits (and escapes to the environment) are
+//! combined with the connections by the power heuristic (Veach 1997). Delta lights (point,
+//! spot, directional) are reached only by the connection, with weight 1. Depth-based termination decides after each vertex
 //! whether the path goes on; survivors are divided by 1 − T_k.
 //!
 //! Where the path cannot go on (T_k = 1 at the path-space depth N, or the physical depth cap)
@@ -42,6 +43,16 @@ pub fn trace(
     let mut last = false; // the previous vertex was the path's last: emission only
     loop {
         let Some(hit) = tracer.intersect(&ray) else {
+            // Escaped: the environment, MIS-weighted against its light sample.
+            let le = scene.lights.environment_radiance(ray.dir);
+            if !le.is_black() {
+                let w = if prev_delta {
+                    1.0
+                } else {
+                    power_heuristic(prev_pdf, scene.lights.pdf_environment(ray.dir))
+                };
+                out.add(depth, beta * le * w);
+            }
             return;
         };
         // Beer–Lambert absorption when the segment ran inside a volumetric material.
@@ -51,7 +62,7 @@ pub fn trace(
         let wo_world = -ray.dir;
 
         if hit.emitter >= 0 {
-            let le = scene.lights.emitters[hit.emitter as usize].radiance_towards(wo_world);
+            let le = scene.lights.emitted(hit.emitter as usize, hit.p, wo_world);
             if !le.is_black() {
                 let w = if prev_delta {
                     1.0
@@ -86,18 +97,18 @@ pub fn trace(
 
         if bsdf.has_non_delta() {
             if let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) {
-                if let Some(conn) = connect_light(scene, tracer, &hit, &shading, ls) {
+                if let Some(conn) = connect_light(scene, tracer, &hit, &shading, &ls) {
                     let f = bsdf.eval(shading.wo, conn.wi_local);
                     if !f.is_black() {
-                        let w = power_heuristic(
-                            conn.pdf_solid_angle,
-                            bsdf.pdf(shading.wo, conn.wi_local),
-                        );
+                        // A delta light cannot be hit by the BSDF sample: weight 1.
+                        let w = if conn.delta {
+                            1.0
+                        } else {
+                            power_heuristic(conn.pdf, bsdf.pdf(shading.wo, conn.wi_local))
+                        };
                         out.add(
                             depth,
-                            beta * f
-                                * conn.radiance
-                                * (conn.wi_local.z.abs() * w / conn.pdf_solid_angle),
+                            beta * f * conn.radiance * (conn.wi_local.z.abs() * w / conn.pdf),
                         );
                     }
                 }

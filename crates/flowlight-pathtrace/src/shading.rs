@@ -1,7 +1,7 @@
 //! Per-vertex shading helpers shared by both samplers.
 
 use flowlight_core::geometry::{Frame, SurfaceHit};
-use flowlight_core::light::LightSample;
+use flowlight_core::light::{LightSample, ShadowTarget};
 use flowlight_core::Rgb;
 use flowlight_sdk::{Scene, Tracer};
 use glam::Vec3;
@@ -33,51 +33,44 @@ pub(crate) fn side_consistent(hit: &SurfaceHit, w_world: Vec3, w_local: Vec3) ->
 /// An unoccluded light sample as seen from a hit.
 pub(crate) struct Connection {
     pub wi_local: Vec3,
-    /// Emitted radiance arriving along −wi.
+    /// Radiance arriving along −wi (area, environment), I/d² (point, spot) or the irradiance
+    /// at normal incidence (directional).
     pub radiance: Rgb,
-    /// |cos θ_light| / d²: converts the area density to the measure at the hit.
-    pub geometry: f32,
-    /// Solid-angle density of the light sample seen from the hit.
-    pub pdf_solid_angle: f32,
-    pub pdf_area: f32,
+    /// What the estimator divides by: the solid-angle density of the sample seen from the hit,
+    /// or, for a delta light, its selection probability.
+    pub pdf: f32,
+    /// A delta light: no BSDF sample can reach it, so no MIS weight.
+    pub delta: bool,
 }
 
-/// Samples a point on the lights and returns the connection if it carries light and is
-/// visible. `None` for back-facing, grazing, occluded or degenerate connections.
+/// Turns a light sample into a connection from `hit` if it carries light and is visible.
+/// `None` for back-facing, grazing, occluded, outside-the-cone or degenerate connections.
 pub(crate) fn connect_light(
     scene: &Scene,
     tracer: &Tracer,
     hit: &SurfaceHit,
     shading: &Shading,
-    ls: LightSample,
+    ls: &LightSample,
 ) -> Option<Connection> {
-    let d = ls.p - hit.p;
-    let dist2 = d.length_squared();
-    if !(dist2 > 0.0 && dist2.is_finite()) {
+    let inc = scene.lights.incident(ls, hit.p)?;
+    if inc.radiance.is_black() || !(inc.pdf > 0.0 && inc.pdf.is_finite()) {
         return None;
     }
-    let wi_world = d / dist2.sqrt();
-    let cos_light = ls.n.dot(-wi_world).abs();
-    if cos_light <= 0.0 || ls.pdf_area <= 0.0 {
+    let wi_local = shading.frame.to_local(inc.wi);
+    if !side_consistent(hit, inc.wi, wi_local) {
         return None;
     }
-    let radiance = scene.lights.emitters[ls.emitter as usize].radiance_towards(-wi_world);
-    if radiance.is_black() {
+    let ray = match inc.target {
+        ShadowTarget::Point { p, p_error, n } => hit.spawn_ray_to(p, p_error, n),
+        ShadowTarget::Infinity => hit.spawn_ray(inc.wi),
+    };
+    if tracer.occluded(&ray) {
         return None;
     }
-    let wi_local = shading.frame.to_local(wi_world);
-    if !side_consistent(hit, wi_world, wi_local) {
-        return None;
-    }
-    if tracer.occluded(&hit.spawn_ray_to(ls.p, ls.p_error, ls.n)) {
-        return None;
-    }
-    let geometry = cos_light / dist2;
     Some(Connection {
         wi_local,
-        radiance,
-        geometry,
-        pdf_solid_angle: ls.pdf_area / geometry,
-        pdf_area: ls.pdf_area,
+        radiance: inc.radiance,
+        pdf: inc.pdf,
+        delta: inc.delta,
     })
 }

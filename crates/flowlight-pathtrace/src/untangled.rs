@@ -17,11 +17,36 @@ use crate::settings::PathSettings;
 use crate::shading::{connect_light, side_consistent, Shading};
 use flowlight_core::bsdf::volume;
 use flowlight_core::camera::Camera;
+use flowlight_core::light::{LightKind, LightSample};
 use flowlight_core::path::{NodeClass, NodeType, Path, PathVertex};
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
 use flowlight_sdk::{Scene, Tracer};
-use glam::Vec2;
+use glam::{Vec2, Vec3};
+
+/// The stored vertex of a light sample connected from `p_ref`. Area lights keep their point
+/// and normal; a point or spot light its position (the normal slot holds the direction to
+/// `p_ref`); a distant light a point one unit from `p_ref` towards it, with that direction
+/// as its normal.
+fn light_vertex(scene: &Scene, ls: &LightSample, p_ref: Vec3) -> PathVertex {
+    let (p, n, prim) = match ls.kind {
+        LightKind::Area => (ls.p, ls.n, scene.lights.emitters[ls.light as usize].prim),
+        LightKind::Positional => (ls.p, (p_ref - ls.p).normalize_or_zero(), u32::MAX),
+        LightKind::Directional | LightKind::Environment => (p_ref + ls.n, ls.n, u32::MAX),
+    };
+    PathVertex {
+        p,
+        p_error: ls.p_error,
+        ng: n,
+        ns: n,
+        uv: Vec2::ZERO,
+        prim,
+        material: u32::MAX,
+        emitter: ls.light as i32,
+        node: NodeType::Light,
+        component: 0,
+    }
+}
 
 /// Probability ζ_e of ending at an emitter that also scatters light (thesis §3.6): the share
 /// of the emitted radiance in emitted plus reflected, taking the reflected radiance as the
@@ -110,7 +135,32 @@ pub fn trace(
 
     loop {
         let Some(hit) = tracer.intersect(&ray) else {
-            return none;
+            // Escaped after a Λα vertex (or the eye): an implicit path to the environment,
+            // which does not scatter (ζ_e = 1). After a Λβ vertex the connection branch
+            // estimates it.
+            let le = scene.lights.environment_radiance(ray.dir);
+            if !after_alpha || le.is_black() {
+                return none;
+            }
+            let Some(env) = scene.lights.environment_index() else {
+                return none;
+            };
+            let light = PathVertex {
+                p: ray.origin + ray.dir,
+                p_error: Vec3::ZERO,
+                ng: ray.dir,
+                ns: ray.dir,
+                uv: Vec2::ZERO,
+                prim: u32::MAX,
+                material: u32::MAX,
+                emitter: env as i32,
+                node: NodeType::Light,
+                component: 0,
+            };
+            if !rec.push(light) {
+                return none;
+            }
+            return finish(&mut rec, beta * le, depth);
         };
         // Beer–Lambert absorption when the segment ran inside a volumetric material.
         if let Some(sigma) = inside.take() {
@@ -120,7 +170,7 @@ pub fn trace(
         let bsdf = scene.bsdf(&hit);
 
         if hit.emitter >= 0 && after_alpha {
-            let le = scene.lights.emitters[hit.emitter as usize].radiance_towards(wo_world);
+            let le = scene.lights.emitted(hit.emitter as usize, hit.p, wo_world);
             if !le.is_black() {
                 let zeta = emission_termination(le, bsdf.albedo());
                 if rng.uniform() < zeta {
@@ -156,32 +206,20 @@ pub fn trace(
                 let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) else {
                     return none;
                 };
-                let Some(conn) = connect_light(scene, tracer, &hit, &shading, ls) else {
+                let Some(conn) = connect_light(scene, tracer, &hit, &shading, &ls) else {
                     return none;
                 };
                 let f = component.eval(shading.wo, conn.wi_local);
                 // The mixture weight of the chosen component equals its selection
                 // probability p_m, so w·f / p_m = f: the component's own value is the estimate.
-                let value = beta
-                    * f
-                    * conn.radiance
-                    * (conn.wi_local.z.abs() * conn.geometry / (t * conn.pdf_area));
+                // conn.pdf is the solid-angle density p_A/G (area, environment) or the
+                // selection probability (delta lights, whose radiance already holds 1/d²).
+                let value = beta * f * conn.radiance * (conn.wi_local.z.abs() / (t * conn.pdf));
                 let node = component.node_type(shading.wo, conn.wi_local);
                 if !rec.push(PathVertex::from_hit(&hit, node, c as u8)) {
                     return none;
                 }
-                let light = PathVertex {
-                    p: ls.p,
-                    p_error: ls.p_error,
-                    ng: ls.n,
-                    ns: ls.n,
-                    uv: Vec2::ZERO,
-                    prim: scene.lights.emitters[ls.emitter as usize].prim,
-                    material: u32::MAX,
-                    emitter: ls.emitter as i32,
-                    node: NodeType::Light,
-                    component: 0,
-                };
+                let light = light_vertex(scene, &ls, hit.p);
                 if !rec.push(light) {
                     return none;
                 }

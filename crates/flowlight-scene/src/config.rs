@@ -32,6 +32,10 @@
 //! png = "cornell-box.png"         # optional sRGB preview
 //! [plugins]
 //! search_paths = ["../my-plugins"]
+//! [environment]       # optional light from infinitely far away (docs/config.md)
+//! color = [0.8, 0.9, 1.0]         # constant radiance, or map = "sky.exr" / "sky.hdr"
+//! strength = 1.0                  # multiplies either
+//! rotation_degrees = 0.0          # turns the map about +Y
 //! [materials.white]
 //! diffuse = "oren-nayar"          # or "lambert"
 //! sigma_degrees = 20.0
@@ -127,6 +131,17 @@ pub fn auto_camera_direction() -> Vec3 {
     Vec3::new(az.sin() * el.cos(), el.sin(), az.cos() * el.cos())
 }
 
+/// The optional `[environment]` table: a constant sky or an equirectangular map.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EnvironmentConfig {
+    /// Constant radiance (linear RGB), when given.
+    pub color: Option<[f32; 3]>,
+    /// Lat-long map (`.exr` or `.hdr`, +Y up), absolute, when given.
+    pub map: Option<PathBuf>,
+    pub strength: f32,
+    pub rotation_degrees: f32,
+}
+
 /// A validated render configuration with absolute paths.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RenderConfig {
@@ -155,6 +170,8 @@ pub struct RenderConfig {
     pub output_png: Option<PathBuf>,
     pub plugin_search_paths: Vec<PathBuf>,
     pub material_overrides: BTreeMap<String, MaterialOverride>,
+    /// `[environment]`, when the file has one.
+    pub environment: Option<EnvironmentConfig>,
 }
 
 #[derive(Deserialize)]
@@ -171,6 +188,22 @@ struct RawConfig {
     plugins: RawPlugins,
     #[serde(default)]
     materials: BTreeMap<String, MaterialOverride>,
+    environment: Option<RawEnvironment>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawEnvironment {
+    color: Option<[f32; 3]>,
+    map: Option<String>,
+    #[serde(default = "default_strength")]
+    strength: f32,
+    #[serde(default)]
+    rotation_degrees: f32,
+}
+
+fn default_strength() -> f32 {
+    1.0
 }
 
 fn default_size() -> u32 {
@@ -518,6 +551,61 @@ pub fn parse_config(path: &Path, text: &str) -> Result<RenderConfig, ConfigError
         o.validate()
             .map_err(|e| invalid(&format!("materials.{name}"), e))?;
     }
+    let environment = match &raw.environment {
+        None => None,
+        Some(e) => {
+            if !(e.strength >= 0.0 && e.strength.is_finite()) {
+                return Err(invalid(
+                    "environment.strength",
+                    format!("must be a finite number ≥ 0, got {}", e.strength),
+                ));
+            }
+            if !e.rotation_degrees.is_finite() {
+                return Err(invalid(
+                    "environment.rotation_degrees",
+                    "must be finite".into(),
+                ));
+            }
+            match (&e.color, &e.map) {
+                (Some(_), Some(_)) => {
+                    return Err(invalid(
+                        "environment.map",
+                        "give either `color` or `map`, not both".into(),
+                    ))
+                }
+                (None, None) => {
+                    return Err(invalid(
+                        "environment",
+                        "needs `color = [r, g, b]` or `map = \"file.exr\"`".into(),
+                    ))
+                }
+                (Some(c), None) if !c.iter().all(|x| *x >= 0.0 && x.is_finite()) => {
+                    return Err(invalid(
+                        "environment.color",
+                        format!("{c:?} must be finite and non-negative"),
+                    ))
+                }
+                (None, Some(m)) => {
+                    let ext = Path::new(m)
+                        .extension()
+                        .map(|x| x.to_string_lossy().to_ascii_lowercase());
+                    if !matches!(ext.as_deref(), Some("exr" | "hdr")) {
+                        return Err(invalid(
+                            "environment.map",
+                            format!("\"{m}\" is neither an .exr nor an .hdr file"),
+                        ));
+                    }
+                }
+                _ => {}
+            }
+            Some(EnvironmentConfig {
+                color: e.color,
+                map: e.map.as_deref().map(resolve),
+                strength: e.strength,
+                rotation_degrees: e.rotation_degrees,
+            })
+        }
+    };
     let stem = path
         .file_stem()
         .map_or_else(|| "render".into(), |s| s.to_string_lossy().into_owned());
@@ -546,6 +634,7 @@ pub fn parse_config(path: &Path, text: &str) -> Result<RenderConfig, ConfigError
             .map(|p| resolve(p))
             .collect(),
         material_overrides: raw.materials,
+        environment,
         base_dir,
     })
 }

@@ -63,6 +63,12 @@ pub enum SceneError {
         node: usize,
         reason: String,
     },
+    #[error("{}: bad KHR_lights_punctual light {light}: {reason}", file.display())]
+    Light {
+        file: PathBuf,
+        light: usize,
+        reason: String,
+    },
     #[error("{}: internal error while loading (malformed input?): {reason}", file.display())]
     Internal { file: PathBuf, reason: String },
 }

@@ -10,13 +10,17 @@
 //! - Only the materials and images that loaded primitives use are converted and decoded.
 //! - Degenerate triangles (a repeated index, a NaN or infinite vertex, zero area) are dropped
 //!   and counted; an index beyond the vertex count is an error.
-//! - Every remaining triangle whose material emits becomes an [`Emitter`].
+//! - Every remaining triangle whose emission, integrated over it (texture included), is
+//!   non-zero becomes an [`Emitter`] ([`crate::lights::mean_emission`]).
+//! - `KHR_lights_punctual` lights become [`flowlight_core::light::PunctualLight`]s placed by
+//!   their node's world transform.
 //! - Every node that places a camera (perspective or orthographic) is recorded in traversal
 //!   order; the render config picks one ([`crate::config`], default: the first).
 
 use crate::accessor::{read_floats, read_indices};
 use crate::error::SceneError;
 use crate::instancing::instance_transforms;
+use crate::lights::{mean_emission, punctual_light};
 use crate::material::{convert, MaterialOverride};
 use crate::scene::{triangle_area, triangle_normal, CameraDesc, CameraProjection, Scene};
 use crate::source::GltfSource;
@@ -131,6 +135,13 @@ impl Loader<'_> {
             }
             if let Some(cam) = node.camera() {
                 self.camera(&cam, &node, world)?;
+            }
+            if let Some(light) = node.light() {
+                let l = punctual_light(&self.src.file, &light, world)?;
+                if light.range().is_some() {
+                    tracing::info!(file = %self.src.file.display(), "light {}: range is ignored (inverse-square fall-off)", light.index());
+                }
+                self.scene.punctual_lights.push(l);
             }
             if let Some(mesh) = node.mesh() {
                 // One placement, or one per EXT_mesh_gpu_instancing instance.
@@ -471,14 +482,17 @@ impl Loader<'_> {
             }
         }
         scene.triangle_emitter = vec![-1; scene.triangles.len()];
+        let views = scene.texture_views();
         for (prim, tri) in scene.triangles.iter().enumerate() {
-            let m = &scene.materials[scene.triangle_material[prim] as usize];
+            let material = scene.triangle_material[prim];
+            let m = &scene.materials[material as usize];
             if !m.is_emissive() {
                 continue;
             }
             let [p0, p1, p2] = tri.map(|i| scene.positions[i as usize]);
-            scene.triangle_emitter[prim] = scene.emitters.len() as i32;
-            scene.emitters.push(Emitter {
+            // One uv set is loaded today; both sets of the emitter carry it.
+            let uv = tri.map(|i| scene.uvs[i as usize]);
+            let mut e = Emitter {
                 p0,
                 p1,
                 p2,
@@ -487,13 +501,23 @@ impl Loader<'_> {
                 radiance: m.emission,
                 double_sided: m.two_sided_emission,
                 prim: prim as u32,
-            });
+                material,
+                uv0: uv,
+                uv1: uv,
+            };
+            e.radiance = mean_emission(&e, |uv| m.emission_at(uv, &views));
+            if e.radiance.is_black() || e.power() <= 0.0 {
+                scene.stats.black_emitters += 1;
+                continue;
+            }
+            scene.triangle_emitter[prim] = scene.emitters.len() as i32;
+            scene.emitters.push(e);
         }
         if !scene.emitters.is_empty() {
             let powers: Vec<f32> = scene.emitters.iter().map(Emitter::power).collect();
             scene.emitter_power_cdf = build_cdf(&powers).ok_or_else(|| SceneError::Primitive {
                 file: file.clone(),
-                reason: "the emitters' total power is zero or not finite".into(),
+                reason: "the emitters' total power is not finite".into(),
             })?;
         }
         let s = &mut scene.stats;
@@ -508,8 +532,8 @@ impl Loader<'_> {
         }
         tracing::info!(
             file = %file.display(),
-            "loaded {} triangles, {} vertices, {} materials, {} textures, {} emitters",
-            s.triangles, s.vertices, scene.materials.len(), scene.textures.len(), scene.emitters.len()
+            "loaded {} triangles, {} vertices, {} materials, {} textures, {} emitters, {} punctual lights",
+            s.triangles, s.vertices, scene.materials.len(), scene.textures.len(), scene.emitters.len(), scene.punctual_lights.len()
         );
         Ok(self.scene)
     }

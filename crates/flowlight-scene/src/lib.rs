@@ -11,6 +11,8 @@
 //! - [`extensions`]: the glTF extensions the loader knows, and the check of a file's list;
 //! - [`material`]: glTF materials to [`flowlight_core::material::Material`], overrides;
 //! - [`texture`]: image decoding and sRGB → linear conversion;
+//! - [`lights`]: punctual lights, the emission integral of emitters, the environment and the
+//!   power CDF over all lights;
 //! - [`config`]: the TOML render configuration;
 //! - [`error`]: the error types.
 
@@ -21,13 +23,15 @@ pub mod error;
 pub mod extensions;
 pub mod gltf_loader;
 pub mod instancing;
+pub mod lights;
 pub mod material;
 pub mod scene;
 pub mod source;
 pub mod texture;
 
 pub use config::{
-    load_config, parse_config, CameraOverride, Intersector, RenderConfig, SampleBudget,
+    load_config, parse_config, CameraOverride, EnvironmentConfig, Intersector, RenderConfig,
+    SampleBudget,
 };
 pub use error::{ConfigError, SceneError};
 pub use gltf_loader::load_gltf;

@@ -2,7 +2,7 @@
 //! the emitter table and the camera found in the file.
 
 use flowlight_core::geometry::{barycentric_error, Ray, SurfaceHit};
-use flowlight_core::light::Emitter;
+use flowlight_core::light::{Emitter, PunctualLight};
 use flowlight_core::material::{Material, Texture};
 use flowlight_core::Rgb;
 use glam::{DVec3, Vec2, Vec3};
@@ -105,6 +105,9 @@ pub struct LoadStats {
     pub mesh_instances: usize,
     /// Images decoded (only those used by loaded materials).
     pub images_decoded: usize,
+    /// Triangles whose material has an emissive factor but whose emission integrates to zero
+    /// (a black emissive texture there): not lights.
+    pub black_emitters: usize,
 }
 
 /// A scene ready to render: every vertex in world space.
@@ -128,6 +131,8 @@ pub struct Scene {
     pub emitter_power_cdf: Vec<f32>,
     /// Per triangle: index into `emitters`, or -1.
     pub triangle_emitter: Vec<i32>,
+    /// `KHR_lights_punctual` lights of the default scene, placed by their nodes.
+    pub punctual_lights: Vec<PunctualLight>,
     pub stats: LoadStats,
 }
 

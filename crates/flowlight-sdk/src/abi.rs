@@ -9,7 +9,7 @@
 use crate::params::ParamKind;
 use flowlight_core::camera::Camera;
 use flowlight_core::geometry::{Ray, SurfaceHit};
-use flowlight_core::light::Emitter;
+use flowlight_core::light::{Emitter, Environment, PunctualLight};
 use flowlight_core::material::{Material, Texture};
 use flowlight_core::path::{Path, PathVertex};
 use flowlight_core::rng::Rng;
@@ -18,7 +18,7 @@ use glam::Vec3;
 use std::ffi::c_void;
 
 /// Bumped whenever any type or function table in this module changes incompatibly.
-pub const ABI_VERSION: u32 = 1;
+pub const ABI_VERSION: u32 = 2;
 /// Version of the SDK crate compiled into this binary.
 pub const SDK_VERSION: &str = env!("CARGO_PKG_VERSION");
 /// `rustc --version` of the compiler that built this binary.
@@ -147,8 +147,14 @@ pub struct SceneView {
     pub texture_count: usize,
     pub emitters: *const Emitter,
     pub emitter_count: usize,
-    /// CDF over emitter power, `emitter_count` entries.
-    pub emitter_power_cdf: *const f32,
+    /// `KHR_lights_punctual` lights.
+    pub punctual_lights: *const PunctualLight,
+    pub punctual_count: usize,
+    /// The environment (kind `None` when the config has none).
+    pub environment: Environment,
+    /// CDF over the power of all lights: emitters, punctual lights, then the environment when
+    /// present (`emitter_count + punctual_count + 0 or 1` entries).
+    pub light_power_cdf: *const f32,
     pub bounds_min: Vec3,
     pub bounds_max: Vec3,
 }
@@ -406,6 +412,8 @@ pub const fn layout_hash() -> u64 {
         size_of::<Material>(),
         size_of::<Texture>(),
         size_of::<Emitter>(),
+        size_of::<PunctualLight>(),
+        size_of::<Environment>(),
         size_of::<Ray>(),
         size_of::<SurfaceHit>(),
         size_of::<HitRecord>(),
@@ -424,6 +432,7 @@ pub const fn layout_hash() -> u64 {
         size_of::<Rng>(),
         size_of::<PluginDeclaration>(),
         align_of::<SceneView>(),
+        align_of::<Environment>(),
         align_of::<Path>(),
         align_of::<ErrorBuf>(),
         align_of::<WorkUnit>(),

@@ -4,7 +4,7 @@ use crate::abi::SceneView;
 use flowlight_core::bsdf::Bsdf;
 use flowlight_core::camera::Camera;
 use flowlight_core::geometry::SurfaceHit;
-use flowlight_core::light::{Emitter, Lights};
+use flowlight_core::light::{Emitter, Lights, PunctualLight};
 use flowlight_core::material::{Material, Texture};
 use glam::Vec3;
 
@@ -33,13 +33,22 @@ impl<'a> Scene<'a> {
     /// of a plugin instance).
     pub unsafe fn from_view(v: &SceneView) -> Scene<'a> {
         let emitters: &'a [Emitter] = slice(v.emitters, v.emitter_count);
+        let punctual: &'a [PunctualLight] = slice(v.punctual_lights, v.punctual_count);
+        let light_count =
+            v.emitter_count + v.punctual_count + usize::from(v.environment.is_present());
+        let materials: &'a [Material] = slice(v.materials, v.material_count);
+        let textures: &'a [Texture] = slice(v.textures, v.texture_count);
         Scene {
             camera: v.camera,
-            materials: slice(v.materials, v.material_count),
-            textures: slice(v.textures, v.texture_count),
+            materials,
+            textures,
             lights: Lights {
                 emitters,
-                power_cdf: slice(v.emitter_power_cdf, v.emitter_count),
+                punctual,
+                environment: v.environment,
+                power_cdf: slice(v.light_power_cdf, light_count),
+                materials,
+                textures,
             },
             bounds_min: v.bounds_min,
             bounds_max: v.bounds_max,
@@ -56,7 +65,10 @@ impl<'a> Scene<'a> {
             texture_count: self.textures.len(),
             emitters: self.lights.emitters.as_ptr(),
             emitter_count: self.lights.emitters.len(),
-            emitter_power_cdf: self.lights.power_cdf.as_ptr(),
+            punctual_lights: self.lights.punctual.as_ptr(),
+            punctual_count: self.lights.punctual.len(),
+            environment: self.lights.environment,
+            light_power_cdf: self.lights.power_cdf.as_ptr(),
             bounds_min: self.bounds_min,
             bounds_max: self.bounds_max,
         }

@@ -1,0 +1,246 @@
+//! Lights of a loaded scene: `KHR_lights_punctual` lights placed by their nodes, the
+//! emissive-triangle integration behind the emitter table, the `[environment]` of the render
+//! config, and the one power CDF over all of them.
+//!
+//! - Punctual lights: position = the node's world origin, direction = its world −Z (scale
+//!   ignored, as the extension says); intensity = `color × intensity` (candela for point and
+//!   spot, lux for directional; taken as renderer units, see
+//!   [`flowlight_core::light::punctual`]). `range` is ignored (one info line per file).
+//! - Emissive triangles: the mean emitted radiance over a triangle is estimated from
+//!   [`EMISSION_STRATA`]² stratified points (Heitz's uniform triangle map of a jittered-free
+//!   grid of cell centres), each `Material::emission_at` of both uv sets. A triangle whose mean
+//!   is zero is not a light; its mean times π·area is its power.
+//! - Environment: `color` (constant) or `map` (`.exr` or `.hdr`, equirectangular, +Y up),
+//!   times `strength`, turned by `rotation_degrees` about +Y.
+
+use crate::config::EnvironmentConfig;
+use crate::error::{ConfigError, SceneError};
+use crate::scene::Scene;
+use flowlight_core::light::environment::{build_map_distribution, MapDistribution};
+use flowlight_core::light::{light_powers, Emitter, Environment, PunctualLight};
+use flowlight_core::sampling::{build_cdf, uniform_triangle};
+use flowlight_core::Rgb;
+use glam::{Mat3, Mat4, Vec2, Vec3};
+use std::path::{Path, PathBuf};
+
+/// Strata per side for the emission integral of one triangle (16 points).
+pub const EMISSION_STRATA: usize = 4;
+
+/// Mean of `emission(uv)` over emitter `e`'s triangle, from stratified points.
+pub fn mean_emission(e: &Emitter, mut emission: impl FnMut([Vec2; 2]) -> Rgb) -> Rgb {
+    let n = EMISSION_STRATA;
+    let mut sum = Rgb::ZERO;
+    for i in 0..n {
+        for j in 0..n {
+            let u = Vec2::new((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32);
+            sum += emission(e.uv_at(uniform_triangle(u)));
+        }
+    }
+    sum / (n * n) as f32
+}
+
+/// A `KHR_lights_punctual` light at a node with world transform `world`.
+pub fn punctual_light(
+    file: &Path,
+    light: &gltf::khr_lights_punctual::Light,
+    world: Mat4,
+) -> Result<PunctualLight, SceneError> {
+    let err = |reason: String| SceneError::Light {
+        file: file.to_path_buf(),
+        light: light.index(),
+        reason,
+    };
+    let color = Rgb::from_array(light.color());
+    let intensity = light.intensity();
+    if !(color.is_valid_radiance() && intensity >= 0.0 && intensity.is_finite()) {
+        return Err(err(format!(
+            "color {:?} and intensity {intensity} must be finite and non-negative",
+            light.color()
+        )));
+    }
+    let position = world.transform_point3(Vec3::ZERO);
+    let direction = (Mat3::from_mat4(world) * -Vec3::Z).normalize_or_zero();
+    if !position.is_finite() || direction == Vec3::ZERO || !direction.is_finite() {
+        return Err(err("its node transform is degenerate".into()));
+    }
+    let i = color * intensity;
+    use gltf::khr_lights_punctual::Kind;
+    Ok(match light.kind() {
+        Kind::Point => PunctualLight::point(position, i),
+        Kind::Directional => PunctualLight::directional(direction, i),
+        Kind::Spot {
+            inner_cone_angle,
+            outer_cone_angle,
+        } => {
+            let half_pi = std::f32::consts::FRAC_PI_2;
+            if !(inner_cone_angle >= 0.0
+                && inner_cone_angle < outer_cone_angle
+                && outer_cone_angle <= half_pi + 1e-6)
+            {
+                return Err(err(format!(
+                    "spot cone angles must satisfy 0 ≤ innerConeAngle ({inner_cone_angle}) < outerConeAngle ({outer_cone_angle}) ≤ π/2"
+                )));
+            }
+            PunctualLight::spot(position, direction, i, inner_cone_angle, outer_cone_angle)
+        }
+    })
+}
+
+/// A loaded environment: owns the map and its sampling tables that [`EnvironmentData::view`]
+/// points into.
+#[derive(Clone, Debug, Default)]
+pub struct EnvironmentData {
+    pub constant: Option<Rgb>,
+    pub width: u32,
+    pub height: u32,
+    pub texels: Vec<Rgb>,
+    pub distribution: Option<MapDistribution>,
+    pub strength: f32,
+    pub rotation_degrees: f32,
+    pub source: Option<PathBuf>,
+}
+
+impl EnvironmentData {
+    /// The plugin-side view; valid while `self` lives (its buffers never move).
+    pub fn view(&self) -> Environment {
+        if let Some(c) = self.constant {
+            if c.is_black() {
+                return Environment::none();
+            }
+            return Environment::constant(c);
+        }
+        match &self.distribution {
+            Some(d) => Environment::map(
+                self.width,
+                self.height,
+                &self.texels,
+                d,
+                self.strength,
+                self.rotation_degrees,
+            ),
+            None => Environment::none(),
+        }
+    }
+}
+
+/// Loads the config's `[environment]`: a constant colour or a decoded lat-long map.
+pub fn load_environment(
+    config_file: &Path,
+    env: &EnvironmentConfig,
+) -> Result<EnvironmentData, ConfigError> {
+    let invalid = |key: &str, reason: String| ConfigError::Invalid {
+        file: config_file.to_path_buf(),
+        key: key.into(),
+        reason,
+    };
+    if let Some(c) = env.color {
+        return Ok(EnvironmentData {
+            constant: Some(Rgb::from_array(c) * env.strength),
+            strength: env.strength,
+            rotation_degrees: env.rotation_degrees,
+            ..Default::default()
+        });
+    }
+    let Some(map) = &env.map else {
+        return Ok(EnvironmentData::default());
+    };
+    let img = image::open(map)
+        .map_err(|e| invalid("environment.map", format!("{}: {e}", map.display())))?
+        .into_rgb32f();
+    let (width, height) = img.dimensions();
+    let texels: Vec<Rgb> = img
+        .pixels()
+        .map(|p| Rgb::new(p.0[0], p.0[1], p.0[2]))
+        .collect();
+    if let Some(bad) = texels.iter().position(|t| !t.is_valid_radiance()) {
+        return Err(invalid(
+            "environment.map",
+            format!(
+                "{}: texel ({}, {}) is negative or not finite",
+                map.display(),
+                bad as u32 % width.max(1),
+                bad as u32 / width.max(1)
+            ),
+        ));
+    }
+    let distribution = build_map_distribution(width, height, &texels);
+    if distribution.is_none() {
+        tracing::warn!(file = %config_file.display(), "environment map {} is black everywhere: no environment light", map.display());
+    }
+    Ok(EnvironmentData {
+        constant: None,
+        width,
+        height,
+        texels,
+        distribution,
+        strength: env.strength,
+        rotation_degrees: env.rotation_degrees,
+        source: Some(map.clone()),
+    })
+}
+
+/// Radius of the bounding sphere of the scene's triangles (for distant lights' power).
+pub fn scene_radius(scene: &Scene) -> f32 {
+    scene
+        .bounds()
+        .map_or(1.0, |(lo, hi)| ((hi - lo).length() * 0.5).max(1e-6))
+}
+
+/// The power CDF over all lights (area emitters, punctual lights, environment); empty when
+/// there is no light or no light carries power.
+pub fn light_power_cdf(scene: &Scene, environment: &Environment) -> Vec<f32> {
+    let powers = light_powers(
+        &scene.emitters,
+        &scene.punctual_lights,
+        environment,
+        scene_radius(scene),
+    );
+    build_cdf(&powers).unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mean_emission_sees_a_black_half() {
+        let e = Emitter {
+            p0: Vec3::ZERO,
+            p1: Vec3::X,
+            p2: Vec3::Y,
+            n: Vec3::Z,
+            area: 0.5,
+            radiance: Rgb::ZERO,
+            double_sided: 0,
+            prim: 0,
+            material: 0,
+            uv0: [Vec2::ZERO, Vec2::X, Vec2::Y],
+            uv1: [Vec2::ZERO; 3],
+        };
+        // Emits 2 where u < 0.5: the mean over the triangle is the emitting area's share
+        // (3/4 of the triangle has u < 1/2) times 2, up to the strata's resolution.
+        let m = mean_emission(&e, |uv| {
+            if uv[0].x < 0.5 {
+                Rgb::splat(2.0)
+            } else {
+                Rgb::ZERO
+            }
+        });
+        assert!((m.r - 1.5).abs() < 0.2, "{m:?}");
+        // Black where the triangle lies entirely in the black half: no light.
+        let mut black = e;
+        black.uv0 = [
+            Vec2::new(0.6, 0.0),
+            Vec2::new(0.9, 0.0),
+            Vec2::new(0.6, 0.3),
+        ];
+        let m = mean_emission(&black, |uv| {
+            if uv[0].x < 0.5 {
+                Rgb::splat(2.0)
+            } else {
+                Rgb::ZERO
+            }
+        });
+        assert!(m.is_black());
+    }
+}
