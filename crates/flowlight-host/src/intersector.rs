@@ -1,6 +1,6 @@
 //! Intersectors and the host's answer to plugins' ray queries.
 
-use flowlight_bvh::{Bvh, TriangleHit};
+use flowlight_bvh::{Bvh, HitFilter, TriangleHit};
 use flowlight_core::geometry::Ray;
 use flowlight_scene::config::Intersector as IntersectorChoice;
 use flowlight_scene::Scene;
@@ -14,6 +14,10 @@ pub trait Intersector: Send + Sync {
     fn name(&self) -> &'static str;
     fn intersect(&self, ray: &Ray) -> Option<TriangleHit>;
     fn occluded(&self, ray: &Ray) -> bool;
+    /// Closest hit among those `accept` keeps (alpha MASK / BLEND).
+    fn intersect_filtered(&self, ray: &Ray, accept: HitFilter) -> Option<TriangleHit>;
+    /// Whether a hit that `accept` keeps lies on the ray.
+    fn occluded_filtered(&self, ray: &Ray, accept: HitFilter) -> bool;
 }
 
 /// The pure-Rust BVH backend.
@@ -40,6 +44,14 @@ impl Intersector for BvhIntersector {
     #[inline]
     fn occluded(&self, ray: &Ray) -> bool {
         self.bvh.occluded(ray)
+    }
+    #[inline]
+    fn intersect_filtered(&self, ray: &Ray, accept: HitFilter) -> Option<TriangleHit> {
+        self.bvh.intersect_filtered(ray, accept)
+    }
+    #[inline]
+    fn occluded_filtered(&self, ray: &Ray, accept: HitFilter) -> bool {
+        self.bvh.occluded_filtered(ray, accept)
     }
 }
 
@@ -79,6 +91,14 @@ impl Intersector for EmbreeIntersector {
     #[inline]
     fn occluded(&self, ray: &Ray) -> bool {
         self.scene.occluded(ray)
+    }
+    #[inline]
+    fn intersect_filtered(&self, ray: &Ray, accept: HitFilter) -> Option<TriangleHit> {
+        self.scene.intersect_filtered(ray, accept)
+    }
+    #[inline]
+    fn occluded_filtered(&self, ray: &Ray, accept: HitFilter) -> bool {
+        self.scene.occluded_filtered(ray, accept)
     }
 }
 
@@ -130,10 +150,15 @@ pub struct RayCounts {
 }
 
 /// Answers one work unit's ray queries: intersects and fills in the surface data.
+///
+/// When the scene has alpha-tested materials (MASK or BLEND), every query goes through the
+/// intersector's filtered variant with [`Scene::passes_through`] as the filter, so closest
+/// hits, shadow rays and camera rays all see the same cut-outs.
 pub struct UnitTracer<'a> {
     pub scene: &'a Scene,
     pub intersector: &'a dyn Intersector,
     pub counts: RayCounts,
+    alpha: bool,
 }
 
 impl<'a> UnitTracer<'a> {
@@ -142,6 +167,31 @@ impl<'a> UnitTracer<'a> {
             scene,
             intersector,
             counts: RayCounts::default(),
+            alpha: scene.has_alpha(),
+        }
+    }
+
+    /// The closest hit of `ray`, alpha-tested when the scene needs it.
+    #[inline]
+    pub fn closest(&self, ray: &Ray) -> Option<TriangleHit> {
+        if self.alpha {
+            let scene = self.scene;
+            self.intersector
+                .intersect_filtered(ray, &|prim, b1, b2| !scene.passes_through(ray, prim, b1, b2))
+        } else {
+            self.intersector.intersect(ray)
+        }
+    }
+
+    /// Whether `ray` is blocked, alpha-tested when the scene needs it.
+    #[inline]
+    pub fn blocked(&self, ray: &Ray) -> bool {
+        if self.alpha {
+            let scene = self.scene;
+            self.intersector
+                .occluded_filtered(ray, &|prim, b1, b2| !scene.passes_through(ray, prim, b1, b2))
+        } else {
+            self.intersector.occluded(ray)
         }
     }
 
@@ -157,7 +207,7 @@ impl<'a> UnitTracer<'a> {
     #[inline]
     pub fn intersect(&mut self, ray: &Ray) -> HitRecord {
         self.counts.closest += 1;
-        match self.intersector.intersect(ray) {
+        match self.closest(ray) {
             Some(h) => HitRecord {
                 hit: 1,
                 surface: self.scene.surface_hit(ray, h.t, h.prim, h.b1, h.b2),
@@ -177,6 +227,8 @@ const EMPTY_HIT: flowlight_core::geometry::SurfaceHit = flowlight_core::geometry
     ng: glam::Vec3::Z,
     ns: glam::Vec3::Z,
     uv: glam::Vec2::ZERO,
+    uv1: glam::Vec2::ZERO,
+    color: [1.0; 4],
     prim: u32::MAX,
     material: 0,
     emitter: -1,
@@ -198,6 +250,6 @@ unsafe extern "C" fn occluded_cb(ctx: *mut c_void, rays: *const Ray, blocked: *m
     let tracer = &mut *(ctx as *mut UnitTracer);
     tracer.counts.shadow += n as u64;
     for i in 0..n {
-        *blocked.add(i) = tracer.intersector.occluded(&*rays.add(i)) as u8;
+        *blocked.add(i) = tracer.blocked(&*rays.add(i)) as u8;
     }
 }

@@ -168,6 +168,8 @@ pub fn trace(
                     ng: ls.n,
                     ns: ls.n,
                     uv: Vec2::ZERO,
+                    uv1: Vec2::ZERO,
+                    color: [1.0; 4],
                     prim: scene.lights.emitters[ls.emitter as usize].prim,
                     material: u32::MAX,
                     emitter: ls.emitter as i32,

@@ -7,7 +7,7 @@
 //! - [`source`]: reading `.gltf`/`.glb` files and their buffers (external files, data URIs);
 //! - [`accessor`]: validated reading of glTF accessors;
 //! - [`material`]: glTF materials to [`flowlight_core::material::Material`], overrides;
-//! - [`texture`]: image decoding and sRGB → linear conversion;
+//! - [`texture`]: image decoding into compact texel storage, and samplers;
 //! - [`config`]: the TOML render configuration;
 //! - [`error`]: the error types.
 
@@ -26,4 +26,5 @@ pub use config::{
 pub use error::{ConfigError, SceneError};
 pub use gltf_loader::load_gltf;
 pub use material::{DiffuseChoice, MaterialOverride};
-pub use scene::{CameraDesc, LoadStats, Scene, TextureData};
+pub use scene::{CameraDesc, LoadStats, Scene};
+pub use texture::{ImageData, Sampler, TextureData, Texels};
