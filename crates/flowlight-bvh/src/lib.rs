@@ -165,12 +165,12 @@ impl Bvh {
 
     /// Closest hit with `t ∈ (0, ray.t_max)`, or `None`.
     pub fn intersect(&self, ray: &Ray) -> Option<TriangleHit> {
-        self.traverse::<false>(ray, &mut 0, &|_, _, _| true)
+        self.traverse::<false, _>(ray, &mut 0, &|_, _, _| true)
     }
 
     /// Whether any triangle is hit with `t ∈ (0, ray.t_max)`. Returns at the first hit found.
     pub fn occluded(&self, ray: &Ray) -> bool {
-        self.traverse::<true>(ray, &mut 0, &|_, _, _| true).is_some()
+        self.traverse::<true, _>(ray, &mut 0, &|_, _, _| true).is_some()
     }
 
     /// [`Bvh::intersect`] counting only the hits `accept` keeps (alpha testing): a rejected

@@ -253,3 +253,97 @@ unsafe extern "C" fn occluded_cb(ctx: *mut c_void, rays: *const Ray, blocked: *m
         *blocked.add(i) = tracer.blocked(&*rays.add(i)) as u8;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use flowlight_core::geometry::Ray;
+    use flowlight_scene::gltf_loader::load_gltf;
+    use flowlight_scene::testutil::{png8, temp_dir, Quad};
+    use glam::Vec3;
+    use std::collections::BTreeMap;
+
+    /// The unit quad at z = 0 whose right half (x > 0.5) is cut away by its base colour
+    /// alpha (`mode` MASK or BLEND), and a copy at z = −1 shifted by +0.5 in x.
+    fn cut_scene(mode: &str, alpha_right: u8) -> Scene {
+        let q = Quad {
+            images: vec![png8(2, 1, 4, &[255, 255, 255, 255, 255, 255, 255, alpha_right])],
+            textures: r#"{"source": 0, "sampler": 0}"#.into(),
+            samplers: r#"{"magFilter": 9728}"#.into(),
+            material: format!(
+                r#"{{"alphaMode": "{mode}", "pbrMetallicRoughness": {{"baseColorTexture": {{"index": 0}}}}}}"#
+            ),
+            second_node: Some([0.5, 0.0, -1.0]),
+            ..Quad::default()
+        };
+        let dir = temp_dir("alpha-host");
+        load_gltf(&q.write(&dir, "cut.gltf"), &BTreeMap::new()).unwrap()
+    }
+
+    fn intersectors(scene: &Scene) -> Vec<Box<dyn Intersector>> {
+        let (bvh, _) = BvhIntersector::build(scene);
+        let (embree, _) =
+            EmbreeIntersector::build_with(scene, flowlight_embree::SceneOptions::default())
+                .expect("Embree is provisioned by the build");
+        vec![Box::new(bvh), Box::new(embree)]
+    }
+
+    fn down(x: f32, y: f32) -> Ray {
+        Ray::new(Vec3::new(x, y, 1.0), -Vec3::Z, f32::INFINITY)
+    }
+
+    #[test]
+    fn alpha_mask_cuts_half_a_quad_in_both_intersectors() {
+        let scene = cut_scene("MASK", 0);
+        for isect in intersectors(&scene) {
+            let tracer = UnitTracer::new(&scene, isect.as_ref());
+            for i in 0..16 {
+                for j in 0..16 {
+                    let (x, y) = ((i as f32 + 0.5) / 16.0 * 1.5, (j as f32 + 0.5) / 16.0);
+                    let ray = down(x, y);
+                    // Upper quad opaque on x < 0.5; lower copy opaque on 0.5 < x < 1.
+                    let want = if x < 0.5 {
+                        Some(1.0)
+                    } else if x < 1.0 {
+                        Some(2.0)
+                    } else {
+                        None
+                    };
+                    let got = tracer.closest(&ray).map(|h| h.t);
+                    match (want, got) {
+                        (Some(w), Some(g)) => assert!((w - g).abs() < 1e-5, "{} ({x}, {y}): t {g}", isect.name()),
+                        (None, None) => {}
+                        _ => panic!("{} ({x}, {y}): want {want:?}, got {got:?}", isect.name()),
+                    }
+                    assert_eq!(tracer.blocked(&ray), want.is_some(), "{} ({x}, {y})", isect.name());
+                    // A shadow ray that stops above the lower copy sees only the upper quad.
+                    let short = Ray::new(ray.origin, ray.dir, 1.5);
+                    assert_eq!(tracer.blocked(&short), x < 0.5, "{} ({x}, {y}) short", isect.name());
+                    // Unfiltered queries still see the whole quads.
+                    assert_eq!(isect.occluded(&ray), x < 1.5);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn alpha_blend_decisions_agree_between_intersectors() {
+        let scene = cut_scene("BLEND", 128);
+        let all = intersectors(&scene);
+        let (bvh, embree) = (UnitTracer::new(&scene, all[0].as_ref()), UnitTracer::new(&scene, all[1].as_ref()));
+        let mut passed_upper = 0;
+        let n = 2000;
+        for i in 0..n {
+            let x = 0.5 + (i as f32 + 0.5) / n as f32 * 0.5;
+            let y = ((i * 37) % n) as f32 / n as f32;
+            let ray = down(x, y);
+            let (a, b) = (bvh.closest(&ray), embree.closest(&ray));
+            assert_eq!(a.map(|h| (h.prim, (h.t * 1e4).round())), b.map(|h| (h.prim, (h.t * 1e4).round())), "({x}, {y})");
+            assert_eq!(bvh.blocked(&ray), embree.blocked(&ray));
+            passed_upper += a.is_none_or(|h| h.t > 1.5) as usize;
+        }
+        // α = 128/255 on the right half of the upper quad: about half the rays pass it.
+        let f = passed_upper as f64 / n as f64;
+        assert!((f - (1.0 - 128.0 / 255.0)).abs() < 0.06, "{f}");
+    }
+}

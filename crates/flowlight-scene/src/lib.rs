@@ -18,6 +18,7 @@ pub mod gltf_loader;
 pub mod material;
 pub mod scene;
 pub mod source;
+pub mod testutil;
 pub mod texture;
 
 pub use config::{
