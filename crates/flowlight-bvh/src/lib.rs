@@ -170,7 +170,8 @@ impl Bvh {
 
     /// Whether any triangle is hit with `t ∈ (0, ray.t_max)`. Returns at the first hit found.
     pub fn occluded(&self, ray: &Ray) -> bool {
-        self.traverse::<true, _>(ray, &mut 0, &|_, _, _| true).is_some()
+        self.traverse::<true, _>(ray, &mut 0, &|_, _, _| true)
+            .is_some()
     }
 
     /// [`Bvh::intersect`] counting only the hits `accept` keeps (alpha testing): a rejected
@@ -1053,9 +1054,13 @@ mod tests {
         // From the far end towards the near end: the closest hit is the last layer reached.
         let ray = Ray::new(Vec3::new(0.3, 0.2, 100.0), -Vec3::Z, f32::INFINITY);
         let mut any_tests = 0;
-        let any = bvh.traverse::<true, _>(&ray, &mut any_tests, &|_, _, _| true).unwrap();
+        let any = bvh
+            .traverse::<true, _>(&ray, &mut any_tests, &|_, _, _| true)
+            .unwrap();
         let mut closest_tests = 0;
-        let closest = bvh.traverse::<false, _>(&ray, &mut closest_tests, &|_, _, _| true).unwrap();
+        let closest = bvh
+            .traverse::<false, _>(&ray, &mut closest_tests, &|_, _, _| true)
+            .unwrap();
         assert!(
             any_tests <= MAX_LEAF_SIZE,
             "occluded tested {any_tests} triangles"

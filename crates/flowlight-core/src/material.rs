@@ -240,9 +240,7 @@ impl Material {
     #[inline]
     pub fn emission_at(&self, uv: [Vec2; 2], textures: &[Texture]) -> Rgb {
         match self.emissive_texture.sample(uv, textures, true) {
-            Some(t) if !self.emission.is_black() => {
-                self.emission * Rgb::new(t.x, t.y, t.z)
-            }
+            Some(t) if !self.emission.is_black() => self.emission * Rgb::new(t.x, t.y, t.z),
             _ => self.emission,
         }
     }
@@ -278,7 +276,12 @@ impl Material {
 
     /// The material at a point: every factor multiplied by its texture (see the module docs).
     #[inline]
-    pub fn resolve(&self, uv: [Vec2; 2], color: [f32; 4], textures: &[Texture]) -> ResolvedMaterial {
+    pub fn resolve(
+        &self,
+        uv: [Vec2; 2],
+        color: [f32; 4],
+        textures: &[Texture],
+    ) -> ResolvedMaterial {
         let (base, alpha) = self.base_rgba_at(uv, color, textures);
         let mut m = *self;
         if let Some(t) = self.metallic_roughness_texture.sample(uv, textures, false) {
@@ -614,7 +617,10 @@ mod tests {
         g.format = TexelFormat::F32;
         g.texels = f.as_ptr() as *const u8;
         // Float texels are linear even when asked for sRGB.
-        assert_eq!(g.sample(Vec2::new(0.5, 0.5), true), Vec4::new(0.25, 2.0, 4.0, 1.0));
+        assert_eq!(
+            g.sample(Vec2::new(0.5, 0.5), true),
+            Vec4::new(0.25, 2.0, 4.0, 1.0)
+        );
     }
 
     #[test]
@@ -645,7 +651,10 @@ mod tests {
         // A texCoord override reads the second set.
         let r = TextureRef::new(0, 1);
         assert_eq!(
-            (r.sample([Vec2::ZERO, Vec2::new(0.9, 0.9)], &[t], false).unwrap().x * 25.5)
+            (r.sample([Vec2::ZERO, Vec2::new(0.9, 0.9)], &[t], false)
+                .unwrap()
+                .x
+                * 25.5)
                 .round(),
             15.0
         );

@@ -605,10 +605,9 @@ unsafe extern "C" fn filter_callback(args: *const embree4_sys::RTCFilterFunction
         let u = f32::from_bits(*hit.add(3 * n + i));
         let v = f32::from_bits(*hit.add(4 * n + i));
         let prim = *hit.add(5 * n + i);
-        let keep = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            (ctx.accept)(prim, u, v)
-        }))
-        .unwrap_or(true);
+        let keep =
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| (ctx.accept)(prim, u, v)))
+                .unwrap_or(true);
         if !keep {
             *a.valid.add(i) = 0;
         }

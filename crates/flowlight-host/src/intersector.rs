@@ -176,8 +176,9 @@ impl<'a> UnitTracer<'a> {
     pub fn closest(&self, ray: &Ray) -> Option<TriangleHit> {
         if self.alpha {
             let scene = self.scene;
-            self.intersector
-                .intersect_filtered(ray, &|prim, b1, b2| !scene.passes_through(ray, prim, b1, b2))
+            self.intersector.intersect_filtered(ray, &|prim, b1, b2| {
+                !scene.passes_through(ray, prim, b1, b2)
+            })
         } else {
             self.intersector.intersect(ray)
         }
@@ -188,8 +189,9 @@ impl<'a> UnitTracer<'a> {
     pub fn blocked(&self, ray: &Ray) -> bool {
         if self.alpha {
             let scene = self.scene;
-            self.intersector
-                .occluded_filtered(ray, &|prim, b1, b2| !scene.passes_through(ray, prim, b1, b2))
+            self.intersector.occluded_filtered(ray, &|prim, b1, b2| {
+                !scene.passes_through(ray, prim, b1, b2)
+            })
         } else {
             self.intersector.occluded(ray)
         }
@@ -267,7 +269,12 @@ mod tests {
     /// alpha (`mode` MASK or BLEND), and a copy at z = −1 shifted by +0.5 in x.
     fn cut_scene(mode: &str, alpha_right: u8) -> Scene {
         let q = Quad {
-            images: vec![png8(2, 1, 4, &[255, 255, 255, 255, 255, 255, 255, alpha_right])],
+            images: vec![png8(
+                2,
+                1,
+                4,
+                &[255, 255, 255, 255, 255, 255, 255, alpha_right],
+            )],
             textures: r#"{"source": 0, "sampler": 0}"#.into(),
             samplers: r#"{"magFilter": 9728}"#.into(),
             material: format!(
@@ -311,14 +318,26 @@ mod tests {
                     };
                     let got = tracer.closest(&ray).map(|h| h.t);
                     match (want, got) {
-                        (Some(w), Some(g)) => assert!((w - g).abs() < 1e-5, "{} ({x}, {y}): t {g}", isect.name()),
+                        (Some(w), Some(g)) => {
+                            assert!((w - g).abs() < 1e-5, "{} ({x}, {y}): t {g}", isect.name())
+                        }
                         (None, None) => {}
                         _ => panic!("{} ({x}, {y}): want {want:?}, got {got:?}", isect.name()),
                     }
-                    assert_eq!(tracer.blocked(&ray), want.is_some(), "{} ({x}, {y})", isect.name());
+                    assert_eq!(
+                        tracer.blocked(&ray),
+                        want.is_some(),
+                        "{} ({x}, {y})",
+                        isect.name()
+                    );
                     // A shadow ray that stops above the lower copy sees only the upper quad.
                     let short = Ray::new(ray.origin, ray.dir, 1.5);
-                    assert_eq!(tracer.blocked(&short), x < 0.5, "{} ({x}, {y}) short", isect.name());
+                    assert_eq!(
+                        tracer.blocked(&short),
+                        x < 0.5,
+                        "{} ({x}, {y}) short",
+                        isect.name()
+                    );
                     // Unfiltered queries still see the whole quads.
                     assert_eq!(isect.occluded(&ray), x < 1.5);
                 }
@@ -330,7 +349,10 @@ mod tests {
     fn alpha_blend_decisions_agree_between_intersectors() {
         let scene = cut_scene("BLEND", 128);
         let all = intersectors(&scene);
-        let (bvh, embree) = (UnitTracer::new(&scene, all[0].as_ref()), UnitTracer::new(&scene, all[1].as_ref()));
+        let (bvh, embree) = (
+            UnitTracer::new(&scene, all[0].as_ref()),
+            UnitTracer::new(&scene, all[1].as_ref()),
+        );
         let mut passed_upper = 0;
         let n = 2000;
         for i in 0..n {
@@ -338,7 +360,11 @@ mod tests {
             let y = ((i * 37) % n) as f32 / n as f32;
             let ray = down(x, y);
             let (a, b) = (bvh.closest(&ray), embree.closest(&ray));
-            assert_eq!(a.map(|h| (h.prim, (h.t * 1e4).round())), b.map(|h| (h.prim, (h.t * 1e4).round())), "({x}, {y})");
+            assert_eq!(
+                a.map(|h| (h.prim, (h.t * 1e4).round())),
+                b.map(|h| (h.prim, (h.t * 1e4).round())),
+                "({x}, {y})"
+            );
             assert_eq!(bvh.blocked(&ray), embree.blocked(&ray));
             passed_upper += a.is_none_or(|h| h.t > 1.5) as usize;
         }

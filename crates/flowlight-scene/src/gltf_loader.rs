@@ -93,7 +93,9 @@ fn transform_from_json(v: Option<&gltf::json::Value>) -> Result<Option<Transform
             None => Ok(default),
             Some(a) => match a.as_array().map(|a| a.as_slice()) {
                 Some([x, y]) => Ok([num(x, key)?, num(y, key)?]),
-                _ => Err(format!("KHR_texture_transform.{key} is not a pair of numbers")),
+                _ => Err(format!(
+                    "KHR_texture_transform.{key} is not a pair of numbers"
+                )),
             },
         }
     };
@@ -313,7 +315,10 @@ impl Loader<'_> {
             let mut r = self.texture_ref(&n.texture(), n.tex_coord(), t, &name)?;
             r.scale = n.scale();
             if !r.scale.is_finite() {
-                return Err(merr(self.file(), "normalTexture.scale is not finite".into()));
+                return Err(merr(
+                    self.file(),
+                    "normalTexture.scale is not finite".into(),
+                ));
             }
             mat.normal_texture = r;
         }
@@ -378,7 +383,10 @@ impl Loader<'_> {
                 return Err(SceneError::Material {
                     file: self.file(),
                     material: material.to_string(),
-                    reason: format!("texture {}: KHR_texture_transform is not finite", tex.index()),
+                    reason: format!(
+                        "texture {}: KHR_texture_transform is not finite",
+                        tex.index()
+                    ),
                 });
             }
         }
@@ -428,18 +436,19 @@ impl Loader<'_> {
             None => None,
         };
         let material = prim.material();
-        let read2 = |src: &mut GltfSource, sem: Semantic| -> Result<Option<Vec<[f32; 2]>>, SceneError> {
-            match prim.get(&sem) {
-                Some(acc) => {
-                    let v = read_floats::<2>(src, &acc)?;
-                    if v.len() != n {
-                        return Err(count_err(src, &acc, v.len()));
+        let read2 =
+            |src: &mut GltfSource, sem: Semantic| -> Result<Option<Vec<[f32; 2]>>, SceneError> {
+                match prim.get(&sem) {
+                    Some(acc) => {
+                        let v = read_floats::<2>(src, &acc)?;
+                        if v.len() != n {
+                            return Err(count_err(src, &acc, v.len()));
+                        }
+                        Ok(Some(v))
                     }
-                    Ok(Some(v))
+                    None => Ok(None),
                 }
-                None => Ok(None),
-            }
-        };
+            };
         let uvs = read2(&mut self.src, Semantic::TexCoords(0))?;
         let uvs1 = read2(&mut self.src, Semantic::TexCoords(1))?;
         let colors: Option<Vec<[f32; 4]>> = match prim.get(&Semantic::Colors(0)) {
@@ -714,7 +723,11 @@ fn corner_tangents(
     linear: Mat3,
 ) -> Option<Vec<[f32; 4]>> {
     if let Some(ft) = file_tangents {
-        let mirror = if linear.determinant() < 0.0 { -1.0 } else { 1.0 };
+        let mirror = if linear.determinant() < 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
         let tv: Vec<[f32; 4]> = ft
             .iter()
             .map(|t| {
@@ -727,7 +740,11 @@ fn corner_tangents(
                 }
             })
             .collect();
-        return Some(tris.iter().flat_map(|t| t.map(|i| tv[i as usize])).collect());
+        return Some(
+            tris.iter()
+                .flat_map(|t| t.map(|i| tv[i as usize]))
+                .collect(),
+        );
     }
     if !mat.normal_texture.is_some() {
         return None;

@@ -28,4 +28,4 @@ pub use error::{ConfigError, SceneError};
 pub use gltf_loader::load_gltf;
 pub use material::{DiffuseChoice, MaterialOverride};
 pub use scene::{CameraDesc, LoadStats, Scene};
-pub use texture::{ImageData, Sampler, TextureData, Texels};
+pub use texture::{ImageData, Sampler, Texels, TextureData};

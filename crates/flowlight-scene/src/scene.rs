@@ -224,12 +224,12 @@ impl Scene {
         } else {
             let m = &self.materials[material as usize];
             if m.normal_texture.is_some() {
-                if let Some(mapped) = self.normal_mapped(prim, b, ns, uv) {
-                    ns = mapped;
+                if let Some(mut mapped) = self.normal_mapped(prim, b, ns, uv) {
+                    // A mesh whose normals oppose its winding has its whole frame flipped.
                     if ns.dot(ng) < 0.0 {
-                        ns = -ns;
+                        mapped = -mapped;
                     }
-                    ns = bend_towards_viewer(ns, ng, -ray.dir);
+                    ns = bend_towards_viewer(lift_above(mapped, ng), ng, -ray.dir);
                 }
             }
             if ns.dot(ng) < 0.0 {
@@ -262,7 +262,9 @@ impl Scene {
     /// −∂p/∂v (the normal map's +Y is "up" in the image, where v grows downwards). `None`
     /// when the frame degenerates.
     pub fn normal_mapped(&self, prim: u32, b: [f32; 3], n: Vec3, uv: [Vec2; 2]) -> Option<Vec3> {
-        let m = self.materials.get(*self.triangle_material.get(prim as usize)? as usize)?;
+        let m = self
+            .materials
+            .get(*self.triangle_material.get(prim as usize)? as usize)?;
         let r = &m.normal_texture;
         let tex = r.sample(uv, &self.texture_table, false)?;
         let tri = self.triangles[prim as usize].map(|i| i as usize);
@@ -304,9 +306,24 @@ impl Scene {
         }
         let dpdu = (dp1 * d2.y - dp2 * d1.y) / det;
         let dpdv = (dp2 * d1.x - dp1 * d2.x) / det;
-        let w = if n.cross(dpdu).dot(-dpdv) < 0.0 { -1.0 } else { 1.0 };
+        let w = if n.cross(dpdu).dot(-dpdv) < 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
         dpdu.is_finite().then_some((dpdu, w))
     }
+}
+
+/// `n` moved along `ng` until it lies at least ε = 10⁻³ above `ng`'s horizon (a normal map
+/// may tilt the normal below the geometric surface; mirroring it back would turn it around).
+pub fn lift_above(n: Vec3, ng: Vec3) -> Vec3 {
+    const EPS: f32 = 1e-3;
+    let d = n.dot(ng);
+    if d >= EPS {
+        return n;
+    }
+    (n + ng * (EPS - d)).try_normalize().unwrap_or(ng)
 }
 
 /// Bends a perturbed shading normal `ns` (on `ng`'s side) so that the viewer direction `wo`

@@ -66,7 +66,11 @@ impl Attribute {
             ty,
             component_type: 5126,
             normalized: false,
-            bytes: values.iter().flatten().flat_map(|v| v.to_le_bytes()).collect(),
+            bytes: values
+                .iter()
+                .flatten()
+                .flat_map(|v| v.to_le_bytes())
+                .collect(),
         }
     }
 }
@@ -125,8 +129,7 @@ impl Quad {
             .collect();
         let mut views = vec![r#"{"buffer": 0, "byteOffset": 0, "byteLength": 24}"#.to_string()];
         let mut accessors = vec![
-            r#"{"bufferView": 0, "componentType": 5125, "count": 6, "type": "SCALAR"}"#
-                .to_string(),
+            r#"{"bufferView": 0, "componentType": 5125, "count": 6, "type": "SCALAR"}"#.to_string(),
         ];
         let mut attr_json = Vec::new();
         for a in attrs.iter().chain(&self.extra) {

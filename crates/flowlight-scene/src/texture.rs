@@ -184,9 +184,7 @@ mod tests {
     use super::*;
     use glam::Vec2;
 
-    fn png<P: image::PixelWithColorType>(
-        img: image::ImageBuffer<P, Vec<P::Subpixel>>,
-    ) -> Vec<u8>
+    fn png<P: image::PixelWithColorType>(img: image::ImageBuffer<P, Vec<P::Subpixel>>) -> Vec<u8>
     where
         [P::Subpixel]: image::EncodableLayout,
     {
@@ -232,7 +230,8 @@ mod tests {
     #[test]
     fn sixteen_bit_grey_alpha_png_keeps_its_precision() {
         let raw: Vec<u16> = vec![0, 65535, 32768, 1000];
-        let bytes = png(image::ImageBuffer::<image::LumaA<u16>, _>::from_raw(2, 1, raw.clone()).unwrap());
+        let bytes =
+            png(image::ImageBuffer::<image::LumaA<u16>, _>::from_raw(2, 1, raw.clone()).unwrap());
         let img = decode_image(&bytes).unwrap();
         assert_eq!(img.channels, 2);
         assert_eq!(img.texels, Texels::U16(raw.into()));

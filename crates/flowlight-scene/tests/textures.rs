@@ -87,16 +87,28 @@ fn normal_map_tilts_the_shading_normal_by_the_known_angle() {
         let angle = h.ns.dot(Vec3::Z).acos().to_degrees();
         assert!((angle - 30.0).abs() < 0.3, "{tag}: {angle}°");
         // The 8-bit texel for 0 is 128, which decodes to 1/255, not 0.
-        assert!(h.ns.x > 0.49 && (h.ns.y - dx.y).abs() < 1e-5 && dx.y.abs() < 0.005, "{tag}: {}", h.ns);
+        assert!(
+            h.ns.x > 0.49 && (h.ns.y - dx.y).abs() < 1e-5 && dx.y.abs() < 0.005,
+            "{tag}: {}",
+            h.ns
+        );
         let h = hit(&s, 0.75, 0.3);
         assert!((h.ns - dy).length() < 1e-5, "{tag}: {} vs {dy}", h.ns);
-        assert!(h.ns.y > 0.49 && (h.ns.x - dy.x).abs() < 1e-5, "{tag}: {}", h.ns);
+        assert!(
+            h.ns.y > 0.49 && (h.ns.x - dy.x).abs() < 1e-5,
+            "{tag}: {}",
+            h.ns
+        );
         assert_eq!(h.ng, Vec3::Z);
     }
     // A left-handed TANGENT (w = −1) flips the bitangent: the +Y texel now tilts to −Y.
     let (q, _, dy) = normal_map_quad(Some([1.0, 0.0, 0.0, -1.0]), 1.0);
     let h = hit(&load(&q, "lefthanded"), 0.75, 0.3);
-    assert!((h.ns - Vec3::new(dy.x, -dy.y, dy.z)).length() < 1e-5, "{}", h.ns);
+    assert!(
+        (h.ns - Vec3::new(dy.x, -dy.y, dy.z)).length() < 1e-5,
+        "{}",
+        h.ns
+    );
     // normalTexture.scale multiplies X and Y: scale 0 gives back the interpolated normal.
     let (q, dx, _) = normal_map_quad(None, 0.0);
     assert!((hit(&load(&q, "scale0"), 0.25, 0.6).ns - Vec3::Z).length() < 1e-6);
@@ -129,7 +141,12 @@ fn a_normal_map_facing_away_from_the_viewer_is_bent_back() {
 fn alpha_quad(mode: &str, alpha: [u8; 2]) -> Quad {
     // Base colour 2×1 RGBA: left half alpha[0], right half alpha[1].
     Quad {
-        images: vec![png8(2, 1, 4, &[255, 255, 255, alpha[0], 255, 255, 255, alpha[1]])],
+        images: vec![png8(
+            2,
+            1,
+            4,
+            &[255, 255, 255, alpha[0], 255, 255, 255, alpha[1]],
+        )],
         textures: r#"{"source": 0, "sampler": 0}"#.into(),
         samplers: NEAREST.into(),
         material: format!(
@@ -144,7 +161,14 @@ fn alpha_mask_cuts_the_quad_where_alpha_is_below_the_cutoff() {
     let s = load(&alpha_quad("MASK", [255, 0]), "mask");
     assert!(s.has_alpha());
     assert_eq!(s.materials[0].alpha_mode, AlphaMode::Mask);
-    for (x, y) in [(0.1, 0.2), (0.4, 0.9), (0.3, 0.1), (0.6, 0.5), (0.9, 0.1), (0.7, 0.95)] {
+    for (x, y) in [
+        (0.1, 0.2),
+        (0.4, 0.9),
+        (0.3, 0.1),
+        (0.6, 0.5),
+        (0.9, 0.1),
+        (0.7, 0.95),
+    ] {
         let (prim, b1, b2) = bary(x, y);
         let ray = Ray::new(Vec3::new(x, y, 1.0), -Vec3::Z, f32::INFINITY);
         assert_eq!(s.passes_through(&ray, prim, b1, b2), x > 0.5, "({x}, {y})");
@@ -201,7 +225,10 @@ fn texture_transform_moves_the_lookup_to_the_expected_texel() {
     assert_eq!(m.base_color_texture.tex_coord, 1);
     // Normal texture transform read from the JSON path.
     let t = m.normal_texture.transform;
-    assert!((t[4] - 0.125).abs() < 1e-7 && (t[0] - 0.5f32.cos()).abs() < 1e-6, "{t:?}");
+    assert!(
+        (t[4] - 0.125).abs() < 1e-7 && (t[0] - 0.5f32.cos()).abs() < 1e-6,
+        "{t:?}"
+    );
     // Point (0.1, 0.9): uv1 = (0.35, 0.1) → (0.85, 0.35) → texel (3, 1) = 70.
     let h = hit(&s, 0.1, 0.9);
     assert!((h.uv1 - Vec2::new(0.35, 0.1)).length() < 1e-6, "{}", h.uv1);
@@ -235,17 +262,30 @@ fn sampler_wrap_modes_and_filters_reach_the_texture() {
         other => panic!("{other:?}"),
     }
     let t0 = s.texture_table[0];
-    assert_eq!((t0.wrap_s, t0.wrap_t, t0.filter), (Wrap::ClampToEdge, Wrap::MirroredRepeat, Filter::Nearest));
+    assert_eq!(
+        (t0.wrap_s, t0.wrap_t, t0.filter),
+        (Wrap::ClampToEdge, Wrap::MirroredRepeat, Filter::Nearest)
+    );
     let t1 = s.texture_table[1];
     // LINEAR_MIPMAP_LINEAR minification counts as linear.
-    assert_eq!((t1.wrap_s, t1.wrap_t, t1.filter), (Wrap::MirroredRepeat, Wrap::Repeat, Filter::Linear));
+    assert_eq!(
+        (t1.wrap_s, t1.wrap_t, t1.filter),
+        (Wrap::MirroredRepeat, Wrap::Repeat, Filter::Linear)
+    );
     let t2 = s.texture_table[2];
-    assert_eq!((t2.wrap_s, t2.wrap_t, t2.filter), (Wrap::Repeat, Wrap::Repeat, Filter::Linear));
+    assert_eq!(
+        (t2.wrap_s, t2.wrap_t, t2.filter),
+        (Wrap::Repeat, Wrap::Repeat, Filter::Linear)
+    );
     // u = 1.3: clamped → texel 1 (255); mirrored, linear: x = 2.6 − 0.5 = 2.1 between
     // texel 2 → 1 (255) and texel 3 → 0 (0): 0.9·1 + 0.1·0; repeat, linear: texels 0 and 1.
     let uv = Vec2::new(1.3, 0.5);
     assert!((t0.sample(uv, false).x - 1.0).abs() < 1e-6);
-    assert!((t1.sample(uv, false).x - 0.9).abs() < 1e-5, "{}", t1.sample(uv, false).x);
+    assert!(
+        (t1.sample(uv, false).x - 0.9).abs() < 1e-5,
+        "{}",
+        t1.sample(uv, false).x
+    );
     assert!((t2.sample(uv, false).x - 0.9 * 0.0 - 0.1).abs() < 1e-5 || true);
     let rep = t2.sample(uv, false).x; // x = 2.1 → texel 0 (0) and 1 (255): 0.9·0 + 0.1·1.
     assert!((rep - 0.1).abs() < 1e-5, "{rep}");
@@ -281,7 +321,12 @@ fn srgb_decode_applies_to_colour_textures_only() {
 #[test]
 fn color_0_multiplies_the_base_colour_as_floats_and_normalized_bytes() {
     // Float RGB vertex colours: red at x = 0, blue at x = 1 (vertices 1, 2 at x = 1).
-    let rgb = [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]];
+    let rgb = [
+        [1.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, 1.0],
+        [1.0, 0.0, 0.0],
+    ];
     let q = Quad {
         extra: vec![Attribute::floats("COLOR_0", rgb)],
         material: r#"{"pbrMetallicRoughness": {"baseColorFactor": [0.5, 1, 1, 1]}}"#.into(),
@@ -300,8 +345,13 @@ fn color_0_multiplies_the_base_colour_as_floats_and_normalized_bytes() {
             ty: "VEC4",
             component_type: 5121,
             normalized: true,
-            bytes: [[255u8, 0, 0, 51], [0, 0, 255, 51], [0, 0, 255, 51], [255, 0, 0, 51]]
-                .concat(),
+            bytes: [
+                [255u8, 0, 0, 51],
+                [0, 0, 255, 51],
+                [0, 0, 255, 51],
+                [255, 0, 0, 51],
+            ]
+            .concat(),
         }],
         material: r#"{"alphaMode": "MASK", "alphaCutoff": 0.3}"#.into(),
         ..Quad::default()
@@ -361,4 +411,22 @@ fn bad_texture_fields_are_clear_errors() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("normalTexture") && e.contains("offset"), "{e}");
+}
+
+#[test]
+fn a_normal_map_below_the_surface_is_lifted_to_the_horizon_not_mirrored() {
+    // A texel pointing 100° away from +Z towards +X: below the geometric surface.
+    let (s, c) = 100f32.to_radians().sin_cos();
+    let t = [s, 0.0, c].map(|x: f32| ((x + 1.0) * 0.5 * 255.0).round() as u8);
+    let q = Quad {
+        images: vec![png8(1, 1, 3, &t)],
+        textures: r#"{"source": 0}"#.into(),
+        material: r#"{"normalTexture": {"index": 0}}"#.into(),
+        ..Quad::default()
+    };
+    let sc = load(&q, "below");
+    // Seen from +X (so the bend towards the viewer leaves it alone), it stays tilted to +X
+    // and just above the horizon.
+    let h = hit_from(&sc, 0.5, 0.3, Vec3::new(1.0, 0.0, 1.0));
+    assert!(h.ns.x > 0.99 && h.ns.z > 0.0 && h.ns.z < 0.01, "{}", h.ns);
 }
