@@ -7,7 +7,13 @@
 //!   TRIANGLE_FAN converted to lists; points and lines are skipped with a warning and counted.
 //! - Primitives without NORMAL get flat per-face normals by duplicating their vertices (the glTF
 //!   spec asks for flat normals then).
-//! - Only the materials and images that loaded primitives use are converted and decoded.
+//! - Only the materials and images that loaded primitives use are converted and decoded; an
+//!   image used by several textures is decoded once and shared.
+//! - Vertex attributes: TEXCOORD_0 and TEXCOORD_1, COLOR_0 (VEC3 or VEC4, float or
+//!   normalized integers), TANGENT (or MikkTSpace tangents when the material has a normal map
+//!   and the file none, see `corner_tangents`). An attribute no primitive has takes no memory.
+//! - Texture references keep their `texCoord` and `KHR_texture_transform`; `alphaMode` and
+//!   `alphaCutoff` are read for alpha testing (see `docs/gltf.md`).
 //! - Degenerate triangles (a repeated index, a NaN or infinite vertex, zero area) are dropped
 //!   and counted; an index beyond the vertex count is an error.
 //! - Every remaining triangle whose material emits becomes an [`Emitter`].

@@ -301,7 +301,7 @@ impl Scene {
         let (dp1, dp2) = (p1 - p0, p2 - p0);
         let (d1, d2) = (*u1 - *u0, *u2 - *u0);
         let det = d1.x * d2.y - d1.y * d2.x;
-        if !(det.abs() > 1e-20) {
+        if det.is_nan() || det.abs() <= 1e-20 {
             return None;
         }
         let dpdu = (dp1 * d2.y - dp2 * d1.y) / det;

@@ -133,7 +133,7 @@ impl Quad {
         ];
         let mut attr_json = Vec::new();
         for a in attrs.iter().chain(&self.extra) {
-            while bytes.len() % 4 != 0 {
+            while !bytes.len().is_multiple_of(4) {
                 bytes.push(0);
             }
             let off = bytes.len();
