@@ -257,6 +257,10 @@ pub struct SceneOptions {
     /// `RTC_SCENE_FLAG_ROBUST`: rays on shared edges and vertices never slip through.
     pub robust: bool,
     pub quality: BuildQuality,
+    /// `RTC_SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS`: needed by
+    /// [`EmbreeScene::intersect_filtered`] and [`EmbreeScene::occluded_filtered`] (alpha
+    /// testing); without it their filter is never called.
+    pub hit_filter: bool,
 }
 
 impl Default for SceneOptions {
@@ -264,6 +268,7 @@ impl Default for SceneOptions {
         SceneOptions {
             robust: true,
             quality: BuildQuality::Medium,
+            hit_filter: false,
         }
     }
 }
@@ -328,9 +333,13 @@ impl EmbreeScene {
                 scene,
                 triangles: triangles.len(),
             };
-            // Alpha-tested queries pass their filter in the call's arguments; without one
-            // the flag costs nothing.
-            let mut flags = RTCSceneFlags::FILTER_FUNCTION_IN_ARGUMENTS;
+            // Alpha-tested queries pass their filter in the call's arguments. The flag is set
+            // only for scenes that need it: it selects other kernels, which (measured) count a
+            // hit at exactly the ray's tfar, where the default ones do not.
+            let mut flags = RTCSceneFlags::NONE;
+            if options.hit_filter {
+                flags |= RTCSceneFlags::FILTER_FUNCTION_IN_ARGUMENTS;
+            }
             if options.robust {
                 flags |= RTCSceneFlags::ROBUST;
             }

@@ -68,10 +68,13 @@ impl EmbreeIntersector {
         Self::build_with(scene, options)
     }
 
+    /// Builds with `options`; the argument-filter flag is set when the scene has
+    /// alpha-tested materials.
     pub fn build_with(
         scene: &Scene,
-        options: flowlight_embree::SceneOptions,
+        mut options: flowlight_embree::SceneOptions,
     ) -> Result<(EmbreeIntersector, Duration), String> {
+        options.hit_filter |= scene.has_alpha();
         // Opening the library and making the device is not part of the build time.
         flowlight_embree::device()?;
         let start = Instant::now();

@@ -222,8 +222,11 @@ impl Scene {
         if ns == Vec3::ZERO || !ns.is_finite() {
             ns = ng;
         } else {
-            let m = &self.materials[material as usize];
-            if m.normal_texture.is_some() {
+            let mapped = self
+                .materials
+                .get(material as usize)
+                .is_some_and(|m| m.normal_texture.is_some());
+            if mapped {
                 if let Some(mut mapped) = self.normal_mapped(prim, b, ns, uv) {
                     // A mesh whose normals oppose its winding has its whole frame flipped.
                     if ns.dot(ng) < 0.0 {
