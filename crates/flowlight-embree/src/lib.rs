@@ -334,8 +334,8 @@ impl EmbreeScene {
                 triangles: triangles.len(),
             };
             // Alpha-tested queries pass their filter in the call's arguments. The flag is set
-            // only for scenes that need it: it selects other kernels, which (measured) count a
-            // hit at exactly the ray's tfar, where the default ones do not.
+            // only for scenes that need it, so that every other scene keeps Embree's default
+            // kernels exactly as before.
             let mut flags = RTCSceneFlags::NONE;
             if options.hit_filter {
                 flags |= RTCSceneFlags::FILTER_FUNCTION_IN_ARGUMENTS;
