@@ -22,6 +22,10 @@
 //!   (`IntersectTriangle`, §6.5.3 and §6.8.4) with a tighter, still conservative, shear error
 //!   term so that grazing hits are kept (see [`WatertightRay::intersect`]). Rays through an
 //!   edge or vertex shared by triangles of a closed mesh hit at least one of them.
+//! * **Hit filtering** (alpha MASK / BLEND): [`Bvh::intersect_filtered`] and
+//!   [`Bvh::occluded_filtered`] ask a [`HitFilter`] about every candidate before accepting
+//!   it, like Embree's filter callbacks; a rejected candidate leaves `t_max` unchanged, so
+//!   the closest accepted hit is found. The unfiltered queries compile the filter away.
 //!
 //! Instancing: [`TwoLevelBvh`] is a hierarchy over instances (affine transforms) of per-mesh
 //! [`Bvh`]s; see the `instanced` module.
@@ -63,6 +67,12 @@ const fn gamma(n: u32) -> f32 {
     let e = f32::EPSILON * 0.5;
     (n as f32 * e) / (1.0 - n as f32 * e)
 }
+
+/// Decides whether a candidate hit of triangle `prim` at barycentrics `(b1, b2)` counts
+/// (`true`) or the ray passes through it (`false`): alpha testing. It is called for
+/// candidates in any order, possibly more than once per triangle, so it must be a pure
+/// function of its arguments (and of the ray it was made for).
+pub type HitFilter<'a> = &'a dyn Fn(u32, f32, f32) -> bool;
 
 /// Closest hit of a ray with the triangles of a [`Bvh`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -161,19 +171,36 @@ impl Bvh {
 
     /// Closest hit with `t ∈ (0, ray.t_max)`, or `None`.
     pub fn intersect(&self, ray: &Ray) -> Option<TriangleHit> {
-        self.traverse::<false>(ray, &mut 0)
+        self.traverse::<false, _>(ray, &mut 0, &|_, _, _| true)
     }
 
     /// Whether any triangle is hit with `t ∈ (0, ray.t_max)`. Returns at the first hit found.
     pub fn occluded(&self, ray: &Ray) -> bool {
-        self.traverse::<true>(ray, &mut 0).is_some()
+        self.traverse::<true, _>(ray, &mut 0, &|_, _, _| true)
+            .is_some()
+    }
+
+    /// [`Bvh::intersect`] counting only the hits `accept` keeps (alpha testing): a rejected
+    /// candidate does not shorten the ray, so traversal finds the closest accepted hit.
+    pub fn intersect_filtered(&self, ray: &Ray, accept: HitFilter) -> Option<TriangleHit> {
+        self.traverse::<false, _>(ray, &mut 0, &accept)
+    }
+
+    /// [`Bvh::occluded`] counting only the hits `accept` keeps.
+    pub fn occluded_filtered(&self, ray: &Ray, accept: HitFilter) -> bool {
+        self.traverse::<true, _>(ray, &mut 0, &accept).is_some()
     }
 
     /// Iterative traversal with a fixed stack, nearer child first. `ANY_HIT` returns the first
     /// hit found instead of the closest. `tests` counts ray/triangle tests (for tests; the
     /// public queries pass a dead local that the optimiser removes).
     #[inline(always)]
-    fn traverse<const ANY_HIT: bool>(&self, ray: &Ray, tests: &mut usize) -> Option<TriangleHit> {
+    fn traverse<const ANY_HIT: bool, F: Fn(u32, f32, f32) -> bool>(
+        &self,
+        ray: &Ray,
+        tests: &mut usize,
+        accept: &F,
+    ) -> Option<TriangleHit> {
         if self.nodes.is_empty() {
             return None;
         }
@@ -196,6 +223,9 @@ impl Bvh {
                     {
                         *tests += 1;
                         if let Some((t, b1, b2)) = wray.intersect(tri, t_max) {
+                            if !accept(prim, b1, b2) {
+                                continue;
+                            }
                             t_max = t;
                             hit = Some(TriangleHit { t, prim, b1, b2 });
                             if ANY_HIT {
@@ -1030,9 +1060,13 @@ mod tests {
         // From the far end towards the near end: the closest hit is the last layer reached.
         let ray = Ray::new(Vec3::new(0.3, 0.2, 100.0), -Vec3::Z, f32::INFINITY);
         let mut any_tests = 0;
-        let any = bvh.traverse::<true>(&ray, &mut any_tests).unwrap();
+        let any = bvh
+            .traverse::<true, _>(&ray, &mut any_tests, &|_, _, _| true)
+            .unwrap();
         let mut closest_tests = 0;
-        let closest = bvh.traverse::<false>(&ray, &mut closest_tests).unwrap();
+        let closest = bvh
+            .traverse::<false, _>(&ray, &mut closest_tests, &|_, _, _| true)
+            .unwrap();
         assert!(
             any_tests <= MAX_LEAF_SIZE,
             "occluded tested {any_tests} triangles"

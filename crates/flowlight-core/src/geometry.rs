@@ -39,8 +39,12 @@ pub struct SurfaceHit {
     pub ng: Vec3,
     /// Unit shading normal (interpolated vertex normal), on the same side as `ng`.
     pub ns: Vec3,
-    /// Texture coordinates (0 when the mesh has none).
+    /// Texture coordinates, set TEXCOORD_0 (0 when the mesh has none).
     pub uv: Vec2,
+    /// Texture coordinates, set TEXCOORD_1 (0 when the mesh has none).
+    pub uv1: Vec2,
+    /// Vertex colour COLOR_0, linear RGBA ((1, 1, 1, 1) when the mesh has none).
+    pub color: [f32; 4],
     /// Global triangle index in the scene.
     pub prim: u32,
     /// Index into the scene's material table.
@@ -108,6 +112,12 @@ pub fn offset_ray_origin(p: Vec3, p_error: Vec3, ng: Vec3, w: Vec3) -> Vec3 {
 }
 
 impl SurfaceHit {
+    /// Both texture-coordinate sets, for [`crate::material::Material::resolve`].
+    #[inline]
+    pub fn uvs(&self) -> [Vec2; 2] {
+        [self.uv, self.uv1]
+    }
+
     /// A ray leaving this hit in direction `dir` (unit), safe from self-intersection.
     #[inline]
     pub fn spawn_ray(&self, dir: Vec3) -> Ray {

@@ -78,6 +78,10 @@ pub struct PathVertex {
     pub ng: Vec3,
     pub ns: Vec3,
     pub uv: Vec2,
+    /// TEXCOORD_1 and COLOR_0 at the vertex, so that a path's BSDFs can be re-evaluated
+    /// with their textures.
+    pub uv1: Vec2,
+    pub color: [f32; 4],
     pub prim: u32,
     pub material: u32,
     pub emitter: i32,
@@ -87,6 +91,12 @@ pub struct PathVertex {
 }
 
 impl PathVertex {
+    /// Both texture-coordinate sets, for [`crate::material::Material::resolve`].
+    #[inline]
+    pub fn uvs(&self) -> [Vec2; 2] {
+        [self.uv, self.uv1]
+    }
+
     /// The vertex at a ray hit, scattered with `node` by BSDF `component`.
     pub fn from_hit(hit: &SurfaceHit, node: NodeType, component: u8) -> PathVertex {
         PathVertex {
@@ -95,6 +105,8 @@ impl PathVertex {
             ng: hit.ng,
             ns: hit.ns,
             uv: hit.uv,
+            uv1: hit.uv1,
+            color: hit.color,
             prim: hit.prim,
             material: hit.material,
             emitter: hit.emitter,
@@ -112,6 +124,8 @@ impl PathVertex {
             ng: forward,
             ns: forward,
             uv: Vec2::ZERO,
+            uv1: Vec2::ZERO,
+            color: [1.0; 4],
             prim: u32::MAX,
             material: u32::MAX,
             emitter: -1,
@@ -129,6 +143,8 @@ impl PathVertex {
             ng: self.ng,
             ns: self.ns,
             uv: self.uv,
+            uv1: self.uv1,
+            color: self.color,
             prim: self.prim,
             material: self.material,
             emitter: self.emitter,

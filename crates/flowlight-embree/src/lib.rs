@@ -11,10 +11,10 @@
 //! [`abi`] and docs/embree.md.
 
 use embree4_sys::{
-    RTCBufferType, RTCBuildQuality, RTCDevice, RTCFormat, RTCGeometry, RTCGeometryType, RTCRay,
-    RTCScene, RTCSceneFlags,
+    RTCBufferType, RTCBuildQuality, RTCDevice, RTCFeatureFlags, RTCFormat, RTCGeometry,
+    RTCGeometryType, RTCRay, RTCRayQueryFlags, RTCScene, RTCSceneFlags,
 };
-use flowlight_bvh::{InstanceHit, TriangleHit};
+use flowlight_bvh::{HitFilter, InstanceHit, TriangleHit};
 use flowlight_core::geometry::Ray;
 use glam::{Mat4, Vec3};
 use std::ffi::{c_char, c_uint, c_void};
@@ -96,6 +96,7 @@ struct Api {
     commit_scene: Fn<unsafe extern "C" fn(RTCScene)>,
     set_geometry_instanced_scene: Fn<unsafe extern "C" fn(RTCGeometry, RTCScene)>,
     set_geometry_transform: Fn<unsafe extern "C" fn(RTCGeometry, c_uint, RTCFormat, *const c_void)>,
+    /// The third argument is `RTCIntersectArguments*` (NULL for the defaults).
     intersect1: Fn<unsafe extern "C" fn(RTCScene, *mut abi::RTCRayHit, *mut c_void)>,
     occluded1: Fn<unsafe extern "C" fn(RTCScene, *mut RTCRay, *mut c_void)>,
 }
@@ -273,6 +274,10 @@ pub struct SceneOptions {
     /// `RTC_SCENE_FLAG_ROBUST`: rays on shared edges and vertices never slip through.
     pub robust: bool,
     pub quality: BuildQuality,
+    /// `RTC_SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS`: needed by
+    /// [`EmbreeScene::intersect_filtered`] and [`EmbreeScene::occluded_filtered`] (alpha
+    /// testing); without it their filter is never called.
+    pub hit_filter: bool,
 }
 
 impl Default for SceneOptions {
@@ -280,6 +285,7 @@ impl Default for SceneOptions {
         SceneOptions {
             robust: true,
             quality: BuildQuality::Medium,
+            hit_filter: false,
         }
     }
 }
@@ -344,7 +350,13 @@ impl EmbreeScene {
                 scene,
                 triangles: triangles.len(),
             };
+            // Alpha-tested queries pass their filter in the call's arguments. The flag is set
+            // only for scenes that need it, so that every other scene keeps Embree's default
+            // kernels exactly as before.
             let mut flags = RTCSceneFlags::NONE;
+            if options.hit_filter {
+                flags |= RTCSceneFlags::FILTER_FUNCTION_IN_ARGUMENTS;
+            }
             if options.robust {
                 flags |= RTCSceneFlags::ROBUST;
             }
@@ -466,6 +478,75 @@ impl EmbreeScene {
         let mut r = Self::rtc_ray(ray);
         // SAFETY: as in `intersect`; Embree sets tfar to -inf when the ray is blocked.
         unsafe { (self.dev.api.occluded1)(self.scene, &mut r, std::ptr::null_mut()) };
+        r.tfar == f32::NEG_INFINITY
+    }
+
+    /// [`EmbreeScene::intersect`] counting only the hits `accept` keeps (alpha testing),
+    /// through an argument filter callback (Embree 4 `RTCIntersectArguments::filter`, invoked
+    /// for every candidate hit; a rejected one leaves the ray unchanged).
+    pub fn intersect_filtered(&self, ray: &Ray, accept: HitFilter) -> Option<TriangleHit> {
+        let mut ctx = FilterContext::new(&accept);
+        let mut args = filter::IntersectArguments {
+            flags: RTCRayQueryFlags::INVOKE_ARGUMENT_FILTER,
+            feature_mask: RTCFeatureFlags::RTC_FEATURE_FLAG_ALL,
+            context: &mut ctx as *mut FilterContext as *mut c_void,
+            filter: Some(filter_callback),
+            intersect: None,
+            min_width_distance_factor: 0.0,
+            _pad: [0; 4],
+        };
+        let mut rh = abi::RTCRayHit {
+            ray: Self::rtc_ray(ray),
+            hit: abi::RTCHit {
+                ng_x: 0.0,
+                ng_y: 0.0,
+                ng_z: 0.0,
+                u: 0.0,
+                v: 0.0,
+                prim_id: u32::MAX,
+                geom_id: u32::MAX,
+                inst_id: [u32::MAX],
+                inst_prim_id: [u32::MAX],
+            },
+        };
+        // SAFETY: a committed scene, a 4.4-layout ray/hit, and arguments whose context
+        // outlives the call; the callback only reads the context it is given.
+        unsafe {
+            (self.dev.api.intersect1)(
+                self.scene,
+                &mut rh,
+                &mut args as *mut filter::IntersectArguments as *mut c_void,
+            )
+        };
+        (rh.hit.geom_id != u32::MAX).then_some(TriangleHit {
+            t: rh.ray.tfar,
+            prim: rh.hit.prim_id,
+            b1: rh.hit.u,
+            b2: rh.hit.v,
+        })
+    }
+
+    /// [`EmbreeScene::occluded`] counting only the hits `accept` keeps.
+    pub fn occluded_filtered(&self, ray: &Ray, accept: HitFilter) -> bool {
+        let mut ctx = FilterContext::new(&accept);
+        let mut args = filter::IntersectArguments {
+            flags: RTCRayQueryFlags::INVOKE_ARGUMENT_FILTER,
+            feature_mask: RTCFeatureFlags::RTC_FEATURE_FLAG_ALL,
+            context: &mut ctx as *mut FilterContext as *mut c_void,
+            filter: Some(filter_callback),
+            intersect: None,
+            min_width_distance_factor: 0.0,
+            _pad: [0; 4],
+        };
+        let mut r = Self::rtc_ray(ray);
+        // SAFETY: as in `intersect_filtered` (RTCOccludedArguments has the same layout).
+        unsafe {
+            (self.dev.api.occluded1)(
+                self.scene,
+                &mut r,
+                &mut args as *mut filter::IntersectArguments as *mut c_void,
+            )
+        };
         r.tfar == f32::NEG_INFINITY
     }
 
@@ -623,6 +704,79 @@ impl Drop for EmbreeInstancedScene {
     fn drop(&mut self) {
         // SAFETY: the top scene is not used after this; the mesh scenes drop after it.
         unsafe { (self.dev.api.release_scene)(self.top) }
+    }
+}
+
+/// The ray query context handed to Embree for a filtered query: Embree's own
+/// `RTCRayQueryContext` first (4.4 with instance arrays: `instID[1]`, `instPrimID[1]`; two
+/// spare words in case a build has more), then the filter, which the callback finds by
+/// casting the context pointer back (the layout Embree's tutorials use for user data).
+#[repr(C)]
+struct FilterContext<'a, 'f> {
+    embree: [u32; 4],
+    accept: &'a HitFilter<'f>,
+}
+
+impl<'a, 'f> FilterContext<'a, 'f> {
+    fn new(accept: &'a HitFilter<'f>) -> Self {
+        // rtcInitRayQueryContext: every instance ID invalid.
+        FilterContext {
+            embree: [u32::MAX; 4],
+            accept,
+        }
+    }
+}
+
+/// Argument structures for filtered queries.
+mod filter {
+    use embree4_sys::{RTCFeatureFlags, RTCFilterFunctionN, RTCRayQueryFlags};
+    use std::ffi::c_void;
+
+    /// `RTCIntersectArguments` / `RTCOccludedArguments` (identical layouts: flags, feature
+    /// mask, context, filter, intersect/occluded callback), followed by
+    /// `minWidthDistanceFactor` for libraries built with `RTC_MIN_WIDTH` (0 = off) and padding,
+    /// so a library reading either layout reads initialised memory.
+    #[repr(C)]
+    pub struct IntersectArguments {
+        pub flags: RTCRayQueryFlags,
+        pub feature_mask: RTCFeatureFlags,
+        pub context: *mut c_void,
+        pub filter: RTCFilterFunctionN,
+        pub intersect: Option<unsafe extern "C" fn(*const c_void)>,
+        pub min_width_distance_factor: f32,
+        pub _pad: [u32; 4],
+    }
+
+    const _: () = assert!(std::mem::offset_of!(IntersectArguments, filter) == 16);
+    const _: () = assert!(
+        std::mem::offset_of!(IntersectArguments, min_width_distance_factor)
+            == std::mem::size_of::<embree4_sys::RTCIntersectArguments>()
+    );
+}
+
+/// Embree's filter callback for filtered queries: for each valid lane of the `N`-wide
+/// (structure-of-arrays) hit, asks the context's filter about `(primID, u, v)` and marks the
+/// lane invalid (`valid[i] = 0`) when the ray passes through. A panic in the filter counts as
+/// "keep the hit" (it must not unwind into Embree).
+unsafe extern "C" fn filter_callback(args: *const embree4_sys::RTCFilterFunctionNArguments) {
+    let a = &*args;
+    let ctx = &*(a.context as *const FilterContext);
+    let n = a.N as usize;
+    let hit = a.hit as *const u32;
+    for i in 0..n {
+        if *a.valid.add(i) == 0 {
+            continue;
+        }
+        // RTCHitN: Ng_x[N], Ng_y[N], Ng_z[N], u[N], v[N], primID[N], geomID[N], ...
+        let u = f32::from_bits(*hit.add(3 * n + i));
+        let v = f32::from_bits(*hit.add(4 * n + i));
+        let prim = *hit.add(5 * n + i);
+        let keep =
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| (ctx.accept)(prim, u, v)))
+                .unwrap_or(true);
+        if !keep {
+            *a.valid.add(i) = 0;
+        }
     }
 }
 

@@ -120,6 +120,7 @@ impl Session {
             robust: config.robust,
             quality: flowlight_embree::BuildQuality::parse(&config.build_quality)
                 .map_err(|e| format!("{}: render.build_quality: {e}", config.path.display()))?,
+            ..Default::default()
         };
         let (intersector, build_time) = build_intersector_with(config.intersector, &scene, options)
             .map_err(|e| format!("{}: {e}", config.path.display()))?;

@@ -80,13 +80,12 @@ pub fn dirac_component(
         .map(|(i, (c, w))| (i, c, w))
 }
 
-/// The BSDF at a stored vertex.
+/// The BSDF at a stored vertex, with the material's textures and vertex colour applied at
+/// the vertex's texture coordinates (the same BSDF [`Scene::bsdf`] gives at the hit).
 pub fn vertex_bsdf(scene: &Scene, v: &PathVertex) -> Option<Bsdf> {
     let m = scene.materials.get(v.material as usize)?;
-    Some(Bsdf::from_material(
-        m,
-        m.base_color_at(v.uv, scene.textures),
-    ))
+    let r = m.resolve(v.uvs(), v.color, scene.textures);
+    Some(Bsdf::from_material(&r.material, r.base))
 }
 
 /// Directions at an interior vertex: local frame, wo (to the previous vertex), wi (to the next).

@@ -179,8 +179,8 @@ fn matching_vertex(
         return (!scene.lights.emitted(i, hit.p, towards).is_black())
             .then(|| PathVertex::from_hit(hit, NodeType::Light, 0));
     }
-    let m = scene.materials.get(hit.material as usize)?;
-    let bsdf = Bsdf::from_material(m, m.base_color_at(hit.uv, scene.textures));
+    scene.materials.get(hit.material as usize)?;
+    let bsdf = scene.bsdf(hit);
     match kind {
         WeakNode::Smooth => bsdf
             .has_non_delta()

@@ -7,7 +7,13 @@
 //!   TRIANGLE_FAN converted to lists; points and lines are skipped with a warning and counted.
 //! - Primitives without NORMAL get flat per-face normals by duplicating their vertices (the glTF
 //!   spec asks for flat normals then).
-//! - Only the materials and images that loaded primitives use are converted and decoded.
+//! - Only the materials and images that loaded primitives use are converted and decoded; an
+//!   image used by several textures is decoded once and shared.
+//! - Vertex attributes: TEXCOORD_0 and TEXCOORD_1, COLOR_0 (VEC3 or VEC4, float or
+//!   normalized integers), TANGENT (or MikkTSpace tangents when the material has a normal map
+//!   and the file none, see `corner_tangents`). An attribute no primitive has takes no memory.
+//! - Texture references keep their `texCoord` and `KHR_texture_transform`; `alphaMode` and
+//!   `alphaCutoff` are read for alpha testing (see `docs/gltf.md`).
 //! - Degenerate triangles (a repeated index, a NaN or infinite vertex, zero area) are dropped
 //!   and counted; an index beyond the vertex count is an error.
 //! - Every remaining triangle whose emission, integrated over it (texture included), is
@@ -24,9 +30,9 @@ use crate::lights::{mean_emission, punctual_light};
 use crate::material::{convert, MaterialOverride};
 use crate::scene::{triangle_area, triangle_normal, CameraDesc, CameraProjection, Scene};
 use crate::source::GltfSource;
-use crate::texture::load_image;
+use crate::texture::{load_image, ImageData, Sampler, TextureData};
 use flowlight_core::light::Emitter;
-use flowlight_core::material::Material;
+use flowlight_core::material::{AlphaMode, Material, TextureRef};
 use flowlight_core::sampling::build_cdf;
 use glam::{Mat3, Mat4, Vec2, Vec3};
 use gltf::mesh::{Mode, Semantic};
@@ -65,8 +71,63 @@ struct Loader<'a> {
     scene: Scene,
     /// glTF material index (None = default material) to scene material index.
     material_map: HashMap<Option<usize>, u32>,
-    /// glTF image index to scene texture index.
-    image_map: HashMap<usize, i32>,
+    /// glTF image index to its decoded image (shared by the textures that use it).
+    image_map: HashMap<usize, ImageData>,
+    /// glTF texture index to scene texture index.
+    texture_map: HashMap<usize, i32>,
+    /// Whether some loaded primitive has TEXCOORD_1, COLOR_0, tangents (read or computed).
+    any_uv1: bool,
+    any_color: bool,
+    any_tangent: bool,
+}
+
+/// A `KHR_texture_transform` as read from the file.
+#[derive(Clone, Copy, Debug)]
+struct Transform {
+    offset: [f32; 2],
+    rotation: f32,
+    scale: [f32; 2],
+    tex_coord: Option<u32>,
+}
+
+/// Parses a `KHR_texture_transform` object given as JSON (for the texture infos the `gltf`
+/// crate does not type: normal and occlusion).
+fn transform_from_json(v: Option<&gltf::json::Value>) -> Result<Option<Transform>, String> {
+    let Some(v) = v else { return Ok(None) };
+    let num = |x: &gltf::json::Value, what: &str| {
+        x.as_f64()
+            .map(|f| f as f32)
+            .ok_or_else(|| format!("KHR_texture_transform.{what} is not a number"))
+    };
+    let pair = |key: &str, default: [f32; 2]| -> Result<[f32; 2], String> {
+        match v.get(key) {
+            None => Ok(default),
+            Some(a) => match a.as_array().map(|a| a.as_slice()) {
+                Some([x, y]) => Ok([num(x, key)?, num(y, key)?]),
+                _ => Err(format!(
+                    "KHR_texture_transform.{key} is not a pair of numbers"
+                )),
+            },
+        }
+    };
+    let rotation = match v.get("rotation") {
+        None => 0.0,
+        Some(r) => num(r, "rotation")?,
+    };
+    let tex_coord = match v.get("texCoord") {
+        None => None,
+        Some(c) => Some(
+            c.as_u64()
+                .and_then(|c| u32::try_from(c).ok())
+                .ok_or("KHR_texture_transform.texCoord is not a non-negative integer")?,
+        ),
+    };
+    Ok(Some(Transform {
+        offset: pair("offset", [0.0, 0.0])?,
+        rotation,
+        scale: pair("scale", [1.0, 1.0])?,
+        tex_coord,
+    }))
 }
 
 fn load_inner(
@@ -80,6 +141,10 @@ fn load_inner(
         scene: Scene::default(),
         material_map: HashMap::new(),
         image_map: HashMap::new(),
+        texture_map: HashMap::new(),
+        any_uv1: false,
+        any_color: false,
+        any_tangent: false,
     };
     loader.walk()?;
     loader.finish()
@@ -268,20 +333,59 @@ impl Loader<'_> {
             None => Material::default(),
             Some(_) => convert(m).map_err(|e| merr(self.file(), e))?,
         };
-        if let Some(info) = m.pbr_metallic_roughness().base_color_texture() {
-            let image = info.texture().source();
-            let ti = match self.image_map.get(&image.index()) {
-                Some(&t) => t,
-                None => {
-                    let data = load_image(&mut self.src, &image, true)?;
-                    self.scene.textures.push(data);
-                    self.scene.stats.images_decoded += 1;
-                    let t = (self.scene.textures.len() - 1) as i32;
-                    self.image_map.insert(image.index(), t);
-                    t
-                }
-            };
-            mat.base_color_texture = ti;
+        let pbr = m.pbr_metallic_roughness();
+        mat.base_alpha = pbr.base_color_factor()[3];
+        mat.alpha_mode = match m.alpha_mode() {
+            gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
+            gltf::material::AlphaMode::Mask => AlphaMode::Mask,
+            gltf::material::AlphaMode::Blend => AlphaMode::Blend,
+        };
+        mat.alpha_cutoff = m.alpha_cutoff().unwrap_or(0.5);
+        if !(mat.alpha_cutoff.is_finite() && mat.alpha_cutoff >= 0.0) {
+            return Err(merr(
+                self.file(),
+                format!("alphaCutoff = {} must be finite and >= 0", mat.alpha_cutoff),
+            ));
+        }
+        let tt = |i: &gltf::texture::Info| {
+            i.texture_transform().map(|t| Transform {
+                offset: t.offset(),
+                rotation: t.rotation(),
+                scale: t.scale(),
+                tex_coord: t.tex_coord(),
+            })
+        };
+        if let Some(info) = pbr.base_color_texture() {
+            mat.base_color_texture =
+                self.texture_ref(&info.texture(), info.tex_coord(), tt(&info), &name)?;
+        }
+        if let Some(info) = pbr.metallic_roughness_texture() {
+            mat.metallic_roughness_texture =
+                self.texture_ref(&info.texture(), info.tex_coord(), tt(&info), &name)?;
+        }
+        if let Some(info) = m.emissive_texture() {
+            mat.emissive_texture =
+                self.texture_ref(&info.texture(), info.tex_coord(), tt(&info), &name)?;
+        }
+        if let Some(n) = m.normal_texture() {
+            let t = transform_from_json(n.extension_value("KHR_texture_transform"))
+                .map_err(|e| merr(self.file(), format!("normalTexture: {e}")))?;
+            let mut r = self.texture_ref(&n.texture(), n.tex_coord(), t, &name)?;
+            r.scale = n.scale();
+            if !r.scale.is_finite() {
+                return Err(merr(
+                    self.file(),
+                    "normalTexture.scale is not finite".into(),
+                ));
+            }
+            mat.normal_texture = r;
+        }
+        if let Some(o) = m.occlusion_texture() {
+            let t = transform_from_json(o.extension_value("KHR_texture_transform"))
+                .map_err(|e| merr(self.file(), format!("occlusionTexture: {e}")))?;
+            let mut r = self.texture_ref(&o.texture(), o.tex_coord(), t, &name)?;
+            r.scale = o.strength();
+            mat.occlusion_texture = r;
         }
         if let Some(o) = self.overrides.get(&name) {
             o.validate()
@@ -293,6 +397,62 @@ impl Loader<'_> {
         let i = (self.scene.materials.len() - 1) as u32;
         self.material_map.insert(m.index(), i);
         Ok(i)
+    }
+
+    /// The scene texture for glTF texture `tex` (decoding its image on first use; images are
+    /// shared between textures), as a reference through texture-coordinate set `tex_coord`
+    /// with an optional `KHR_texture_transform`.
+    fn texture_ref(
+        &mut self,
+        tex: &gltf::Texture,
+        tex_coord: u32,
+        transform: Option<Transform>,
+        material: &str,
+    ) -> Result<TextureRef, SceneError> {
+        let index = match self.texture_map.get(&tex.index()) {
+            Some(&t) => t,
+            None => {
+                let image = tex.source();
+                let data = match self.image_map.get(&image.index()) {
+                    Some(d) => d.clone(),
+                    None => {
+                        let d = load_image(&mut self.src, &image)?;
+                        self.scene.stats.images_decoded += 1;
+                        self.image_map.insert(image.index(), d.clone());
+                        d
+                    }
+                };
+                self.scene.textures.push(TextureData {
+                    image: data,
+                    sampler: Sampler::from_gltf(&tex.sampler()),
+                });
+                let t = (self.scene.textures.len() - 1) as i32;
+                self.texture_map.insert(tex.index(), t);
+                t
+            }
+        };
+        let mut r = TextureRef::new(index, tex_coord);
+        if let Some(t) = transform {
+            r = r.with_transform(t.offset, t.rotation, t.scale);
+            if let Some(c) = t.tex_coord {
+                r.tex_coord = c;
+            }
+            if !r.transform.iter().all(|v| v.is_finite()) {
+                return Err(SceneError::Material {
+                    file: self.file(),
+                    material: material.to_string(),
+                    reason: format!(
+                        "texture {}: KHR_texture_transform is not finite",
+                        tex.index()
+                    ),
+                });
+            }
+        }
+        if r.tex_coord > 1 {
+            tracing::warn!(file = %self.src.file.display(), "material '{material}': texture {} reads TEXCOORD_{}; only sets 0 and 1 are loaded, it reads TEXCOORD_1", tex.index(), r.tex_coord);
+            r.tex_coord = 1;
+        }
+        Ok(r)
     }
 
     fn primitive(
@@ -334,13 +494,43 @@ impl Loader<'_> {
             None => None,
         };
         let material = prim.material();
-        let uv_set = material
-            .pbr_metallic_roughness()
-            .base_color_texture()
-            .map_or(0, |t| t.tex_coord());
-        let uvs = match prim.get(&Semantic::TexCoords(uv_set)) {
+        let read2 =
+            |src: &mut GltfSource, sem: Semantic| -> Result<Option<Vec<[f32; 2]>>, SceneError> {
+                match prim.get(&sem) {
+                    Some(acc) => {
+                        let v = read_floats::<2>(src, &acc)?;
+                        if v.len() != n {
+                            return Err(count_err(src, &acc, v.len()));
+                        }
+                        Ok(Some(v))
+                    }
+                    None => Ok(None),
+                }
+            };
+        let uvs = read2(&mut self.src, Semantic::TexCoords(0))?;
+        let uvs1 = read2(&mut self.src, Semantic::TexCoords(1))?;
+        let colors: Option<Vec<[f32; 4]>> = match prim.get(&Semantic::Colors(0)) {
             Some(acc) => {
-                let v = read_floats::<2>(&mut self.src, &acc)?;
+                let v: Vec<[f32; 4]> = match acc.dimensions() {
+                    gltf::accessor::Dimensions::Vec3 => read_floats::<3>(&mut self.src, &acc)?
+                        .into_iter()
+                        .map(|[r, g, b]| [r, g, b, 1.0])
+                        .collect(),
+                    _ => read_floats::<4>(&mut self.src, &acc)?,
+                };
+                if v.len() != n {
+                    return Err(count_err(&self.src, &acc, v.len()));
+                }
+                Some(v)
+            }
+            None => None,
+        };
+        if prim.get(&Semantic::Colors(1)).is_some() {
+            tracing::warn!(file = %self.src.file.display(), "{what}: COLOR_1 and beyond are ignored (glTF materials only use COLOR_0)");
+        }
+        let file_tangents = match prim.get(&Semantic::Tangents) {
+            Some(acc) => {
+                let v = read_floats::<4>(&mut self.src, &acc)?;
                 if v.len() != n {
                     return Err(count_err(&self.src, &acc, v.len()));
                 }
@@ -403,33 +593,62 @@ impl Loader<'_> {
             .map(|&p| world.transform_point3(Vec3::from_array(p)))
             .collect();
         let mat_index = self.material(&material)?;
-        let emissive = self.scene.materials[mat_index as usize].is_emissive();
+        let mat = self.scene.materials[mat_index as usize];
+        let emissive = mat.is_emissive();
+        let nm_ok = normal_matrix.is_finite();
+        let world_normals: Option<Vec<Vec3>> = normals.as_ref().map(|ns| {
+            ns.iter()
+                .map(|&v| {
+                    if nm_ok {
+                        (normal_matrix * Vec3::from_array(v)).normalize_or_zero()
+                    } else {
+                        Vec3::ZERO
+                    }
+                })
+                .collect()
+        });
+        let corner_tangents = corner_tangents(
+            &self.src.file,
+            &what,
+            &mat,
+            &tris,
+            &wp,
+            world_normals.as_deref(),
+            [uvs.as_deref(), uvs1.as_deref()],
+            file_tangents.as_deref(),
+            linear,
+        );
+        self.any_uv1 |= uvs1.is_some();
+        self.any_color |= colors.is_some();
+        self.any_tangent |= corner_tangents.is_some();
+        let uv_at = |set: &Option<Vec<[f32; 2]>>, v: usize| {
+            set.as_ref().map_or(Vec2::ZERO, |u| Vec2::from_array(u[v]))
+        };
+        let color_at = |v: usize| colors.as_ref().map_or([1.0; 4], |c| c[v]);
 
         let base = self.scene.positions.len();
-        let flat = normals.is_none();
+        let flat = world_normals.is_none();
         if flat {
             self.scene.stats.flat_shaded_primitives += 1;
         } else {
-            let ns = normals.as_deref().unwrap_or_default();
-            let nm_ok = normal_matrix.is_finite();
-            self.scene.positions.extend_from_slice(&wp);
-            self.scene.normals.extend(ns.iter().map(|&v| {
-                if nm_ok {
-                    (normal_matrix * Vec3::from_array(v)).normalize_or_zero()
-                } else {
-                    Vec3::ZERO
+            let sc = &mut self.scene;
+            sc.positions.extend_from_slice(&wp);
+            sc.normals.extend(world_normals.iter().flatten());
+            sc.uvs.extend((0..n).map(|v| uv_at(&uvs, v)));
+            sc.uvs1.extend((0..n).map(|v| uv_at(&uvs1, v)));
+            sc.colors.extend((0..n).map(color_at));
+            let mut tv = vec![[0.0f32; 4]; n];
+            if let Some(ct) = &corner_tangents {
+                for (k, t) in tris.iter().enumerate() {
+                    for j in 0..3 {
+                        tv[t[j] as usize] = ct[3 * k + j];
+                    }
                 }
-            }));
-            match &uvs {
-                Some(uv) => self
-                    .scene
-                    .uvs
-                    .extend(uv.iter().map(|&t| Vec2::from_array(t))),
-                None => self.scene.uvs.extend(std::iter::repeat_n(Vec2::ZERO, n)),
             }
+            sc.tangents.extend(tv);
         }
-        let stats = &mut self.scene.stats;
-        for t in tris {
+        for (k, &t) in tris.iter().enumerate() {
+            let stats = &mut self.scene.stats;
             let [a, b, c] = t.map(|i| i as usize);
             let dropped = if a == b || b == c || a == c {
                 stats.dropped_repeated_index += 1;
@@ -452,16 +671,21 @@ impl Loader<'_> {
             }
             if flat {
                 let face_n = triangle_normal(wp[a], wp[b], wp[c]).unwrap_or(Vec3::Z);
-                let first = self.scene.positions.len() as u32;
-                for v in [a, b, c] {
-                    self.scene.positions.push(wp[v]);
-                    self.scene.normals.push(face_n);
-                    self.scene.uvs.push(
-                        uvs.as_ref()
-                            .map_or(Vec2::ZERO, |uv| Vec2::from_array(uv[v])),
+                let sc = &mut self.scene;
+                let first = sc.positions.len() as u32;
+                for (j, v) in [a, b, c].into_iter().enumerate() {
+                    sc.positions.push(wp[v]);
+                    sc.normals.push(face_n);
+                    sc.uvs.push(uv_at(&uvs, v));
+                    sc.uvs1.push(uv_at(&uvs1, v));
+                    sc.colors.push(color_at(v));
+                    sc.tangents.push(
+                        corner_tangents
+                            .as_ref()
+                            .map_or([0.0; 4], |ct| ct[3 * k + j]),
                     );
                 }
-                self.scene.triangles.push([first, first + 1, first + 2]);
+                sc.triangles.push([first, first + 1, first + 2]);
             } else {
                 self.scene.triangles.push(t.map(|i| i + base as u32));
             }
@@ -473,6 +697,17 @@ impl Loader<'_> {
     fn finish(mut self) -> Result<Scene, SceneError> {
         let file = self.file();
         let scene = &mut self.scene;
+        // Attributes no primitive had take no memory.
+        if !self.any_uv1 {
+            scene.uvs1 = Vec::new();
+        }
+        if !self.any_color {
+            scene.colors = Vec::new();
+        }
+        if !self.any_tangent {
+            scene.tangents = Vec::new();
+        }
+        scene.sync_texture_views();
         if scene.triangles.is_empty() {
             return Err(SceneError::NoTriangles { file });
         }
@@ -537,4 +772,115 @@ impl Loader<'_> {
         );
         Ok(self.scene)
     }
+}
+
+/// Tangents per triangle corner (3 per entry of `tris`, world space, w = ±1): the TANGENT
+/// attribute transformed by the node's linear part (w flipped under a mirroring transform,
+/// since then n × t flips), or, when the material has a normal map and the file no tangents,
+/// MikkTSpace tangents (the glTF 2.0 spec's choice, §3.7.2.1) from the world-space positions,
+/// normals and the normal map's texture-coordinate set. MikkTSpace is given (u, 1 − v) so
+/// that its bitangent points along −∂p/∂v, the normal map's +Y ("up" in the image).
+/// `None` when neither applies.
+#[allow(clippy::too_many_arguments)]
+fn corner_tangents(
+    file: &Path,
+    what: &str,
+    mat: &Material,
+    tris: &[[u32; 3]],
+    wp: &[Vec3],
+    normals: Option<&[Vec3]>,
+    uvs: [Option<&[[f32; 2]]>; 2],
+    file_tangents: Option<&[[f32; 4]]>,
+    linear: Mat3,
+) -> Option<Vec<[f32; 4]>> {
+    if let Some(ft) = file_tangents {
+        let mirror = if linear.determinant() < 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
+        let tv: Vec<[f32; 4]> = ft
+            .iter()
+            .map(|t| {
+                let x = (linear * Vec3::new(t[0], t[1], t[2])).normalize_or_zero();
+                let w = if t[3] < 0.0 { -1.0 } else { 1.0 } * mirror;
+                if x.is_finite() {
+                    [x.x, x.y, x.z, w]
+                } else {
+                    [0.0; 4]
+                }
+            })
+            .collect();
+        return Some(
+            tris.iter()
+                .flat_map(|t| t.map(|i| tv[i as usize]))
+                .collect(),
+        );
+    }
+    if !mat.normal_texture.is_some() {
+        return None;
+    }
+    let set = (mat.normal_texture.tex_coord as usize).min(1);
+    let Some(uv) = uvs[set] else {
+        tracing::warn!(file = %file.display(), "{what}: the normal map reads TEXCOORD_{set}, which the primitive lacks; normal map ignored");
+        return None;
+    };
+    struct Mikk<'a> {
+        tris: &'a [[u32; 3]],
+        wp: &'a [Vec3],
+        normals: Option<&'a [Vec3]>,
+        uv: &'a [[f32; 2]],
+        out: Vec<[f32; 4]>,
+    }
+    impl Mikk<'_> {
+        fn vertex(&self, face: usize, vert: usize) -> usize {
+            self.tris[face][vert] as usize
+        }
+    }
+    impl bevy_mikktspace::Geometry for Mikk<'_> {
+        fn num_faces(&self) -> usize {
+            self.tris.len()
+        }
+        fn num_vertices_of_face(&self, _face: usize) -> usize {
+            3
+        }
+        fn position(&self, face: usize, vert: usize) -> [f32; 3] {
+            self.wp[self.vertex(face, vert)].to_array()
+        }
+        fn normal(&self, face: usize, vert: usize) -> [f32; 3] {
+            match self.normals {
+                Some(n) => n[self.vertex(face, vert)].to_array(),
+                None => {
+                    let [a, b, c] = self.tris[face].map(|i| self.wp[i as usize]);
+                    triangle_normal(a, b, c).unwrap_or(Vec3::Z).to_array()
+                }
+            }
+        }
+        fn tex_coord(&self, face: usize, vert: usize) -> [f32; 2] {
+            let t = self.uv[self.vertex(face, vert)];
+            [t[0], 1.0 - t[1]]
+        }
+        fn set_tangent(
+            &mut self,
+            tangent: Option<bevy_mikktspace::TangentSpace>,
+            face: usize,
+            vert: usize,
+        ) {
+            if let Some(t) = tangent {
+                self.out[3 * face + vert] = t.tangent_encoded();
+            }
+        }
+    }
+    let mut m = Mikk {
+        tris,
+        wp,
+        normals,
+        uv,
+        out: vec![[0.0; 4]; tris.len() * 3],
+    };
+    if let Err(e) = bevy_mikktspace::generate_tangents(&mut m) {
+        tracing::warn!(file = %file.display(), "{what}: MikkTSpace could not compute tangents ({e:?}); per-face tangents are used");
+        return None;
+    }
+    Some(m.out)
 }

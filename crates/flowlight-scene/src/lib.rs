@@ -10,7 +10,7 @@
 //! - [`compression`]: `EXT_meshopt_compression` buffer views;
 //! - [`extensions`]: the glTF extensions the loader knows, and the check of a file's list;
 //! - [`material`]: glTF materials to [`flowlight_core::material::Material`], overrides;
-//! - [`texture`]: image decoding and sRGB → linear conversion;
+//! - [`texture`]: image decoding into compact texel storage, and samplers;
 //! - [`lights`]: punctual lights, the emission integral of emitters, the environment and the
 //!   power CDF over all lights;
 //! - [`config`]: the TOML render configuration;
@@ -27,6 +27,7 @@ pub mod lights;
 pub mod material;
 pub mod scene;
 pub mod source;
+pub mod testutil;
 pub mod texture;
 
 pub use config::{
@@ -36,4 +37,5 @@ pub use config::{
 pub use error::{ConfigError, SceneError};
 pub use gltf_loader::load_gltf;
 pub use material::{DiffuseChoice, MaterialOverride};
-pub use scene::{CameraDesc, CameraProjection, LoadStats, Scene, TextureData};
+pub use scene::{CameraDesc, CameraProjection, LoadStats, Scene};
+pub use texture::{ImageData, Sampler, Texels, TextureData};

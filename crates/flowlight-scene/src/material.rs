@@ -274,7 +274,6 @@ pub fn convert(m: &gltf::Material) -> Result<Material, String> {
     }
     let mut out = Material {
         base_color: Rgb::new(r, g, b),
-        base_color_texture: -1,
         metallic,
         roughness,
         transmission,

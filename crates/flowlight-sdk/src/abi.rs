@@ -10,7 +10,7 @@ use crate::params::ParamKind;
 use flowlight_core::camera::Camera;
 use flowlight_core::geometry::{Ray, SurfaceHit};
 use flowlight_core::light::{Emitter, Environment, PunctualLight};
-use flowlight_core::material::{Material, Texture};
+use flowlight_core::material::{Material, Texture, TextureRef};
 use flowlight_core::path::{Path, PathVertex};
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
@@ -411,6 +411,7 @@ pub const fn layout_hash() -> u64 {
         size_of::<Camera>(),
         size_of::<Material>(),
         size_of::<Texture>(),
+        size_of::<TextureRef>(),
         size_of::<Emitter>(),
         size_of::<PunctualLight>(),
         size_of::<Environment>(),

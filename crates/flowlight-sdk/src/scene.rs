@@ -5,7 +5,7 @@ use flowlight_core::bsdf::Bsdf;
 use flowlight_core::camera::Camera;
 use flowlight_core::geometry::SurfaceHit;
 use flowlight_core::light::{Emitter, Lights, PunctualLight};
-use flowlight_core::material::{Material, Texture};
+use flowlight_core::material::{Material, ResolvedMaterial, Texture};
 use glam::Vec3;
 
 /// The scene as plugins see it. Borrowed from the host for the plugin instance's lifetime.
@@ -79,11 +79,19 @@ impl<'a> Scene<'a> {
         &self.materials[hit.material as usize]
     }
 
-    /// The BSDF at a hit (textures applied).
+    /// The material at a hit with its textures and vertex colour applied.
+    #[inline]
+    pub fn resolve(&self, hit: &SurfaceHit) -> ResolvedMaterial {
+        self.material(hit)
+            .resolve(hit.uvs(), hit.color, self.textures)
+    }
+
+    /// The BSDF at a hit (textures and vertex colour applied; the hit's shading normal is
+    /// already normal-mapped by the host).
     #[inline]
     pub fn bsdf(&self, hit: &SurfaceHit) -> Bsdf {
-        let m = self.material(hit);
-        Bsdf::from_material(m, m.base_color_at(hit.uv, self.textures))
+        let r = self.resolve(hit);
+        Bsdf::from_material(&r.material, r.base)
     }
 
     /// Radius of the scene's bounding sphere.
