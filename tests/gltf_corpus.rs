@@ -94,7 +94,8 @@ fn documented() -> BTreeMap<String, Documented> {
         }
         let file = cells[0].trim_matches('`').to_string();
         let parse = |s: &str| {
-            Outcome::parse(s).unwrap_or_else(|| panic!("docs/gltf.md corpus row {file}: unknown outcome '{s}'"))
+            Outcome::parse(s)
+                .unwrap_or_else(|| panic!("docs/gltf.md corpus row {file}: unknown outcome '{s}'"))
         };
         let error_names = cells[3]
             .split('`')
@@ -184,8 +185,17 @@ fn every_corpus_model_renders_or_names_what_it_lacks() {
         };
         let model = root.join(f);
         for (environment, expected) in [(false, d.plain), (true, d.environment)] {
-            let run = render(&model, environment, &scratch, &format!("m{i}-{environment}"));
-            let what = if environment { "with [environment]" } else { "as it is" };
+            let run = render(
+                &model,
+                environment,
+                &scratch,
+                &format!("m{i}-{environment}"),
+            );
+            let what = if environment {
+                "with [environment]"
+            } else {
+                "as it is"
+            };
             if run.outcome != expected {
                 problems.push(format!(
                     "{f} {what}: {:?}, docs/gltf.md says {expected:?}; stderr: {}",
@@ -213,7 +223,9 @@ fn every_corpus_model_renders_or_names_what_it_lacks() {
     }
     for f in docs.keys() {
         if !files.contains(f) {
-            problems.push(format!("docs/gltf.md lists {f}, which is not in the corpus"));
+            problems.push(format!(
+                "docs/gltf.md lists {f}, which is not in the corpus"
+            ));
         }
     }
     assert!(problems.is_empty(), "{}", problems.join("\n"));

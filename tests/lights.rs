@@ -20,7 +20,7 @@ use flowlight_host::session::Session;
 use glam::{Vec2, Vec3};
 
 const ALBEDO: f64 = 0.5;
-const LAMBERT: &str = r#"{"name": "white", "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0}, "extensions": {"KHR_materials_ior": {"ior": 1.0}}}"#;
+const LAMBERT: &str = r#"{"name": "white", "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0}, "extensions": {"KHR_materials_specular": {"specularFactor": 0.0}}}"#;
 const FLOOR: [[f32; 3]; 4] = [
     [-10.0, 0.0, -10.0],
     [-10.0, 0.0, 10.0],

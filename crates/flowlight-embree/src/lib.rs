@@ -829,8 +829,13 @@ mod tests {
         let q = p[0] * (1.0 - h.b1 - h.b2) + p[1] * h.b1 + p[2] * h.b2;
         assert!((q - Vec3::new(0.5, -0.25, 0.0)).length() < 1e-6, "{q}");
         assert!(s.occluded(&ray));
-        // t_max is exclusive: a hit exactly at t_max is not one.
-        let short = Ray { t_max: 2.0, ..ray };
+        // A hit beyond t_max is not one. Whether a hit exactly at t_max counts differs
+        // between Embree's ISA kernels (AVX2 and AVX-512 builds disagree), so nothing in the
+        // renderer relies on it: shadow rays stop short of their target by the spawn offset.
+        let short = Ray {
+            t_max: 1.9999,
+            ..ray
+        };
         assert!(s.intersect(&short).is_none());
         assert!(!s.occluded(&short));
         let longer = Ray {

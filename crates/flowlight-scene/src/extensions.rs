@@ -75,7 +75,7 @@ pub const KNOWN: &[Extension] = &[
         Status::Supported,
         "TRANSLATION / ROTATION / SCALE per instance, composed after the node's world transform; every instance renders",
     ),
-    // Materials (owned by the material helper).
+    // Materials.
     ext(
         "KHR_materials_emissive_strength",
         Status::Supported,
@@ -93,18 +93,18 @@ pub const KNOWN: &[Extension] = &[
     ),
     ext(
         "KHR_materials_volume",
-        Status::Ignored,
-        "see the materials section",
+        Status::Supported,
+        "thickness, attenuation colour and distance: refraction and Beer–Lambert absorption inside closed meshes (see the materials section)",
     ),
     ext(
         "KHR_materials_specular",
-        Status::Ignored,
-        "see the materials section",
+        Status::Supported,
+        "specularFactor and specularColorFactor set the dielectric's F0 colour and F90 (see the materials section)",
     ),
     ext(
         "KHR_materials_clearcoat",
-        Status::Ignored,
-        "see the materials section",
+        Status::Supported,
+        "a GGX layer with F0 0.04 over the rest (see the materials section)",
     ),
     ext(
         "KHR_materials_sheen",
@@ -146,11 +146,11 @@ pub const KNOWN: &[Extension] = &[
         Status::Ignored,
         "archived extension; the metallic-roughness fallback is used",
     ),
-    // Textures (owned by the texture helper).
+    // Textures.
     ext(
         "KHR_texture_transform",
-        Status::Ignored,
-        "see the textures section",
+        Status::Supported,
+        "offset, rotation, scale and texCoord override on every texture reference (see the textures section)",
     ),
     ext(
         "KHR_texture_basisu",
@@ -172,11 +172,11 @@ pub const KNOWN: &[Extension] = &[
         Status::Ignored,
         "DDS images are not decoded; the fallback image is used when there is one",
     ),
-    // Lights (owned by the lights helper).
+    // Lights.
     ext(
         "KHR_lights_punctual",
-        Status::Ignored,
-        "see the lights section",
+        Status::Supported,
+        "point, spot and directional lights, sampled by next-event estimation (see the lights section)",
     ),
     // Metadata and animation: nothing to render.
     ext(
