@@ -1,14 +1,15 @@
 //! Analytic checks of every light type through the whole renderer (synthetic glTF scenes, both
 //! MCPT variants), and ERPT against MCPT under a point light.
 //!
-//! The surface is a Lambert floor (albedo ½, KHR_materials_ior 1.0 so that no specular layer
-//! applies) seen from above. Direct lighting by a delta light is noise-free (one light, one
+//! The surface is a Lambert floor (albedo ½, KHR_materials_specular factor 0: the spec's purely
+//! diffuse material) seen from above. Direct lighting by a delta light is noise-free (one light, one
 //! connection), so those images are compared per pixel against the analytic radiance
 //! averaged over each pixel's footprint:
 //!
-//! - point light of intensity I: L = ρ/π · I cos θ / r²;
+//! - point light of intensity I cd: L = ρ/π · (I/683) cos θ / r² (683 lm/W: glTF's photometric
+//!   units to radiometric);
 //! - spot light: the same times the spec's cone fall-off (computed here independently);
-//! - directional light of illuminance E at incidence θ: L = ρ/π · E cos θ;
+//! - directional light of illuminance E lx at incidence θ: L = ρ/π · (E/683) cos θ;
 //! - constant environment of radiance L_env over the open floor: L = ρ · L_env (and L_env
 //!   where the camera sees the sky).
 
@@ -20,6 +21,9 @@ use flowlight_host::session::Session;
 use glam::{Vec2, Vec3};
 
 const ALBEDO: f64 = 0.5;
+/// glTF's photometric units (cd, lx) per radiometric unit (W/sr, W/m²): the loader divides by it.
+const LUMENS_PER_WATT: f64 = 683.0;
+
 const LAMBERT: &str = r#"{"name": "white", "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0}, "extensions": {"KHR_materials_specular": {"specularFactor": 0.0}}}"#;
 const FLOOR: [[f32; 3]; 4] = [
     [-10.0, 0.0, -10.0],
@@ -154,7 +158,7 @@ fn point_light_over_a_lambert_plane_gives_i_cos_over_r2() {
             let d = (light - p).as_dvec3();
             let r2 = d.length_squared();
             let cos = d.y / r2.sqrt();
-            ALBEDO / std::f64::consts::PI * intensity * cos / r2
+            ALBEDO / std::f64::consts::PI * (intensity / LUMENS_PER_WATT) * cos / r2
         });
         compare(&format!("point/{variant}"), &s, &expected, 0.02);
     }
@@ -172,7 +176,8 @@ fn directional_light_gives_lux_cos_theta() {
     );
     for variant in ["entangled", "untangled"] {
         let s = session_from(&format!("dir-{variant}"), &gltf, &config(variant, 1, ""), 8);
-        let want = ALBEDO / std::f64::consts::PI * lux * tilt.to_radians().cos();
+        let want =
+            ALBEDO / std::f64::consts::PI * (lux / LUMENS_PER_WATT) * tilt.to_radians().cos();
         let expected = expected_image(&s, |_| want);
         compare(&format!("directional/{variant}"), &s, &expected, 0.01);
         // The colour scales each channel.
@@ -211,7 +216,7 @@ fn spot_light_falls_off_between_its_cones() {
             let cos = d.y / r2.sqrt();
             // Angle from the spot axis (straight down) is the incidence angle here.
             let t = ((cos - outer.cos()) / (inner.cos() - outer.cos())).clamp(0.0, 1.0);
-            ALBEDO / std::f64::consts::PI * intensity * t * t * cos / r2
+            ALBEDO / std::f64::consts::PI * (intensity / LUMENS_PER_WATT) * t * t * cos / r2
         });
         // Inside the inner cone, outside the outer one, and in between, the image has pixels.
         let max = expected.iter().cloned().fold(0.0, f64::max);

@@ -3,8 +3,8 @@
 //! config, and the one power CDF over all of them.
 //!
 //! - Punctual lights: position = the node's world origin, direction = its world −Z (scale
-//!   ignored, as the extension says); intensity = `color × intensity` (candela for point and
-//!   spot, lux for directional; taken as renderer units, see
+//!   ignored, as the extension says); intensity = `color × intensity / 683` (candela for point
+//!   and spot, lux for directional, converted to W/sr and W/m² as Blender's importer does, see
 //!   [`flowlight_core::light::punctual`]). `range` is ignored (one info line per file).
 //! - Emissive triangles: the mean emitted radiance over a triangle is estimated from
 //!   [`EMISSION_STRATA`]² stratified points (Heitz's uniform triangle map of a jittered-free
@@ -39,6 +39,8 @@ pub fn mean_emission(e: &Emitter, mut emission: impl FnMut([Vec2; 2]) -> Rgb) ->
     sum / (n * n) as f32
 }
 
+use flowlight_core::light::punctual::LUMENS_PER_WATT;
+
 /// A `KHR_lights_punctual` light at a node with world transform `world`.
 pub fn punctual_light(
     file: &Path,
@@ -63,7 +65,8 @@ pub fn punctual_light(
     if !position.is_finite() || direction == Vec3::ZERO || !direction.is_finite() {
         return Err(err("its node transform is degenerate".into()));
     }
-    let i = color * intensity;
+    // Photometric (cd, lx) to radiometric (W/sr, W/m²) units, as Blender's importer does.
+    let i = color * (intensity / LUMENS_PER_WATT);
     use gltf::khr_lights_punctual::Kind;
     Ok(match light.kind() {
         Kind::Point => PunctualLight::point(position, i),

@@ -85,7 +85,8 @@ fn punctual_lights_take_their_node_transforms() {
         "{:?}",
         spot.direction
     );
-    assert_eq!(spot.intensity, Rgb::new(5.0, 2.5, 0.0));
+    // Candela to W/sr: divided by 683 lm/W.
+    assert_eq!(spot.intensity, Rgb::new(5.0, 2.5, 0.0) / 683.0);
     assert!((spot.cos_inner - 0.2f32.cos()).abs() < 1e-6);
     assert!((spot.cos_outer - 0.6f32.cos()).abs() < 1e-6);
     let point = sc
@@ -94,7 +95,7 @@ fn punctual_lights_take_their_node_transforms() {
         .find(|l| l.kind == PunctualKind::Point)
         .unwrap();
     assert!(point.position.distance(Vec3::new(6.0, 0.0, 0.0)) < 1e-5);
-    assert_eq!(point.intensity, Rgb::splat(2.0));
+    assert_eq!(point.intensity, Rgb::splat(2.0 / 683.0));
     // No emitter, two punctual lights: a CDF of two entries.
     let cdf = light_power_cdf(&sc, &Environment::none());
     assert_eq!(cdf.len(), 2);

@@ -5,14 +5,15 @@
 //! so there is no MIS), and a path vertex on one is never moved by a mutation.
 //!
 //! Units. The glTF extension gives intensities in photometric units: candela (lm/sr) for point
-//! and spot lights, lux (lm/m²) for directional lights. Flowlight's radiance unit is the one of
-//! glTF's emissive factor (`KHR_materials_emissive_strength` speaks of cd/m², nits), so the
-//! photometric value is taken as is, with a factor of 1 per unit: a point light of I cd and
-//! colour c has radiant intensity I·c in the renderer's units, and a Lambert surface of albedo
-//! ρ at distance r lit at incidence θ has radiance ρ/π · I·cos θ / r². Blender's importer
-//! divides by 683 lm/W to get watts (and multiplies by 4π for point lights); three.js uses the
-//! value directly, as here. `range` is ignored: the inverse-square fall-off is exact and the
-//! spec calls the range a hint.
+//! and spot lights, lux (lm/m²) for directional lights. Flowlight renders radiometric RGB
+//! (the unit of glTF's emissive factor, which Blender exports as its emission strength), so
+//! the loader divides by [`LUMENS_PER_WATT`] = 683 lm/W, the luminous efficacy the photometric
+//! units are defined with — exactly what Blender's glTF importer does (its exporter
+//! multiplies by it). A point light of I cd and colour c therefore has radiant intensity
+//! I·c/683 W/sr, and a Lambert surface of albedo ρ at distance r lit at incidence θ has
+//! radiance ρ/π · (I/683)·cos θ / r². A Blender lamp of P watts exported and rendered here
+//! has P/(4π) W/sr, as in Blender. `range` is ignored: the inverse-square fall-off is exact
+//! and the spec calls the range a hint.
 //!
 //! Spot cone (the spec's reference implementation): with s = 1 / max(0.001, cos θ_inner −
 //! cos θ_outer) and c = cos of the angle between the spot axis and the direction to the point,
@@ -25,6 +26,9 @@
 //!
 //! Power (for light selection): point 4π·I, spot 2π·(1 − (cos θ_inner + cos θ_outer)/2)·I
 //! (pbrt-v4's estimate), directional π·r²·E with r the scene's bounding-sphere radius.
+
+/// Lumens per watt of the photometric units (candela, lux) that `KHR_lights_punctual` uses.
+pub const LUMENS_PER_WATT: f32 = 683.0;
 
 use crate::Rgb;
 use glam::Vec3;
