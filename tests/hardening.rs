@@ -604,3 +604,90 @@ fn also_identical_renders_give_identical_exr_bytes() {
     assert_eq!(files[0], files[1]);
     assert_eq!(files[1], files[2]);
 }
+
+/// The case's furnace.gltf with its two root nodes (sphere, camera) put under `chain` extra
+/// nodes: node 2 is the new root, each extra node lists the next `fan` times as its child and
+/// the last one parents the sphere and the camera; the root carries `root_scale`.
+fn nested_furnace(c: &Case, chain: usize, fan: usize, root_scale: f64) {
+    let path = c.dir.join("furnace.gltf");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let scenes_at = text.find("\"scenes\": [").unwrap();
+    let scenes_end = scenes_at + text[scenes_at..].find("\n ],\n").unwrap() + 4;
+    let mut extra = String::new();
+    for k in 0..chain {
+        let children = if k + 1 == chain {
+            "0, 1".to_string()
+        } else {
+            vec![(3 + k).to_string(); fan].join(", ")
+        };
+        let scale = if k == 0 {
+            format!(", \"scale\": [{root_scale:e}, {root_scale:e}, {root_scale:e}]")
+        } else {
+            String::new()
+        };
+        extra.push_str(&format!(
+            ",\n  {{\"name\": \"n{k}\", \"children\": [{children}]{scale}}}"
+        ));
+    }
+    let nodes_at = text.find("\"nodes\": [\n  {").unwrap();
+    let nodes_end = nodes_at + text[nodes_at..].find("\n ],\n").unwrap();
+    let out = format!(
+        "{}\"scenes\": [{{\"nodes\": [2]}}],\n{}{}{}",
+        &text[..scenes_at],
+        &text[scenes_end..nodes_end],
+        extra,
+        &text[nodes_end..]
+    );
+    std::fs::write(&path, out).unwrap();
+}
+
+// Item 3: a node with several parents (here each node lists the next one twice, which would
+// expand to 2^30 instances) is refused with a line naming the node, before it can exhaust
+// memory; a plain chain of nodes still loads.
+#[test]
+fn item3_nodes_with_several_parents_are_refused() {
+    for (name, chain, fan, expected) in [
+        (
+            "fan-out",
+            31,
+            2,
+            Some("reached twice in the node hierarchy"),
+        ),
+        ("chain", 4, 1, None),
+    ] {
+        let c = case(&format!("parents-{name}"), "", "plugin = \"mcpt\"", "");
+        nested_furnace(&c, chain, fan, 1.0);
+        let o = render(&c, &[]);
+        match expected {
+            Some(msg) => {
+                let line = one_error_line(&o);
+                assert!(
+                    line.contains(msg) && line.contains("node 3"),
+                    "{name}: {line}"
+                );
+            }
+            None => assert!(o.status.success(), "{name}: {}", stderr(&o)),
+        }
+    }
+}
+
+// Item 8: a scene whose coordinates are beyond what f32 ray/triangle arithmetic takes renders
+// with one warning that gives the scale to apply; an ordinary scale gives none.
+#[test]
+fn item8_scenes_beyond_f32_range_warn_with_the_scale() {
+    for (name, scale, warns) in [
+        ("1e14", 1e14, true),
+        ("1", 1.0, false),
+        ("1e-15", 1e-15, true),
+    ] {
+        let c = case(&format!("extent-{name}"), "", "plugin = \"mcpt\"", "");
+        nested_furnace(&c, 1, 1, scale);
+        let o = render(&c, &[]);
+        let err = stderr(&o);
+        let warned = err.contains("f32 ray/triangle arithmetic");
+        assert_eq!(warned, warns, "{name}: {err}");
+        if warns {
+            assert!(err.contains("scale the scene"), "{name}: {err}");
+        }
+    }
+}

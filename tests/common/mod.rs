@@ -92,22 +92,7 @@ pub fn mean_and_stderr(img: &[Rgb], f: impl Fn(Rgb) -> f32) -> (f64, f64) {
 }
 
 /// Standard base64 (for data URIs in synthetic glTF files).
-pub fn base64(data: &[u8]) -> String {
-    const T: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::new();
-    for c in data.chunks(3) {
-        let b = [c[0], *c.get(1).unwrap_or(&0), *c.get(2).unwrap_or(&0)];
-        let n = (b[0] as u32) << 16 | (b[1] as u32) << 8 | b[2] as u32;
-        for i in 0..4 {
-            if i <= c.len() {
-                out.push(T[(n >> (18 - 6 * i) & 63) as usize] as char);
-            } else {
-                out.push('=');
-            }
-        }
-    }
-    out
-}
+pub use flowlight_scene::testutil::base64;
 
 /// A glTF document with one mesh made of `quads` (each four corners, counter-clockwise seen
 /// from its front), material `material` (JSON of materials[0]), and `extra_nodes` (JSON

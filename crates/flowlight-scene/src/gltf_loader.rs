@@ -166,6 +166,7 @@ impl Loader<'_> {
             Exit(usize),
         }
         let mut on_path = vec![false; doc.nodes().len()];
+        let mut entered = vec![false; doc.nodes().len()];
         let mut stack: Vec<Step> = gscene
             .nodes()
             .collect::<Vec<_>>()
@@ -189,6 +190,20 @@ impl Loader<'_> {
                     reason: "the node hierarchy has a cycle".into(),
                 });
             }
+            // glTF requires the nodes to form disjoint trees: a node reached twice has several
+            // parents (or is listed twice by one), and a chain of such nodes expands
+            // exponentially (30 of them: 2^30 instances). Sharing is what meshes are for.
+            if entered[idx] {
+                return Err(SceneError::Node {
+                    file: self.file(),
+                    node: idx,
+                    reason: "it is reached twice in the node hierarchy (a second parent, or a \
+                             parent listing it twice); glTF nodes must form trees — share the \
+                             mesh between two nodes instead"
+                        .into(),
+                });
+            }
+            entered[idx] = true;
             let local = Mat4::from_cols_array_2d(&node.transform().matrix());
             let world = parent * local;
             if !world.is_finite() {
@@ -711,6 +726,7 @@ impl Loader<'_> {
         if scene.triangles.is_empty() {
             return Err(SceneError::NoTriangles { file });
         }
+        warn_if_beyond_f32_range(&file, scene);
         for name in self.overrides.keys() {
             if !scene.material_names.contains(name) {
                 tracing::warn!(file = %file.display(), "material override '{name}' matches no loaded material");
@@ -883,4 +899,34 @@ fn corner_tangents(
         return None;
     }
     Some(m.out)
+}
+
+/// Largest coordinate magnitude the ray/triangle arithmetic takes without overflow: the
+/// watertight test and the error bounds multiply three coordinates (x³ < f32::MAX ≈ 3.4e38).
+pub const MAX_COORDINATE: f32 = 1e12;
+/// Smallest scene extent whose triangle arithmetic stays clear of subnormal numbers (the
+/// products of three edge lengths, 1e-38).
+pub const MIN_EXTENT: f32 = 1e-12;
+
+/// Logs one warning when the scene's coordinates are so large, or its extent so small, that
+/// f32 ray tracing loses hits (issue: a Cornell box scaled to 1e14 rendered black with the
+/// BVH and lost its lamp with Embree, silently).
+fn warn_if_beyond_f32_range(file: &Path, scene: &Scene) {
+    let Some((lo, hi)) = scene.bounds() else {
+        return;
+    };
+    let largest = lo.abs().max(hi.abs()).max_element();
+    let extent = (hi - lo).max_element();
+    if largest > MAX_COORDINATE {
+        tracing::warn!(
+            file = %file.display(),
+            "coordinates reach {largest:e}, beyond {MAX_COORDINATE:e}: f32 ray/triangle arithmetic overflows there and hits are lost; scale the scene down (e.g. a root node with scale {:e})",
+            MAX_COORDINATE / largest
+        );
+    } else if extent < MIN_EXTENT {
+        tracing::warn!(
+            file = %file.display(),
+            "the scene is {extent:e} across, below {MIN_EXTENT:e}: f32 ray/triangle arithmetic underflows and hits are lost; scale the scene up"
+        );
+    }
 }
