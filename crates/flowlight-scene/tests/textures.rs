@@ -429,3 +429,40 @@ fn a_normal_map_below_the_surface_is_lifted_to_the_horizon_not_mirrored() {
     let h = hit_from(&sc, 0.5, 0.3, Vec3::new(1.0, 0.0, 1.0));
     assert!(h.ns.x > 0.99 && h.ns.z > 0.0 && h.ns.z < 0.01, "{}", h.ns);
 }
+
+/// An emissive texture that is black over the quad's upper-left triangle (u + v < 1) and white
+/// over most of the other: the black triangle emits nothing and is no light; the other is the
+/// only emitter, and its radiance follows the texture (the factor where white, 0 where black).
+#[test]
+fn emissive_texture_black_half_is_not_a_light() {
+    const N: usize = 8;
+    let mut texels = Vec::new();
+    for j in 0..N {
+        for i in 0..N {
+            let v = if i + j >= N { 255 } else { 0 };
+            texels.extend_from_slice(&[v, v, v]);
+        }
+    }
+    let q = Quad {
+        images: vec![png8(N as u32, N as u32, 3, &texels)],
+        textures: r#"{"source": 0, "sampler": 0}"#.into(),
+        samplers: NEAREST.into(),
+        material: r#"{"emissiveFactor": [1.0, 0.5, 0.25], "emissiveTexture": {"index": 0}}"#.into(),
+        ..Quad::default()
+    };
+    let s = load(&q, "emissive-half");
+    assert_eq!(s.emitters.len(), 1, "only the lit triangle is a light");
+    assert_eq!(s.stats.black_emitters, 1);
+    assert_eq!(s.triangle_emitter, vec![0, -1]);
+    let e = &s.emitters[0];
+    assert_eq!(e.prim, 0);
+    // Deep in the white part (x = 0.9, y = 0.2: u = 0.9, v = 0.8) and in a black texel of the
+    // lit triangle (x = 0.55, y = 0.51: u = 0.55, v = 0.49 → texel (4, 3), 4 + 3 < 8).
+    let at = |x: f32, y: f32| {
+        let (prim, b1, b2) = bary(x, y);
+        assert_eq!(prim, 0);
+        e.emission_at([1.0 - b1 - b2, b1, b2], &s.materials, &s.texture_table)
+    };
+    assert_eq!(at(0.9, 0.2), flowlight_core::Rgb::new(1.0, 0.5, 0.25));
+    assert_eq!(at(0.55, 0.51), flowlight_core::Rgb::ZERO);
+}
