@@ -264,11 +264,17 @@ fn render(config: &std::path::Path, ov: &Overrides, quiet: bool) -> Result<()> {
         );
         b
     };
+    let env = if session.config.environment.is_some() {
+        " + environment"
+    } else {
+        ""
+    };
     eprintln!(
-        "flowlight: {} ({} triangles, {} lights) with '{}' on {} ({}x{})",
+        "flowlight: {} ({} triangles, {} emissive triangles, {} punctual lights{env}) with '{}' on {} ({}x{})",
         session.config.scene.display(),
         session.scene.triangles.len(),
         session.scene.emitters.len(),
+        session.scene.punctual_lights.len(),
         session.instance.plugin().name,
         session.intersector.name(),
         w,

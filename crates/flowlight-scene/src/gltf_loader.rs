@@ -26,7 +26,7 @@
 use crate::accessor::{read_floats, read_indices};
 use crate::error::SceneError;
 use crate::instancing::instance_transforms;
-use crate::lights::{mean_emission, punctual_light};
+use crate::lights::{emission_strata, mean_emission, punctual_light};
 use crate::material::{convert, MaterialOverride};
 use crate::scene::{triangle_area, triangle_normal, CameraDesc, CameraProjection, Scene};
 use crate::source::GltfSource;
@@ -741,8 +741,13 @@ impl Loader<'_> {
                 continue;
             }
             let [p0, p1, p2] = tri.map(|i| scene.positions[i as usize]);
-            // One uv set is loaded today; both sets of the emitter carry it.
             let uv = tri.map(|i| scene.uvs[i as usize]);
+            // TEXCOORD_1 takes memory only when some primitive has it.
+            let uv1 = if scene.uvs1.is_empty() {
+                uv
+            } else {
+                tri.map(|i| scene.uvs1[i as usize])
+            };
             let mut e = Emitter {
                 p0,
                 p1,
@@ -754,9 +759,10 @@ impl Loader<'_> {
                 prim: prim as u32,
                 material,
                 uv0: uv,
-                uv1: uv,
+                uv1,
             };
-            e.radiance = mean_emission(&e, |uv| m.emission_at(uv, &views));
+            let strata = emission_strata(&e, &m.emissive_texture, &views);
+            e.radiance = mean_emission(&e, strata, |uv| m.emission_at(uv, &views));
             if e.radiance.is_black() || e.power() <= 0.0 {
                 scene.stats.black_emitters += 1;
                 continue;

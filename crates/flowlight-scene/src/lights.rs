@@ -7,8 +7,9 @@
 //!   and spot, lux for directional, converted to W/sr and W/m² as Blender's importer does, see
 //!   [`flowlight_core::light::punctual`]). `range` is ignored (one info line per file).
 //! - Emissive triangles: the mean emitted radiance over a triangle is estimated from
-//!   [`EMISSION_STRATA`]² stratified points (Heitz's uniform triangle map of a jittered-free
-//!   grid of cell centres), each `Material::emission_at` of both uv sets. A triangle whose mean
+//!   n² stratified points (Heitz's uniform triangle map of a jitter-free grid of cell
+//!   centres), n from [`emission_strata`] (about two points per covered texel), each
+//!   `Material::emission_at` of both uv sets. A triangle whose mean
 //!   is zero is not a light; its mean times π·area is its power.
 //! - Environment: `color` (constant) or `map` (`.exr` or `.hdr`, equirectangular, +Y up),
 //!   times `strength`, turned by `rotation_degrees` about +Y.
@@ -18,6 +19,7 @@ use crate::error::{ConfigError, SceneError};
 use crate::scene::Scene;
 use flowlight_core::light::environment::{build_map_distribution, MapDistribution};
 use flowlight_core::light::{light_powers, Emitter, Environment, PunctualLight};
+use flowlight_core::material::{Texture, TextureRef};
 use flowlight_core::sampling::{build_cdf, uniform_triangle};
 use flowlight_core::Rgb;
 use glam::{Mat3, Mat4, Vec2, Vec3};
@@ -27,8 +29,12 @@ use std::path::{Path, PathBuf};
 pub const EMISSION_STRATA: usize = 4;
 
 /// Mean of `emission(uv)` over emitter `e`'s triangle, from stratified points.
-pub fn mean_emission(e: &Emitter, mut emission: impl FnMut([Vec2; 2]) -> Rgb) -> Rgb {
-    let n = EMISSION_STRATA;
+pub fn mean_emission(
+    e: &Emitter,
+    strata: usize,
+    mut emission: impl FnMut([Vec2; 2]) -> Rgb,
+) -> Rgb {
+    let n = strata.max(1);
     let mut sum = Rgb::ZERO;
     for i in 0..n {
         for j in 0..n {
@@ -37,6 +43,33 @@ pub fn mean_emission(e: &Emitter, mut emission: impl FnMut([Vec2; 2]) -> Rgb) ->
         }
     }
     sum / (n * n) as f32
+}
+
+/// Most strata per side [`emission_strata`] gives a triangle (256² = 65,536 look-ups).
+pub const MAX_EMISSION_STRATA: usize = 256;
+
+/// Strata per side for [`mean_emission`] on emitter `e` whose emission texture is `tex`:
+/// enough that every texel the triangle covers gets about two samples,
+/// n = ⌈√(2·T)⌉ with T the triangle's uv area × the texture's texels (× the texture
+/// transform's area scale), between [`EMISSION_STRATA`] and [`MAX_EMISSION_STRATA`]. Fewer
+/// would miss a small lit feature in a big triangle and drop the triangle as black (its light
+/// lost); the cost is about twice the texture's texel count per uv layout.
+pub fn emission_strata(e: &Emitter, tex: &TextureRef, textures: &[Texture]) -> usize {
+    let Some(t) = usize::try_from(tex.index)
+        .ok()
+        .and_then(|i| textures.get(i))
+    else {
+        return EMISSION_STRATA;
+    };
+    let uv = if tex.tex_coord == 1 { e.uv1 } else { e.uv0 };
+    let (a, b) = (uv[1] - uv[0], uv[2] - uv[0]);
+    let m = tex.transform;
+    let det = (m[0] * m[3] - m[2] * m[1]).abs();
+    let texels = 0.5 * a.perp_dot(b).abs() * det * t.width as f32 * t.height as f32;
+    if !texels.is_finite() {
+        return MAX_EMISSION_STRATA;
+    }
+    ((2.0 * texels).sqrt().ceil() as usize).clamp(EMISSION_STRATA, MAX_EMISSION_STRATA)
 }
 
 use flowlight_core::light::punctual::LUMENS_PER_WATT;
@@ -222,7 +255,7 @@ mod tests {
         };
         // Emits 2 where u < 0.5: the mean over the triangle is the emitting area's share
         // (3/4 of the triangle has u < 1/2) times 2, up to the strata's resolution.
-        let m = mean_emission(&e, |uv| {
+        let m = mean_emission(&e, EMISSION_STRATA, |uv| {
             if uv[0].x < 0.5 {
                 Rgb::splat(2.0)
             } else {
@@ -237,7 +270,7 @@ mod tests {
             Vec2::new(0.9, 0.0),
             Vec2::new(0.6, 0.3),
         ];
-        let m = mean_emission(&black, |uv| {
+        let m = mean_emission(&black, EMISSION_STRATA, |uv| {
             if uv[0].x < 0.5 {
                 Rgb::splat(2.0)
             } else {

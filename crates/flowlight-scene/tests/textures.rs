@@ -466,3 +466,35 @@ fn emissive_texture_black_half_is_not_a_light() {
     assert_eq!(at(0.9, 0.2), flowlight_core::Rgb::new(1.0, 0.5, 0.25));
     assert_eq!(at(0.55, 0.51), flowlight_core::Rgb::ZERO);
 }
+
+/// One lit texel of a 64² emissive texture inside a triangle that covers 2048 texels: the
+/// triangle is still a light (a fixed 4×4 set of points would miss it and drop its light), and
+/// its mean radiance is the texel's share of the triangle.
+#[test]
+fn a_small_lit_feature_keeps_its_triangle_a_light() {
+    const N: usize = 64;
+    let (li, lj) = (20, 30); // u = 0.32, v = 0.48: u + v < 1, the quad's triangle 1
+    let mut texels = vec![0u8; N * N * 3];
+    for c in 0..3 {
+        texels[(lj * N + li) * 3 + c] = 255;
+    }
+    let q = Quad {
+        images: vec![png8(N as u32, N as u32, 3, &texels)],
+        textures: r#"{"source": 0, "sampler": 0}"#.into(),
+        samplers: NEAREST.into(),
+        material: r#"{"emissiveFactor": [1.0, 1.0, 1.0], "emissiveTexture": {"index": 0}}"#.into(),
+        ..Quad::default()
+    };
+    let s = load(&q, "emissive-texel");
+    assert_eq!(
+        s.triangle_emitter,
+        vec![-1, 0],
+        "the lit texel's triangle is the light"
+    );
+    let share = 1.0 / (0.5 * (N * N) as f32);
+    let mean = s.emitters[0].radiance.g;
+    assert!(
+        (mean / share - 1.0).abs() < 0.5,
+        "mean radiance {mean}, the texel's share {share}"
+    );
+}
