@@ -203,35 +203,7 @@ fn out_moves_the_png_preview_beside_the_exr() {
 fn a_scene_without_a_camera_renders_through_the_automatic_camera() {
     // An emitting quad [−1, 1]² in z = 0 facing +Z (radiance 1), no camera, no [camera].
     let dir = common::scratch("cli-auto-camera");
-    let mut bin = Vec::new();
-    for p in [
-        [-1f32, -1.0, 0.0],
-        [1.0, -1.0, 0.0],
-        [1.0, 1.0, 0.0],
-        [-1.0, 1.0, 0.0],
-    ] {
-        for c in p {
-            bin.extend_from_slice(&c.to_le_bytes());
-        }
-    }
-    for i in [0u32, 1, 2, 0, 2, 3] {
-        bin.extend_from_slice(&i.to_le_bytes());
-    }
-    std::fs::write(dir.join("q.bin"), &bin).unwrap();
-    std::fs::write(
-        dir.join("q.gltf"),
-        r#"{"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
-            "nodes": [{"mesh": 0}],
-            "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}],
-            "materials": [{"emissiveFactor": [1, 1, 1]}],
-            "accessors": [
-              {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
-               "min": [-1, -1, 0], "max": [1, 1, 0]},
-              {"bufferView": 1, "componentType": 5125, "count": 6, "type": "SCALAR"}],
-            "bufferViews": [{"buffer": 0, "byteLength": 48}, {"buffer": 0, "byteOffset": 48, "byteLength": 24}],
-            "buffers": [{"uri": "q.bin", "byteLength": 72}]}"#,
-    )
-    .unwrap();
+    common::emitting_square(&dir);
     let cfg = dir.join("q.toml");
     std::fs::write(
         &cfg,

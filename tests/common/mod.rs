@@ -176,3 +176,22 @@ pub fn session_from(name: &str, gltf: &str, body: &str, spp: u32) -> Session {
     s.png_path = None;
     s
 }
+
+/// Writes `q.gltf` into `dir`: an emitting square [−1, 1]² in z = 0 facing +Z (radiance 1),
+/// with no camera and no other light.
+pub fn emitting_square(dir: &std::path::Path) -> PathBuf {
+    let gltf = quads_gltf(
+        &[[
+            [-1.0, -1.0, 0.0],
+            [1.0, -1.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [-1.0, 1.0, 0.0],
+        ]],
+        r#"{"emissiveFactor": [1, 1, 1]}"#,
+        &[],
+        "",
+    );
+    let path = dir.join("q.gltf");
+    std::fs::write(&path, gltf).unwrap();
+    path
+}

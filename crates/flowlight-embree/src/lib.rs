@@ -419,6 +419,25 @@ impl EmbreeScene {
         self.triangles
     }
 
+    /// A ray/hit record for `rtcIntersect1`: the ray of [`Self::rtc_ray`] and no hit yet.
+    #[inline]
+    fn rtc_ray_hit(ray: &Ray) -> abi::RTCRayHit {
+        abi::RTCRayHit {
+            ray: Self::rtc_ray(ray),
+            hit: abi::RTCHit {
+                ng_x: 0.0,
+                ng_y: 0.0,
+                ng_z: 0.0,
+                u: 0.0,
+                v: 0.0,
+                prim_id: u32::MAX,
+                geom_id: u32::MAX,
+                inst_id: [u32::MAX],
+                inst_prim_id: [u32::MAX],
+            },
+        }
+    }
+
     #[inline]
     fn rtc_ray(ray: &Ray) -> RTCRay {
         // Valid hits have 0 < t < t_max; Embree's interval [tnear, tfar] is closed.
@@ -448,20 +467,7 @@ impl EmbreeScene {
     /// Closest hit with `0 < t < ray.t_max`.
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<TriangleHit> {
-        let mut rh = abi::RTCRayHit {
-            ray: Self::rtc_ray(ray),
-            hit: abi::RTCHit {
-                ng_x: 0.0,
-                ng_y: 0.0,
-                ng_z: 0.0,
-                u: 0.0,
-                v: 0.0,
-                prim_id: u32::MAX,
-                geom_id: u32::MAX,
-                inst_id: [u32::MAX],
-                inst_prim_id: [u32::MAX],
-            },
-        };
+        let mut rh = EmbreeScene::rtc_ray_hit(ray);
         // SAFETY: a committed scene and a 4.4-layout ray/hit; NULL arguments = defaults.
         unsafe { (self.dev.api.intersect1)(self.scene, &mut rh, std::ptr::null_mut()) };
         (rh.hit.geom_id != u32::MAX).then_some(TriangleHit {
@@ -495,20 +501,7 @@ impl EmbreeScene {
             min_width_distance_factor: 0.0,
             _pad: [0; 4],
         };
-        let mut rh = abi::RTCRayHit {
-            ray: Self::rtc_ray(ray),
-            hit: abi::RTCHit {
-                ng_x: 0.0,
-                ng_y: 0.0,
-                ng_z: 0.0,
-                u: 0.0,
-                v: 0.0,
-                prim_id: u32::MAX,
-                geom_id: u32::MAX,
-                inst_id: [u32::MAX],
-                inst_prim_id: [u32::MAX],
-            },
-        };
+        let mut rh = EmbreeScene::rtc_ray_hit(ray);
         // SAFETY: a committed scene, a 4.4-layout ray/hit, and arguments whose context
         // outlives the call; the callback only reads the context it is given.
         unsafe {
@@ -665,20 +658,7 @@ impl EmbreeInstancedScene {
     /// Closest hit with `0 < t < ray.t_max`.
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<InstanceHit> {
-        let mut rh = abi::RTCRayHit {
-            ray: EmbreeScene::rtc_ray(ray),
-            hit: abi::RTCHit {
-                ng_x: 0.0,
-                ng_y: 0.0,
-                ng_z: 0.0,
-                u: 0.0,
-                v: 0.0,
-                prim_id: u32::MAX,
-                geom_id: u32::MAX,
-                inst_id: [u32::MAX],
-                inst_prim_id: [u32::MAX],
-            },
-        };
+        let mut rh = EmbreeScene::rtc_ray_hit(ray);
         // SAFETY: a committed scene and a 4.4-layout ray/hit; NULL arguments = defaults.
         unsafe { (self.dev.api.intersect1)(self.top, &mut rh, std::ptr::null_mut()) };
         (rh.hit.geom_id != u32::MAX).then_some(InstanceHit {
