@@ -321,3 +321,160 @@ fn swapping_strategies_in_the_config_changes_the_loaded_plugins() {
     .expect("missing strategy accepted");
     assert!(err.contains("no-such-mutation"), "{err}");
 }
+
+// ---------------------------------------------------------------------------------------------
+// Lights at infinity: a directional light (a fixed direction) and the environment (a direction
+// the mutations perturb). Synthetic scenes: a Lambert floor (albedo ½) and a short wall.
+
+const LAMBERT: &str = r#"{"name": "white", "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0}, "extensions": {"KHR_materials_specular": {"specularFactor": 0.0}}}"#;
+const FLOOR: [[f32; 3]; 4] = [
+    [-10.0, 0.0, -10.0],
+    [-10.0, 0.0, 10.0],
+    [10.0, 0.0, 10.0],
+    [10.0, 0.0, -10.0],
+];
+/// A wall one unit high at z = −1 facing +Z: it shadows the floor in front of it from a sun
+/// behind it, hides part of the sky from the floor and bounces light onto it.
+const SHORT_WALL: [[f32; 3]; 4] = [
+    [-10.0, 0.0, -1.0],
+    [10.0, 0.0, -1.0],
+    [10.0, 1.0, -1.0],
+    [-10.0, 1.0, -1.0],
+];
+
+/// A directional light node travelling down and tilted by `tilt` degrees towards +Z (it comes
+/// from behind the wall): a rotation about +X by −(90° + tilt) of the node's −Z.
+fn sun_node(tilt: f32) -> String {
+    let a = -(90.0 + tilt).to_radians();
+    let q = [(a / 2.0).sin(), 0.0, 0.0, (a / 2.0).cos()];
+    format!(
+        r#"{{"translation": [0.0, 5.0, 0.0], "rotation": {q:?}, "extensions": {{"KHR_lights_punctual": {{"light": 0}}}}}}"#
+    )
+}
+
+/// Writes the floor-and-wall scene lit by `lights` (a sun or none) and `tail` (e.g. an
+/// `[environment]`) with `integrator` into a scratch folder; returns the config's path.
+fn distant_scene(name: &str, sun: bool, integrator: &str, tail: &str) -> String {
+    let gltf = if sun {
+        common::quads_gltf(
+            &[FLOOR, SHORT_WALL],
+            LAMBERT,
+            &[sun_node(40.0)],
+            r#"[{"type": "directional", "intensity": 2000.0, "color": [1.0, 0.8, 0.6]}]"#,
+        )
+    } else {
+        common::quads_gltf(&[FLOOR, SHORT_WALL], LAMBERT, &[], "")
+    };
+    let dir = common::scratch(name);
+    std::fs::write(dir.join("scene.gltf"), gltf).unwrap();
+    let cfg = dir.join("scene.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            r#"scene = "scene.gltf"
+[render]
+width = 32
+height = 32
+seed = 5
+intersector = "bvh"
+[camera]
+position = [0.0, 2.0, 3.0]
+look_at = [0.0, 0.5, -1.0]
+fov_y = 60.0
+[integrator]
+{integrator}
+path_depth = 3
+{tail}"#
+        ),
+    )
+    .unwrap();
+    cfg.display().to_string()
+}
+
+const SKY: &str = "[environment]\ncolor = [0.6, 0.8, 1.0]\nstrength = 1.5\n";
+
+#[test]
+fn mutations_keep_detailed_balance_with_lights_at_infinity() {
+    let all = strategies();
+    let list: Vec<(&str, &[(&str, toml::Value)])> =
+        all.iter().map(|(p, e)| (*p, e.as_slice())).collect();
+    for (label, sun, tail) in [("sun", true, ""), ("sky", false, SKY)] {
+        let cfg = distant_scene(&format!("balance-{label}"), sun, "plugin = \"erpt\"", tail);
+        let s = session_at(&cfg, 32, 32, 1, &[("mutations", mutations(&list))]);
+        let set = s.instance.mutation_set();
+        // SAFETY: the session keeps the view's data alive.
+        let scene = unsafe { Scene::from_view(s.instance.view()) };
+        let mut unit_tracer = UnitTracer::new(&s.scene, s.intersector.as_ref());
+        let table = unit_tracer.table();
+        let tracer = Tracer::new(&table);
+        let mut settings =
+            PathSettings::from_params(&flowlight_sdk::Params::from_slice(&[])).unwrap();
+        settings.variant = Variant::Untangled;
+        settings.path_depth = 3;
+        let mut rng = Rng::new(17, 2);
+        let mut x = Box::new(Path::empty());
+        let mut y = Box::new(Path::empty());
+        let (mut valid, mut moved) = (vec![0usize; set.len()], vec![0usize; set.len()]);
+        let mut seen_sky = 0;
+        for _ in 0..1500 {
+            let raster = glam::Vec2::new(rng.uniform() * 32.0, rng.uniform() * 32.0);
+            let sample =
+                untangled::trace(&scene, &tracer, &settings, &mut rng, raster, Some(&mut x));
+            if sample.value.is_black() {
+                continue;
+            }
+            let n = x.vertex_count as usize - 1;
+            let light = x.vertices[n];
+            assert!(
+                flowlight_mcmc::measure::is_distant(&scene, &light),
+                "{label}: a seed ended on {light:?}"
+            );
+            // The target function sees what the seed sampler found.
+            assert!(
+                !flowlight_mcmc::measurement(&scene, &x).is_black(),
+                "{label}: f = 0 for a seed {}",
+                x.heckbert()
+            );
+            seen_sky += usize::from(n == 1);
+            x.film_window = 8;
+            for i in 0..set.len() {
+                let p = set.propose(i, &tracer, &mut rng, &x, &mut y).unwrap();
+                if p.valid == 0 {
+                    continue;
+                }
+                let ly = y.vertices[n];
+                if sun {
+                    assert_eq!(ly.ng, light.ng, "{} moved the sun's direction", set.name(i));
+                } else if n > 1 && ly.ng != light.ng {
+                    // (On an E L path the film move alone turns the eye ray, and ω with it.)
+                    moved[i] += 1;
+                }
+                let forward = set.density(i, &x, &y).unwrap();
+                let reverse = set.density(i, &y, &x).unwrap();
+                assert!(forward > 0.0, "{label} {}: unreachable proposal", set.name(i));
+                let expected = reverse / forward;
+                let got = p.transition_ratio as f64;
+                assert!(
+                    (got - expected).abs() <= 2e-3 * expected.max(got) + 1e-30,
+                    "{label} {}: ratio {got} vs T(y→x)/T(x→y) {expected} ({} → {})",
+                    set.name(i),
+                    x.heckbert(),
+                    y.heckbert()
+                );
+                valid[i] += 1;
+            }
+        }
+        for (i, v) in valid.iter().enumerate() {
+            assert!(*v > 100, "{label}: {} made {v} valid proposals", set.name(i));
+        }
+        if !sun {
+            // The camera sees the sky (E L paths), and every extending strategy perturbs the
+            // sky direction (hard reconnection keeps it).
+            assert!(seen_sky > 50, "{seen_sky} seeds saw the sky");
+            assert_eq!(moved[0], 0, "hard reconnection moved the sky direction");
+            for (i, m) in moved.iter().enumerate().skip(1) {
+                assert!(*m > 20, "{} perturbed the sky direction {m} times", set.name(i));
+            }
+        }
+    }
+}

@@ -13,6 +13,29 @@
 //! radiance scaling) and w_c its mixture weight. A path tracer's estimate of the same path is
 //! f(x)/p(x) with p in the same measure, so BSDF-sampled steps contribute f_s|cos|/p_ω exactly
 //! as in path tracing (the Jacobian cancels).
+//!
+//! The light end xₙ sets the measure of the last step (J(x_{n−1} → xₙ) above is replaced by):
+//!
+//! ```text
+//! area light           |n_n·ω| / |xₙ − x_{n−1}|²   xₙ a free point on the emitter (area measure)
+//! point / spot light   1 / |xₙ − x_{n−1}|²          xₙ fixed: a Dirac in position
+//! environment          1                            xₙ a free direction ω (solid-angle measure)
+//! directional light    1                            xₙ fixed: a Dirac in direction
+//! ```
+//!
+//! and L_e is the emitted radiance towards x_{n−1}: L(xₙ, ω), I(ω)/1 with the 1/d² above,
+//! L_env(ω), or the directional light's irradiance at normal incidence E (its radiance is
+//! E·δ(ω − ω_sun)). A **light vertex at infinity** (environment, directional light) stores the
+//! unit direction from the scene towards the light in `ng`/`ns`; its `p` is only a nominal
+//! point one unit from x_{n−1} ([`distant_vertex`]), and every direction towards it is that
+//! stored direction ([`direction`]). Veach 1997 §8.2 (directions at infinity as an extra
+//! solid-angle factor of the path measure), thesis §3.2 (point lights).
+//!
+//! A path tracer's estimate is again f/p: next-event estimation of the environment divides by
+//! the environment's solid-angle density, of a directional light by its selection probability
+//! alone (a Dirac); an escaped ray after a Dirac vertex (or the eye) sees L_env(ω) with no
+//! density at all, the direction being fixed by the Dirac chain. A Dirac light (point, spot,
+//! directional) can only end a path after a smooth vertex: nothing else reaches it.
 
 use flowlight_core::bsdf::{volume, Bsdf, Component};
 use flowlight_core::geometry::Frame;
@@ -94,8 +117,17 @@ pub fn local_directions(
     prev: Vec3,
     next: Vec3,
 ) -> Option<(Frame, Vec3, Vec3, Vec3, Vec3)> {
+    local_directions_towards(v, prev, (next - v.p).try_normalize()?)
+}
+
+/// [`local_directions`] with the world direction `wi_w` to the next vertex given (a vertex at
+/// infinity has no position to take it from).
+pub fn local_directions_towards(
+    v: &PathVertex,
+    prev: Vec3,
+    wi_w: Vec3,
+) -> Option<(Frame, Vec3, Vec3, Vec3, Vec3)> {
     let wo_w = (prev - v.p).try_normalize()?;
-    let wi_w = (next - v.p).try_normalize()?;
     let frame = Frame::from_z(v.ns);
     Some((
         frame,
@@ -127,6 +159,60 @@ pub fn area_jacobian(a: Vec3, b: Vec3, nb: Vec3) -> f32 {
 /// How far a stored direction may stray from the Dirac direction recomputed from positions.
 const DIRAC_TOLERANCE: f32 = 1e-3;
 
+/// Unified light index of a light vertex, if it names one of the scene's lights.
+pub fn light_index(scene: &Scene, v: &PathVertex) -> Option<usize> {
+    usize::try_from(v.emitter)
+        .ok()
+        .filter(|&i| v.node == NodeType::Light && i < scene.lights.count())
+}
+
+/// Whether `v` is a light vertex at infinity (an environment direction or a directional
+/// light): its `ng` holds the unit direction towards the light (module docs).
+pub fn is_distant(scene: &Scene, v: &PathVertex) -> bool {
+    light_index(scene, v).is_some_and(|i| scene.lights.kind(i).is_distant())
+}
+
+/// Unit direction from vertex `a` towards vertex `b`: the stored direction when `b` is at
+/// infinity, else from the positions. `None` for coincident points.
+pub fn direction(scene: &Scene, a: &PathVertex, b: &PathVertex) -> Option<Vec3> {
+    if is_distant(scene, b) {
+        b.ng.try_normalize()
+    } else {
+        (b.p - a.p).try_normalize()
+    }
+}
+
+/// Whether `a` and `b` are the same point of path space: the same position, or, at infinity,
+/// the same light and direction (the nominal positions of distant vertices differ whenever
+/// the vertex before them moved).
+pub fn same_vertex(scene: &Scene, a: &PathVertex, b: &PathVertex) -> bool {
+    match (is_distant(scene, a), is_distant(scene, b)) {
+        (true, true) => a.emitter == b.emitter && a.ng == b.ng,
+        (false, false) => a.p == b.p,
+        _ => false,
+    }
+}
+
+/// The light vertex at infinity of light `light` in unit direction `dir` seen from `from`: the
+/// direction in its normal slots, a nominal position one unit along it. The seed samplers
+/// (`flowlight-pathtrace`) store distant light vertices the same way.
+pub fn distant_vertex(from: Vec3, dir: Vec3, light: usize) -> PathVertex {
+    PathVertex {
+        p: from + dir,
+        p_error: Vec3::ZERO,
+        ng: dir,
+        ns: dir,
+        uv: Vec2::ZERO,
+        uv1: Vec2::ZERO,
+        color: [1.0; 4],
+        prim: u32::MAX,
+        material: u32::MAX,
+        emitter: light as i32,
+        node: NodeType::Light,
+        component: 0,
+    }
+}
+
 /// The target function f(x) of a complete path (module docs). Zero for a path that does not
 /// end on an emitter, breaks a Dirac constraint or leaks through a shading normal.
 pub fn measurement(scene: &Scene, path: &Path) -> Rgb {
@@ -136,21 +222,22 @@ pub fn measurement(scene: &Scene, path: &Path) -> Rgb {
     }
     let n = v.len() - 1;
     let light = &v[n];
-    let Some(to_prev) = (v[n - 1].p - light.p).try_normalize() else {
+    let Some(li) = light_index(scene, light) else {
+        return Rgb::ZERO;
+    };
+    let kind = scene.lights.kind(li);
+    // Nothing but a smooth vertex reaches a Dirac light (no sampled direction hits it).
+    if kind.is_delta() && WeakNode::of(&v[n - 1]) != WeakNode::Smooth {
+        return Rgb::ZERO;
+    }
+    let Some(to_light) = direction(scene, &v[n - 1], light) else {
         return Rgb::ZERO;
     };
     // The light end: emitted radiance towards x_{n-1} and the measure factor of the last step
-    // (the area Jacobian for an area light; 1/d² for a point or spot light, whose position is
-    // a Dirac and no free coordinate). Distant lights are not part of this path space.
-    let Some(li) = usize::try_from(light.emitter)
-        .ok()
-        .filter(|&i| i < scene.lights.count())
-    else {
-        return Rgb::ZERO;
-    };
-    let (mut f, light_factor) = match scene.lights.kind(li) {
+    // (module docs' table).
+    let (mut f, light_factor) = match kind {
         LightKind::Area => (
-            scene.lights.emitted(li, light.p, to_prev),
+            scene.lights.emitted(li, light.p, -to_light),
             area_jacobian(v[n - 1].p, light.p, light.ng),
         ),
         LightKind::Positional => {
@@ -158,18 +245,31 @@ pub fn measurement(scene: &Scene, path: &Path) -> Rgb {
                 return Rgb::ZERO;
             };
             (
-                l.intensity_towards(to_prev),
+                l.intensity_towards(-to_light),
                 1.0 / (v[n - 1].p - light.p).length_squared(),
             )
         }
-        LightKind::Directional | LightKind::Environment => return Rgb::ZERO,
+        LightKind::Directional => {
+            let Some(l) = scene.lights.punctual_at(li) else {
+                return Rgb::ZERO;
+            };
+            // A Dirac in direction: the vertex must hold the light's own direction.
+            if to_light.dot(-l.direction) < 1.0 - DIRAC_TOLERANCE {
+                return Rgb::ZERO;
+            }
+            (l.intensity, 1.0)
+        }
+        LightKind::Environment => (scene.lights.environment_radiance(to_light), 1.0),
     };
     for k in 1..n {
         let x = &v[k];
         let Some(bsdf) = vertex_bsdf(scene, x) else {
             return Rgb::ZERO;
         };
-        let Some((_, wo_w, wi_w, wo, wi)) = local_directions(x, v[k - 1].p, v[k + 1].p) else {
+        let Some(wi_w) = direction(scene, x, &v[k + 1]) else {
+            return Rgb::ZERO;
+        };
+        let Some((_, wo_w, wi_w, wo, wi)) = local_directions_towards(x, v[k - 1].p, wi_w) else {
             return Rgb::ZERO;
         };
         if !side_consistent(x.ng, wo_w, wo) || !side_consistent(x.ng, wi_w, wi) {
@@ -202,7 +302,10 @@ pub fn measurement(scene: &Scene, path: &Path) -> Rgb {
             WeakNode::Eye | WeakNode::Light => return Rgb::ZERO,
         }
         // Beer–Lambert absorption when the segment to the next vertex runs inside a volume.
-        if let Some(m) = scene.materials.get(x.material as usize) {
+        // A segment to infinity leaves the scene, so it runs inside no closed volume (the path
+        // tracers' escaped and shadow rays apply none either).
+        let to_infinity = k + 1 == n && is_distant(scene, light);
+        if let Some(m) = scene.materials.get(x.material as usize).filter(|_| !to_infinity) {
             f *= volume::segment_transmittance(m, x.ng, wi_w, (v[k + 1].p - x.p).length());
         }
         if f.is_black() {

@@ -18,14 +18,32 @@
 //! has T = p_r. The reverse move regenerates x from y with the same rules: for the cap, the
 //! cap is centred on the direction from x_j to y_{j+1}. The strategies differ only by their
 //! [`Policy`].
+//!
+//! **Lights at infinity** (the measure is in [`crate::measure`]'s module docs):
+//!
+//! * a *directional* light's vertex is a Dirac in direction: like a point light's, no mutation
+//!   moves it. A smooth vertex whose successor is a Dirac light (point, spot, directional)
+//!   always reconnects (p_r = 1 whatever the policy: an extension could never reach the
+//!   light), and the reconnection to a directional light is an unbounded shadow ray along the
+//!   light's direction;
+//! * the *environment*'s vertex is a free direction ω in the solid-angle measure, so mutations
+//!   perturb it like any free vertex: a hard reconnection keeps ω (a Dirac step, T = p_r, with
+//!   the shadow ray unbounded along ω); an extension at x_{n−1} must escape the scene, and the
+//!   direction it escaped along is the new ω, with T = (1 − p_r)·p_ω — no area Jacobian, the
+//!   measure of ω being solid angle; a Dirac chain (or the eye ray) that escapes reaches the
+//!   environment along the direction it is forced into. The cap of a cap extension is centred
+//!   on ω itself. Regenerating ω freshly from the environment's own sampling density would be
+//!   correct too (an independence move for the last vertex), but it ignores the BSDF and the
+//!   current direction, so most proposals would land where the path's f is small.
 
 use crate::film;
 use crate::measure::{
-    area_jacobian, dirac_component, dirac_scatter, local_directions, side_consistent, vertex_bsdf,
-    WeakNode,
+    area_jacobian, dirac_component, dirac_scatter, direction, distant_vertex, is_distant,
+    light_index, local_directions_towards, same_vertex, side_consistent, vertex_bsdf, WeakNode,
 };
 use flowlight_core::bsdf::Bsdf;
-use flowlight_core::geometry::{Frame, SurfaceHit};
+use flowlight_core::geometry::{Frame, Ray, SurfaceHit};
+use flowlight_core::light::LightKind;
 use flowlight_core::path::{NodeType, Path, PathVertex};
 use flowlight_core::rng::Rng;
 use flowlight_core::sampling::{uniform_cone, uniform_cone_pdf};
@@ -65,13 +83,16 @@ pub struct Policy {
     pub drill_caustics: bool,
 }
 
-/// Probability of reconnecting at smooth vertex `j` of `x` after `extensions` extensions.
-fn p_reconnect(policy: &Policy, x: &[PathVertex], j: usize, extensions: u32) -> f32 {
+/// Probability of reconnecting at smooth vertex `j` of `x` after `extensions` extensions. 1
+/// when the next vertex is a Dirac light, which only a reconnection reaches (module docs).
+fn p_reconnect(scene: &Scene, policy: &Policy, x: &[PathVertex], j: usize, extensions: u32) -> f32 {
     let n = x.len() - 1;
     if !WeakNode::of(&x[j + 1]).connectable() {
         return 0.0;
     }
-    if policy.extension.is_none() {
+    if policy.extension.is_none()
+        || light_index(scene, &x[j + 1]).is_some_and(|i| scene.lights.kind(i).is_delta())
+    {
         return 1.0;
     }
     if extensions < policy.min_extensions {
@@ -84,16 +105,20 @@ fn p_reconnect(policy: &Policy, x: &[PathVertex], j: usize, extensions: u32) -> 
 }
 
 /// Density of extending from `from` (with previous vertex `prev`) to `to`; for a cap, centred
-/// on the direction to `target`. Solid angle times the area Jacobian of `to`.
+/// on the direction to `target`. Solid angle times the area Jacobian of `to` (times 1 when
+/// `to` is a direction at infinity, whose measure is solid angle).
 fn extension_density(
     scene: &Scene,
     ext: Extension,
     prev: &PathVertex,
     from: &PathVertex,
     to: &PathVertex,
-    target: Vec3,
+    target: &PathVertex,
 ) -> f64 {
-    let Some((_, _, wi_w, wo, wi)) = local_directions(from, prev.p, to.p) else {
+    let Some(dir) = direction(scene, from, to) else {
+        return 0.0;
+    };
+    let Some((_, _, wi_w, wo, wi)) = local_directions_towards(from, prev.p, dir) else {
         return 0.0;
     };
     let p_omega = match ext {
@@ -104,7 +129,7 @@ fn extension_density(
             smooth_pdf(&bsdf, wo, wi)
         }
         Extension::Cap { cos_max } => {
-            let Some(axis) = (target - from.p).try_normalize() else {
+            let Some(axis) = direction(scene, from, target) else {
                 return 0.0;
             };
             if axis.dot(wi_w) >= cos_max {
@@ -114,7 +139,12 @@ fn extension_density(
             }
         }
     };
-    p_omega as f64 * area_jacobian(from.p, to.p, to.ng) as f64
+    let jacobian = if is_distant(scene, to) {
+        1.0
+    } else {
+        area_jacobian(from.p, to.p, to.ng)
+    };
+    p_omega as f64 * jacobian as f64
 }
 
 /// Sum of the smooth components' weights.
@@ -194,6 +224,29 @@ fn matching_vertex(
     }
 }
 
+/// Traces `ray`, leaving the vertex at `from`, to the vertex that stands in for `original`: a
+/// hit [`matching_vertex`] accepts or, when `original` is the environment, an escape along a
+/// direction the environment shines from (a directional light cannot be reached by a ray).
+fn trace_vertex(
+    scene: &Scene,
+    tracer: &Tracer,
+    ray: &Ray,
+    from: Vec3,
+    original: &PathVertex,
+) -> Option<PathVertex> {
+    if is_distant(scene, original) {
+        let i = light_index(scene, original)?;
+        if scene.lights.kind(i) != LightKind::Environment || tracer.intersect(ray).is_some() {
+            return None;
+        }
+        let dir = ray.dir.try_normalize()?;
+        return (!scene.lights.environment_radiance(dir).is_black())
+            .then(|| distant_vertex(from, dir, i));
+    }
+    let hit = tracer.intersect(ray)?;
+    matching_vertex(scene, &hit, original, from)
+}
+
 /// Image size the film squares are clipped to.
 fn film_size(scene: &Scene) -> (u32, u32) {
     (scene.camera.width, scene.camera.height)
@@ -233,10 +286,7 @@ pub fn propose(
     let eye_ray = scene.camera.generate_ray(y.raster);
     y.vertices[0] = PathVertex::eye(eye_ray.origin, scene.camera.forward);
 
-    let Some(hit) = tracer.intersect(&eye_ray) else {
-        return MISS;
-    };
-    let Some(v1) = matching_vertex(scene, &hit, &xv[1], eye_ray.origin) else {
+    let Some(v1) = trace_vertex(scene, tracer, &eye_ray, eye_ray.origin, &xv[1]) else {
         return MISS;
     };
     y.vertices[1] = v1;
@@ -298,30 +348,37 @@ fn continue_from(
         if !side_consistent(yj.ng, wo_w, wo) {
             return None;
         }
-        let next_hit;
         if kind.is_dirac() {
             let bsdf = vertex_bsdf(scene, &yj)?;
             let (c, _) = bsdf.components().nth(yj.component as usize)?;
             let (wi, _) = dirac_scatter(&c, wo, kind == WeakNode::DiracTransmission)?;
-            next_hit = tracer.intersect(&yj.surface().spawn_ray(frame.to_world(wi)))?;
-            let next = matching_vertex(scene, &next_hit, &xv[j + 1], yj.p)?;
+            let ray = yj.surface().spawn_ray(frame.to_world(wi));
+            let next = trace_vertex(scene, tracer, &ray, yj.p, &xv[j + 1])?;
             j += 1;
             y.vertices[j] = next;
         } else {
-            let p_r = p_reconnect(policy, xv, j, *extensions);
+            let p_r = p_reconnect(scene, policy, xv, j, *extensions);
             if p_r > 0.0 && rng.uniform() < p_r {
                 let target = &xv[j + 1];
-                let dir = (target.p - yj.p).try_normalize()?;
+                let distant = is_distant(scene, target);
+                let dir = direction(scene, &yj, target)?;
                 if !side_consistent(yj.ng, dir, frame.to_local(dir)) {
                     return None;
                 }
-                if tracer.occluded(
-                    &yj.surface()
-                        .spawn_ray_to(target.p, target.p_error, target.ng),
-                ) {
+                let shadow = if distant {
+                    yj.surface().spawn_ray(dir)
+                } else {
+                    yj.surface()
+                        .spawn_ray_to(target.p, target.p_error, target.ng)
+                };
+                if tracer.occluded(&shadow) {
                     return None;
                 }
                 y.vertices[j + 1..=n].copy_from_slice(&xv[j + 1..=n]);
+                if distant {
+                    // The same direction, its nominal point moved with y_{n-1}.
+                    y.vertices[n].p = yj.p + dir;
+                }
                 *fwd *= p_r as f64;
                 *rev *= p_r as f64;
                 return Some(());
@@ -333,22 +390,22 @@ fn continue_from(
                     frame.to_world(sample_smooth(&bsdf, wo, rng)?)
                 }
                 Extension::Cap { cos_max } => {
-                    let axis = (xv[j + 1].p - yj.p).try_normalize()?;
+                    let axis = direction(scene, &yj, &xv[j + 1])?;
                     Frame::from_z(axis).to_world(uniform_cone(rng.uniform2(), cos_max))
                 }
             };
             if !side_consistent(yj.ng, dir, frame.to_local(dir)) {
                 return None;
             }
-            next_hit = tracer.intersect(&yj.surface().spawn_ray(dir))?;
-            let next = matching_vertex(scene, &next_hit, &xv[j + 1], yj.p)?;
+            let ray = yj.surface().spawn_ray(dir);
+            let next = trace_vertex(scene, tracer, &ray, yj.p, &xv[j + 1])?;
             // Densities are evaluated from the vertex positions, in the forward as in the reverse
             // direction and in `density`: the sampled direction and the one the positions give
             // differ by the ray-origin offset, which matters for close, grazing vertices.
             *fwd *= (1.0 - p_r) as f64
-                * extension_density(scene, ext, &y.vertices[j - 1], &yj, &next, xv[j + 1].p);
+                * extension_density(scene, ext, &y.vertices[j - 1], &yj, &next, &xv[j + 1]);
             *rev *= (1.0 - p_r) as f64
-                * extension_density(scene, ext, &xv[j - 1], &xv[j], &xv[j + 1], next.p);
+                * extension_density(scene, ext, &xv[j - 1], &xv[j], &xv[j + 1], &next);
             *extensions += 1;
             j += 1;
             y.vertices[j] = next;
@@ -385,11 +442,11 @@ pub fn density(scene: &Scene, policy: &Policy, x: &Path, y: &Path) -> f64 {
         if WeakNode::of(&xv[j]).is_dirac() {
             continue;
         }
-        let p_r = p_reconnect(policy, xv, j, extensions);
+        let p_r = p_reconnect(scene, policy, xv, j, extensions);
         if yv[j + 1..=n]
             .iter()
             .zip(&xv[j + 1..=n])
-            .all(|(a, b)| a.p == b.p)
+            .all(|(a, b)| same_vertex(scene, a, b))
         {
             return d * p_r as f64;
         }
@@ -397,7 +454,7 @@ pub fn density(scene: &Scene, policy: &Policy, x: &Path, y: &Path) -> f64 {
             return 0.0;
         };
         d *= (1.0 - p_r) as f64
-            * extension_density(scene, ext, &yv[j - 1], &yv[j], &yv[j + 1], xv[j + 1].p);
+            * extension_density(scene, ext, &yv[j - 1], &yv[j], &yv[j + 1], &xv[j + 1]);
         extensions += 1;
     }
     d

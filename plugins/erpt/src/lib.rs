@@ -142,10 +142,6 @@ impl Integrator for Erpt {
         scene: Scene<'static>,
     ) -> Result<(Self, IntegratorInfo), String> {
         let settings = ErptSettings::from_params(params)?;
-        let lights = &scene.lights;
-        if (0..lights.count()).any(|i| lights.kind(i).is_distant()) {
-            return Err("erpt does not handle lights at infinity yet (a directional light or an [environment]): its chains would lose their light; render this scene with mcpt".into());
-        }
         if mutations.is_empty() {
             return Err("erpt needs at least one [[integrator.mutations]] entry".into());
         }
