@@ -1,5 +1,6 @@
 //! Analytic checks of every light type through the whole renderer (synthetic glTF scenes, both
-//! MCPT variants), and ERPT against MCPT under a point light.
+//! MCPT variants), and ERPT against MCPT under a point light (ERPT under lights at infinity:
+//! `tests/erpt.rs`).
 //!
 //! The surface is a Lambert floor (albedo ½, KHR_materials_specular factor 0: the spec's purely
 //! diffuse material) seen from above. Direct lighting by a delta light is noise-free (one light, one
@@ -364,24 +365,6 @@ weight = 0.3
         (m / ref_mean - 1.0).abs() < 0.03,
         "ERPT mean {m:.5} (runs {means:?}) vs MCPT {ref_mean:.5}"
     );
-}
-
-#[test]
-fn erpt_refuses_lights_at_infinity() {
-    let gltf = quads_gltf(&[FLOOR], LAMBERT, &[], "");
-    let dir = common::scratch("erpt-env");
-    std::fs::write(dir.join("scene.gltf"), &gltf).unwrap();
-    let cfg = dir.join("scene.toml");
-    std::fs::write(
-        &cfg,
-        "scene = \"scene.gltf\"\n[camera]\nposition = [0.0, 2.0, 0.0]\nlook_at = [0.0, 0.0, 0.1]\nfov_y = 40.0\n[integrator]\nplugin = \"erpt\"\n[[integrator.mutations]]\nplugin = \"hard-reconnection\"\n[environment]\ncolor = [1.0, 1.0, 1.0]\n",
-    )
-    .unwrap();
-    let err = match Session::prepare(&cfg, &Default::default()) {
-        Ok(_) => panic!("erpt accepted an environment"),
-        Err(e) => e,
-    };
-    assert!(err.contains("erpt") && err.contains("environment"), "{err}");
 }
 
 #[test]
