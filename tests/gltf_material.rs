@@ -277,7 +277,7 @@ fn volume_absorbs_by_beer_lambert() {
             .collect();
         for k in 0..3 {
             // ERPT's image scale carries the noise of its chain counts ⌊U + lum X/(N·e_d)⌋
-            // (seed 3 here: 1.7 % high in every channel alike, a 2.3σ draw; over 30 seeds the
+            // and of the colour of where they deposit (seed 3 here: 1.7 % high in every channel alike, a 2.3σ draw; over 30 seeds the
             // clear channel's mean is 1.0002 ± 0.0014, docs/erpt.md); its absorption shows in
             // the ratio to the clear channel b.
             let (got, want) = if variant == "erpt" {
