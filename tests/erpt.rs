@@ -468,7 +468,11 @@ fn mutations_keep_detailed_balance_with_lights_at_infinity() {
                 }
                 let forward = set.density(i, &x, &y).unwrap();
                 let reverse = set.density(i, &y, &x).unwrap();
-                assert!(forward > 0.0, "{label} {}: unreachable proposal", set.name(i));
+                assert!(
+                    forward > 0.0,
+                    "{label} {}: unreachable proposal",
+                    set.name(i)
+                );
                 let expected = reverse / forward;
                 let got = p.transition_ratio as f64;
                 assert!(
@@ -482,7 +486,11 @@ fn mutations_keep_detailed_balance_with_lights_at_infinity() {
             }
         }
         for (i, v) in valid.iter().enumerate() {
-            assert!(*v > 100, "{label}: {} made {v} valid proposals", set.name(i));
+            assert!(
+                *v > 100,
+                "{label}: {} made {v} valid proposals",
+                set.name(i)
+            );
         }
         if !sun {
             // The camera sees the sky (E L paths), and every extending strategy perturbs the
@@ -490,7 +498,11 @@ fn mutations_keep_detailed_balance_with_lights_at_infinity() {
             assert!(seen_sky > 50, "{seen_sky} seeds saw the sky");
             assert_eq!(moved[0], 0, "hard reconnection moved the sky direction");
             for (i, m) in moved.iter().enumerate().skip(1) {
-                assert!(*m > 20, "{} perturbed the sky direction {m} times", set.name(i));
+                assert!(
+                    *m > 20,
+                    "{} perturbed the sky direction {m} times",
+                    set.name(i)
+                );
             }
         }
     }
@@ -498,7 +510,12 @@ fn mutations_keep_detailed_balance_with_lights_at_infinity() {
 
 #[test]
 fn erpt_agrees_with_mcpt_under_a_directional_light() {
-    let mcpt = distant_scene("sun-mcpt", true, "plugin = \"mcpt\"\nvariant = \"entangled\"", "");
+    let mcpt = distant_scene(
+        "sun-mcpt",
+        true,
+        "plugin = \"mcpt\"\nvariant = \"entangled\"",
+        "",
+    );
     let reference = reference(&mcpt, 1024);
     let cfg = distant_scene("sun-erpt", true, "plugin = \"erpt\"", "");
     for (plugin, extra) in [
@@ -555,5 +572,11 @@ fn erpt_under_a_constant_sky_gives_albedo_times_sky_on_an_open_plane() {
     ]);
     // ρ·L per channel: 0.5 · 1.5 · (0.6, 0.8, 1.0).
     let exact = vec![Rgb::new(0.45, 0.6, 0.75); 32 * 32];
-    check_unbiased_window(cfg.to_str().unwrap(), "open plane under the sky", mix, &exact, 32);
+    check_unbiased_window(
+        cfg.to_str().unwrap(),
+        "open plane under the sky",
+        mix,
+        &exact,
+        32,
+    );
 }

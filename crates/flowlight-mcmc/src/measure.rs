@@ -305,7 +305,11 @@ pub fn measurement(scene: &Scene, path: &Path) -> Rgb {
         // A segment to infinity leaves the scene, so it runs inside no closed volume (the path
         // tracers' escaped and shadow rays apply none either).
         let to_infinity = k + 1 == n && is_distant(scene, light);
-        if let Some(m) = scene.materials.get(x.material as usize).filter(|_| !to_infinity) {
+        if let Some(m) = scene
+            .materials
+            .get(x.material as usize)
+            .filter(|_| !to_infinity)
+        {
             f *= volume::segment_transmittance(m, x.ng, wi_w, (v[k + 1].p - x.p).length());
         }
         if f.is_black() {
