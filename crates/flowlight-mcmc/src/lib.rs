@@ -13,6 +13,8 @@ pub mod measure;
 pub mod norms;
 pub mod regenerate;
 pub mod strategy;
+#[cfg(test)]
+mod testscene;
 
 pub use measure::{measurement, WeakNode};
 pub use regenerate::{Extension, Policy};

@@ -318,3 +318,86 @@ pub fn measurement(scene: &Scene, path: &Path) -> Rgb {
     }
     f
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testscene::*;
+    use std::f32::consts::PI;
+
+    fn close(a: Rgb, b: f32) -> bool {
+        (a.g - b).abs() <= 1e-5 * b.abs().max(1e-6)
+    }
+
+    #[test]
+    fn a_directional_light_gives_e_times_the_brdf_and_cosine_with_no_distance_factor() {
+        let scene = scene();
+        let x1 = floor(Vec3::new(0.2, 0.0, -0.5));
+        let cos = sun_travel().y.abs();
+        let f = measurement(&scene, &path(&[eye(), x1, sun(x1.p)], 8));
+        assert!(close(f, SUN * ALBEDO / PI * cos), "{f:?}");
+        // The nominal position of the vertex at infinity does not matter ...
+        let mut far = sun(x1.p);
+        far.p = Vec3::new(40.0, -7.0, 3.0);
+        assert_eq!(measurement(&scene, &path(&[eye(), x1, far], 8)), f);
+        // ... its direction does: a Dirac in direction, nothing but the sun's own counts.
+        let off = distant_vertex(x1.p, Vec3::Y, SUN_INDEX);
+        assert!(measurement(&scene, &path(&[eye(), x1, off], 8)).is_black());
+        // The eye cannot see it, nor a mirror reflect it into the eye (a Dirac after a Dirac).
+        assert!(measurement(&scene, &path(&[eye(), sun(eye().p)], 8)).is_black());
+        let m = mirror(Vec3::new(0.0, 0.0, -1.0), Vec3::Y);
+        assert!(measurement(&scene, &path(&[eye(), m, sun(m.p)], 8)).is_black());
+    }
+
+    #[test]
+    fn the_environment_is_a_direction_in_solid_angle() {
+        let scene = scene();
+        let x1 = floor(Vec3::new(0.2, 0.0, -0.5));
+        for dir in [Vec3::Y, Vec3::new(0.5, 1.0, -0.2), Vec3::new(-2.0, 0.3, 1.0)] {
+            let w = dir.normalize();
+            let f = measurement(&scene, &path(&[eye(), x1, sky(x1.p, w)], 8));
+            assert!(close(f, SKY * ALBEDO / PI * w.y), "{dir}: {f:?}");
+        }
+        // Below the floor: nothing (the direction leaves through the surface).
+        let below = sky(x1.p, Vec3::new(0.0, -1.0, 0.3));
+        assert!(measurement(&scene, &path(&[eye(), x1, below], 8)).is_black());
+        // The eye sees the sky itself: f = L_env, in the film measure alone.
+        let up = sky(eye().p, Vec3::new(0.1, 0.4, -1.0));
+        assert!(close(measurement(&scene, &path(&[eye(), up], 8)), SKY));
+        // A mirror reflects it with its Fresnel coefficient (a metal of base colour 1: 1);
+        // a sky vertex off the mirror direction is not on the path.
+        let m = mirror(Vec3::new(0.0, 0.0, -1.0), Vec3::Y);
+        let into = (m.p - eye().p).normalize();
+        let reflected = Vec3::new(into.x, -into.y, into.z);
+        let f = measurement(&scene, &path(&[eye(), m, sky(m.p, reflected)], 8));
+        assert!(close(f, SKY), "{f:?}");
+        let f = measurement(&scene, &path(&[eye(), m, sky(m.p, Vec3::Y)], 8));
+        assert!(f.is_black());
+    }
+
+    #[test]
+    fn an_area_light_keeps_its_area_jacobian() {
+        let scene = scene();
+        let x1 = floor(Vec3::new(0.2, 0.0, -0.5));
+        let l = lamp(Vec3::new(0.1, 2.0, -0.2));
+        let d = l.p - x1.p;
+        let w = d.normalize();
+        let want = LAMP * ALBEDO / PI * w.y * w.y / d.length_squared();
+        let f = measurement(&scene, &path(&[eye(), x1, l], 8));
+        assert!(close(f, want), "{f:?} vs {want}");
+    }
+
+    #[test]
+    fn distant_vertices_compare_by_direction() {
+        let scene = scene();
+        let a = sky(Vec3::ZERO, Vec3::Y);
+        let mut b = a;
+        b.p = Vec3::splat(5.0);
+        assert!(is_distant(&scene, &a) && same_vertex(&scene, &a, &b));
+        assert!(!same_vertex(&scene, &a, &sky(Vec3::ZERO, Vec3::X)));
+        assert!(!same_vertex(&scene, &a, &distant_vertex(Vec3::ZERO, Vec3::Y, SUN_INDEX)));
+        let x = floor(Vec3::ZERO);
+        assert!(!is_distant(&scene, &x) && !is_distant(&scene, &lamp(Vec3::Y)));
+        assert_eq!(direction(&scene, &x, &b), Some(Vec3::Y));
+    }
+}
