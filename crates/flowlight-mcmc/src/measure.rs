@@ -353,7 +353,11 @@ mod tests {
     fn the_environment_is_a_direction_in_solid_angle() {
         let scene = scene();
         let x1 = floor(Vec3::new(0.2, 0.0, -0.5));
-        for dir in [Vec3::Y, Vec3::new(0.5, 1.0, -0.2), Vec3::new(-2.0, 0.3, 1.0)] {
+        for dir in [
+            Vec3::Y,
+            Vec3::new(0.5, 1.0, -0.2),
+            Vec3::new(-2.0, 0.3, 1.0),
+        ] {
             let w = dir.normalize();
             let f = measurement(&scene, &path(&[eye(), x1, sky(x1.p, w)], 8));
             assert!(close(f, SKY * ALBEDO / PI * w.y), "{dir}: {f:?}");
@@ -395,7 +399,11 @@ mod tests {
         b.p = Vec3::splat(5.0);
         assert!(is_distant(&scene, &a) && same_vertex(&scene, &a, &b));
         assert!(!same_vertex(&scene, &a, &sky(Vec3::ZERO, Vec3::X)));
-        assert!(!same_vertex(&scene, &a, &distant_vertex(Vec3::ZERO, Vec3::Y, SUN_INDEX)));
+        assert!(!same_vertex(
+            &scene,
+            &a,
+            &distant_vertex(Vec3::ZERO, Vec3::Y, SUN_INDEX)
+        ));
         let x = floor(Vec3::ZERO);
         assert!(!is_distant(&scene, &x) && !is_distant(&scene, &lamp(Vec3::Y)));
         assert_eq!(direction(&scene, &x, &b), Some(Vec3::Y));

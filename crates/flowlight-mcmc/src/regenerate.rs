@@ -459,3 +459,103 @@ pub fn density(scene: &Scene, policy: &Policy, x: &Path, y: &Path) -> f64 {
     }
     d
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testscene::*;
+    use std::f64::consts::PI;
+
+    const BLOW: Policy = Policy {
+        min_extensions: 0,
+        p_reconnect: 0.5,
+        extension: Some(Extension::Bsdf),
+        drill_caustics: false,
+    };
+
+    fn soft(cap_degrees: f32) -> Policy {
+        Policy {
+            min_extensions: 1,
+            p_reconnect: 1.0,
+            extension: Some(Extension::cap_degrees(cap_degrees)),
+            drill_caustics: false,
+        }
+    }
+
+    /// Film density of the migration the tests make: 1/K² with K = 8.
+    const FILM: f64 = 1.0 / 64.0;
+
+    fn moved(p: &Path) -> Path {
+        let mut q = *p;
+        q.raster += glam::Vec2::new(1.0, -0.5);
+        q
+    }
+
+    #[test]
+    fn a_dirac_light_is_always_reconnected_to_whatever_the_policy() {
+        let scene = scene();
+        let (x1, y1) = (
+            floor(Vec3::new(0.2, 0.0, -0.5)),
+            floor(Vec3::new(0.3, 0.0, -0.6)),
+        );
+        let x = path(&[eye(), x1, sun(x1.p)], 8);
+        for policy in [BLOW, soft(5.0)] {
+            assert_eq!(p_reconnect(&scene, &policy, x.vertices(), 1, 0), 1.0);
+        }
+        // y: x1 moved, the sun's vertex kept (its nominal point moves with y1).
+        let mut y = moved(&path(&[eye(), y1, sun(y1.p)], 8));
+        for policy in [BLOW, soft(5.0)] {
+            assert!((density(&scene, &policy, &x, &y) - FILM).abs() < 1e-12);
+        }
+        // A sun vertex in another direction cannot be reached at all.
+        y.vertices[2] = distant_vertex(y1.p, Vec3::Y, SUN_INDEX);
+        assert_eq!(density(&scene, &BLOW, &x, &y), 0.0);
+        // An environment or area light keeps the policy's probability.
+        let x = path(&[eye(), x1, sky(x1.p, Vec3::Y)], 8);
+        assert_eq!(p_reconnect(&scene, &BLOW, x.vertices(), 1, 0), 0.5);
+        assert_eq!(p_reconnect(&scene, &soft(5.0), x.vertices(), 1, 0), 0.0);
+    }
+
+    #[test]
+    fn a_sky_direction_is_extended_to_in_solid_angle_and_reconnected_to_as_it_is() {
+        let scene = scene();
+        let (x1, y1) = (
+            floor(Vec3::new(0.2, 0.0, -0.5)),
+            floor(Vec3::new(0.3, 0.0, -0.6)),
+        );
+        let w_x = Vec3::new(0.1, 1.0, 0.05).normalize();
+        let x = path(&[eye(), x1, sky(x1.p, w_x)], 8);
+        // Hard reconnection to the same direction: T = film · p_r.
+        let kept = moved(&path(&[eye(), y1, sky(y1.p, w_x)], 8));
+        assert!((density(&scene, &BLOW, &x, &kept) - FILM * 0.5).abs() < 1e-12);
+        // BSDF extension to a new direction: film · (1 − p_r) · cos θ/π, no area Jacobian.
+        let w_y = Vec3::new(-0.4, 0.8, 0.3).normalize();
+        let ext = moved(&path(&[eye(), y1, sky(y1.p, w_y)], 8));
+        let want = FILM * 0.5 * w_y.y as f64 / PI;
+        let got = density(&scene, &BLOW, &x, &ext);
+        assert!((got / want - 1.0).abs() < 1e-5, "{got} vs {want}");
+        // Cap extension: uniform in the cap around x's direction, 0 outside it.
+        let cap = soft(30.0);
+        let want = FILM / (2.0 * PI * (1.0 - 30f64.to_radians().cos()));
+        let near = Vec3::new(0.3, 1.0, 0.0).normalize(); // 11° from w_x
+        let inside = moved(&path(&[eye(), y1, sky(y1.p, near)], 8));
+        let got = density(&scene, &cap, &x, &inside);
+        assert!((got / want - 1.0).abs() < 1e-4, "{got} vs {want}");
+        assert_eq!(density(&scene, &cap, &x, &ext), 0.0);
+    }
+
+    #[test]
+    fn extension_density_to_an_area_light_has_the_area_jacobian() {
+        let scene = scene();
+        let (e, x1) = (eye(), floor(Vec3::new(0.2, 0.0, -0.5)));
+        let l = lamp(Vec3::new(0.1, 2.0, -0.2));
+        let d = l.p - x1.p;
+        let cos = (d.y / d.length()) as f64;
+        let want = cos / PI * cos / d.length_squared() as f64;
+        let got = extension_density(&scene, Extension::Bsdf, &e, &x1, &l, &l);
+        assert!((got / want - 1.0).abs() < 1e-5, "{got} vs {want}");
+        let s = sky(x1.p, d);
+        let got = extension_density(&scene, Extension::Bsdf, &e, &x1, &s, &s);
+        assert!((got / (cos / PI) - 1.0).abs() < 1e-5, "{got}");
+    }
+}
