@@ -69,6 +69,62 @@ fn colour(f: Rgb) -> Rgb {
     f / f.luminance()
 }
 
+/// How many chains a seed starts and the quantum each of their steps deposits (§5.2,
+/// Algorithm 2): ⌊U + lum(X_f)/(N·e_d)⌋ chains of quantum e_d, U uniform in [0, 1), whose
+/// expected energy N·e_d·E[chains] is lum(X_f); when that count exceeds `cap`, `cap` chains of
+/// quantum lum(X_f)/(N·cap): the same energy, exactly. The flag says the cap applied.
+pub fn chain_count(u: f64, lum_seed: f64, n: f64, quantum: f64, cap: f64) -> (u64, f64, bool) {
+    let wanted = (u + lum_seed / (n * quantum)).floor();
+    if wanted > cap {
+        (cap as u64, lum_seed / (n * cap), true)
+    } else {
+        (wanted as u64, quantum, false)
+    }
+}
+
+/// Metropolis–Hastings acceptance of the corrected flow (§5.3, with the mixture or the
+/// selected strategy's transition ratio, §5.4):
+///
+/// ```text
+/// a(y → z) = min(1, lum f(z) / lum f(y) · T(z→y) / T(y→z))
+/// ```
+///
+/// `None` when the ratio or f(z) is NaN, infinite or negative: such a proposal is a counted
+/// rejection, never a state. 0 when f(z) is black. `f_y` is the current state's, lum f(y) > 0.
+pub fn acceptance(f_y: Rgb, f_z: Rgb, ratio: f64) -> Option<f64> {
+    let lum_z = f_z.luminance() as f64;
+    if !(ratio.is_finite() && ratio >= 0.0 && f_z.is_valid_radiance() && lum_z.is_finite()) {
+        return None;
+    }
+    Some(if lum_z > 0.0 {
+        (lum_z / f_y.luminance() as f64 * ratio).min(1.0)
+    } else {
+        0.0
+    })
+}
+
+/// The expected-value deposits of one step (§5.5), at the proposal z and at the current state
+/// y, each in the colour of the state it lands on:
+///
+/// ```text
+/// at z:  a · e_d · f(z) / lum f(z)        at y:  (1 − a) · e_d · f(y) / lum f(y)
+/// ```
+///
+/// Their luminances sum to e_d whatever a is: every step deposits one quantum.
+pub fn expected_deposits(a: f64, e: f32, f_y: Rgb, f_z: Rgb) -> (Rgb, Rgb) {
+    let at_z = if a > 0.0 {
+        colour(f_z) * (a as f32 * e)
+    } else {
+        Rgb::ZERO
+    };
+    let at_y = if a < 1.0 {
+        colour(f_y) * ((1.0 - a) as f32 * e)
+    } else {
+        Rgb::ZERO
+    };
+    (at_z, at_y)
+}
+
 impl<'a> Flow<'a> {
     pub fn new(
         scene: &'a Scene<'a>,
@@ -124,17 +180,16 @@ impl<'a> Flow<'a> {
             stats[stats::SEEDS_SKIPPED] += 1.0;
             return Ok(());
         }
-        let n = self.settings.chain_length as f64;
-        let wanted = (rng.uniform() as f64 + lum_seed / (n * quantum)).floor();
-        let cap = self.settings.max_chains_per_seed as f64;
-        // A seed that would need more chains than the cap spreads the same energy over the
-        // capped number: each deposit carries lum(X_f)/(N·chains) instead of e_d.
-        let (chains, quantum) = if wanted > cap {
+        let (chains, quantum, capped) = chain_count(
+            rng.uniform() as f64,
+            lum_seed,
+            self.settings.chain_length as f64,
+            quantum,
+            self.settings.max_chains_per_seed as f64,
+        );
+        if capped {
             stats[stats::SEEDS_CAPPED] += 1.0;
-            (cap as u64, lum_seed / (n * cap))
-        } else {
-            (wanted as u64, quantum)
-        };
+        }
         let e = quantum as f32;
         let mut dep = Depositor {
             film,
@@ -173,26 +228,14 @@ impl<'a> Flow<'a> {
                     }
                     _ => proposal.transition_ratio as f64,
                 };
-                let lum_z = f_z.luminance() as f64;
-                let a = if !(ratio.is_finite()
-                    && ratio >= 0.0
-                    && f_z.is_valid_radiance()
-                    && lum_z.is_finite())
-                {
+                let a = acceptance(f_y, f_z, ratio).unwrap_or_else(|| {
                     // Never deposit at, or move to, an invalid state: a counted rejection.
                     stats[stats::INVALID_PROPOSALS] += 1.0;
                     0.0
-                } else if lum_z > 0.0 {
-                    (lum_z / f_y.luminance() as f64 * ratio).min(1.0)
-                } else {
-                    0.0
-                };
-                if a > 0.0 {
-                    dep.deposit(&self.proposal, colour(f_z) * (a as f32 * e));
-                }
-                if a < 1.0 {
-                    dep.deposit(&self.state, colour(f_y) * ((1.0 - a) as f32 * e));
-                }
+                });
+                let (at_z, at_y) = expected_deposits(a, e, f_y, f_z);
+                dep.deposit(&self.proposal, at_z);
+                dep.deposit(&self.state, at_y);
                 let accepted = (rng.uniform() as f64) < a;
                 if accepted {
                     std::mem::swap(&mut self.state, &mut self.proposal);
@@ -216,5 +259,69 @@ impl<'a> Flow<'a> {
         for (i, t) in self.per_strategy.iter().enumerate() {
             add_tally(stats, i + 1, t);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chain_counts_keep_the_seed_energy_in_expectation_and_under_the_cap() {
+        // E[⌊U + a⌋] = a: over a fine grid of U the mean count is lum X/(N e_d).
+        let (n, e_d) = (16.0, 0.01);
+        for lum in [0.0, 0.05, 0.16, 0.5, 1.234] {
+            let steps = 10_000;
+            let total: u64 = (0..steps)
+                .map(|i| chain_count((i as f64 + 0.5) / steps as f64, lum, n, e_d, 1e9).0)
+                .sum();
+            let energy = total as f64 / steps as f64 * n * e_d;
+            assert!(
+                (energy - lum).abs() < 1e-4 * lum.max(1.0),
+                "{lum}: {energy}"
+            );
+        }
+        // Over the cap: the cap's count, each step carrying lum/(N·cap), exactly lum in all.
+        let (chains, q, capped) = chain_count(0.3, 1000.0, n, e_d, 64.0);
+        assert!(capped && chains == 64);
+        assert!((chains as f64 * n * q - 1000.0).abs() < 1e-9);
+        assert_eq!(chain_count(0.3, 0.05, n, e_d, 64.0), (0, e_d, false));
+    }
+
+    #[test]
+    fn acceptance_is_the_metropolis_hastings_ratio_and_refuses_invalid_proposals() {
+        let (y, z) = (Rgb::splat(2.0), Rgb::splat(1.0));
+        assert!((acceptance(y, z, 1.0).unwrap() - 0.5).abs() < 1e-12);
+        assert!((acceptance(y, z, 0.5).unwrap() - 0.25).abs() < 1e-12);
+        assert_eq!(acceptance(z, y, 1.0), Some(1.0));
+        assert_eq!(acceptance(y, z, 4.0), Some(1.0));
+        // Detailed balance of the rule: lum f(y)·a(y→z) = lum f(z)·a(z→y)·(T(z→y)/T(y→z)).
+        let r = 0.7;
+        let lhs = 2.0 * acceptance(y, z, r).unwrap();
+        let rhs = 1.0 * acceptance(z, y, 1.0 / r).unwrap() * r;
+        assert!((lhs - rhs).abs() < 1e-12, "{lhs} vs {rhs}");
+        assert_eq!(acceptance(y, Rgb::ZERO, 1.0), Some(0.0));
+        for bad in [f64::NAN, f64::INFINITY, -1.0] {
+            assert_eq!(acceptance(y, z, bad), None);
+        }
+        assert_eq!(acceptance(y, Rgb::splat(f32::NAN), 1.0), None);
+        assert_eq!(acceptance(y, Rgb::new(1.0, -1.0, 1.0), 1.0), None);
+    }
+
+    #[test]
+    fn each_step_deposits_one_quantum_in_the_colours_of_its_states() {
+        let (f_y, f_z) = (Rgb::new(3.0, 0.0, 0.0), Rgb::new(0.0, 0.0, 5.0));
+        let e = 0.2f32;
+        for a in [0.0, 0.3, 1.0] {
+            let (at_z, at_y) = expected_deposits(a, e, f_y, f_z);
+            let total = at_z.luminance() + at_y.luminance();
+            assert!((total - e).abs() < 1e-6, "a = {a}: {total}");
+            // Red stays at y, blue at z: no state lends its colour to the other.
+            assert!(at_z.r == 0.0 && at_z.g == 0.0 && at_y.b == 0.0 && at_y.g == 0.0);
+            assert!((at_z.luminance() - a as f32 * e).abs() < 1e-6);
+        }
+        // a = 0 with a black proposal: nothing at z (no 0/0).
+        let (at_z, at_y) = expected_deposits(0.0, e, f_y, Rgb::ZERO);
+        assert!(at_z == Rgb::ZERO && (at_y.luminance() - e).abs() < 1e-6);
     }
 }
