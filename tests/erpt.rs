@@ -369,18 +369,27 @@ fn sun_node(tilt: f32) -> String {
     )
 }
 
-/// Writes the floor-and-wall scene lit by `lights` (a sun or none) and `tail` (e.g. an
+/// The Lambert base under a Dirac dielectric coat (roughness 0, ior 1.5): every vertex has a
+/// Dirac reflection and a smooth component, so paths mix them (E S L, E D S L, E S D L).
+const VARNISH: &str = r#"{"name": "varnish", "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.0}}"#;
+
+/// Writes the floor-and-wall scene lit by a sun (or none) and `tail` (e.g. an
 /// `[environment]`) with `integrator` into a scratch folder; returns the config's path.
 fn distant_scene(name: &str, sun: bool, integrator: &str, tail: &str) -> String {
+    distant_scene_of(name, LAMBERT, sun, integrator, tail)
+}
+
+/// [`distant_scene`] with the floor and wall of `material`.
+fn distant_scene_of(name: &str, material: &str, sun: bool, integrator: &str, tail: &str) -> String {
     let gltf = if sun {
         common::quads_gltf(
             &[FLOOR, SHORT_WALL],
-            LAMBERT,
+            material,
             &[sun_node(40.0)],
             r#"[{"type": "directional", "intensity": 2000.0, "color": [1.0, 0.8, 0.6]}]"#,
         )
     } else {
-        common::quads_gltf(&[FLOOR, SHORT_WALL], LAMBERT, &[], "")
+        common::quads_gltf(&[FLOOR, SHORT_WALL], material, &[], "")
     };
     let dir = common::scratch(name);
     std::fs::write(dir.join("scene.gltf"), gltf).unwrap();
@@ -415,8 +424,19 @@ fn mutations_keep_detailed_balance_with_lights_at_infinity() {
     let all = strategies();
     let list: Vec<(&str, &[(&str, toml::Value)])> =
         all.iter().map(|(p, e)| (*p, e.as_slice())).collect();
-    for (label, sun, tail) in [("sun", true, ""), ("sky", false, SKY)] {
-        let cfg = distant_scene(&format!("balance-{label}"), sun, "plugin = \"erpt\"", tail);
+    for (label, material, sun, tail) in [
+        ("sun", LAMBERT, true, ""),
+        ("sky", LAMBERT, false, SKY),
+        ("varnished sun", VARNISH, true, ""),
+        ("varnished sky", VARNISH, false, SKY),
+    ] {
+        let cfg = distant_scene_of(
+            &format!("balance-{label}"),
+            material,
+            sun,
+            "plugin = \"erpt\"",
+            tail,
+        );
         let s = session_at(&cfg, 32, 32, 1, &[("mutations", mutations(&list))]);
         let set = s.instance.mutation_set();
         // SAFETY: the session keeps the view's data alive.
@@ -432,8 +452,10 @@ fn mutations_keep_detailed_balance_with_lights_at_infinity() {
         let mut x = Box::new(Path::empty());
         let mut y = Box::new(Path::empty());
         let (mut valid, mut moved) = (vec![0usize; set.len()], vec![0usize; set.len()]);
-        let mut seen_sky = 0;
-        for _ in 0..1500 {
+        let (mut seen_sky, mut seen_dirac) = (0, 0);
+        // The coat reflects a few per cent: more seeds to meet enough Dirac vertices.
+        let seeds = if material == VARNISH { 5000 } else { 1500 };
+        for _ in 0..seeds {
             let raster = glam::Vec2::new(rng.uniform() * 32.0, rng.uniform() * 32.0);
             let sample =
                 untangled::trace(&scene, &tracer, &settings, &mut rng, raster, Some(&mut x));
@@ -453,6 +475,8 @@ fn mutations_keep_detailed_balance_with_lights_at_infinity() {
                 x.heckbert()
             );
             seen_sky += usize::from(n == 1);
+            seen_dirac += usize::from(x.heckbert().contains('S'));
+            let smooth_before_light = x.vertices[n - 1].node.heckbert() == 'D';
             x.film_window = 8;
             for i in 0..set.len() {
                 let p = set.propose(i, &tracer, &mut rng, &x, &mut y).unwrap();
@@ -462,8 +486,8 @@ fn mutations_keep_detailed_balance_with_lights_at_infinity() {
                 let ly = y.vertices[n];
                 if sun {
                     assert_eq!(ly.ng, light.ng, "{} moved the sun's direction", set.name(i));
-                } else if n > 1 && ly.ng != light.ng {
-                    // (On an E L path the film move alone turns the eye ray, and ω with it.)
+                } else if smooth_before_light && ly.ng != light.ng {
+                    // (After the eye or a Dirac vertex, the film move alone turns ω.)
                     moved[i] += 1;
                 }
                 let forward = set.density(i, &x, &y).unwrap();
@@ -490,6 +514,12 @@ fn mutations_keep_detailed_balance_with_lights_at_infinity() {
                 *v > 100,
                 "{label}: {} made {v} valid proposals",
                 set.name(i)
+            );
+        }
+        if material == VARNISH {
+            assert!(
+                seen_dirac > 30,
+                "{label}: {seen_dirac} seeds with a Dirac vertex"
             );
         }
         if !sun {
@@ -579,4 +609,25 @@ fn erpt_under_a_constant_sky_gives_albedo_times_sky_on_an_open_plane() {
         &exact,
         32,
     );
+}
+
+#[test]
+fn erpt_agrees_with_mcpt_on_a_varnished_floor_under_sun_and_sky() {
+    // Both lights at infinity at once, and Dirac coat reflections of the sky and of the lit
+    // floor (E S L, E S D L, E D S L): a mixture of strategies.
+    let mcpt = distant_scene_of(
+        "both-mcpt",
+        VARNISH,
+        true,
+        "plugin = \"mcpt\"\nvariant = \"entangled\"",
+        SKY,
+    );
+    let reference = reference(&mcpt, 1024);
+    let cfg = distant_scene_of("both-erpt", VARNISH, true, "plugin = \"erpt\"", SKY);
+    let mix = mutations(&[
+        ("blow", &[("weight", 0.4.into())]),
+        ("drill", &[("width", "wide".into()), ("weight", 0.3.into())]),
+        ("hard-reconnection", &[("weight", 0.3.into())]),
+    ]);
+    check_unbiased_window(&cfg, "varnish under sun and sky", mix, &reference, 32);
 }
