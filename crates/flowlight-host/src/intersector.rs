@@ -1,6 +1,6 @@
 //! Intersectors and the host's answer to plugins' ray queries.
 
-use flowlight_bvh::{Bvh, HitFilter, TriangleHit};
+use flowlight_bvh::{Bvh, HitFilter, Instance, InstanceHit, TriangleHit, TwoLevelBvh};
 use flowlight_core::geometry::Ray;
 use flowlight_scene::config::Intersector as IntersectorChoice;
 use flowlight_scene::Scene;
@@ -20,16 +20,92 @@ pub trait Intersector: Send + Sync {
     fn occluded_filtered(&self, ray: &Ray, accept: HitFilter) -> bool;
 }
 
-/// The pure-Rust BVH backend.
-pub struct BvhIntersector {
-    bvh: Bvh,
+/// The meshes and instances of an instanced scene, as the two-level builds take them: per
+/// stored mesh its triangles' vertices (indices into the mesh's range), per instance its mesh
+/// and object-to-world matrix, and the first virtual id of each instance.
+struct Levels {
+    meshes: Vec<Vec<[glam::Vec3; 3]>>,
+    instances: Vec<(u32, glam::Mat4)>,
+    first_virtual: Vec<u32>,
+}
+
+fn levels(scene: &Scene) -> Levels {
+    let meshes = scene
+        .meshes
+        .iter()
+        .map(|r| {
+            scene.triangles[r.first_triangle as usize..][..r.triangle_count as usize]
+                .iter()
+                .map(|t| t.map(|i| scene.positions[i as usize]))
+                .collect()
+        })
+        .collect();
+    Levels {
+        meshes,
+        instances: scene
+            .instances
+            .iter()
+            .map(|i| (i.mesh, i.object_to_world))
+            .collect(),
+        first_virtual: scene.instances.iter().map(|i| i.first_virtual).collect(),
+    }
+}
+
+/// An instance hit as the virtual triangle it shows.
+#[inline]
+fn virtual_hit(first_virtual: &[u32], h: InstanceHit) -> TriangleHit {
+    TriangleHit {
+        t: h.t,
+        prim: first_virtual[h.instance as usize] + h.prim,
+        b1: h.b1,
+        b2: h.b2,
+    }
+}
+
+/// The pure-Rust BVH backend: one BVH over the world-space triangles for a scene without
+/// instancing, else a [`TwoLevelBvh`] over the scene's mesh instances (each mesh stored
+/// once). Hits name virtual triangle ids either way.
+pub enum BvhIntersector {
+    Flat(Bvh),
+    Instanced {
+        bvh: TwoLevelBvh,
+        first_virtual: Vec<u32>,
+    },
 }
 
 impl BvhIntersector {
     pub fn build(scene: &Scene) -> (BvhIntersector, Duration) {
         let start = Instant::now();
-        let bvh = Bvh::build(&scene.triangle_vertices());
-        (BvhIntersector { bvh }, start.elapsed())
+        let b = if scene.is_instanced() {
+            let l = levels(scene);
+            let meshes = l.meshes.iter().map(|m| Bvh::build(m)).collect();
+            let instances = l
+                .instances
+                .iter()
+                .map(|&(mesh, object_to_world)| Instance {
+                    mesh,
+                    object_to_world,
+                })
+                .collect();
+            // The loader only makes invertible affine instances of existing meshes.
+            let bvh = TwoLevelBvh::build(meshes, instances)
+                .expect("the scene's instances are valid by construction");
+            BvhIntersector::Instanced {
+                bvh,
+                first_virtual: l.first_virtual,
+            }
+        } else {
+            BvhIntersector::Flat(Bvh::build(&scene.triangle_vertices()))
+        };
+        (b, start.elapsed())
+    }
+
+    /// Triangles stored in the acceleration structure (each instanced mesh once).
+    pub fn stored_triangle_count(&self) -> usize {
+        match self {
+            BvhIntersector::Flat(b) => b.stored_triangle_count(),
+            BvhIntersector::Instanced { bvh, .. } => bvh.stored_triangle_count(),
+        }
     }
 }
 
@@ -39,27 +115,55 @@ impl Intersector for BvhIntersector {
     }
     #[inline]
     fn intersect(&self, ray: &Ray) -> Option<TriangleHit> {
-        self.bvh.intersect(ray)
+        match self {
+            BvhIntersector::Flat(b) => b.intersect(ray),
+            BvhIntersector::Instanced { bvh, first_virtual } => {
+                bvh.intersect(ray).map(|h| virtual_hit(first_virtual, h))
+            }
+        }
     }
     #[inline]
     fn occluded(&self, ray: &Ray) -> bool {
-        self.bvh.occluded(ray)
+        match self {
+            BvhIntersector::Flat(b) => b.occluded(ray),
+            BvhIntersector::Instanced { bvh, .. } => bvh.occluded(ray),
+        }
     }
     #[inline]
     fn intersect_filtered(&self, ray: &Ray, accept: HitFilter) -> Option<TriangleHit> {
-        self.bvh.intersect_filtered(ray, accept)
+        match self {
+            BvhIntersector::Flat(b) => b.intersect_filtered(ray, accept),
+            BvhIntersector::Instanced { bvh, first_virtual } => bvh
+                .intersect_filtered(ray, &|inst, prim, b1, b2| {
+                    accept(first_virtual[inst as usize] + prim, b1, b2)
+                })
+                .map(|h| virtual_hit(first_virtual, h)),
+        }
     }
     #[inline]
     fn occluded_filtered(&self, ray: &Ray, accept: HitFilter) -> bool {
-        self.bvh.occluded_filtered(ray, accept)
+        match self {
+            BvhIntersector::Flat(b) => b.occluded_filtered(ray, accept),
+            BvhIntersector::Instanced { bvh, first_virtual } => {
+                bvh.occluded_filtered(ray, &|inst, prim, b1, b2| {
+                    accept(first_virtual[inst as usize] + prim, b1, b2)
+                })
+            }
+        }
     }
 }
 
 /// The Embree 4 backend (`flowlight-embree`): one device per process, the scene committed
 /// once, robust mode on by default; `FLOWLIGHT_EMBREE_QUALITY` (`low` | `medium` | `high`)
-/// sets the build quality for large scenes.
-pub struct EmbreeIntersector {
-    scene: flowlight_embree::EmbreeScene,
+/// sets the build quality for large scenes. A scene with instancing becomes an
+/// [`flowlight_embree::EmbreeInstancedScene`] (one Embree scene per stored mesh, one
+/// instance geometry per placement).
+pub enum EmbreeIntersector {
+    Flat(flowlight_embree::EmbreeScene),
+    Instanced {
+        scene: flowlight_embree::EmbreeInstancedScene,
+        first_virtual: Vec<u32>,
+    },
 }
 
 impl EmbreeIntersector {
@@ -78,8 +182,48 @@ impl EmbreeIntersector {
         // Opening the library and making the device is not part of the build time.
         flowlight_embree::device()?;
         let start = Instant::now();
-        let s = flowlight_embree::EmbreeScene::build(&scene.positions, &scene.triangles, options)?;
-        Ok((EmbreeIntersector { scene: s }, start.elapsed()))
+        let e = if scene.is_instanced() {
+            let instances: Vec<(u32, glam::Mat4)> = scene
+                .instances
+                .iter()
+                .map(|i| (i.mesh, i.object_to_world))
+                .collect();
+            let first_virtual = scene.instances.iter().map(|i| i.first_virtual).collect();
+            // Each mesh's own vertex buffer: the span of scene vertices its triangles use
+            // (a mesh's vertices are contiguous), re-indexed from 0.
+            let meshes: Vec<(Vec<glam::Vec3>, Vec<[u32; 3]>)> = scene
+                .meshes
+                .iter()
+                .map(|r| {
+                    let tris = &scene.triangles[r.first_triangle as usize..]
+                        [..r.triangle_count as usize];
+                    let lo = tris.iter().flatten().copied().min().unwrap_or(0);
+                    let hi = tris.iter().flatten().copied().max().map_or(0, |h| h + 1);
+                    let positions = scene.positions[lo as usize..hi as usize].to_vec();
+                    (positions, tris.iter().map(|t| t.map(|i| i - lo)).collect())
+                })
+                .collect();
+            let s = flowlight_embree::EmbreeInstancedScene::build(&meshes, &instances, options)?;
+            EmbreeIntersector::Instanced {
+                scene: s,
+                first_virtual,
+            }
+        } else {
+            EmbreeIntersector::Flat(flowlight_embree::EmbreeScene::build(
+                &scene.positions,
+                &scene.triangles,
+                options,
+            )?)
+        };
+        Ok((e, start.elapsed()))
+    }
+
+    /// Triangles stored in Embree (each instanced mesh once).
+    pub fn stored_triangle_count(&self) -> usize {
+        match self {
+            EmbreeIntersector::Flat(s) => s.triangle_count(),
+            EmbreeIntersector::Instanced { scene, .. } => scene.stored_triangle_count(),
+        }
     }
 }
 
@@ -89,19 +233,46 @@ impl Intersector for EmbreeIntersector {
     }
     #[inline]
     fn intersect(&self, ray: &Ray) -> Option<TriangleHit> {
-        self.scene.intersect(ray)
+        match self {
+            EmbreeIntersector::Flat(s) => s.intersect(ray),
+            EmbreeIntersector::Instanced {
+                scene,
+                first_virtual,
+            } => scene.intersect(ray).map(|h| virtual_hit(first_virtual, h)),
+        }
     }
     #[inline]
     fn occluded(&self, ray: &Ray) -> bool {
-        self.scene.occluded(ray)
+        match self {
+            EmbreeIntersector::Flat(s) => s.occluded(ray),
+            EmbreeIntersector::Instanced { scene, .. } => scene.occluded(ray),
+        }
     }
     #[inline]
     fn intersect_filtered(&self, ray: &Ray, accept: HitFilter) -> Option<TriangleHit> {
-        self.scene.intersect_filtered(ray, accept)
+        match self {
+            EmbreeIntersector::Flat(s) => s.intersect_filtered(ray, accept),
+            EmbreeIntersector::Instanced {
+                scene,
+                first_virtual,
+            } => scene
+                .intersect_filtered(ray, &|inst, prim, b1, b2| {
+                    accept(first_virtual[inst as usize] + prim, b1, b2)
+                })
+                .map(|h| virtual_hit(first_virtual, h)),
+        }
     }
     #[inline]
     fn occluded_filtered(&self, ray: &Ray, accept: HitFilter) -> bool {
-        self.scene.occluded_filtered(ray, accept)
+        match self {
+            EmbreeIntersector::Flat(s) => s.occluded_filtered(ray, accept),
+            EmbreeIntersector::Instanced {
+                scene,
+                first_virtual,
+            } => scene.occluded_filtered(ray, &|inst, prim, b1, b2| {
+                accept(first_virtual[inst as usize] + prim, b1, b2)
+            }),
+        }
     }
 }
 
