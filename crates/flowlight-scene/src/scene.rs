@@ -364,7 +364,9 @@ impl Scene {
     }
 
     /// World-space bounds of the mesh instances' triangles, `(min, max)`; `None` for an empty
-    /// scene. An instanced mesh's box is the box of its transformed vertices.
+    /// scene. An instance contributes the eight corners of its mesh's local box transformed
+    /// (a box around its triangles, at most √3 times wider under rotation), so the cost is
+    /// per instance, not per instanced vertex.
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
         let mut lo = DVec3::splat(f64::INFINITY);
         let mut hi = DVec3::splat(f64::NEG_INFINITY);
