@@ -519,6 +519,117 @@ mod tests {
         }
     }
 
+    fn load_json(tag: &str, json: &str) -> Scene {
+        let dir = temp_dir(tag);
+        let p = dir.join(format!("{tag}.gltf"));
+        std::fs::write(&p, json).unwrap();
+        load_gltf(&p, &BTreeMap::new()).unwrap()
+    }
+
+    /// Rays from a sphere around the octahedra towards random points near them.
+    fn probe_rays(scene: &Scene, n: usize) -> Vec<Ray> {
+        let (lo, hi) = scene.bounds().unwrap();
+        let (c, r) = ((lo + hi) * 0.5, (hi - lo).length());
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut u = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        (0..n)
+            .map(|_| {
+                let o = c + (Vec3::new(u(), u(), u()) - 0.5).normalize_or_zero() * r;
+                let t = lo + (hi - lo) * Vec3::new(u(), u(), u());
+                Ray::new(o, (t - o).normalize(), f32::INFINITY)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn instanced_scene_hits_what_its_flattened_copy_hits_in_both_intersectors() {
+        use flowlight_scene::testutil::{octahedra_gltf, octahedra_placements};
+        let placements = octahedra_placements(9);
+        let shared = load_json("inst-shared", &octahedra_gltf(&placements, false, "{}"));
+        let flat = load_json("inst-flat", &octahedra_gltf(&placements, true, "{}"));
+        assert!(shared.is_instanced() && !flat.is_instanced());
+        let (flat_bvh, _) = BvhIntersector::build(&flat);
+        let reference = UnitTracer::new(&flat, &flat_bvh);
+        assert_eq!(shared.triangles.len(), 8);
+        for isect in intersectors(&shared) {
+            let mut hits = 0;
+            let mut tracer = UnitTracer::new(&shared, isect.as_ref());
+            let mut mismatched = 0;
+            let rays = probe_rays(&shared, 4000);
+            for ray in &rays {
+                let want = reference.closest(ray);
+                let got = tracer.closest(ray);
+                assert_eq!(isect.occluded(ray), got.is_some(), "{}", isect.name());
+                match (want, got) {
+                    (Some(w), Some(g)) => {
+                        assert!((w.t - g.t).abs() <= 1e-4 * w.t, "{}: t {} vs {}", isect.name(), g.t, w.t);
+                        if w.prim != g.prim {
+                            // Only on an edge shared by two triangles of one octahedron.
+                            assert_eq!(w.prim / 8, g.prim / 8, "{}", isect.name());
+                            mismatched += 1;
+                            continue;
+                        }
+                        hits += 1;
+                        let a = tracer.intersect(ray).surface;
+                        let mut r = UnitTracer::new(&flat, &flat_bvh);
+                        let b = r.intersect(ray).surface;
+                        assert!((a.p - b.p).length() <= 1e-4 * (1.0 + b.p.length()), "{} vs {}", a.p, b.p);
+                        assert!((a.ng - b.ng).length() < 1e-5, "{} vs {}", a.ng, b.ng);
+                        assert!((a.ns - b.ns).length() < 1e-3, "{} vs {}", a.ns, b.ns);
+                        assert_eq!(a.prim, b.prim);
+                    }
+                    (None, None) => {}
+                    // Grazing an outline, within float noise of an edge.
+                    _ => mismatched += 1,
+                }
+            }
+            assert!(mismatched * 200 <= rays.len(), "{}: {mismatched} mismatches", isect.name());
+            assert!(hits > 300, "{}: {hits} hits", isect.name());
+        }
+    }
+
+    #[test]
+    fn all_27_gpu_instances_are_hit_and_stored_once() {
+        use flowlight_scene::testutil::octahedra_ext_gltf;
+        let t: Vec<[f32; 3]> = (0..27)
+            .map(|i| [3.0 * (i % 3) as f32, 3.0 * (i / 3 % 3) as f32, 3.0 * (i / 9) as f32])
+            .collect();
+        let s: Vec<[f32; 3]> = (0..27).map(|_| [1.0, 1.0, 1.0]).collect();
+        let scene = load_json("ext27-host", &octahedra_ext_gltf(&t, &s, "{}"));
+        assert_eq!(scene.triangles.len(), 8);
+        let (bvh, _) = BvhIntersector::build(&scene);
+        assert_eq!(bvh.stored_triangle_count(), 8);
+        let (embree, _) =
+            EmbreeIntersector::build_with(&scene, flowlight_embree::SceneOptions::default())
+                .unwrap();
+        assert_eq!(embree.stored_triangle_count(), 8);
+        for isect in [&bvh as &dyn Intersector, &embree] {
+            for (i, ti) in t.iter().enumerate() {
+                // Straight down onto the top vertex's face 0 (local +x, +y, +z corner).
+                let target = Vec3::from_array(*ti) + Vec3::new(0.3, 0.3, 0.4);
+                let ray = Ray::new(target + Vec3::new(0.3, 0.3, 0.4) * 0.5, -Vec3::new(0.3, 0.3, 0.4).normalize(), f32::INFINITY);
+                let h = isect.intersect(&ray).unwrap_or_else(|| panic!("{} instance {i} missed", isect.name()));
+                assert_eq!(h.prim, 8 * i as u32, "{} instance {i}", isect.name());
+                let want = (Vec3::new(0.3, 0.3, 0.4) * 0.5).length();
+                assert!((h.t - want).abs() < 1e-5, "{} instance {i}: t {}", isect.name(), h.t);
+            }
+        }
+    }
+
+    #[test]
+    fn alpha_mask_cuts_through_an_instance() {
+        // cut_scene's two nodes share the quad mesh: the second is an instance.
+        let scene = cut_scene("MASK", 0);
+        assert!(scene.is_instanced());
+        assert_eq!(scene.triangles.len(), 2);
+        assert_eq!(scene.virtual_triangle_count(), 4);
+    }
+
     #[test]
     fn alpha_blend_decisions_agree_between_intersectors() {
         let scene = cut_scene("BLEND", 128);
