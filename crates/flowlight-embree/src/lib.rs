@@ -669,11 +669,7 @@ impl EmbreeInstancedScene {
     /// [`EmbreeInstancedScene::intersect`] counting only the hits `accept(instance, prim,
     /// u, v)` keeps (alpha testing through instances). Needs
     /// [`SceneOptions::hit_filter`], which is set on every mesh scene and the top scene.
-    pub fn intersect_filtered(
-        &self,
-        ray: &Ray,
-        accept: InstanceHitFilter,
-    ) -> Option<InstanceHit> {
+    pub fn intersect_filtered(&self, ray: &Ray, accept: InstanceHitFilter) -> Option<InstanceHit> {
         let mut ctx = FilterContext::instanced(&accept);
         let mut args = ctx.arguments();
         let mut rh = EmbreeScene::rtc_ray_hit(ray);

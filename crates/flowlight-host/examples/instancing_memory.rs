@@ -13,7 +13,11 @@ use std::collections::BTreeMap;
 
 fn rss() -> u64 {
     let s = std::fs::read_to_string("/proc/self/statm").unwrap_or_default();
-    let pages: u64 = s.split_whitespace().nth(1).and_then(|v| v.parse().ok()).unwrap_or(0);
+    let pages: u64 = s
+        .split_whitespace()
+        .nth(1)
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0);
     pages * 4096
 }
 
@@ -64,7 +68,13 @@ fn main() {
     bin.extend(pos.iter().flatten().flat_map(|v| v.to_le_bytes()));
     let t_off = bin.len();
     let t: Vec<[f32; 3]> = (0..n)
-        .map(|i| [3.0 * (i % 3) as f32, 3.0 * (i / 3 % 3) as f32, 3.0 * (i / 9) as f32])
+        .map(|i| {
+            [
+                3.0 * (i % 3) as f32,
+                3.0 * (i / 3 % 3) as f32,
+                3.0 * (i / 9) as f32,
+            ]
+        })
         .collect();
     bin.extend(t.iter().flatten().flat_map(|v| v.to_le_bytes()));
     let mesh = r#"{"primitives": [{"attributes": {"POSITION": 1, "NORMAL": 1}, "indices": 0}]}"#;
@@ -72,7 +82,12 @@ fn main() {
         let nodes: Vec<String> = t
             .iter()
             .enumerate()
-            .map(|(i, t)| format!(r#"{{"mesh": {i}, "translation": [{}, {}, {}]}}"#, t[0], t[1], t[2]))
+            .map(|(i, t)| {
+                format!(
+                    r#"{{"mesh": {i}, "translation": [{}, {}, {}]}}"#,
+                    t[0], t[1], t[2]
+                )
+            })
             .collect();
         let roots: Vec<String> = (0..n).map(|i| i.to_string()).collect();
         (nodes.join(", "), vec![mesh; n].join(", "), roots.join(", "))
@@ -103,7 +118,10 @@ fn main() {
         b64 = base64(&bin),
         len = bin.len(),
     );
-    let dir = std::env::temp_dir().join(format!("flowlight-instancing-memory-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!(
+        "flowlight-instancing-memory-{}",
+        std::process::id()
+    ));
     std::fs::create_dir_all(&dir).unwrap();
     let file = dir.join(format!("{mode}.gltf"));
     std::fs::write(&file, json).unwrap();

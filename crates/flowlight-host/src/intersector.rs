@@ -144,11 +144,10 @@ impl Intersector for BvhIntersector {
     fn occluded_filtered(&self, ray: &Ray, accept: HitFilter) -> bool {
         match self {
             BvhIntersector::Flat(b) => b.occluded_filtered(ray, accept),
-            BvhIntersector::Instanced { bvh, first_virtual } => {
-                bvh.occluded_filtered(ray, &|inst, prim, b1, b2| {
+            BvhIntersector::Instanced { bvh, first_virtual } => bvh
+                .occluded_filtered(ray, &|inst, prim, b1, b2| {
                     accept(first_virtual[inst as usize] + prim, b1, b2)
-                })
-            }
+                }),
         }
     }
 }
@@ -195,8 +194,8 @@ impl EmbreeIntersector {
                 .meshes
                 .iter()
                 .map(|r| {
-                    let tris = &scene.triangles[r.first_triangle as usize..]
-                        [..r.triangle_count as usize];
+                    let tris =
+                        &scene.triangles[r.first_triangle as usize..][..r.triangle_count as usize];
                     let lo = tris.iter().flatten().copied().min().unwrap_or(0);
                     let hi = tris.iter().flatten().copied().max().map_or(0, |h| h + 1);
                     let positions = scene.positions[lo as usize..hi as usize].to_vec();
@@ -567,7 +566,13 @@ mod tests {
                 assert_eq!(isect.occluded(ray), got.is_some(), "{}", isect.name());
                 match (want, got) {
                     (Some(w), Some(g)) => {
-                        assert!((w.t - g.t).abs() <= 1e-4 * w.t, "{}: t {} vs {}", isect.name(), g.t, w.t);
+                        assert!(
+                            (w.t - g.t).abs() <= 1e-4 * w.t,
+                            "{}: t {} vs {}",
+                            isect.name(),
+                            g.t,
+                            w.t
+                        );
                         if w.prim != g.prim {
                             // Only on an edge shared by two triangles of one octahedron.
                             assert_eq!(w.prim / 8, g.prim / 8, "{}", isect.name());
@@ -578,7 +583,12 @@ mod tests {
                         let a = tracer.intersect(ray).surface;
                         let mut r = UnitTracer::new(&flat, &flat_bvh);
                         let b = r.intersect(ray).surface;
-                        assert!((a.p - b.p).length() <= 1e-4 * (1.0 + b.p.length()), "{} vs {}", a.p, b.p);
+                        assert!(
+                            (a.p - b.p).length() <= 1e-4 * (1.0 + b.p.length()),
+                            "{} vs {}",
+                            a.p,
+                            b.p
+                        );
                         assert!((a.ng - b.ng).length() < 1e-5, "{} vs {}", a.ng, b.ng);
                         assert!((a.ns - b.ns).length() < 1e-3, "{} vs {}", a.ns, b.ns);
                         assert_eq!(a.prim, b.prim);
@@ -588,7 +598,11 @@ mod tests {
                     _ => mismatched += 1,
                 }
             }
-            assert!(mismatched * 200 <= rays.len(), "{}: {mismatched} mismatches", isect.name());
+            assert!(
+                mismatched * 200 <= rays.len(),
+                "{}: {mismatched} mismatches",
+                isect.name()
+            );
             assert!(hits > 300, "{}: {hits} hits", isect.name());
         }
     }
@@ -597,7 +611,13 @@ mod tests {
     fn all_27_gpu_instances_are_hit_and_stored_once() {
         use flowlight_scene::testutil::octahedra_ext_gltf;
         let t: Vec<[f32; 3]> = (0..27)
-            .map(|i| [3.0 * (i % 3) as f32, 3.0 * (i / 3 % 3) as f32, 3.0 * (i / 9) as f32])
+            .map(|i| {
+                [
+                    3.0 * (i % 3) as f32,
+                    3.0 * (i / 3 % 3) as f32,
+                    3.0 * (i / 9) as f32,
+                ]
+            })
             .collect();
         let s: Vec<[f32; 3]> = (0..27).map(|_| [1.0, 1.0, 1.0]).collect();
         let scene = load_json("ext27-host", &octahedra_ext_gltf(&t, &s, "{}"));
@@ -612,11 +632,22 @@ mod tests {
             for (i, ti) in t.iter().enumerate() {
                 // Straight down onto the top vertex's face 0 (local +x, +y, +z corner).
                 let target = Vec3::from_array(*ti) + Vec3::new(0.3, 0.3, 0.4);
-                let ray = Ray::new(target + Vec3::new(0.3, 0.3, 0.4) * 0.5, -Vec3::new(0.3, 0.3, 0.4).normalize(), f32::INFINITY);
-                let h = isect.intersect(&ray).unwrap_or_else(|| panic!("{} instance {i} missed", isect.name()));
+                let ray = Ray::new(
+                    target + Vec3::new(0.3, 0.3, 0.4) * 0.5,
+                    -Vec3::new(0.3, 0.3, 0.4).normalize(),
+                    f32::INFINITY,
+                );
+                let h = isect
+                    .intersect(&ray)
+                    .unwrap_or_else(|| panic!("{} instance {i} missed", isect.name()));
                 assert_eq!(h.prim, 8 * i as u32, "{} instance {i}", isect.name());
                 let want = (Vec3::new(0.3, 0.3, 0.4) * 0.5).length();
-                assert!((h.t - want).abs() < 1e-5, "{} instance {i}: t {}", isect.name(), h.t);
+                assert!(
+                    (h.t - want).abs() < 1e-5,
+                    "{} instance {i}: t {}",
+                    isect.name(),
+                    h.t
+                );
             }
         }
     }

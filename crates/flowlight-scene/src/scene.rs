@@ -293,11 +293,9 @@ impl Scene {
     /// Number of virtual triangles (every instance's, counted per instance); the number of
     /// stored triangles without instancing.
     pub fn virtual_triangle_count(&self) -> usize {
-        self.instances
-            .last()
-            .map_or(self.triangles.len(), |i| {
-                i.first_virtual as usize + i.triangle_count as usize
-            })
+        self.instances.last().map_or(self.triangles.len(), |i| {
+            i.first_virtual as usize + i.triangle_count as usize
+        })
     }
 
     /// Whether some mesh is stored once for several placements (the two-level path).
@@ -385,8 +383,8 @@ impl Scene {
             // Each mesh's vertices once, then its box's corners per placement.
             let mut mesh_box = vec![None::<(Vec3, Vec3)>; self.meshes.len().max(1)];
             for inst in &self.instances {
-                let tris = &self.triangles[inst.first_triangle as usize..]
-                    [..inst.triangle_count as usize];
+                let tris =
+                    &self.triangles[inst.first_triangle as usize..][..inst.triangle_count as usize];
                 if inst.identity {
                     for t in tris {
                         for &i in t {
@@ -395,20 +393,18 @@ impl Scene {
                     }
                     continue;
                 }
-                let b = mesh_box
-                    .get_mut(inst.mesh as usize)
-                    .and_then(|b| {
-                        if b.is_none() {
-                            let mut l = Vec3::INFINITY;
-                            let mut h = Vec3::NEG_INFINITY;
-                            for &i in tris.iter().flatten() {
-                                l = l.min(self.positions[i as usize]);
-                                h = h.max(self.positions[i as usize]);
-                            }
-                            *b = (!tris.is_empty()).then_some((l, h));
+                let b = mesh_box.get_mut(inst.mesh as usize).and_then(|b| {
+                    if b.is_none() {
+                        let mut l = Vec3::INFINITY;
+                        let mut h = Vec3::NEG_INFINITY;
+                        for &i in tris.iter().flatten() {
+                            l = l.min(self.positions[i as usize]);
+                            h = h.max(self.positions[i as usize]);
                         }
-                        *b
-                    });
+                        *b = (!tris.is_empty()).then_some((l, h));
+                    }
+                    *b
+                });
                 if let Some((l, h)) = b {
                     for c in 0..8 {
                         let corner = Vec3::new(

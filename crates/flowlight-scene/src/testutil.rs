@@ -246,7 +246,11 @@ pub fn octahedra_gltf(placements: &[[f32; 16]], flatten: bool, material: &str) -
 
 /// [`octahedra_gltf`]'s octahedron placed by one node with `EXT_mesh_gpu_instancing`:
 /// instance i at `translations[i]`, scaled by `scales[i]`.
-pub fn octahedra_ext_gltf(translations: &[[f32; 3]], scales: &[[f32; 3]], material: &str) -> String {
+pub fn octahedra_ext_gltf(
+    translations: &[[f32; 3]],
+    scales: &[[f32; 3]],
+    material: &str,
+) -> String {
     assert_eq!(translations.len(), scales.len());
     let node = r#"{"mesh": 0, "extensions": {"EXT_mesh_gpu_instancing": {"attributes": {"TRANSLATION": 4, "SCALE": 5}}}}"#;
     octahedra_doc(

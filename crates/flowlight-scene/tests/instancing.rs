@@ -46,13 +46,23 @@ fn nodes_sharing_a_mesh_store_one_copy_and_show_the_flattened_triangles() {
     // Same world-space vertices in the same order (mirrored instances' winding swapped like
     // the flattening loader's), bit for bit: both transform by the same matrix.
     for v in 0..(8 * n) as u32 {
-        assert_eq!(shared.world_triangle(v), flat.world_triangle(v), "triangle {v}");
+        assert_eq!(
+            shared.world_triangle(v),
+            flat.world_triangle(v),
+            "triangle {v}"
+        );
     }
     // Instances are bounded by their mesh box's transformed corners: a box around the
     // flat one, no more than the octahedron's box transformed (√3 larger at most here).
     let (a, b) = (shared.bounds().unwrap(), flat.bounds().unwrap());
-    assert!(a.0.cmple(b.0).all() && a.1.cmpge(b.1).all(), "{a:?} vs {b:?}");
-    assert!((a.1 - a.0).length() < 1.2 * (b.1 - b.0).length(), "{a:?} vs {b:?}");
+    assert!(
+        a.0.cmple(b.0).all() && a.1.cmpge(b.1).all(),
+        "{a:?} vs {b:?}"
+    );
+    assert!(
+        (a.1 - a.0).length() < 1.2 * (b.1 - b.0).length(),
+        "{a:?} vs {b:?}"
+    );
 }
 
 #[test]
@@ -66,7 +76,11 @@ fn surface_hits_of_instances_match_the_flattened_scene() {
         for &(b1, b2) in &[(0.2f32, 0.3f32), (0.6, 0.1), (0.05, 0.9)] {
             let [q0, q1, q2] = shared.world_triangle(v);
             let target = q0 * (1.0 - b1 - b2) + q1 * b1 + q2 * b2;
-            let ray = Ray::new(target + Vec3::new(0.3, 5.0, 0.7), -Vec3::new(0.3, 5.0, 0.7).normalize(), f32::INFINITY);
+            let ray = Ray::new(
+                target + Vec3::new(0.3, 5.0, 0.7),
+                -Vec3::new(0.3, 5.0, 0.7).normalize(),
+                f32::INFINITY,
+            );
             // Intersectors report barycentrics of the stored vertices: a mirrored
             // instance's stored order has vertices 1 and 2 swapped against the flat copy.
             let (s1, s2) = if mirrored { (b2, b1) } else { (b1, b2) };
@@ -77,9 +91,17 @@ fn surface_hits_of_instances_match_the_flattened_scene() {
             assert!(close(a.ng, b.ng, 1e-6), "{v}: ng {} vs {}", a.ng, b.ng);
             assert!(close(a.ns, b.ns, 1e-5), "{v}: ns {} vs {}", a.ns, b.ns);
             assert!((a.uv - b.uv).abs().max_element() < 1e-6, "{v}: uv");
-            assert_eq!((a.prim, a.material, a.emitter), (b.prim, b.material, b.emitter));
+            assert_eq!(
+                (a.prim, a.material, a.emitter),
+                (b.prim, b.material, b.emitter)
+            );
             // The instance's bound adds the transforms' rounding to the flat one.
-            assert!(a.p_error.cmpge(b.p_error).all(), "{v}: {} vs {}", a.p_error, b.p_error);
+            assert!(
+                a.p_error.cmpge(b.p_error).all(),
+                "{v}: {} vs {}",
+                a.p_error,
+                b.p_error
+            );
             assert!(a.p_error.max_element() < 1e-4 * (1.0 + a.p.abs().max_element()));
         }
     }
@@ -99,10 +121,18 @@ fn mirrored_instances_keep_their_normals_pointing_out() {
             let v = (8 * i) as u32 + k;
             let [p0, p1, p2] = shared.world_triangle(v);
             let c = (p0 + p1 + p2) / 3.0;
-            let ray = Ray::new(c + (c - centre) * 4.0, (centre - c).normalize(), f32::INFINITY);
+            let ray = Ray::new(
+                c + (c - centre) * 4.0,
+                (centre - c).normalize(),
+                f32::INFINITY,
+            );
             let h = shared.surface_hit(&ray, 1.0, v, 1.0 / 3.0, 1.0 / 3.0);
             // The octahedron is convex around its centre: the front face looks outwards.
-            assert!(h.ng.dot(c - centre) > 0.0, "instance {i} tri {k}: ng {}", h.ng);
+            assert!(
+                h.ng.dot(c - centre) > 0.0,
+                "instance {i} tri {k}: ng {}",
+                h.ng
+            );
             // The interpolated normal at the centroid: the mean of the three vertex normals
             // (the local corners' directions) each taken by the inverse transpose and
             // normalised.
@@ -112,7 +142,11 @@ fn mirrored_instances_keep_their_normals_pointing_out() {
                 .iter()
                 .sum::<Vec3>()
                 .normalize();
-            assert!(close(h.ns, want, 1e-5), "instance {i} tri {k}: ns {} vs {want}", h.ns);
+            assert!(
+                close(h.ns, want, 1e-5),
+                "instance {i} tri {k}: ns {} vs {want}",
+                h.ns
+            );
             assert!(h.ns.dot(h.ng) > 0.0);
         }
     }
@@ -145,13 +179,22 @@ fn each_instance_of_an_emissive_mesh_is_its_own_light() {
         assert!((a - b).abs() < 1e-6, "{a} vs {b}");
     }
     let first = shared.emitters[0].area;
-    assert!(shared.emitters.iter().any(|e| (e.area - first).abs() > 0.1 * first));
+    assert!(shared
+        .emitters
+        .iter()
+        .any(|e| (e.area - first).abs() > 0.1 * first));
 }
 
 #[test]
 fn gpu_instancing_stores_one_copy_for_27_instances() {
     let t: Vec<[f32; 3]> = (0..27)
-        .map(|i| [3.0 * (i % 3) as f32, 3.0 * (i / 3 % 3) as f32, 3.0 * (i / 9) as f32])
+        .map(|i| {
+            [
+                3.0 * (i % 3) as f32,
+                3.0 * (i / 3 % 3) as f32,
+                3.0 * (i / 9) as f32,
+            ]
+        })
         .collect();
     let s: Vec<[f32; 3]> = (0..27).map(|i| [1.0, 1.0 + 0.01 * i as f32, 1.0]).collect();
     let scene = load_json("ext27", &octahedra_ext_gltf(&t, &s, "{}"));
@@ -161,7 +204,10 @@ fn gpu_instancing_stores_one_copy_for_27_instances() {
     for (i, ti) in t.iter().enumerate() {
         let [p0, ..] = scene.world_triangle(8 * i as u32);
         // Triangle 0's vertex 0 is the local (1, 0, 0).
-        assert!(close(p0, Vec3::from_array(*ti) + Vec3::X, 1e-6), "{i}: {p0}");
+        assert!(
+            close(p0, Vec3::from_array(*ti) + Vec3::X, 1e-6),
+            "{i}: {p0}"
+        );
     }
 }
 
