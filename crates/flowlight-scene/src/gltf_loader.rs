@@ -1,8 +1,15 @@
-//! Walks a glTF 2.0 document's default scene into a world-space [`Scene`].
+//! Walks a glTF 2.0 document's default scene into a [`Scene`].
 //!
 //! - Node transforms (TRS or matrix) are composed down the hierarchy; normals use the
 //!   inverse-transpose and the winding is flipped under a negative determinant, so a
 //!   counter-clockwise front face stays the front face.
+//! - Instancing: the walk first collects every placement (node, and each
+//!   `EXT_mesh_gpu_instancing` instance) of every mesh. A mesh placed once is flattened into
+//!   world space; a mesh placed several times is loaded once, in its local space, and each
+//!   placement becomes a [`MeshInstance`] (see [`crate::scene`]). The instance and
+//!   virtual-triangle limits are checked from the accessors' counts before any geometry is
+//!   decoded ([`MAX_INSTANCES`], [`MAX_VIRTUAL_TRIANGLES`], and the memory estimate against
+//!   `MemAvailable`).
 //! - Only triangle primitives are loaded: TRIANGLES as they are, TRIANGLE_STRIP and
 //!   TRIANGLE_FAN converted to lists; points and lines are skipped with a warning and counted.
 //! - Primitives without NORMAL get flat per-face normals by duplicating their vertices (the glTF

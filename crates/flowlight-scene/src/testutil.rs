@@ -258,9 +258,7 @@ pub fn octahedra_ext_gltf(
         1,
         material,
         &[translations, scales],
-        &format!(
-            r#", "extensionsUsed": ["EXT_mesh_gpu_instancing"], "extensionsRequired": ["EXT_mesh_gpu_instancing"]"#
-        ),
+        r#", "extensionsUsed": ["EXT_mesh_gpu_instancing"], "extensionsRequired": ["EXT_mesh_gpu_instancing"]"#,
     )
 }
 
