@@ -27,7 +27,8 @@ path_depth = 3
 #[test]
 fn instanced_emissive_octahedra_render_like_their_flattened_copy() {
     let placements = octahedra_placements(9);
-    let material = r#"{"emissiveFactor": [1.0, 0.8, 0.6], "pbrMetallicRoughness": {"metallicFactor": 0.0}}"#;
+    let material =
+        r#"{"emissiveFactor": [1.0, 0.8, 0.6], "pbrMetallicRoughness": {"metallicFactor": 0.0}}"#;
     for isect in ["bvh", "embree"] {
         let body = BODY_BVH.replace("\"bvh\"", &format!("\"{isect}\""));
         let shared = session_from(

@@ -243,7 +243,10 @@ fn filtered_queries_see_the_instance_and_pass_through_rejected_ones() {
     let h = bvh
         .intersect_filtered(&ray, &|_, prim, b1, b2| {
             assert_eq!(prim, 0);
-            assert!((b1 - 0.5).abs() < 1e-6 && (b2 - 0.2).abs() < 1e-6, "{b1} {b2}");
+            assert!(
+                (b1 - 0.5).abs() < 1e-6 && (b2 - 0.2).abs() < 1e-6,
+                "{b1} {b2}"
+            );
             true
         })
         .unwrap();
