@@ -1052,8 +1052,10 @@ pub const MAX_INSTANCES: u64 = 1 << 24;
 /// `u32`, and `u32::MAX` means "no triangle".
 pub const MAX_VIRTUAL_TRIANGLES: u64 = u32::MAX as u64 - 1;
 /// Estimated resident bytes per stored triangle: its vertices' attributes and indices in the
-/// scene (≈ 60), the BVH's or Embree's copy and nodes (≈ 100).
-pub const BYTES_PER_STORED_TRIANGLE: u64 = 160;
+/// scene, and the BVH's or Embree's copy and nodes. Measured on a sphere with unshared
+/// vertices (three per triangle, the worst case): 133 bytes in the scene, 147 in the BVH,
+/// 145 in Embree (`examples/instancing_memory.rs` of the host).
+pub const BYTES_PER_STORED_TRIANGLE: u64 = 280;
 /// Estimated resident bytes per instance: the scene's [`MeshInstance`] (≈ 200), the
 /// two-level BVH's entry and node (≈ 140) and Embree's instance geometry (a few hundred).
 pub const BYTES_PER_INSTANCE: u64 = 512;
