@@ -269,10 +269,20 @@ fn render(config: &std::path::Path, ov: &Overrides, quiet: bool) -> Result<()> {
     } else {
         ""
     };
+    let sc = &session.scene;
+    let triangles = if sc.is_instanced() {
+        format!(
+            "{} triangles in {} instances, {} stored",
+            sc.virtual_triangle_count(),
+            sc.instances.len(),
+            sc.triangles.len()
+        )
+    } else {
+        format!("{} triangles", sc.triangles.len())
+    };
     eprintln!(
-        "flowlight: {} ({} triangles, {} emissive triangles, {} punctual lights{env}) with '{}' on {} ({}x{})",
+        "flowlight: {} ({triangles}, {} emissive triangles, {} punctual lights{env}) with '{}' on {} ({}x{})",
         session.config.scene.display(),
-        session.scene.triangles.len(),
         session.scene.emitters.len(),
         session.scene.punctual_lights.len(),
         session.instance.plugin().name,

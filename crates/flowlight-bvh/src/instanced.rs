@@ -11,6 +11,8 @@
 //!   `d'` *not* normalised, so that the ray parameter `t` means the same point in both spaces
 //!   (`M (o' + t d') = o + t d`) and one `t_max` shrinks across instances (pbrt-v4 §7.1.4,
 //!   `TransformedPrimitive`). The mesh's watertight test then runs in object space.
+//! * **Alpha**: the filtered queries hand every candidate (instance, triangle, barycentrics)
+//!   to an [`InstanceHitFilter`] before accepting it, as [`Bvh::intersect_filtered`] does.
 //! * **Hits** name the instance and the triangle of its mesh; the world-space point and
 //!   normals are the caller's (`p = M p_obj`, normals by the inverse transpose of M's linear
 //!   part).
@@ -23,6 +25,10 @@
 use crate::{build_parallel, Aabb, Bvh, Node, PrimRef, SlabRay, STACK_SIZE};
 use flowlight_core::geometry::Ray;
 use glam::{Affine3A, Mat4, Vec3};
+
+/// [`crate::HitFilter`] for instances: `(instance, prim, b1, b2)`, `prim` the triangle's
+/// index in its mesh. The same purity rules apply.
+pub type InstanceHitFilter<'a> = &'a dyn Fn(u32, u32, f32, f32) -> bool;
 
 /// One placement of a mesh.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -131,16 +137,33 @@ impl TwoLevelBvh {
 
     /// Closest hit with `t ∈ (0, ray.t_max)`, or `None`.
     pub fn intersect(&self, ray: &Ray) -> Option<InstanceHit> {
-        self.traverse::<false>(ray)
+        self.traverse::<false, false>(ray, &|_, _, _, _| true)
     }
 
     /// Whether any instance's triangle is hit with `t ∈ (0, ray.t_max)`.
     pub fn occluded(&self, ray: &Ray) -> bool {
-        self.traverse::<true>(ray).is_some()
+        self.traverse::<true, false>(ray, &|_, _, _, _| true)
+            .is_some()
+    }
+
+    /// [`TwoLevelBvh::intersect`] counting only the hits `accept(instance, prim, b1, b2)`
+    /// keeps (alpha testing through instances): a rejected candidate does not shorten the
+    /// ray.
+    pub fn intersect_filtered(&self, ray: &Ray, accept: InstanceHitFilter) -> Option<InstanceHit> {
+        self.traverse::<false, true>(ray, accept)
+    }
+
+    /// [`TwoLevelBvh::occluded`] counting only the hits `accept` keeps.
+    pub fn occluded_filtered(&self, ray: &Ray, accept: InstanceHitFilter) -> bool {
+        self.traverse::<true, true>(ray, accept).is_some()
     }
 
     #[inline(always)]
-    fn traverse<const ANY_HIT: bool>(&self, ray: &Ray) -> Option<InstanceHit> {
+    fn traverse<const ANY_HIT: bool, const FILTER: bool>(
+        &self,
+        ray: &Ray,
+        accept: &dyn Fn(u32, u32, f32, f32) -> bool,
+    ) -> Option<InstanceHit> {
         if self.nodes.is_empty() || ray.t_max.is_nan() || ray.t_max <= 0.0 {
             return None;
         }
@@ -163,7 +186,29 @@ impl TwoLevelBvh {
                             t_max,
                         };
                         let mesh = &self.meshes[self.instances[inst as usize].mesh as usize];
-                        if ANY_HIT {
+                        if FILTER {
+                            let keep = |prim, b1, b2| accept(inst, prim, b1, b2);
+                            if ANY_HIT {
+                                if mesh.occluded_filtered(&local, &keep) {
+                                    return Some(InstanceHit {
+                                        t: t_max,
+                                        instance: inst,
+                                        prim: u32::MAX,
+                                        b1: 0.0,
+                                        b2: 0.0,
+                                    });
+                                }
+                            } else if let Some(h) = mesh.intersect_filtered(&local, &keep) {
+                                t_max = h.t;
+                                hit = Some(InstanceHit {
+                                    t: h.t,
+                                    instance: inst,
+                                    prim: h.prim,
+                                    b1: h.b1,
+                                    b2: h.b2,
+                                });
+                            }
+                        } else if ANY_HIT {
                             if mesh.occluded(&local) {
                                 return Some(InstanceHit {
                                     t: t_max,

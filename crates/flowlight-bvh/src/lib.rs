@@ -38,7 +38,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 mod instanced;
-pub use instanced::{Instance, InstanceHit, TwoLevelBvh};
+pub use instanced::{Instance, InstanceHit, InstanceHitFilter, TwoLevelBvh};
 
 /// Largest number of triangles in a leaf.
 pub const MAX_LEAF_SIZE: usize = 4;

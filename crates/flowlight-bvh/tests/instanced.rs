@@ -208,3 +208,53 @@ fn bad_instances_are_errors_naming_them() {
     let e = TwoLevelBvh::build(mesh, vec![singular]).unwrap_err();
     assert!(e.contains("instance 0") && e.contains("invertible"), "{e}");
 }
+
+#[test]
+fn filtered_queries_see_the_instance_and_pass_through_rejected_ones() {
+    // One unit square (two triangles) in z = 0, placed at z = 0, −1, −2 (instances 0, 1, 2).
+    let quad: Vec<Tri> = vec![
+        [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0)],
+        [Vec3::ZERO, Vec3::new(1.0, 1.0, 0.0), Vec3::Y],
+    ];
+    let instances = (0..3)
+        .map(|i| Instance {
+            mesh: 0,
+            object_to_world: Mat4::from_translation(Vec3::new(0.0, 0.0, -(i as f32))),
+        })
+        .collect();
+    let bvh = TwoLevelBvh::build(vec![Bvh::build(&quad)], instances).unwrap();
+    let ray = Ray::new(Vec3::new(0.7, 0.2, 1.0), -Vec3::Z, f32::INFINITY);
+    // Unfiltered: instance 0 at t = 1, triangle 0 (below the diagonal).
+    let h = bvh.intersect(&ray).unwrap();
+    assert_eq!((h.instance, h.prim), (0, 0));
+    assert!((h.t - 1.0).abs() < 1e-6);
+    // Rejecting instance 0 finds instance 1 behind it; rejecting 0 and 1 finds 2.
+    let h = bvh
+        .intersect_filtered(&ray, &|inst, _, _, _| inst != 0)
+        .unwrap();
+    assert_eq!(h.instance, 1);
+    assert!((h.t - 2.0).abs() < 1e-6, "{}", h.t);
+    let h = bvh
+        .intersect_filtered(&ray, &|inst, _, _, _| inst == 2)
+        .unwrap();
+    assert_eq!(h.instance, 2);
+    assert!((h.t - 3.0).abs() < 1e-6, "{}", h.t);
+    // The filter gets the mesh's triangle and barycentrics: u = 0.5, v = 0.2 on triangle 0.
+    let h = bvh
+        .intersect_filtered(&ray, &|_, prim, b1, b2| {
+            assert_eq!(prim, 0);
+            assert!(
+                (b1 - 0.5).abs() < 1e-6 && (b2 - 0.2).abs() < 1e-6,
+                "{b1} {b2}"
+            );
+            true
+        })
+        .unwrap();
+    assert_eq!(h.instance, 0);
+    // Shadow rays: blocked unless every instance is rejected; a short ray sees only the first.
+    assert!(bvh.occluded_filtered(&ray, &|inst, _, _, _| inst == 2));
+    assert!(!bvh.occluded_filtered(&ray, &|_, _, _, _| false));
+    let short = Ray::new(ray.origin, ray.dir, 1.5);
+    assert!(!bvh.occluded_filtered(&short, &|inst, _, _, _| inst != 0));
+    assert!(bvh.occluded_filtered(&short, &|_, _, _, _| true));
+}

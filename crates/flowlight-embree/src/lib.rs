@@ -14,7 +14,7 @@ use embree4_sys::{
     RTCBufferType, RTCBuildQuality, RTCDevice, RTCFeatureFlags, RTCFormat, RTCGeometry,
     RTCGeometryType, RTCRay, RTCRayQueryFlags, RTCScene, RTCSceneFlags,
 };
-use flowlight_bvh::{HitFilter, InstanceHit, TriangleHit};
+use flowlight_bvh::{HitFilter, InstanceHit, InstanceHitFilter, TriangleHit};
 use flowlight_core::geometry::Ray;
 use glam::{Mat4, Vec3};
 use std::ffi::{c_char, c_uint, c_void};
@@ -492,15 +492,7 @@ impl EmbreeScene {
     /// for every candidate hit; a rejected one leaves the ray unchanged).
     pub fn intersect_filtered(&self, ray: &Ray, accept: HitFilter) -> Option<TriangleHit> {
         let mut ctx = FilterContext::new(&accept);
-        let mut args = filter::IntersectArguments {
-            flags: RTCRayQueryFlags::INVOKE_ARGUMENT_FILTER,
-            feature_mask: RTCFeatureFlags::RTC_FEATURE_FLAG_ALL,
-            context: &mut ctx as *mut FilterContext as *mut c_void,
-            filter: Some(filter_callback),
-            intersect: None,
-            min_width_distance_factor: 0.0,
-            _pad: [0; 4],
-        };
+        let mut args = ctx.arguments();
         let mut rh = EmbreeScene::rtc_ray_hit(ray);
         // SAFETY: a committed scene, a 4.4-layout ray/hit, and arguments whose context
         // outlives the call; the callback only reads the context it is given.
@@ -522,15 +514,7 @@ impl EmbreeScene {
     /// [`EmbreeScene::occluded`] counting only the hits `accept` keeps.
     pub fn occluded_filtered(&self, ray: &Ray, accept: HitFilter) -> bool {
         let mut ctx = FilterContext::new(&accept);
-        let mut args = filter::IntersectArguments {
-            flags: RTCRayQueryFlags::INVOKE_ARGUMENT_FILTER,
-            feature_mask: RTCFeatureFlags::RTC_FEATURE_FLAG_ALL,
-            context: &mut ctx as *mut FilterContext as *mut c_void,
-            filter: Some(filter_callback),
-            intersect: None,
-            min_width_distance_factor: 0.0,
-            _pad: [0; 4],
-        };
+        let mut args = ctx.arguments();
         let mut r = Self::rtc_ray(ray);
         // SAFETY: as in `intersect_filtered` (RTCOccludedArguments has the same layout).
         unsafe {
@@ -619,6 +603,9 @@ impl EmbreeInstancedScene {
             if options.robust {
                 flags |= RTCSceneFlags::ROBUST;
             }
+            if options.hit_filter {
+                flags |= RTCSceneFlags::FILTER_FUNCTION_IN_ARGUMENTS;
+            }
             (api.set_scene_flags)(top, flags);
             (api.set_scene_build_quality)(top, options.quality.raw());
             for (i, (m, x)) in instances.iter().enumerate() {
@@ -678,6 +665,46 @@ impl EmbreeInstancedScene {
         unsafe { (self.dev.api.occluded1)(self.top, &mut r, std::ptr::null_mut()) };
         r.tfar == f32::NEG_INFINITY
     }
+
+    /// [`EmbreeInstancedScene::intersect`] counting only the hits `accept(instance, prim,
+    /// u, v)` keeps (alpha testing through instances). Needs
+    /// [`SceneOptions::hit_filter`], which is set on every mesh scene and the top scene.
+    pub fn intersect_filtered(&self, ray: &Ray, accept: InstanceHitFilter) -> Option<InstanceHit> {
+        let mut ctx = FilterContext::instanced(&accept);
+        let mut args = ctx.arguments();
+        let mut rh = EmbreeScene::rtc_ray_hit(ray);
+        // SAFETY: as in `EmbreeScene::intersect_filtered`.
+        unsafe {
+            (self.dev.api.intersect1)(
+                self.top,
+                &mut rh,
+                &mut args as *mut filter::IntersectArguments as *mut c_void,
+            )
+        };
+        (rh.hit.geom_id != u32::MAX).then_some(InstanceHit {
+            t: rh.ray.tfar,
+            instance: rh.hit.inst_id[0],
+            prim: rh.hit.prim_id,
+            b1: rh.hit.u,
+            b2: rh.hit.v,
+        })
+    }
+
+    /// [`EmbreeInstancedScene::occluded`] counting only the hits `accept` keeps.
+    pub fn occluded_filtered(&self, ray: &Ray, accept: InstanceHitFilter) -> bool {
+        let mut ctx = FilterContext::instanced(&accept);
+        let mut args = ctx.arguments();
+        let mut r = EmbreeScene::rtc_ray(ray);
+        // SAFETY: as in `EmbreeScene::occluded_filtered`.
+        unsafe {
+            (self.dev.api.occluded1)(
+                self.top,
+                &mut r,
+                &mut args as *mut filter::IntersectArguments as *mut c_void,
+            )
+        };
+        r.tfar == f32::NEG_INFINITY
+    }
 }
 
 impl Drop for EmbreeInstancedScene {
@@ -694,7 +721,13 @@ impl Drop for EmbreeInstancedScene {
 #[repr(C)]
 struct FilterContext<'a, 'f> {
     embree: [u32; 4],
-    accept: &'a HitFilter<'f>,
+    accept: Accept<'a, 'f>,
+}
+
+/// The filter of a filtered query: by triangle, or by (instance, triangle of its mesh).
+enum Accept<'a, 'f> {
+    Flat(&'a HitFilter<'f>),
+    Instanced(&'a InstanceHitFilter<'f>),
 }
 
 impl<'a, 'f> FilterContext<'a, 'f> {
@@ -702,7 +735,27 @@ impl<'a, 'f> FilterContext<'a, 'f> {
         // rtcInitRayQueryContext: every instance ID invalid.
         FilterContext {
             embree: [u32::MAX; 4],
-            accept,
+            accept: Accept::Flat(accept),
+        }
+    }
+
+    fn instanced(accept: &'a InstanceHitFilter<'f>) -> Self {
+        FilterContext {
+            embree: [u32::MAX; 4],
+            accept: Accept::Instanced(accept),
+        }
+    }
+
+    /// The arguments of a filtered query with this context.
+    fn arguments(&mut self) -> filter::IntersectArguments {
+        filter::IntersectArguments {
+            flags: RTCRayQueryFlags::INVOKE_ARGUMENT_FILTER,
+            feature_mask: RTCFeatureFlags::RTC_FEATURE_FLAG_ALL,
+            context: self as *mut FilterContext as *mut c_void,
+            filter: Some(filter_callback),
+            intersect: None,
+            min_width_distance_factor: 0.0,
+            _pad: [0; 4],
         }
     }
 }
@@ -735,7 +788,8 @@ mod filter {
 }
 
 /// Embree's filter callback for filtered queries: for each valid lane of the `N`-wide
-/// (structure-of-arrays) hit, asks the context's filter about `(primID, u, v)` and marks the
+/// (structure-of-arrays) hit, asks the context's filter about `(primID, u, v)` (with
+/// `instID` first for an instanced scene) and marks the
 /// lane invalid (`valid[i] = 0`) when the ray passes through. A panic in the filter counts as
 /// "keep the hit" (it must not unwind into Embree).
 unsafe extern "C" fn filter_callback(args: *const embree4_sys::RTCFilterFunctionNArguments) {
@@ -747,13 +801,17 @@ unsafe extern "C" fn filter_callback(args: *const embree4_sys::RTCFilterFunction
         if *a.valid.add(i) == 0 {
             continue;
         }
-        // RTCHitN: Ng_x[N], Ng_y[N], Ng_z[N], u[N], v[N], primID[N], geomID[N], ...
+        // RTCHitN: Ng_x[N], Ng_y[N], Ng_z[N], u[N], v[N], primID[N], geomID[N],
+        // instID[1][N] (the instance stack when the hit was found), instPrimID[1][N].
         let u = f32::from_bits(*hit.add(3 * n + i));
         let v = f32::from_bits(*hit.add(4 * n + i));
         let prim = *hit.add(5 * n + i);
-        let keep =
-            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| (ctx.accept)(prim, u, v)))
-                .unwrap_or(true);
+        let inst = *hit.add(7 * n + i);
+        let keep = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| match ctx.accept {
+            Accept::Flat(f) => f(prim, u, v),
+            Accept::Instanced(f) => f(inst, prim, u, v),
+        }))
+        .unwrap_or(true);
         if !keep {
             *a.valid.add(i) = 0;
         }

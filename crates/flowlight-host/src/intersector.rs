@@ -1,6 +1,6 @@
 //! Intersectors and the host's answer to plugins' ray queries.
 
-use flowlight_bvh::{Bvh, HitFilter, TriangleHit};
+use flowlight_bvh::{Bvh, HitFilter, Instance, InstanceHit, TriangleHit, TwoLevelBvh};
 use flowlight_core::geometry::Ray;
 use flowlight_scene::config::Intersector as IntersectorChoice;
 use flowlight_scene::Scene;
@@ -20,16 +20,92 @@ pub trait Intersector: Send + Sync {
     fn occluded_filtered(&self, ray: &Ray, accept: HitFilter) -> bool;
 }
 
-/// The pure-Rust BVH backend.
-pub struct BvhIntersector {
-    bvh: Bvh,
+/// The meshes and instances of an instanced scene, as the two-level builds take them: per
+/// stored mesh its triangles' vertices (indices into the mesh's range), per instance its mesh
+/// and object-to-world matrix, and the first virtual id of each instance.
+struct Levels {
+    meshes: Vec<Vec<[glam::Vec3; 3]>>,
+    instances: Vec<(u32, glam::Mat4)>,
+    first_virtual: Vec<u32>,
+}
+
+fn levels(scene: &Scene) -> Levels {
+    let meshes = scene
+        .meshes
+        .iter()
+        .map(|r| {
+            scene.triangles[r.first_triangle as usize..][..r.triangle_count as usize]
+                .iter()
+                .map(|t| t.map(|i| scene.positions[i as usize]))
+                .collect()
+        })
+        .collect();
+    Levels {
+        meshes,
+        instances: scene
+            .instances
+            .iter()
+            .map(|i| (i.mesh, i.object_to_world))
+            .collect(),
+        first_virtual: scene.instances.iter().map(|i| i.first_virtual).collect(),
+    }
+}
+
+/// An instance hit as the virtual triangle it shows.
+#[inline]
+fn virtual_hit(first_virtual: &[u32], h: InstanceHit) -> TriangleHit {
+    TriangleHit {
+        t: h.t,
+        prim: first_virtual[h.instance as usize] + h.prim,
+        b1: h.b1,
+        b2: h.b2,
+    }
+}
+
+/// The pure-Rust BVH backend: one BVH over the world-space triangles for a scene without
+/// instancing, else a [`TwoLevelBvh`] over the scene's mesh instances (each mesh stored
+/// once). Hits name virtual triangle ids either way.
+pub enum BvhIntersector {
+    Flat(Bvh),
+    Instanced {
+        bvh: TwoLevelBvh,
+        first_virtual: Vec<u32>,
+    },
 }
 
 impl BvhIntersector {
     pub fn build(scene: &Scene) -> (BvhIntersector, Duration) {
         let start = Instant::now();
-        let bvh = Bvh::build(&scene.triangle_vertices());
-        (BvhIntersector { bvh }, start.elapsed())
+        let b = if scene.is_instanced() {
+            let l = levels(scene);
+            let meshes = l.meshes.iter().map(|m| Bvh::build(m)).collect();
+            let instances = l
+                .instances
+                .iter()
+                .map(|&(mesh, object_to_world)| Instance {
+                    mesh,
+                    object_to_world,
+                })
+                .collect();
+            // The loader only makes invertible affine instances of existing meshes.
+            let bvh = TwoLevelBvh::build(meshes, instances)
+                .expect("the scene's instances are valid by construction");
+            BvhIntersector::Instanced {
+                bvh,
+                first_virtual: l.first_virtual,
+            }
+        } else {
+            BvhIntersector::Flat(Bvh::build(&scene.triangle_vertices()))
+        };
+        (b, start.elapsed())
+    }
+
+    /// Triangles stored in the acceleration structure (each instanced mesh once).
+    pub fn stored_triangle_count(&self) -> usize {
+        match self {
+            BvhIntersector::Flat(b) => b.stored_triangle_count(),
+            BvhIntersector::Instanced { bvh, .. } => bvh.stored_triangle_count(),
+        }
     }
 }
 
@@ -39,27 +115,54 @@ impl Intersector for BvhIntersector {
     }
     #[inline]
     fn intersect(&self, ray: &Ray) -> Option<TriangleHit> {
-        self.bvh.intersect(ray)
+        match self {
+            BvhIntersector::Flat(b) => b.intersect(ray),
+            BvhIntersector::Instanced { bvh, first_virtual } => {
+                bvh.intersect(ray).map(|h| virtual_hit(first_virtual, h))
+            }
+        }
     }
     #[inline]
     fn occluded(&self, ray: &Ray) -> bool {
-        self.bvh.occluded(ray)
+        match self {
+            BvhIntersector::Flat(b) => b.occluded(ray),
+            BvhIntersector::Instanced { bvh, .. } => bvh.occluded(ray),
+        }
     }
     #[inline]
     fn intersect_filtered(&self, ray: &Ray, accept: HitFilter) -> Option<TriangleHit> {
-        self.bvh.intersect_filtered(ray, accept)
+        match self {
+            BvhIntersector::Flat(b) => b.intersect_filtered(ray, accept),
+            BvhIntersector::Instanced { bvh, first_virtual } => bvh
+                .intersect_filtered(ray, &|inst, prim, b1, b2| {
+                    accept(first_virtual[inst as usize] + prim, b1, b2)
+                })
+                .map(|h| virtual_hit(first_virtual, h)),
+        }
     }
     #[inline]
     fn occluded_filtered(&self, ray: &Ray, accept: HitFilter) -> bool {
-        self.bvh.occluded_filtered(ray, accept)
+        match self {
+            BvhIntersector::Flat(b) => b.occluded_filtered(ray, accept),
+            BvhIntersector::Instanced { bvh, first_virtual } => bvh
+                .occluded_filtered(ray, &|inst, prim, b1, b2| {
+                    accept(first_virtual[inst as usize] + prim, b1, b2)
+                }),
+        }
     }
 }
 
 /// The Embree 4 backend (`flowlight-embree`): one device per process, the scene committed
 /// once, robust mode on by default; `FLOWLIGHT_EMBREE_QUALITY` (`low` | `medium` | `high`)
-/// sets the build quality for large scenes.
-pub struct EmbreeIntersector {
-    scene: flowlight_embree::EmbreeScene,
+/// sets the build quality for large scenes. A scene with instancing becomes an
+/// [`flowlight_embree::EmbreeInstancedScene`] (one Embree scene per stored mesh, one
+/// instance geometry per placement).
+pub enum EmbreeIntersector {
+    Flat(flowlight_embree::EmbreeScene),
+    Instanced {
+        scene: flowlight_embree::EmbreeInstancedScene,
+        first_virtual: Vec<u32>,
+    },
 }
 
 impl EmbreeIntersector {
@@ -78,8 +181,48 @@ impl EmbreeIntersector {
         // Opening the library and making the device is not part of the build time.
         flowlight_embree::device()?;
         let start = Instant::now();
-        let s = flowlight_embree::EmbreeScene::build(&scene.positions, &scene.triangles, options)?;
-        Ok((EmbreeIntersector { scene: s }, start.elapsed()))
+        let e = if scene.is_instanced() {
+            let instances: Vec<(u32, glam::Mat4)> = scene
+                .instances
+                .iter()
+                .map(|i| (i.mesh, i.object_to_world))
+                .collect();
+            let first_virtual = scene.instances.iter().map(|i| i.first_virtual).collect();
+            // Each mesh's own vertex buffer: the span of scene vertices its triangles use
+            // (a mesh's vertices are contiguous), re-indexed from 0.
+            let meshes: Vec<(Vec<glam::Vec3>, Vec<[u32; 3]>)> = scene
+                .meshes
+                .iter()
+                .map(|r| {
+                    let tris =
+                        &scene.triangles[r.first_triangle as usize..][..r.triangle_count as usize];
+                    let lo = tris.iter().flatten().copied().min().unwrap_or(0);
+                    let hi = tris.iter().flatten().copied().max().map_or(0, |h| h + 1);
+                    let positions = scene.positions[lo as usize..hi as usize].to_vec();
+                    (positions, tris.iter().map(|t| t.map(|i| i - lo)).collect())
+                })
+                .collect();
+            let s = flowlight_embree::EmbreeInstancedScene::build(&meshes, &instances, options)?;
+            EmbreeIntersector::Instanced {
+                scene: s,
+                first_virtual,
+            }
+        } else {
+            EmbreeIntersector::Flat(flowlight_embree::EmbreeScene::build(
+                &scene.positions,
+                &scene.triangles,
+                options,
+            )?)
+        };
+        Ok((e, start.elapsed()))
+    }
+
+    /// Triangles stored in Embree (each instanced mesh once).
+    pub fn stored_triangle_count(&self) -> usize {
+        match self {
+            EmbreeIntersector::Flat(s) => s.triangle_count(),
+            EmbreeIntersector::Instanced { scene, .. } => scene.stored_triangle_count(),
+        }
     }
 }
 
@@ -89,19 +232,46 @@ impl Intersector for EmbreeIntersector {
     }
     #[inline]
     fn intersect(&self, ray: &Ray) -> Option<TriangleHit> {
-        self.scene.intersect(ray)
+        match self {
+            EmbreeIntersector::Flat(s) => s.intersect(ray),
+            EmbreeIntersector::Instanced {
+                scene,
+                first_virtual,
+            } => scene.intersect(ray).map(|h| virtual_hit(first_virtual, h)),
+        }
     }
     #[inline]
     fn occluded(&self, ray: &Ray) -> bool {
-        self.scene.occluded(ray)
+        match self {
+            EmbreeIntersector::Flat(s) => s.occluded(ray),
+            EmbreeIntersector::Instanced { scene, .. } => scene.occluded(ray),
+        }
     }
     #[inline]
     fn intersect_filtered(&self, ray: &Ray, accept: HitFilter) -> Option<TriangleHit> {
-        self.scene.intersect_filtered(ray, accept)
+        match self {
+            EmbreeIntersector::Flat(s) => s.intersect_filtered(ray, accept),
+            EmbreeIntersector::Instanced {
+                scene,
+                first_virtual,
+            } => scene
+                .intersect_filtered(ray, &|inst, prim, b1, b2| {
+                    accept(first_virtual[inst as usize] + prim, b1, b2)
+                })
+                .map(|h| virtual_hit(first_virtual, h)),
+        }
     }
     #[inline]
     fn occluded_filtered(&self, ray: &Ray, accept: HitFilter) -> bool {
-        self.scene.occluded_filtered(ray, accept)
+        match self {
+            EmbreeIntersector::Flat(s) => s.occluded_filtered(ray, accept),
+            EmbreeIntersector::Instanced {
+                scene,
+                first_virtual,
+            } => scene.occluded_filtered(ray, &|inst, prim, b1, b2| {
+                accept(first_virtual[inst as usize] + prim, b1, b2)
+            }),
+        }
     }
 }
 
@@ -346,6 +516,149 @@ mod tests {
                 }
             }
         }
+    }
+
+    fn load_json(tag: &str, json: &str) -> Scene {
+        let dir = temp_dir(tag);
+        let p = dir.join(format!("{tag}.gltf"));
+        std::fs::write(&p, json).unwrap();
+        load_gltf(&p, &BTreeMap::new()).unwrap()
+    }
+
+    /// Rays from a sphere around the octahedra towards random points near them.
+    fn probe_rays(scene: &Scene, n: usize) -> Vec<Ray> {
+        let (lo, hi) = scene.bounds().unwrap();
+        let (c, r) = ((lo + hi) * 0.5, (hi - lo).length());
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut u = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        (0..n)
+            .map(|_| {
+                let o = c + (Vec3::new(u(), u(), u()) - 0.5).normalize_or_zero() * r;
+                let t = lo + (hi - lo) * Vec3::new(u(), u(), u());
+                Ray::new(o, (t - o).normalize(), f32::INFINITY)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn instanced_scene_hits_what_its_flattened_copy_hits_in_both_intersectors() {
+        use flowlight_scene::testutil::{octahedra_gltf, octahedra_placements};
+        let placements = octahedra_placements(9);
+        let shared = load_json("inst-shared", &octahedra_gltf(&placements, false, "{}"));
+        let flat = load_json("inst-flat", &octahedra_gltf(&placements, true, "{}"));
+        assert!(shared.is_instanced() && !flat.is_instanced());
+        let (flat_bvh, _) = BvhIntersector::build(&flat);
+        let reference = UnitTracer::new(&flat, &flat_bvh);
+        assert_eq!(shared.triangles.len(), 8);
+        for isect in intersectors(&shared) {
+            let mut hits = 0;
+            let mut tracer = UnitTracer::new(&shared, isect.as_ref());
+            let mut mismatched = 0;
+            let rays = probe_rays(&shared, 4000);
+            for ray in &rays {
+                let want = reference.closest(ray);
+                let got = tracer.closest(ray);
+                assert_eq!(isect.occluded(ray), got.is_some(), "{}", isect.name());
+                match (want, got) {
+                    (Some(w), Some(g)) => {
+                        assert!(
+                            (w.t - g.t).abs() <= 1e-4 * w.t,
+                            "{}: t {} vs {}",
+                            isect.name(),
+                            g.t,
+                            w.t
+                        );
+                        if w.prim != g.prim {
+                            // Only on an edge shared by two triangles of one octahedron.
+                            assert_eq!(w.prim / 8, g.prim / 8, "{}", isect.name());
+                            mismatched += 1;
+                            continue;
+                        }
+                        hits += 1;
+                        let a = tracer.intersect(ray).surface;
+                        let mut r = UnitTracer::new(&flat, &flat_bvh);
+                        let b = r.intersect(ray).surface;
+                        assert!(
+                            (a.p - b.p).length() <= 1e-4 * (1.0 + b.p.length()),
+                            "{} vs {}",
+                            a.p,
+                            b.p
+                        );
+                        assert!((a.ng - b.ng).length() < 1e-5, "{} vs {}", a.ng, b.ng);
+                        assert!((a.ns - b.ns).length() < 1e-3, "{} vs {}", a.ns, b.ns);
+                        assert_eq!(a.prim, b.prim);
+                    }
+                    (None, None) => {}
+                    // Grazing an outline, within float noise of an edge.
+                    _ => mismatched += 1,
+                }
+            }
+            assert!(
+                mismatched * 200 <= rays.len(),
+                "{}: {mismatched} mismatches",
+                isect.name()
+            );
+            assert!(hits > 300, "{}: {hits} hits", isect.name());
+        }
+    }
+
+    #[test]
+    fn all_27_gpu_instances_are_hit_and_stored_once() {
+        use flowlight_scene::testutil::octahedra_ext_gltf;
+        let t: Vec<[f32; 3]> = (0..27)
+            .map(|i| {
+                [
+                    3.0 * (i % 3) as f32,
+                    3.0 * (i / 3 % 3) as f32,
+                    3.0 * (i / 9) as f32,
+                ]
+            })
+            .collect();
+        let s: Vec<[f32; 3]> = (0..27).map(|_| [1.0, 1.0, 1.0]).collect();
+        let scene = load_json("ext27-host", &octahedra_ext_gltf(&t, &s, "{}"));
+        assert_eq!(scene.triangles.len(), 8);
+        let (bvh, _) = BvhIntersector::build(&scene);
+        assert_eq!(bvh.stored_triangle_count(), 8);
+        let (embree, _) =
+            EmbreeIntersector::build_with(&scene, flowlight_embree::SceneOptions::default())
+                .unwrap();
+        assert_eq!(embree.stored_triangle_count(), 8);
+        for isect in [&bvh as &dyn Intersector, &embree] {
+            for (i, ti) in t.iter().enumerate() {
+                // Straight down onto the top vertex's face 0 (local +x, +y, +z corner).
+                let target = Vec3::from_array(*ti) + Vec3::new(0.3, 0.3, 0.4);
+                let ray = Ray::new(
+                    target + Vec3::new(0.3, 0.3, 0.4) * 0.5,
+                    -Vec3::new(0.3, 0.3, 0.4).normalize(),
+                    f32::INFINITY,
+                );
+                let h = isect
+                    .intersect(&ray)
+                    .unwrap_or_else(|| panic!("{} instance {i} missed", isect.name()));
+                assert_eq!(h.prim, 8 * i as u32, "{} instance {i}", isect.name());
+                let want = (Vec3::new(0.3, 0.3, 0.4) * 0.5).length();
+                assert!(
+                    (h.t - want).abs() < 1e-5,
+                    "{} instance {i}: t {}",
+                    isect.name(),
+                    h.t
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn alpha_mask_cuts_through_an_instance() {
+        // cut_scene's two nodes share the quad mesh: the second is an instance.
+        let scene = cut_scene("MASK", 0);
+        assert!(scene.is_instanced());
+        assert_eq!(scene.triangles.len(), 2);
+        assert_eq!(scene.virtual_triangle_count(), 4);
     }
 
     #[test]

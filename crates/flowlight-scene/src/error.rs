@@ -69,6 +69,9 @@ pub enum SceneError {
         light: usize,
         reason: String,
     },
+    /// A documented size limit (instances, instanced triangles, memory) is exceeded.
+    #[error("{}: scene too large: {reason}", file.display())]
+    Limit { file: PathBuf, reason: String },
     #[error("{}: internal error while loading (malformed input?): {reason}", file.display())]
     Internal { file: PathBuf, reason: String },
 }

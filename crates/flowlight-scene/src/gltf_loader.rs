@@ -1,8 +1,15 @@
-//! Walks a glTF 2.0 document's default scene into a world-space [`Scene`].
+//! Walks a glTF 2.0 document's default scene into a [`Scene`].
 //!
 //! - Node transforms (TRS or matrix) are composed down the hierarchy; normals use the
 //!   inverse-transpose and the winding is flipped under a negative determinant, so a
 //!   counter-clockwise front face stays the front face.
+//! - Instancing: the walk first collects every placement (node, and each
+//!   `EXT_mesh_gpu_instancing` instance) of every mesh. A mesh placed once is flattened into
+//!   world space; a mesh placed several times is loaded once, in its local space, and each
+//!   placement becomes a [`MeshInstance`] (see [`crate::scene`]). The instance and
+//!   virtual-triangle limits are checked from the accessors' counts before any geometry is
+//!   decoded ([`MAX_INSTANCES`], [`MAX_VIRTUAL_TRIANGLES`], and the memory estimate against
+//!   `MemAvailable`).
 //! - Only triangle primitives are loaded: TRIANGLES as they are, TRIANGLE_STRIP and
 //!   TRIANGLE_FAN converted to lists; points and lines are skipped with a warning and counted.
 //! - Primitives without NORMAL get flat per-face normals by duplicating their vertices (the glTF
@@ -28,7 +35,9 @@ use crate::error::SceneError;
 use crate::instancing::instance_transforms;
 use crate::lights::{emission_strata, mean_emission, punctual_light};
 use crate::material::{convert, MaterialOverride};
-use crate::scene::{triangle_area, triangle_normal, CameraDesc, CameraProjection, Scene};
+use crate::scene::{
+    triangle_area, triangle_normal, CameraDesc, CameraProjection, MeshInstance, MeshRange, Scene,
+};
 use crate::source::GltfSource;
 use crate::texture::{load_image, ImageData, Sampler, TextureData};
 use flowlight_core::light::Emitter;
@@ -165,6 +174,9 @@ impl Loader<'_> {
             Enter(gltf::Node<'d>, Mat4),
             Exit(usize),
         }
+        // (glTF mesh, its world placements) in traversal order; geometry is loaded after the
+        // walk, once the number of placements of each mesh is known.
+        let mut placements: Vec<(usize, Vec<Mat4>)> = Vec::new();
         let mut on_path = vec![false; doc.nodes().len()];
         let mut entered = vec![false; doc.nodes().len()];
         let mut stack: Vec<Step> = gscene
@@ -225,12 +237,9 @@ impl Loader<'_> {
             }
             if let Some(mesh) = node.mesh() {
                 // One placement, or one per EXT_mesh_gpu_instancing instance.
-                for placed in instance_transforms(&mut self.src, &node, world)? {
-                    self.scene.stats.mesh_instances += 1;
-                    for prim in mesh.primitives() {
-                        self.primitive(&mesh, &prim, placed)?;
-                    }
-                }
+                let transforms = instance_transforms(&mut self.src, &node, world)?;
+                self.scene.stats.mesh_instances += transforms.len();
+                placements.push((mesh.index(), transforms));
             }
             on_path[idx] = true;
             stack.push(Step::Exit(idx));
@@ -238,6 +247,90 @@ impl Loader<'_> {
                 stack.push(Step::Enter(child, world));
             }
         }
+        self.geometry(&doc, &placements)
+    }
+
+    /// Loads the meshes of `placements`: a mesh placed once is flattened into world space
+    /// (all of them form mesh 0, one identity instance); a mesh placed several times is
+    /// stored once in its local space and gets one [`MeshInstance`] per placement. The
+    /// limits ([`check_instancing_limits`]) are checked before any geometry is decoded.
+    fn geometry(
+        &mut self,
+        doc: &gltf::Document,
+        placements: &[(usize, Vec<Mat4>)],
+    ) -> Result<(), SceneError> {
+        let mesh_of = |i: usize| doc.meshes().nth(i);
+        let mut uses: HashMap<usize, usize> = HashMap::new();
+        for (m, ts) in placements {
+            *uses.entry(*m).or_default() += ts.len();
+        }
+        check_instancing_limits(&self.src.file, doc, placements, &uses)?;
+        let mut virtual_count: u32 = 0;
+        // Meshes placed once, flattened in traversal order.
+        let flat_start = self.scene.triangles.len() as u32;
+        for (m, ts) in placements {
+            if uses[m] != 1 {
+                continue;
+            }
+            let Some(mesh) = mesh_of(*m) else { continue };
+            for prim in mesh.primitives() {
+                self.primitive(&mesh, &prim, ts[0])?;
+            }
+        }
+        let flat = MeshRange {
+            first_triangle: flat_start,
+            triangle_count: self.scene.triangles.len() as u32 - flat_start,
+        };
+        if flat.triangle_count > 0 {
+            self.scene.meshes.push(flat);
+            self.scene
+                .instances
+                .push(MeshInstance::identity(0, flat, 0, 0));
+            virtual_count = flat.triangle_count;
+        }
+        // Meshes placed several times: stored once, in local space.
+        let mut stored: HashMap<usize, u32> = HashMap::new();
+        for (m, ts) in placements {
+            if uses[m] < 2 {
+                continue;
+            }
+            let Some(mesh) = mesh_of(*m) else { continue };
+            let index = match stored.get(m) {
+                Some(&i) => i,
+                None => {
+                    let first = self.scene.triangles.len() as u32;
+                    for prim in mesh.primitives() {
+                        self.primitive(&mesh, &prim, Mat4::IDENTITY)?;
+                    }
+                    self.scene.meshes.push(MeshRange {
+                        first_triangle: first,
+                        triangle_count: self.scene.triangles.len() as u32 - first,
+                    });
+                    let i = (self.scene.meshes.len() - 1) as u32;
+                    stored.insert(*m, i);
+                    i
+                }
+            };
+            let range = self.scene.meshes[index as usize];
+            if range.triangle_count == 0 {
+                continue;
+            }
+            for &t in ts {
+                match MeshInstance::placed(index, range, t, virtual_count, 0) {
+                    Some(inst) => {
+                        self.scene.instances.push(inst);
+                        self.scene.stats.instanced_placements += 1;
+                        // Bounded by check_instancing_limits.
+                        virtual_count += range.triangle_count;
+                    }
+                    None => self.scene.stats.singular_placements += 1,
+                }
+            }
+        }
+        if self.scene.stats.singular_placements > 0 {
+            tracing::warn!(file = %self.src.file.display(), "{} placements of instanced meshes have a transform that cannot be inverted (zero scale); they are not rendered", self.scene.stats.singular_placements);
+        }
+        self.scene.stats.virtual_triangles = virtual_count as usize;
         Ok(())
     }
 
@@ -733,42 +826,77 @@ impl Loader<'_> {
             }
         }
         scene.triangle_emitter = vec![-1; scene.triangles.len()];
+        // Each stored emissive triangle once (its radiance does not depend on where it is
+        // placed), ranked within its mesh ...
         let views = scene.texture_views();
-        for (prim, tri) in scene.triangles.iter().enumerate() {
-            let material = scene.triangle_material[prim];
-            let m = &scene.materials[material as usize];
-            if !m.is_emissive() {
-                continue;
+        let mut mesh_emitters: Vec<Vec<(usize, Emitter)>> = vec![Vec::new(); scene.meshes.len()];
+        for (mi, range) in scene.meshes.iter().enumerate() {
+            let first = range.first_triangle as usize;
+            for prim in first..first + range.triangle_count as usize {
+                let tri = scene.triangles[prim];
+                let material = scene.triangle_material[prim];
+                let m = &scene.materials[material as usize];
+                if !m.is_emissive() {
+                    continue;
+                }
+                let [p0, p1, p2] = tri.map(|i| scene.positions[i as usize]);
+                let uv = tri.map(|i| scene.uvs[i as usize]);
+                // TEXCOORD_1 takes memory only when some primitive has it.
+                let uv1 = if scene.uvs1.is_empty() {
+                    uv
+                } else {
+                    tri.map(|i| scene.uvs1[i as usize])
+                };
+                let mut e = Emitter {
+                    p0,
+                    p1,
+                    p2,
+                    n: triangle_normal(p0, p1, p2).unwrap_or(Vec3::Z),
+                    area: triangle_area(p0, p1, p2) as f32,
+                    radiance: m.emission,
+                    double_sided: m.two_sided_emission,
+                    prim: prim as u32,
+                    material,
+                    uv0: uv,
+                    uv1,
+                };
+                let strata = emission_strata(&e, &m.emissive_texture, &views);
+                e.radiance = mean_emission(&e, strata, |uv| m.emission_at(uv, &views));
+                if e.radiance.is_black() || e.power() <= 0.0 {
+                    scene.stats.black_emitters += 1;
+                    continue;
+                }
+                scene.triangle_emitter[prim] = mesh_emitters[mi].len() as i32;
+                mesh_emitters[mi].push((prim, e));
             }
-            let [p0, p1, p2] = tri.map(|i| scene.positions[i as usize]);
-            let uv = tri.map(|i| scene.uvs[i as usize]);
-            // TEXCOORD_1 takes memory only when some primitive has it.
-            let uv1 = if scene.uvs1.is_empty() {
-                uv
-            } else {
-                tri.map(|i| scene.uvs1[i as usize])
-            };
-            let mut e = Emitter {
-                p0,
-                p1,
-                p2,
-                n: triangle_normal(p0, p1, p2).unwrap_or(Vec3::Z),
-                area: triangle_area(p0, p1, p2) as f32,
-                radiance: m.emission,
-                double_sided: m.two_sided_emission,
-                prim: prim as u32,
-                material,
-                uv0: uv,
-                uv1,
-            };
-            let strata = emission_strata(&e, &m.emissive_texture, &views);
-            e.radiance = mean_emission(&e, strata, |uv| m.emission_at(uv, &views));
-            if e.radiance.is_black() || e.power() <= 0.0 {
-                scene.stats.black_emitters += 1;
-                continue;
+        }
+        // ... then placed once per instance: each instance of an emissive mesh is its own
+        // light, in world space, naming its virtual triangle.
+        for inst in scene.instances.iter_mut() {
+            inst.first_emitter = scene.emitters.len() as u32;
+            for &(prim, e) in &mesh_emitters[inst.mesh as usize] {
+                let local = (prim - inst.first_triangle as usize) as u32;
+                let mut e = e;
+                e.prim = inst.first_virtual + local;
+                if !inst.identity {
+                    let m = inst.object_to_world;
+                    let (mut p, mut uv0, mut uv1) = ([e.p0, e.p1, e.p2], e.uv0, e.uv1);
+                    if inst.mirror {
+                        p.swap(1, 2);
+                        uv0.swap(1, 2);
+                        uv1.swap(1, 2);
+                    }
+                    let [p0, p1, p2] = p.map(|q| m.transform_point3(q));
+                    e.p0 = p0;
+                    e.p1 = p1;
+                    e.p2 = p2;
+                    e.uv0 = uv0;
+                    e.uv1 = uv1;
+                    e.n = triangle_normal(p0, p1, p2).unwrap_or(Vec3::Z);
+                    e.area = triangle_area(p0, p1, p2) as f32;
+                }
+                scene.emitters.push(e);
             }
-            scene.triangle_emitter[prim] = scene.emitters.len() as i32;
-            scene.emitters.push(e);
         }
         if !scene.emitters.is_empty() {
             let powers: Vec<f32> = scene.emitters.iter().map(Emitter::power).collect();
@@ -777,9 +905,11 @@ impl Loader<'_> {
                 reason: "the emitters' total power is not finite".into(),
             })?;
         }
+        let virtual_triangles = scene.virtual_triangle_count();
         let s = &mut scene.stats;
         s.triangles = scene.triangles.len();
         s.vertices = scene.positions.len();
+        s.virtual_triangles = virtual_triangles;
         if s.degenerate_dropped > 0 {
             tracing::warn!(
                 file = %file.display(),
@@ -792,6 +922,13 @@ impl Loader<'_> {
             "loaded {} triangles, {} vertices, {} materials, {} textures, {} emitters, {} punctual lights",
             s.triangles, s.vertices, scene.materials.len(), scene.textures.len(), scene.emitters.len(), scene.punctual_lights.len()
         );
+        if s.instanced_placements > 0 {
+            tracing::info!(
+                file = %file.display(),
+                "instancing: {} placements of {} meshes stored once show {} triangles",
+                s.instanced_placements, scene.meshes.len() - usize::from(scene.instances[0].identity), s.virtual_triangles
+            );
+        }
         Ok(self.scene)
     }
 }
@@ -905,6 +1042,95 @@ fn corner_tangents(
         return None;
     }
     Some(m.out)
+}
+
+/// Most mesh instances a scene may have (nodes with a mesh plus `EXT_mesh_gpu_instancing`
+/// placements): 2²⁴. Each costs about [`BYTES_PER_INSTANCE`] in the scene, the two-level
+/// BVH and Embree's instance geometry.
+pub const MAX_INSTANCES: u64 = 1 << 24;
+/// Most triangles a scene may show, every instance's counted: virtual triangle ids are
+/// `u32`, and `u32::MAX` means "no triangle".
+pub const MAX_VIRTUAL_TRIANGLES: u64 = u32::MAX as u64 - 1;
+/// Estimated resident bytes per stored triangle: its vertices' attributes and indices in the
+/// scene, and the BVH's or Embree's copy and nodes. Measured on a sphere with unshared
+/// vertices (three per triangle, the worst case): 133 bytes in the scene, 147 in the BVH,
+/// 145 in Embree (`examples/instancing_memory.rs` of the host).
+pub const BYTES_PER_STORED_TRIANGLE: u64 = 280;
+/// Estimated resident bytes per instance: the scene's [`MeshInstance`] (≈ 200), the
+/// two-level BVH's entry and node (≈ 140) and Embree's instance geometry (a few hundred).
+pub const BYTES_PER_INSTANCE: u64 = 512;
+
+/// Triangles primitive `prim` will have, from its accessors' counts (nothing decoded).
+fn primitive_triangles(prim: &gltf::Primitive) -> u64 {
+    let Some(pos) = prim.get(&Semantic::Positions) else {
+        return 0;
+    };
+    let n = prim.indices().map_or(pos.count(), |i| i.count()) as u64;
+    match prim.mode() {
+        Mode::Triangles => n / 3,
+        Mode::TriangleStrip | Mode::TriangleFan => n.saturating_sub(2),
+        _ => 0,
+    }
+}
+
+/// Refuses, before any geometry is decoded, a scene whose instance count or instanced
+/// (virtual) triangle count exceeds [`MAX_INSTANCES`] / [`MAX_VIRTUAL_TRIANGLES`], or whose
+/// estimated geometry memory (stored triangles × [`BYTES_PER_STORED_TRIANGLE`] + instances ×
+/// [`BYTES_PER_INSTANCE`]) exceeds `MemAvailable` (issue 12, "Limits").
+fn check_instancing_limits(
+    file: &Path,
+    doc: &gltf::Document,
+    placements: &[(usize, Vec<Mat4>)],
+    uses: &HashMap<usize, usize>,
+) -> Result<(), SceneError> {
+    let mesh_tris: HashMap<usize, u64> = uses
+        .keys()
+        .filter_map(|&m| {
+            let mesh = doc.meshes().nth(m)?;
+            Some((m, mesh.primitives().map(|p| primitive_triangles(&p)).sum()))
+        })
+        .collect();
+    let instances: u64 = placements.iter().map(|(_, t)| t.len() as u64).sum();
+    let virtual_tris: u64 = placements
+        .iter()
+        .map(|(m, t)| mesh_tris.get(m).copied().unwrap_or(0) * t.len() as u64)
+        .sum();
+    // Every mesh is stored once: flattened when placed once, in local space otherwise.
+    let stored: u64 = uses.keys().filter_map(|m| mesh_tris.get(m)).sum();
+    let err = |reason: String| SceneError::Limit {
+        file: file.to_path_buf(),
+        reason,
+    };
+    if instances > MAX_INSTANCES {
+        return Err(err(format!(
+            "{instances} mesh instances exceed the limit of {MAX_INSTANCES}"
+        )));
+    }
+    if virtual_tris > MAX_VIRTUAL_TRIANGLES {
+        return Err(err(format!(
+            "{instances} mesh instances show {virtual_tris} triangles, beyond the limit of {MAX_VIRTUAL_TRIANGLES} (32-bit triangle ids)"
+        )));
+    }
+    let need = stored * BYTES_PER_STORED_TRIANGLE + instances * BYTES_PER_INSTANCE;
+    if let Some(avail) = available_memory() {
+        if need > avail {
+            return Err(err(format!(
+                "{stored} stored triangles and {instances} mesh instances need about {} MiB ({need} bytes) but {} MiB is available",
+                need >> 20,
+                avail >> 20
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// `MemAvailable` of `/proc/meminfo` in bytes, where there is one (as the host's image-size
+/// check reads it).
+fn available_memory() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    kib.checked_mul(1024)
 }
 
 /// Largest coordinate magnitude the ray/triangle arithmetic takes without overflow: the

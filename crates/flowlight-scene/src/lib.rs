@@ -37,5 +37,5 @@ pub use config::{
 pub use error::{ConfigError, SceneError};
 pub use gltf_loader::load_gltf;
 pub use material::{DiffuseChoice, MaterialOverride};
-pub use scene::{CameraDesc, CameraProjection, LoadStats, Scene};
+pub use scene::{CameraDesc, CameraProjection, LoadStats, MeshInstance, MeshRange, Scene};
 pub use texture::{ImageData, Sampler, Texels, TextureData};

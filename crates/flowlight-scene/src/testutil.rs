@@ -215,3 +215,140 @@ pub fn temp_dir(tag: &str) -> PathBuf {
     std::fs::create_dir_all(&d).expect("creating a temporary directory");
     d
 }
+
+/// A glTF with one mesh — an octahedron of radius 1 around the origin (8 triangles, smooth
+/// NORMALs pointing out, TEXCOORD_0 from the position) with material `material` — placed
+/// by one node per matrix of `placements` (column-major, as glTF's `matrix`). With
+/// `flatten`, every node gets its own `meshes` entry (over the same accessors), so the
+/// loader stores a copy per node: the same scene without instancing, triangle for triangle
+/// in the same order.
+pub fn octahedra_gltf(placements: &[[f32; 16]], flatten: bool, material: &str) -> String {
+    let nodes: Vec<String> = placements
+        .iter()
+        .enumerate()
+        .map(|(i, m)| {
+            let m: Vec<String> = m.iter().map(|v| format!("{v:?}")).collect();
+            format!(
+                r#"{{"mesh": {}, "matrix": [{}]}}"#,
+                if flatten { i } else { 0 },
+                m.join(", ")
+            )
+        })
+        .collect();
+    octahedra_doc(
+        &nodes,
+        if flatten { placements.len() } else { 1 },
+        material,
+        &[],
+        "",
+    )
+}
+
+/// [`octahedra_gltf`]'s octahedron placed by one node with `EXT_mesh_gpu_instancing`:
+/// instance i at `translations[i]`, scaled by `scales[i]`.
+pub fn octahedra_ext_gltf(
+    translations: &[[f32; 3]],
+    scales: &[[f32; 3]],
+    material: &str,
+) -> String {
+    assert_eq!(translations.len(), scales.len());
+    let node = r#"{"mesh": 0, "extensions": {"EXT_mesh_gpu_instancing": {"attributes": {"TRANSLATION": 4, "SCALE": 5}}}}"#;
+    octahedra_doc(
+        &[node.to_string()],
+        1,
+        material,
+        &[translations, scales],
+        r#", "extensionsUsed": ["EXT_mesh_gpu_instancing"], "extensionsRequired": ["EXT_mesh_gpu_instancing"]"#,
+    )
+}
+
+fn octahedra_doc(
+    nodes: &[String],
+    meshes: usize,
+    material: &str,
+    vec3_accessors: &[&[[f32; 3]]],
+    top: &str,
+) -> String {
+    let pos: [[f32; 3]; 6] = [
+        [1.0, 0.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+    ];
+    // Counter-clockwise seen from outside.
+    let idx: [u32; 24] = [
+        0, 2, 4, 2, 1, 4, 1, 3, 4, 3, 0, 4, 2, 0, 5, 1, 2, 5, 3, 1, 5, 0, 3, 5,
+    ];
+    let mut bytes: Vec<u8> = idx.iter().flat_map(|i| i.to_le_bytes()).collect();
+    let mut views = vec![format!(
+        r#"{{"buffer": 0, "byteOffset": 0, "byteLength": {}}}"#,
+        bytes.len()
+    )];
+    let mut push = |data: Vec<f32>, bytes: &mut Vec<u8>| {
+        let off = bytes.len();
+        bytes.extend(data.iter().flat_map(|v| v.to_le_bytes()));
+        views.push(format!(
+            r#"{{"buffer": 0, "byteOffset": {off}, "byteLength": {}}}"#,
+            data.len() * 4
+        ));
+    };
+    push(pos.iter().flatten().copied().collect(), &mut bytes);
+    push(pos.iter().flatten().copied().collect(), &mut bytes);
+    push(
+        pos.iter()
+            .flat_map(|p| [0.5 + 0.5 * p[0], 0.5 - 0.5 * p[1]])
+            .collect(),
+        &mut bytes,
+    );
+    let mut accessors = vec![
+        r#"{"bufferView": 0, "componentType": 5125, "count": 24, "type": "SCALAR"}"#.to_string(),
+        r#"{"bufferView": 1, "componentType": 5126, "count": 6, "type": "VEC3", "min": [-1, -1, -1], "max": [1, 1, 1]}"#.to_string(),
+        r#"{"bufferView": 2, "componentType": 5126, "count": 6, "type": "VEC3"}"#.to_string(),
+        r#"{"bufferView": 3, "componentType": 5126, "count": 6, "type": "VEC2"}"#.to_string(),
+    ];
+    for a in vec3_accessors {
+        push(a.iter().flatten().copied().collect(), &mut bytes);
+        accessors.push(format!(
+            r#"{{"bufferView": {}, "componentType": 5126, "count": {}, "type": "VEC3"}}"#,
+            accessors.len(),
+            a.len()
+        ));
+    }
+    let mesh = r#"{"primitives": [{"attributes": {"POSITION": 1, "NORMAL": 2, "TEXCOORD_0": 3}, "indices": 0, "material": 0}]}"#;
+    let roots: Vec<String> = (0..nodes.len()).map(|i| i.to_string()).collect();
+    format!(
+        r#"{{"asset": {{"version": "2.0"}}, "scene": 0, "scenes": [{{"nodes": [{roots}]}}],
+  "nodes": [{nodes}],
+  "meshes": [{meshes}],
+  "materials": [{material}],
+  "accessors": [{accessors}],
+  "bufferViews": [{views}],
+  "buffers": [{{"uri": "data:application/octet-stream;base64,{b64}", "byteLength": {len}}}]{top}}}"#,
+        roots = roots.join(", "),
+        nodes = nodes.join(", "),
+        meshes = vec![mesh; meshes].join(", "),
+        accessors = accessors.join(", "),
+        views = views.join(", "),
+        b64 = base64(&bytes),
+        len = bytes.len(),
+    )
+}
+
+/// Placements for [`octahedra_gltf`]: a row of octahedra along x, rotated, scaled
+/// non-uniformly, and every third one mirrored (negative x scale).
+pub fn octahedra_placements(n: usize) -> Vec<[f32; 16]> {
+    (0..n)
+        .map(|i| {
+            let f = i as f32;
+            let mirror = if i % 3 == 2 { -1.0 } else { 1.0 };
+            let m = glam::Mat4::from_scale_rotation_translation(
+                glam::Vec3::new(mirror * (0.6 + 0.1 * f), 0.5 + 0.05 * f, 0.8),
+                glam::Quat::from_euler(glam::EulerRot::XYZ, 0.3 * f, 0.7 + 0.2 * f, -0.4 * f),
+                glam::Vec3::new(3.0 * f, 0.25 * f, -0.5 * f),
+            );
+            m.to_cols_array()
+        })
+        .collect()
+}

@@ -667,9 +667,14 @@ fn gpu_instancing_renders_every_instance_where_the_spec_puts_it() {
     let (json, want) = instanced_json();
     let s = load(&write("instancing", &json)).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(s.stats.mesh_instances, 27);
-    assert_eq!(s.triangles.len(), 27);
+    // One copy of the mesh's triangle, 27 placements of it.
+    assert_eq!(s.triangles.len(), 1);
+    assert_eq!(s.positions.len(), 3);
+    assert_eq!(s.instances.len(), 27);
+    assert_eq!(s.virtual_triangle_count(), 27);
+    assert_eq!(s.stats.virtual_triangles, 27);
     for (i, w) in want.iter().enumerate() {
-        let got = s.triangles[i].map(|v| s.positions[v as usize]);
+        let got = s.world_triangle(i as u32);
         for c in 0..3 {
             // Rotations are 16-bit normalized: error ≤ 1/32767 per component, times the
             // scaled vertex (≤ 3).
