@@ -55,10 +55,9 @@ use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
 use flowlight_pathtrace::untangled;
 use flowlight_sdk::abi::ParamSpec;
-use flowlight_sdk::integrator::STAT_SLOTS;
 use flowlight_sdk::{
     export_integrator, AccumulationStyle, Film, Integrator, IntegratorInfo, MutationSet, Params,
-    Scene, Tracer, WorkUnit,
+    Scene, Stats, StatsBuilder, Tracer, WorkUnit, MAX_MUTATIONS,
 };
 use glam::Vec2;
 use settings::{ErptSettings, QuantumScope};
@@ -69,8 +68,8 @@ pub struct Erpt {
     settings: ErptSettings,
     /// e_d from the whole-image pre-pass (`quantum = "image"`).
     image_quantum: Option<f64>,
-    /// The counters' specs, which the host reads through `IntegratorInfo::stats`.
-    _stats: stats::StatTable,
+    /// Handles of the counters declared in `create`.
+    counters: stats::Counters,
 }
 
 /// Random streams of a seed: its path, and its chains.
@@ -140,6 +139,7 @@ impl Integrator for Erpt {
         params: &Params,
         mutations: MutationSet<'static>,
         scene: Scene<'static>,
+        stats: &mut StatsBuilder,
     ) -> Result<(Self, IntegratorInfo), String> {
         let settings = ErptSettings::from_params(params)?;
         let lights = &scene.lights;
@@ -149,9 +149,10 @@ impl Integrator for Erpt {
         if mutations.is_empty() {
             return Err("erpt needs at least one [[integrator.mutations]] entry".into());
         }
-        if mutations.len() > 8 {
+        // The host refuses longer lists; kept for hosts that do not.
+        if mutations.len() > MAX_MUTATIONS {
             return Err(format!(
-                "erpt takes at most 8 mutation strategies, got {}",
+                "erpt takes at most {MAX_MUTATIONS} mutation strategies, got {}",
                 mutations.len()
             ));
         }
@@ -166,9 +167,7 @@ impl Integrator for Erpt {
                 }
             })
             .collect();
-        let stat_table = stats::StatTable::new(&names);
-        let specs = stat_table.specs();
-        debug_assert!(stats::slot_count(names.len()) <= STAT_SLOTS && specs.len() <= STAT_SLOTS);
+        let counters = stats::Counters::declare(stats, &names);
         let layers = params.boolean("layers", false)?;
         let info = IntegratorInfo {
             layer_count: if layers {
@@ -181,8 +180,6 @@ impl Integrator for Erpt {
             // of their deposits in the unit's buffer (the host keeps the rest).
             accumulation: AccumulationStyle::FlangedTile,
             flange: 2 * settings.film_window,
-            stats: specs.as_ptr(),
-            stat_count: specs.len(),
             ..IntegratorInfo::simple()
         };
         Ok((
@@ -191,7 +188,7 @@ impl Integrator for Erpt {
                 mutations,
                 settings,
                 image_quantum: None,
-                _stats: stat_table,
+                counters,
             },
             info,
         ))
@@ -214,7 +211,7 @@ impl Integrator for Erpt {
         unit: &WorkUnit,
         tracer: &Tracer,
         film: &mut Film,
-        stats: &mut [f64],
+        stats: &mut Stats,
     ) -> Result<(), String> {
         let mut path = Box::new(Path::empty());
         let samples = unit.sample_begin..unit.sample_begin + unit.sample_count;
@@ -226,11 +223,14 @@ impl Integrator for Erpt {
             // random streams rather than stored.
             None => self.quantum(tracer, unit.seed, pixels(), samples.clone(), &mut path),
         };
-        stats[stats::QUANTUM_SUM] += quantum;
-        stats[stats::UNITS] += 1.0;
-        stats[stats::IMAGE_PIXELS] =
-            (self.scene.camera.width as f64) * (self.scene.camera.height as f64);
-        let mut flow = Flow::new(&self.scene, tracer, &self.settings, &self.mutations);
+        let c = &self.counters;
+        stats.add(c.quantum_sum, quantum);
+        stats.add(c.units, 1.0);
+        stats.add(
+            c.image_pixels,
+            (self.scene.camera.width as f64) * (self.scene.camera.height as f64),
+        );
+        let mut flow = Flow::new(&self.scene, tracer, &self.settings, &self.mutations, c);
         for (x, y) in pixels() {
             for s in samples.clone() {
                 let (mut rng, mut chain_rng) = seed_rngs(unit.seed, x, y, s);

@@ -31,7 +31,7 @@ use flowlight_pathtrace::{entangled, untangled, PathSettings, SampleContribution
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::{
     export_integrator, param, Film, Integrator, IntegratorInfo, MutationSet, ParamKind, Params,
-    Scene, Tracer, WorkUnit,
+    Scene, Stats, StatsBuilder, Tracer, WorkUnit,
 };
 use glam::Vec2;
 
@@ -71,6 +71,7 @@ impl Integrator for Mcpt {
         params: &Params,
         _mutations: MutationSet<'static>,
         scene: Scene<'static>,
+        _stats: &mut StatsBuilder,
     ) -> Result<(Self, IntegratorInfo), String> {
         let settings = PathSettings::from_params(params)?;
         let layers = params.boolean("layers", false)?;
@@ -86,7 +87,7 @@ impl Integrator for Mcpt {
         unit: &WorkUnit,
         tracer: &Tracer,
         film: &mut Film,
-        _stats: &mut [f64],
+        _stats: &mut Stats,
     ) -> Result<(), String> {
         let mut contributions = SampleContributions::default();
         for y in unit.y0..unit.y1 {

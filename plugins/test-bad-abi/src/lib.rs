@@ -3,7 +3,8 @@
 
 use flowlight_sdk::abi::{IntegratorTable, ParamSpec, PluginDeclaration, ABI_VERSION};
 use flowlight_sdk::{
-    Film, Integrator, IntegratorInfo, MutationSet, Params, PluginKind, Scene, Tracer, WorkUnit,
+    Film, Integrator, IntegratorInfo, MutationSet, Params, PluginKind, Scene, Stats, StatsBuilder,
+    Tracer, WorkUnit,
 };
 
 pub struct NeverCalled;
@@ -17,6 +18,7 @@ impl Integrator for NeverCalled {
         _: &Params,
         _mutations: MutationSet<'static>,
         _: Scene<'static>,
+        _stats: &mut StatsBuilder,
     ) -> Result<(Self, IntegratorInfo), String> {
         let info = IntegratorInfo::simple();
         Ok((NeverCalled, info))
@@ -27,7 +29,7 @@ impl Integrator for NeverCalled {
         _: &WorkUnit,
         _: &Tracer,
         _: &mut Film,
-        _stats: &mut [f64],
+        _stats: &mut Stats,
     ) -> Result<(), String> {
         panic!("a plugin with a mismatched ABI must never be called")
     }

@@ -6,7 +6,7 @@ use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::core::Rgb;
 use flowlight_sdk::{
     export_integrator, param, Film, Integrator, IntegratorInfo, MutationSet, ParamKind, Params,
-    Scene, Tracer, WorkUnit,
+    Scene, Stats, StatsBuilder, Tracer, WorkUnit,
 };
 
 pub struct Faulty;
@@ -25,6 +25,7 @@ impl Integrator for Faulty {
         params: &Params,
         _mutations: MutationSet<'static>,
         _: Scene<'static>,
+        _stats: &mut StatsBuilder,
     ) -> Result<(Self, IntegratorInfo), String> {
         if params.boolean("fail_create", false)? {
             return Err("asked to fail in create".into());
@@ -38,7 +39,7 @@ impl Integrator for Faulty {
         unit: &WorkUnit,
         _: &Tracer,
         film: &mut Film,
-        _stats: &mut [f64],
+        _stats: &mut Stats,
     ) -> Result<(), String> {
         if unit.x0 == 0 && unit.y0 == 0 {
             panic!("deliberate panic in render");
