@@ -45,6 +45,9 @@
 //! acceptance, rejection, domain hit and miss, per strategy and in total), chains per seed and
 //! deposits per pixel are reported to the host, which prints them and writes them as JSON.
 
+// A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
+#![forbid(unsafe_code)]
+
 mod flow;
 mod settings;
 mod stats;

@@ -25,6 +25,9 @@
 //! finite and non-negative is handed to the host as one invalid deposit, which the host counts
 //! and discards.
 
+// A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
+#![forbid(unsafe_code)]
+
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
 use flowlight_pathtrace::{entangled, untangled, PathSettings, SampleContributions, Variant};

@@ -2,6 +2,9 @@
 //! return an error; otherwise `render` panics on the unit that contains pixel (0, 0). The
 //! host must report both as errors naming the plugin, and keep the units finished before.
 
+// A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
+#![forbid(unsafe_code)]
+
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::core::Rgb;
 use flowlight_sdk::{
