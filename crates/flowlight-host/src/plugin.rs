@@ -423,13 +423,17 @@ impl MutationInstance {
         })?;
         let mut instance = std::ptr::null_mut();
         let mut err = ErrorBuf::default();
-        let status = (table.create)(
-            list.as_slice().as_ptr(),
-            list.as_slice().len(),
-            view,
-            &mut instance,
-            &mut err,
-        );
+        // SAFETY: the table is a checked mutation plugin's; the parameter list and `view` are
+        // valid for the call, and the caller keeps `view`'s data alive for the instance.
+        let status = unsafe {
+            (table.create)(
+                list.as_slice().as_ptr(),
+                list.as_slice().len(),
+                view,
+                &mut instance,
+                &mut err,
+            )
+        };
         if status != Status::Ok {
             return Err(plugin.call_error(status, &err));
         }
@@ -480,7 +484,7 @@ pub fn normalised_weights(list: &str, entries: &[(&str, f64)]) -> Result<Vec<f64
     if entries.is_empty() {
         return Ok(Vec::new());
     }
-    if !(total > 0.0) {
+    if total <= 0.0 {
         return Err(format!(
             "integrator.{list}: the weights sum to 0; give at least one entry a positive `weight`"
         ));
@@ -568,17 +572,22 @@ impl IntegratorInstance {
         let mut info = IntegratorInfo::simple();
         let mut stats = StatList::EMPTY;
         let mut err = ErrorBuf::default();
-        let status = (table.create)(
-            list.as_slice().as_ptr(),
-            list.as_slice().len(),
-            refs.as_ptr(),
-            refs.len(),
-            &*view,
-            &mut instance,
-            &mut info,
-            &mut stats,
-            &mut err,
-        );
+        // SAFETY: the table is a checked integrator plugin's; every pointer is valid for the
+        // call, and `refs`, the mutation instances and the boxed view live in the returned
+        // instance (the caller keeps the view's data alive for it).
+        let status = unsafe {
+            (table.create)(
+                list.as_slice().as_ptr(),
+                list.as_slice().len(),
+                refs.as_ptr(),
+                refs.len(),
+                &*view,
+                &mut instance,
+                &mut info,
+                &mut stats,
+                &mut err,
+            )
+        };
         if status != Status::Ok {
             return Err(plugin.call_error(status, &err));
         }

@@ -55,11 +55,15 @@ impl StrRef {
     /// # Safety
     /// The pointer must be valid for `len` bytes of UTF-8 for the chosen lifetime.
     pub unsafe fn as_str<'a>(&self) -> &'a str {
-        if self.ptr.is_null() || self.len == 0 {
-            return "";
+        // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+        // ABI rules in `abi.rs` for the C entry points).
+        unsafe {
+            if self.ptr.is_null() || self.len == 0 {
+                return "";
+            }
+            let bytes = std::slice::from_raw_parts(self.ptr, self.len);
+            std::str::from_utf8(bytes).unwrap_or("<invalid utf-8>")
         }
-        let bytes = std::slice::from_raw_parts(self.ptr, self.len);
-        std::str::from_utf8(bytes).unwrap_or("<invalid utf-8>")
     }
 }
 
@@ -466,4 +470,40 @@ pub const fn layout_hash() -> u64 {
         i += 1;
     }
     h
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn str_ref_round_trips_and_tolerates_empty_null_and_bad_utf8() {
+        let s = String::from("drill#2 ✓");
+        let r = StrRef::new(&s);
+        assert_eq!(r.len, s.len());
+        // SAFETY: `s` outlives the read.
+        assert_eq!(unsafe { r.as_str() }, "drill#2 ✓");
+        // SAFETY: null and empty references read as "".
+        assert_eq!(unsafe { StrRef::EMPTY.as_str() }, "");
+        assert_eq!(unsafe { StrRef::new("").as_str() }, "");
+        let bad = [0x66, 0xff, 0x6f];
+        let r = StrRef {
+            ptr: bad.as_ptr(),
+            len: bad.len(),
+        };
+        // SAFETY: `bad` outlives the read; invalid UTF-8 is reported, not trusted.
+        assert_eq!(unsafe { r.as_str() }, "<invalid utf-8>");
+    }
+
+    #[test]
+    fn error_buf_truncates_at_a_char_boundary() {
+        let mut e = ErrorBuf::default();
+        e.set("short");
+        assert_eq!(e.message(), "short");
+        // 1023 ASCII bytes then a 3-byte character: it does not fit whole and is dropped.
+        let long = format!("{}✓tail", "a".repeat(1023));
+        e.set(&long);
+        assert_eq!(e.len, 1023);
+        assert_eq!(e.message(), "a".repeat(1023));
+    }
 }

@@ -70,39 +70,47 @@ unsafe extern "C" fn create<T: Integrator>(
     stats: *mut StatList,
     err: *mut ErrorBuf,
 ) -> Status {
-    guard(err, || {
-        let params = Params::from_raw(params, param_count);
-        let scene = Scene::from_view(&*scene);
-        let mutations = MutationSet::from_raw(mutations, mutation_count);
-        let mut builder = StatsBuilder::new();
-        let (integrator, inf) = T::create(&params, mutations, scene, &mut builder)?;
-        let table = builder.finish()?;
-        let boxed = Box::new(Instance {
-            integrator,
-            stats: table,
-        });
-        // The specs live in the box, which does not move until `destroy`.
-        let specs = boxed.stats.specs();
-        *stats = StatList {
-            specs: if specs.is_empty() {
-                std::ptr::null()
-            } else {
-                specs.as_ptr()
-            },
-            count: specs.len(),
-        };
-        *instance = Box::into_raw(boxed) as *mut c_void;
-        *info = inf;
-        Ok(())
-    })
+    // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+    // ABI rules in `abi.rs` for the C entry points).
+    unsafe {
+        guard(err, || {
+            let params = Params::from_raw(params, param_count);
+            let scene = Scene::from_view(&*scene);
+            let mutations = MutationSet::from_raw(mutations, mutation_count);
+            let mut builder = StatsBuilder::new();
+            let (integrator, inf) = T::create(&params, mutations, scene, &mut builder)?;
+            let table = builder.finish()?;
+            let boxed = Box::new(Instance {
+                integrator,
+                stats: table,
+            });
+            // The specs live in the box, which does not move until `destroy`.
+            let specs = boxed.stats.specs();
+            *stats = StatList {
+                specs: if specs.is_empty() {
+                    std::ptr::null()
+                } else {
+                    specs.as_ptr()
+                },
+                count: specs.len(),
+            };
+            *instance = Box::into_raw(boxed) as *mut c_void;
+            *info = inf;
+            Ok(())
+        })
+    }
 }
 
 unsafe extern "C" fn destroy<T: Integrator>(instance: *mut c_void) {
-    if !instance.is_null() {
-        // Dropping must not unwind into the host.
-        let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            drop(Box::from_raw(instance as *mut Instance<T>))
-        }));
+    // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+    // ABI rules in `abi.rs` for the C entry points).
+    unsafe {
+        if !instance.is_null() {
+            // Dropping must not unwind into the host.
+            let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                drop(Box::from_raw(instance as *mut Instance<T>))
+            }));
+        }
     }
 }
 
@@ -111,10 +119,14 @@ unsafe extern "C" fn prepare<T: Integrator>(
     tracer: *const TracerTable,
     err: *mut ErrorBuf,
 ) -> Status {
-    guard(err, || {
-        let inst = &mut *(instance as *mut Instance<T>);
-        inst.integrator.prepare(&Tracer::new(&*tracer))
-    })
+    // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+    // ABI rules in `abi.rs` for the C entry points).
+    unsafe {
+        guard(err, || {
+            let inst = &mut *(instance as *mut Instance<T>);
+            inst.integrator.prepare(&Tracer::new(&*tracer))
+        })
+    }
 }
 
 unsafe extern "C" fn render<T: Integrator>(
@@ -126,24 +138,28 @@ unsafe extern "C" fn render<T: Integrator>(
     stat_count: usize,
     err: *mut ErrorBuf,
 ) -> Status {
-    guard(err, || {
-        let inst = &*(instance as *const Instance<T>);
-        let tracer = Tracer::new(&*tracer);
-        let mut film = Film::new(&*film);
-        let declared = inst.stats.specs().len();
-        if stat_count < declared || (declared > 0 && stats.is_null()) {
-            return Err(format!(
+    // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+    // ABI rules in `abi.rs` for the C entry points).
+    unsafe {
+        guard(err, || {
+            let inst = &*(instance as *const Instance<T>);
+            let tracer = Tracer::new(&*tracer);
+            let mut film = Film::new(&*film);
+            let declared = inst.stats.specs().len();
+            if stat_count < declared || (declared > 0 && stats.is_null()) {
+                return Err(format!(
                 "the host passed {stat_count} statistics slots for {declared} declared counters"
             ));
-        }
-        let slots = if stats.is_null() || stat_count == 0 {
-            &mut [][..]
-        } else {
-            std::slice::from_raw_parts_mut(stats, declared)
-        };
-        inst.integrator
-            .render(&*unit, &tracer, &mut film, &mut Stats::new(slots))
-    })
+            }
+            let slots = if stats.is_null() || stat_count == 0 {
+                &mut [][..]
+            } else {
+                std::slice::from_raw_parts_mut(stats, declared)
+            };
+            inst.integrator
+                .render(&*unit, &tracer, &mut film, &mut Stats::new(slots))
+        })
+    }
 }
 
 /// The function table for `T`; used by [`crate::export_integrator!`].

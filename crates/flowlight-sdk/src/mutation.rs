@@ -45,19 +45,27 @@ unsafe extern "C" fn create<T: Mutation>(
     instance: *mut *mut c_void,
     err: *mut ErrorBuf,
 ) -> Status {
-    guard(err, || {
-        let params = Params::from_raw(params, param_count);
-        let inst = T::create(&params, Scene::from_view(&*scene))?;
-        *instance = Box::into_raw(Box::new(inst)) as *mut c_void;
-        Ok(())
-    })
+    // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+    // ABI rules in `abi.rs` for the C entry points).
+    unsafe {
+        guard(err, || {
+            let params = Params::from_raw(params, param_count);
+            let inst = T::create(&params, Scene::from_view(&*scene))?;
+            *instance = Box::into_raw(Box::new(inst)) as *mut c_void;
+            Ok(())
+        })
+    }
 }
 
 unsafe extern "C" fn destroy<T: Mutation>(instance: *mut c_void) {
-    if !instance.is_null() {
-        let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            drop(Box::from_raw(instance as *mut T))
-        }));
+    // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+    // ABI rules in `abi.rs` for the C entry points).
+    unsafe {
+        if !instance.is_null() {
+            let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                drop(Box::from_raw(instance as *mut T))
+            }));
+        }
     }
 }
 
@@ -70,11 +78,15 @@ unsafe extern "C" fn propose<T: Mutation>(
     out: *mut Proposal,
     err: *mut ErrorBuf,
 ) -> Status {
-    guard(err, || {
-        let inst = &*(instance as *const T);
-        *out = inst.propose(&Tracer::new(&*tracer), &mut *rng, &*current, &mut *proposal)?;
-        Ok(())
-    })
+    // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+    // ABI rules in `abi.rs` for the C entry points).
+    unsafe {
+        guard(err, || {
+            let inst = &*(instance as *const T);
+            *out = inst.propose(&Tracer::new(&*tracer), &mut *rng, &*current, &mut *proposal)?;
+            Ok(())
+        })
+    }
 }
 
 unsafe extern "C" fn density<T: Mutation>(
@@ -84,11 +96,15 @@ unsafe extern "C" fn density<T: Mutation>(
     out: *mut f64,
     err: *mut ErrorBuf,
 ) -> Status {
-    guard(err, || {
-        let inst = &*(instance as *const T);
-        *out = inst.density(&*from, &*to);
-        Ok(())
-    })
+    // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+    // ABI rules in `abi.rs` for the C entry points).
+    unsafe {
+        guard(err, || {
+            let inst = &*(instance as *const T);
+            *out = inst.density(&*from, &*to);
+            Ok(())
+        })
+    }
 }
 
 /// The function table for `T`; used by [`crate::export_mutation!`].
@@ -121,12 +137,16 @@ impl<'a> MutationSet<'a> {
     /// # Safety
     /// `refs` must point to `count` valid entries whose instances outlive `'a`.
     pub unsafe fn from_raw(refs: *const MutationRef, count: usize) -> Self {
-        let refs = if refs.is_null() || count == 0 {
-            &[][..]
-        } else {
-            std::slice::from_raw_parts(refs, count)
-        };
-        MutationSet { refs }
+        // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+        // ABI rules in `abi.rs` for the C entry points).
+        unsafe {
+            let refs = if refs.is_null() || count == 0 {
+                &[][..]
+            } else {
+                std::slice::from_raw_parts(refs, count)
+            };
+            MutationSet { refs }
+        }
     }
 
     /// No strategies.

@@ -335,7 +335,7 @@ mod tests {
         let mut b = StatsBuilder::new();
         let hits = b.sum("hits");
         let tries = b.sum("tries");
-        let longest = b.max("longest");
+        b.max("longest");
         b.ratio("hit_rate", hits, tries);
         let table = b.finish().unwrap();
         let specs = table.specs();
