@@ -22,7 +22,7 @@
 //! Per work unit (a tile × a range of samples per pixel): the deposition quantum
 //! e_d = lum(Σ X_f) / (count · M) is estimated from the unit's seeds (or once for the image,
 //! `quantum = "image"`), with M the expected number of mutations per initial sample (§5.2);
-//! then every seed runs the corrected Equal Deposition Flow ([`flow`]). Chains random-walk on
+//! then every seed runs the corrected Equal Deposition Flow (`flow.rs`). Chains random-walk on
 //! the film in a `film_window`² window around their current position, so their deposits land
 //! around the seed's tile: units use flanged tiles (§5.9).
 //!
