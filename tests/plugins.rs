@@ -275,6 +275,41 @@ fn build_fixture(
     ))
 }
 
+/// A copy of this repository's SDK crate at `dest`, with `version` in its manifest and, if
+/// given, one text replacement in `abi.rs`; returns its folder.
+fn copy_sdk(
+    dest: &std::path::Path,
+    version: &str,
+    patch: Option<(&str, &str)>,
+) -> std::path::PathBuf {
+    let repo = common::repo();
+    let real = repo.join("crates/flowlight-sdk");
+    std::fs::create_dir_all(dest.join("src")).unwrap();
+    std::fs::copy(real.join("build.rs"), dest.join("build.rs")).unwrap();
+    for f in std::fs::read_dir(real.join("src")).unwrap() {
+        let f = f.unwrap().path();
+        let mut text = std::fs::read_to_string(&f).unwrap();
+        if let (Some((from, to)), Some("abi.rs")) = (patch, f.file_name().and_then(|n| n.to_str()))
+        {
+            assert!(text.contains(from), "abi.rs no longer contains {from:?}");
+            text = text.replace(from, to);
+        }
+        let out = dest.join("src").join(f.file_name().unwrap());
+        // Unchanged files keep their timestamps, so reruns do not rebuild the copy.
+        if std::fs::read_to_string(&out).ok().as_deref() != Some(text.as_str()) {
+            std::fs::write(out, text).unwrap();
+        }
+    }
+    let manifest = format!(
+        "[package]\nname = \"flowlight-sdk\"\nversion = \"{version}\"\nedition = \"2021\"\nbuild = \"build.rs\"\n\n[dependencies]\nflowlight-core = {{ path = {:?} }}\nglam = \"0.34\"\n",
+        repo.join("crates/flowlight-core").display().to_string()
+    );
+    if std::fs::read_to_string(dest.join("Cargo.toml")).ok() != Some(manifest.clone()) {
+        std::fs::write(dest.join("Cargo.toml"), manifest).unwrap();
+    }
+    dest.to_path_buf()
+}
+
 /// A plugin built against another SDK version, and one built by another rustc, are refused
 /// with the documented message (docs/architecture.md, "Versions"):
 /// `plugin PATH was refused: WHAT mismatch (plugin has X, host has Y); rebuild the plugin
@@ -285,6 +320,8 @@ fn build_fixture(
 /// - *another SDK*: against a copy of `crates/flowlight-sdk` whose manifest says version
 ///   `9.9.9-fixture`, otherwise the same sources (same ABI version and layout hash, so the
 ///   SDK version is the only difference the host can see);
+/// - *another type layout*: against a copy of this SDK version with one crossing type
+///   (`HitRecord`) enlarged, so that only the layout hash differs;
 /// - a control, built against this SDK by this rustc, loads;
 /// - *another rustc*: against this SDK, with `RUSTC` set to a script that answers
 ///   `rustc --version` (what the SDK's build script records) as `rustc 1.95.0-fixture
@@ -314,21 +351,7 @@ fn plugins_from_another_sdk_or_rustc_are_refused() {
 
     // Another SDK version: a copy of the SDK crate with another version in its manifest.
     let ws = root.join("other-sdk");
-    let sdk = ws.join("sdk");
-    std::fs::create_dir_all(sdk.join("src")).unwrap();
-    std::fs::copy(real_sdk.join("build.rs"), sdk.join("build.rs")).unwrap();
-    for f in std::fs::read_dir(real_sdk.join("src")).unwrap() {
-        let f = f.unwrap().path();
-        std::fs::copy(&f, sdk.join("src").join(f.file_name().unwrap())).unwrap();
-    }
-    std::fs::write(
-        sdk.join("Cargo.toml"),
-        format!(
-            "[package]\nname = \"flowlight-sdk\"\nversion = \"9.9.9-fixture\"\nedition = \"2021\"\nbuild = \"build.rs\"\n\n[dependencies]\nflowlight-core = {{ path = {:?} }}\nglam = \"0.34\"\n",
-            repo.join("crates/flowlight-core").display().to_string()
-        ),
-    )
-    .unwrap();
+    let sdk = copy_sdk(&ws.join("sdk"), "9.9.9-fixture", None);
     let lib = build_fixture(&ws, "flowlight_fixture_other_sdk", &sdk, None);
     let err = PluginLibrary::load(&lib)
         .err()
@@ -339,6 +362,30 @@ fn plugins_from_another_sdk_or_rustc_are_refused() {
             "plugin {} was refused: SDK version mismatch (plugin has 9.9.9-fixture, host has {SDK_VERSION}); rebuild the plugin against this host's SDK",
             lib.display()
         )
+    );
+
+    // Another type layout: a copy of this SDK version whose hit record's flag is a u64 (one
+    // crossing type changed without an ABI version bump).
+    let ws = root.join("other-layout");
+    let sdk = copy_sdk(
+        &ws.join("sdk"),
+        SDK_VERSION,
+        Some(("pub hit: u32,", "pub hit: u64,")),
+    );
+    let lib = build_fixture(&ws, "flowlight_fixture_other_layout", &sdk, None);
+    let err = PluginLibrary::load(&lib)
+        .err()
+        .expect("a plugin with another type layout was accepted");
+    let msg = err.to_string();
+    assert!(
+        msg.starts_with(&format!(
+            "plugin {} was refused: type layout mismatch (plugin has ",
+            lib.display()
+        )) && msg.ends_with(&format!(
+            ", host has {:016x}); rebuild the plugin against this host's SDK",
+            flowlight_sdk::abi::layout_hash()
+        )),
+        "{msg}"
     );
 
     // Another rustc: the same SDK, compiled by a "different" compiler.
