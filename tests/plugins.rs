@@ -536,3 +536,35 @@ fn mutations_for_an_integrator_without_a_list_are_an_unknown_parameter() {
         "{err}"
     );
 }
+
+/// The host reads a mutation list under the name of the parameter the integrator declares
+/// as `ParamKind::MutationList` (`strategies` for the test-panic fixture), not a fixed key.
+#[test]
+fn the_mutation_list_is_read_under_the_declared_name() {
+    let mut cfg =
+        flowlight_scene::config::load_config(&common::scene_config("furnace/furnace.toml"))
+            .unwrap();
+    cfg.integrator_plugin = "test-panic".into();
+    cfg.integrator_params = common::toml_params(&[(
+        "strategies",
+        weighted(&[("drill", 1.into()), ("blow", 1.into())]),
+    )]);
+    let s = Session::from_config(cfg.clone(), &Overrides::default()).unwrap();
+    let names: Vec<&str> = s
+        .instance
+        .mutations()
+        .iter()
+        .map(|m| m.plugin().name.as_str())
+        .collect();
+    assert_eq!(names, ["drill", "blow"]);
+    assert_eq!(s.instance.mutation_set().weight(1), 0.5);
+    // `mutations` is not a parameter of this integrator.
+    cfg.integrator_params = common::toml_params(&[("mutations", weighted(&[("drill", 1.into())]))]);
+    let err = Session::from_config(cfg, &Overrides::default())
+        .err()
+        .expect("a list under an undeclared name was read");
+    assert!(
+        err.contains("unknown parameter 'mutations' for plugin 'test-panic'"),
+        "{err}"
+    );
+}

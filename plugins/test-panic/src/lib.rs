@@ -1,6 +1,7 @@
 //! Test fixture: an integrator that fails on purpose. `fail_create = true` makes `create`
 //! return an error; otherwise `render` panics on the unit that contains pixel (0, 0). The
 //! host must report both as errors naming the plugin, and keep the units finished before.
+//! It also declares a mutation list named `strategies`, which it ignores.
 
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]
@@ -17,12 +18,17 @@ pub struct Faulty;
 impl Integrator for Faulty {
     const NAME: &'static str = "test-panic";
     const DESCRIPTION: &'static str = "test fixture that fails on purpose";
-    const PARAMS: &'static [ParamSpec] = &[param(
-        "fail_create",
-        ParamKind::Bool,
-        "false",
-        "fail in create",
-    )];
+    const PARAMS: &'static [ParamSpec] = &[
+        param("fail_create", ParamKind::Bool, "false", "fail in create"),
+        // A mutation list under another name than ERPT's `mutations`: the host must read the
+        // list under the name the integrator declares.
+        param(
+            "strategies",
+            ParamKind::MutationList,
+            "(none)",
+            "[[integrator.strategies]]: mutation plugins (accepted and ignored)",
+        ),
+    ];
 
     fn create(
         params: &Params,
