@@ -89,7 +89,7 @@ enum Command {
         /// Total time budget in seconds.
         #[arg(long)]
         time: Option<f64>,
-        /// Output EXR (default: <config stem>.ref.exr beside the config).
+        /// Output EXR (default: `<config stem>.ref.exr` beside the config).
         #[arg(long)]
         out: Option<PathBuf>,
         /// Seed of the first half; the second uses seed + 1.

@@ -9,6 +9,9 @@
 //! Types come from `embree4-sys` (bindgen over the Embree **4.2** headers it ships). Where
 //! those differ from the 4.4 library, this crate has its own `#[repr(C)]` definitions: see
 //! [`abi`] and docs/embree.md.
+// The workspace lint `unsafe_op_in_unsafe_fn` is not yet applied to this FFI crate (owned by
+// the instancing work): its two `unsafe fn`s are each one unsafe region.
+#![allow(unsafe_op_in_unsafe_fn)]
 
 use embree4_sys::{
     RTCBufferType, RTCBuildQuality, RTCDevice, RTCFeatureFlags, RTCFormat, RTCGeometry,

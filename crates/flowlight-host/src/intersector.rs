@@ -415,17 +415,25 @@ unsafe extern "C" fn intersect_cb(
     hits: *mut HitRecord,
     n: usize,
 ) {
-    let tracer = &mut *(ctx as *mut UnitTracer);
-    for i in 0..n {
-        *hits.add(i) = tracer.intersect(&*rays.add(i));
+    // SAFETY: `ctx` is the UnitTracer whose table this is, and the SDK passes `n` valid rays
+    // and `n` writable results for the call (`TracerTable`).
+    unsafe {
+        let tracer = &mut *(ctx as *mut UnitTracer);
+        for i in 0..n {
+            *hits.add(i) = tracer.intersect(&*rays.add(i));
+        }
     }
 }
 
 unsafe extern "C" fn occluded_cb(ctx: *mut c_void, rays: *const Ray, blocked: *mut u8, n: usize) {
-    let tracer = &mut *(ctx as *mut UnitTracer);
-    tracer.counts.shadow += n as u64;
-    for i in 0..n {
-        *blocked.add(i) = tracer.blocked(&*rays.add(i)) as u8;
+    // SAFETY: `ctx` is the UnitTracer whose table this is, and the SDK passes `n` valid rays
+    // and `n` writable results for the call (`TracerTable`).
+    unsafe {
+        let tracer = &mut *(ctx as *mut UnitTracer);
+        tracer.counts.shadow += n as u64;
+        for i in 0..n {
+            *blocked.add(i) = tracer.blocked(&*rays.add(i)) as u8;
+        }
     }
 }
 

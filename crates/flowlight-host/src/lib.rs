@@ -1,7 +1,7 @@
 //! Flowlight host: everything a plugin does not own.
 //!
 //! The host loads plugins ([`plugin`]), owns the one rayon thread pool and schedules work
-//! units on it ([`render`]), answers ray queries through an intersector ([`intersector`]),
+//! units on it ([`render`](mod@render)), answers ray queries through an intersector ([`intersector`]),
 //! owns the accumulators ([`film`]), counts statistics, and writes images atomically
 //! ([`output`]).
 

@@ -3,10 +3,11 @@
 use crate::params::build_params;
 use flowlight_sdk::abi::{
     self, ErrorBuf, FilmTable, IntegratorInfo, IntegratorTable, MutationRef, MutationTable,
-    ParamSpec, PluginDeclaration, SceneView, StatSpec, Status, StrRef, TracerTable, WorkUnit,
+    ParamSpec, PluginDeclaration, SceneView, StatList, StatSpec, Status, StrRef, TracerTable,
+    WorkUnit,
 };
-use flowlight_sdk::integrator::STAT_SLOTS;
-use flowlight_sdk::{ParamKind, PluginKind};
+use flowlight_sdk::stats::MAX_COUNTERS;
+use flowlight_sdk::{ParamKind, PluginKind, MAX_MUTATIONS};
 use libloading::Library;
 use std::ffi::c_void;
 use std::path::{Path, PathBuf};
@@ -316,6 +317,31 @@ impl PluginLibrary {
             .collect()
     }
 
+    /// The name of the integrator's [`ParamKind::MutationList`] parameter, the one config key
+    /// the host reads a mutation list from (`None`: the integrator takes no mutations). An
+    /// integrator declaring two is refused: the host would not know which list is meant.
+    pub fn mutation_list_param(&self) -> Result<Option<String>, PluginError> {
+        let lists: Vec<String> = self
+            .params()
+            .into_iter()
+            .filter(|p| p.kind == ParamKind::MutationList)
+            .map(|p| p.name)
+            .collect();
+        match lists.as_slice() {
+            [] => Ok(None),
+            [one] => Ok(Some(one.clone())),
+            many => Err(PluginError::Call {
+                name: self.name.clone(),
+                path: self.path.clone(),
+                message: format!(
+                    "declares {} mutation-list parameters ({}); an integrator takes at most one",
+                    many.len(),
+                    many.join(", ")
+                ),
+            }),
+        }
+    }
+
     fn integrator_table(&self) -> Result<IntegratorTable, PluginError> {
         match self.kind {
             // SAFETY: non-null checked at load.
@@ -367,6 +393,8 @@ pub struct MutationInstance {
     instance: *mut c_void,
     /// Name as the integrator sees it (the plugin name).
     name: String,
+    /// The config's weight, as given (validated and normalised with the list's others by
+    /// [`normalised_weights`] when the integrator is created).
     weight: f64,
 }
 
@@ -395,13 +423,17 @@ impl MutationInstance {
         })?;
         let mut instance = std::ptr::null_mut();
         let mut err = ErrorBuf::default();
-        let status = (table.create)(
-            list.as_slice().as_ptr(),
-            list.as_slice().len(),
-            view,
-            &mut instance,
-            &mut err,
-        );
+        // SAFETY: the table is a checked mutation plugin's; the parameter list and `view` are
+        // valid for the call, and the caller keeps `view`'s data alive for the instance.
+        let status = unsafe {
+            (table.create)(
+                list.as_slice().as_ptr(),
+                list.as_slice().len(),
+                view,
+                &mut instance,
+                &mut err,
+            )
+        };
         if status != Status::Ok {
             return Err(plugin.call_error(status, &err));
         }
@@ -419,9 +451,50 @@ impl MutationInstance {
         &self.plugin
     }
 
+    /// The weight the config gave (before normalisation).
     pub fn weight(&self) -> f64 {
         self.weight
     }
+}
+
+/// Validates the weights of a mutation list and normalises them to sum to 1: the one place
+/// where weights are checked. Each weight must be finite and ≥ 0 (0 keeps a strategy in the
+/// list, e.g. in the mixture density, without ever choosing it), their sum positive and
+/// finite, and the list at most [`MAX_MUTATIONS`] long. `list` is the parameter's name
+/// (`mutations`), `entries` the plugin name and weight of each entry; errors name the entry
+/// as `integrator.LIST[i] (plugin "NAME")`.
+pub fn normalised_weights(list: &str, entries: &[(&str, f64)]) -> Result<Vec<f64>, String> {
+    if entries.len() > MAX_MUTATIONS {
+        return Err(format!(
+            "integrator.{list}: {} entries, at most {MAX_MUTATIONS} mutation strategies are supported (flowlight_sdk::MAX_MUTATIONS)",
+            entries.len()
+        ));
+    }
+    let mut total = 0.0;
+    for (i, &(name, w)) in entries.iter().enumerate() {
+        let at = format!("integrator.{list}[{i}] (plugin \"{name}\")");
+        if !w.is_finite() {
+            return Err(format!("{at}: `weight` must be finite, got {w}"));
+        }
+        if w < 0.0 {
+            return Err(format!("{at}: `weight` must not be negative, got {w}"));
+        }
+        total += w;
+    }
+    if entries.is_empty() {
+        return Ok(Vec::new());
+    }
+    if total <= 0.0 {
+        return Err(format!(
+            "integrator.{list}: the weights sum to 0; give at least one entry a positive `weight`"
+        ));
+    }
+    if !total.is_finite() {
+        return Err(format!(
+            "integrator.{list}: the weights sum to more than the largest f64; use smaller weights (only their ratios matter)"
+        ));
+    }
+    Ok(entries.iter().map(|&(_, w)| w / total).collect())
 }
 
 impl Drop for MutationInstance {
@@ -438,6 +511,8 @@ pub struct IntegratorInstance {
     table: IntegratorTable,
     instance: *mut c_void,
     pub info: IntegratorInfo,
+    /// The counters the instance declared (owned by the instance, valid until `destroy`).
+    stats: StatList,
     // The plugin may keep pointers into these for its whole life; dropped after `destroy`.
     _view: Box<SceneView>,
     _mutation_refs: Vec<MutationRef>,
@@ -451,7 +526,8 @@ unsafe impl Sync for IntegratorInstance {}
 
 impl IntegratorInstance {
     /// Creates an instance with `params` from the config and the given mutation strategies
-    /// (weights are normalised to sum to 1).
+    /// (their weights checked and normalised to sum to 1 by [`normalised_weights`]; `params`
+    /// no longer holds the mutation list).
     ///
     /// # Safety
     /// The data `view` points to must outlive the instance.
@@ -468,12 +544,25 @@ impl IntegratorInstance {
             message,
         };
         let list = build_params(&plugin.name, plugin.param_specs(), params).map_err(call_error)?;
-        let total: f64 = mutations.iter().map(|m| m.weight).sum();
+        let list_name = plugin.mutation_list_param()?;
+        if let (None, Some(m)) = (&list_name, mutations.first()) {
+            return Err(call_error(format!(
+                "takes no mutation list, but was given mutation '{}'",
+                m.name
+            )));
+        }
+        let entries: Vec<(&str, f64)> = mutations
+            .iter()
+            .map(|m| (m.name.as_str(), m.weight))
+            .collect();
+        let weights = normalised_weights(list_name.as_deref().unwrap_or("mutations"), &entries)
+            .map_err(call_error)?;
         let refs: Vec<MutationRef> = mutations
             .iter()
-            .map(|m| MutationRef {
+            .zip(weights)
+            .map(|(m, weight)| MutationRef {
                 name: StrRef::new(&m.name),
-                weight: m.weight / total,
+                weight,
                 table: &*m.table,
                 instance: m.instance,
             })
@@ -481,17 +570,24 @@ impl IntegratorInstance {
         let view = Box::new(view);
         let mut instance = std::ptr::null_mut();
         let mut info = IntegratorInfo::simple();
+        let mut stats = StatList::EMPTY;
         let mut err = ErrorBuf::default();
-        let status = (table.create)(
-            list.as_slice().as_ptr(),
-            list.as_slice().len(),
-            refs.as_ptr(),
-            refs.len(),
-            &*view,
-            &mut instance,
-            &mut info,
-            &mut err,
-        );
+        // SAFETY: the table is a checked integrator plugin's; every pointer is valid for the
+        // call, and `refs`, the mutation instances and the boxed view live in the returned
+        // instance (the caller keeps the view's data alive for it).
+        let status = unsafe {
+            (table.create)(
+                list.as_slice().as_ptr(),
+                list.as_slice().len(),
+                refs.as_ptr(),
+                refs.len(),
+                &*view,
+                &mut instance,
+                &mut info,
+                &mut stats,
+                &mut err,
+            )
+        };
         if status != Status::Ok {
             return Err(plugin.call_error(status, &err));
         }
@@ -500,18 +596,20 @@ impl IntegratorInstance {
             table,
             instance,
             info,
+            stats,
             _view: view,
             _mutation_refs: refs,
             mutations,
             prepared: std::sync::Mutex::new(false),
         };
-        if inst.info.stat_count > STAT_SLOTS {
+        // The SDK's builder refuses more; a plugin that wrote its own glue might not.
+        if inst.stats.count > MAX_COUNTERS || (inst.stats.count > 0 && inst.stats.specs.is_null()) {
             return Err(PluginError::Call {
                 name: inst.plugin.name.clone(),
                 path: inst.plugin.path.clone(),
                 message: format!(
-                    "declares {} statistics, at most {STAT_SLOTS} are supported",
-                    inst.info.stat_count
+                    "declares {} statistics counters, at most {MAX_COUNTERS} are supported",
+                    inst.stats.count
                 ),
             });
         }
@@ -545,11 +643,11 @@ impl IntegratorInstance {
 
     /// The statistics counters the integrator declared.
     pub fn stat_specs(&self) -> &[StatSpec] {
-        if self.info.stats.is_null() || self.info.stat_count == 0 {
+        if self.stats.specs.is_null() || self.stats.count == 0 {
             return &[];
         }
-        // SAFETY: static data of the loaded plugin, `stat_count` entries.
-        unsafe { std::slice::from_raw_parts(self.info.stats, self.info.stat_count) }
+        // SAFETY: owned by the instance until `destroy` (in our Drop), `count` entries.
+        unsafe { std::slice::from_raw_parts(self.stats.specs, self.stats.count) }
     }
 
     /// Runs the plugin's one-time preparation, the first time it is called. The scheduler
@@ -570,14 +668,26 @@ impl IntegratorInstance {
         Ok(())
     }
 
-    /// Renders one work unit through the plugin; `stats` must hold [`STAT_SLOTS`] zeroed slots.
+    /// Renders one work unit through the plugin; `stats` holds one zeroed slot per counter
+    /// of [`IntegratorInstance::stat_specs`].
     pub fn render(
         &self,
         unit: &WorkUnit,
         tracer: &TracerTable,
         film: &FilmTable,
-        stats: &mut [f64; STAT_SLOTS],
+        stats: &mut [f64],
     ) -> Result<(), PluginError> {
+        if stats.len() < self.stats.count {
+            return Err(PluginError::Call {
+                name: self.plugin.name.clone(),
+                path: self.plugin.path.clone(),
+                message: format!(
+                    "render was given {} statistics slots for {} counters",
+                    stats.len(),
+                    self.stats.count
+                ),
+            });
+        }
         let mut err = ErrorBuf::default();
         // SAFETY: all pointers are valid for the call; the instance is alive.
         let status = unsafe {
@@ -587,6 +697,7 @@ impl IntegratorInstance {
                 tracer,
                 film,
                 stats.as_mut_ptr(),
+                stats.len(),
                 &mut err,
             )
         };
@@ -602,5 +713,47 @@ impl Drop for IntegratorInstance {
         // SAFETY: created by this table's `create`, destroyed once, before the mutation
         // instances and the view it may point into (fields drop after this body).
         unsafe { (self.table.destroy)(self.instance) };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn weights_are_normalised_to_sum_to_one() {
+        let w =
+            normalised_weights("mutations", &[("drill", 1.0), ("blow", 3.0), ("x", 0.0)]).unwrap();
+        assert_eq!(w, [0.25, 0.75, 0.0]);
+        assert_eq!(
+            normalised_weights("mutations", &[]).unwrap(),
+            Vec::<f64>::new()
+        );
+        // Only ratios matter: huge finite weights are fine as long as their sum is.
+        let w = normalised_weights("m", &[("a", 1e300), ("b", 1e300)]).unwrap();
+        assert_eq!(w, [0.5, 0.5]);
+    }
+
+    #[test]
+    fn bad_weights_are_one_line_errors_naming_the_entry() {
+        let e = normalised_weights("mutations", &[("drill", 1.0), ("blow", -2.0)]).unwrap_err();
+        assert_eq!(
+            e,
+            "integrator.mutations[1] (plugin \"blow\"): `weight` must not be negative, got -2"
+        );
+        let e = normalised_weights("strategies", &[("drill", f64::NAN)]).unwrap_err();
+        assert_eq!(
+            e,
+            "integrator.strategies[0] (plugin \"drill\"): `weight` must be finite, got NaN"
+        );
+        let e = normalised_weights("m", &[("a", f64::INFINITY)]).unwrap_err();
+        assert!(e.contains("[0]") && e.contains("inf"), "{e}");
+        let e = normalised_weights("m", &[("a", 0.0), ("b", 0.0)]).unwrap_err();
+        assert!(e.starts_with("integrator.m: the weights sum to 0"), "{e}");
+        let e = normalised_weights("m", &[("a", f64::MAX), ("b", f64::MAX)]).unwrap_err();
+        assert!(e.contains("largest f64"), "{e}");
+        let nine: Vec<(&str, f64)> = (0..MAX_MUTATIONS + 1).map(|_| ("a", 1.0)).collect();
+        let e = normalised_weights("m", &nine).unwrap_err();
+        assert!(e.contains("9 entries") && e.contains("at most 8"), "{e}");
     }
 }

@@ -32,8 +32,7 @@ use crate::film::{Frame, TileAccumulator};
 use crate::intersector::{Intersector, UnitTracer};
 use crate::plugin::{IntegratorInstance, PluginError};
 use flowlight_scene::Scene;
-use flowlight_sdk::integrator::STAT_SLOTS;
-use flowlight_sdk::{AccumulationStyle, Accumulator, StatMerge, StatSpec, WorkUnit};
+use flowlight_sdk::{AccumulationStyle, Accumulator, WorkUnit};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Mutex;
@@ -74,7 +73,7 @@ pub struct RenderStats {
     pub partial_pass: bool,
     /// Samples of a pass cut short and dropped (flanged integrators), not in `pixel_samples`.
     pub discarded_samples: u64,
-    /// The integrator's own counters (declared in its `IntegratorInfo`), merged over units,
+    /// The integrator's own counters (declared on its `StatsBuilder`), merged over units,
     /// ratios resolved, in declaration order.
     pub integrator: Vec<(String, f64)>,
 }
@@ -299,7 +298,7 @@ pub fn render(
             };
             let mut tile = TileAccumulator::new(x0, y0, x1, y1, flange, width, height, layer_count);
             let mut tracer = UnitTracer::new(scene, intersector);
-            let mut unit_stats = [0.0f64; STAT_SLOTS];
+            let mut unit_stats = vec![0.0f64; specs.len()];
             let result = instance.render(&unit, &tracer.table(), &tile.table(), &mut unit_stats);
             closest.fetch_add(tracer.counts.closest, Ordering::Relaxed);
             shadow.fetch_add(tracer.counts.shadow, Ordering::Relaxed);
@@ -316,7 +315,7 @@ pub fn render(
                 None => frame.lock().unwrap().merge(&tile, count),
             }
             if !specs.is_empty() {
-                merge_stats(specs, &mut merged_stats.lock().unwrap(), &unit_stats);
+                flowlight_sdk::stats::merge(specs, &mut merged_stats.lock().unwrap(), &unit_stats);
             }
             units.fetch_add(1, Ordering::Relaxed);
             let pixels = (x1 - x0) as u64 * (y1 - y0) as u64;
@@ -380,7 +379,10 @@ pub fn render(
         interrupted,
         partial_pass,
         discarded_samples: discarded,
-        integrator: resolve_stats(specs, &merged_stats.into_inner().unwrap()),
+        // SAFETY: the specs' names are the instance's, which outlives this call.
+        integrator: unsafe {
+            flowlight_sdk::stats::resolve(specs, &merged_stats.into_inner().unwrap())
+        },
     };
     Ok(RenderOutcome {
         frame: frame.into_inner().unwrap(),
@@ -389,61 +391,9 @@ pub fn render(
     })
 }
 
-/// Adds one unit's counters into the running totals.
-fn merge_stats(specs: &[StatSpec], total: &mut [f64], unit: &[f64]) {
-    for (i, s) in specs.iter().enumerate() {
-        match s.merge {
-            StatMerge::Sum => total[i] += unit[i],
-            StatMerge::Max => total[i] = total[i].max(unit[i]),
-            StatMerge::Ratio => {}
-        }
-    }
-}
-
-/// Names and values of the counters, ratios computed (0 where the denominator is 0).
-fn resolve_stats(specs: &[StatSpec], total: &[f64]) -> Vec<(String, f64)> {
-    specs
-        .iter()
-        .enumerate()
-        .map(|(i, s)| {
-            // SAFETY: static strings of the loaded plugin.
-            let name = unsafe { s.name.as_str() }.to_string();
-            let value = match s.merge {
-                StatMerge::Ratio => {
-                    let num = total.get(s.numerator as usize).copied().unwrap_or(0.0);
-                    let den = total.get(s.denominator as usize).copied().unwrap_or(0.0);
-                    if den != 0.0 {
-                        num / den
-                    } else {
-                        0.0
-                    }
-                }
-                _ => total[i],
-            };
-            (name, value)
-        })
-        .collect()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn stats_merge_by_kind_and_ratios_resolve() {
-        let specs = [
-            flowlight_sdk::stat("events", StatMerge::Sum),
-            flowlight_sdk::stat("longest", StatMerge::Max),
-            flowlight_sdk::stat_ratio("mean", 1, 0),
-        ];
-        let mut total = vec![0.0; 3];
-        merge_stats(&specs, &mut total, &[2.0, 5.0, 99.0]);
-        merge_stats(&specs, &mut total, &[3.0, 4.0, 99.0]);
-        let r = resolve_stats(&specs, &total);
-        assert_eq!(r[0], ("events".to_string(), 5.0));
-        assert_eq!(r[1].1, 5.0);
-        assert_eq!(r[2].1, 1.0);
-    }
 
     #[test]
     fn frame_bytes_counts_frame_pass_and_output_buffers_without_overflow() {

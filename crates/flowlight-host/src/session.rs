@@ -5,7 +5,8 @@ use crate::film::Frame;
 use crate::intersector::{build_intersector_with, Intersector};
 use crate::output::{write_exr, write_png_preview, ExrMetadata, ImageLayer};
 use crate::plugin::{
-    find_plugin, search_dirs, IntegratorInstance, MutationInstance, PluginLibrary,
+    find_plugin, normalised_weights, search_dirs, IntegratorInstance, MutationInstance,
+    PluginLibrary,
 };
 use crate::render::{render, Progress, RenderOptions, RenderOutcome};
 use flowlight_core::camera::Camera;
@@ -14,7 +15,6 @@ use flowlight_scene::config::{load_config, RenderConfig, SampleBudget};
 use flowlight_scene::lights::{light_power_cdf, load_environment, EnvironmentData};
 use flowlight_scene::{load_gltf, Scene};
 use flowlight_sdk::abi::SceneView;
-use flowlight_sdk::ParamKind;
 use glam::Vec3;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -134,7 +134,23 @@ impl Session {
         let plugin = Arc::new(PluginLibrary::load(&plugin_path).map_err(|e| e.to_string())?);
 
         let textures = scene.texture_views();
-        let mutation_entries = take_mutations(&mut config.integrator_params, &config.path)?;
+        // The mutation list lives under the name of the parameter the integrator declares as
+        // a mutation list; weights are checked here, before any mutation plugin loads.
+        let list_name = plugin
+            .mutation_list_param()
+            .map_err(|e| format!("{}: {e}", config.path.display()))?;
+        let mutation_entries = match &list_name {
+            Some(list) => take_mutations(&mut config.integrator_params, list, &config.path)?,
+            None => Vec::new(),
+        };
+        if let Some(list) = &list_name {
+            let weights: Vec<(&str, f64)> = mutation_entries
+                .iter()
+                .map(|e| (e.plugin.as_str(), e.weight))
+                .collect();
+            normalised_weights(list, &weights)
+                .map_err(|e| format!("{}: {e}", config.path.display()))?;
+        }
         let (bounds_min, bounds_max) = scene.bounds().unwrap_or((Vec3::ZERO, Vec3::ZERO));
         let environment = match &config.environment {
             Some(e) => load_environment(&config.path, e).map_err(|e| e.to_string())?,
@@ -167,22 +183,17 @@ impl Session {
             bounds_min,
             bounds_max,
         };
-        let takes_mutations = plugin
-            .param_specs()
-            .iter()
-            .any(|s| s.kind == ParamKind::MutationList);
-        if !mutation_entries.is_empty() && !takes_mutations {
-            return Err(format!(
-                "{}: integrator '{}' takes no [[integrator.mutations]]",
-                config.path.display(),
-                plugin.name
-            ));
-        }
         let mut mutations = Vec::new();
         let mut plugin_files = vec![plugin_path.clone()];
         for entry in &mutation_entries {
-            let path = find_plugin(&relative_to(&entry.plugin, &config.base_dir), &dirs)
-                .map_err(|e| format!("{}: integrator.mutations: {e}", config.path.display()))?;
+            let path =
+                find_plugin(&relative_to(&entry.plugin, &config.base_dir), &dirs).map_err(|e| {
+                    format!(
+                        "{}: integrator.{}: {e}",
+                        config.path.display(),
+                        list_name.as_deref().unwrap_or_default()
+                    )
+                })?;
             plugin_files.push(path.clone());
             let lib = Arc::new(PluginLibrary::load(&path).map_err(|e| e.to_string())?);
             // SAFETY: as for the integrator below.
@@ -424,21 +435,25 @@ struct MutationEntry {
     params: Vec<(String, toml::Value)>,
 }
 
-/// Removes `mutations` from the integrator's parameters and checks each entry: a `plugin`
-/// name, an optional positive `weight` (default 1), the rest are the plugin's parameters.
+/// Removes the mutation list `list` (the integrator's [`ParamKind::MutationList`]
+/// parameter, e.g. `mutations`) from the integrator's parameters and reads each entry: a
+/// `plugin` name, a numeric `weight` (default 1; its value is checked with the list's other
+/// weights by [`normalised_weights`]), the rest are the plugin's parameters.
+///
+/// [`ParamKind::MutationList`]: flowlight_sdk::ParamKind::MutationList
 fn take_mutations(
     params: &mut Vec<(String, toml::Value)>,
+    list: &str,
     config: &Path,
 ) -> Result<Vec<MutationEntry>, String> {
-    let Some(pos) = params.iter().position(|(k, _)| k == "mutations") else {
+    let Some(pos) = params.iter().position(|(k, _)| k == list) else {
         return Ok(Vec::new());
     };
     let (_, value) = params.remove(pos);
-    let at =
-        |i: usize, msg: &str| format!("{}: integrator.mutations[{i}]: {msg}", config.display());
+    let at = |i: usize, msg: &str| format!("{}: integrator.{list}[{i}]: {msg}", config.display());
     let toml::Value::Array(items) = value else {
         return Err(format!(
-            "{}: integrator.mutations must be an array of tables ([[integrator.mutations]])",
+            "{}: integrator.{list} must be an array of tables ([[integrator.{list}]])",
             config.display()
         ));
     };
@@ -464,12 +479,6 @@ fn take_mutations(
                         .as_float()
                         .or_else(|| v.as_integer().map(|n| n as f64))
                         .ok_or_else(|| at(i, "`weight` must be a number"))?;
-                    if !(weight > 0.0 && weight.is_finite()) {
-                        return Err(at(
-                            i,
-                            &format!("`weight` must be positive and finite, got {weight}"),
-                        ));
-                    }
                 }
                 _ => rest.push((k, v)),
             }

@@ -17,8 +17,9 @@ use flowlight_core::Rgb;
 use glam::Vec3;
 use std::ffi::c_void;
 
-/// Bumped whenever any type or function table in this module changes incompatibly.
-pub const ABI_VERSION: u32 = 2;
+/// Bumped whenever any type or function table in this module changes incompatibly; every
+/// version and what changed is listed in the repository's `CHANGELOG.md`.
+pub const ABI_VERSION: u32 = 3;
 /// Version of the SDK crate compiled into this binary.
 pub const SDK_VERSION: &str = env!("CARGO_PKG_VERSION");
 /// `rustc --version` of the compiler that built this binary.
@@ -54,11 +55,15 @@ impl StrRef {
     /// # Safety
     /// The pointer must be valid for `len` bytes of UTF-8 for the chosen lifetime.
     pub unsafe fn as_str<'a>(&self) -> &'a str {
-        if self.ptr.is_null() || self.len == 0 {
-            return "";
+        // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+        // ABI rules in `abi.rs` for the C entry points).
+        unsafe {
+            if self.ptr.is_null() || self.len == 0 {
+                return "";
+            }
+            let bytes = std::slice::from_raw_parts(self.ptr, self.len);
+            std::str::from_utf8(bytes).unwrap_or("<invalid utf-8>")
         }
-        let bytes = std::slice::from_raw_parts(self.ptr, self.len);
-        std::str::from_utf8(bytes).unwrap_or("<invalid utf-8>")
     }
 }
 
@@ -223,8 +228,9 @@ pub enum StatMerge {
     Ratio = 2,
 }
 
-/// A statistics counter an integrator declares. The host gives each work unit a zeroed
-/// array of `f64`, one per counter, merges the arrays and reports them (summary and JSON).
+/// A statistics counter an integrator declared through [`crate::stats::StatsBuilder`]. The
+/// host gives each work unit a zeroed array of `f64`, one per counter, merges the arrays with
+/// [`StatMerge::combine`] and reports them (summary and JSON).
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct StatSpec {
@@ -250,9 +256,23 @@ pub struct IntegratorInfo {
     /// Tile sides must be a multiple of this (0 or 1: any). ERPT's film-plane migration keeps
     /// chains inside fixed K×K squares, so tiles aligned to K contain every deposit.
     pub tile_multiple: u32,
-    /// Counters the integrator reports (static data of the plugin), `stat_count` of them.
-    pub stats: *const StatSpec,
-    pub stat_count: usize,
+}
+
+/// The counters an integrator instance declared, written by the SDK's glue after `create`:
+/// `count` specs owned by the instance (valid until `destroy`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct StatList {
+    pub specs: *const StatSpec,
+    pub count: usize,
+}
+
+impl StatList {
+    /// No counters.
+    pub const EMPTY: StatList = StatList {
+        specs: std::ptr::null(),
+        count: 0,
+    };
 }
 
 impl IntegratorInfo {
@@ -264,8 +284,6 @@ impl IntegratorInfo {
             flange: 0,
             biased: 0,
             tile_multiple: 0,
-            stats: std::ptr::null(),
-            stat_count: 0,
         }
     }
 }
@@ -276,7 +294,8 @@ impl IntegratorInfo {
 #[derive(Clone, Copy)]
 pub struct MutationRef {
     pub name: StrRef,
-    /// Selection weight from the config (the host normalises weights to sum to 1).
+    /// Selection weight: the config's, validated and normalised by the host so that the
+    /// weights of a list are finite, ≥ 0 and sum to 1.
     pub weight: f64,
     pub table: *const MutationTable,
     pub instance: *const c_void,
@@ -310,6 +329,7 @@ pub struct IntegratorTable {
         scene: *const SceneView,
         instance: *mut *mut c_void,
         info: *mut IntegratorInfo,
+        stats: *mut StatList,
         err: *mut ErrorBuf,
     ) -> Status,
     pub destroy: unsafe extern "C" fn(instance: *mut c_void),
@@ -321,13 +341,15 @@ pub struct IntegratorTable {
         err: *mut ErrorBuf,
     ) -> Status,
     /// Renders one unit. Called concurrently from the host's threads with the same instance.
-    /// `stats` points to `stat_count` zeroed counters for this unit.
+    /// `stats` points to `stat_count` zeroed counters for this unit, one per spec of the
+    /// instance's [`StatList`] (null when it declared none).
     pub render: unsafe extern "C" fn(
         instance: *const c_void,
         unit: *const WorkUnit,
         tracer: *const TracerTable,
         film: *const FilmTable,
         stats: *mut f64,
+        stat_count: usize,
         err: *mut ErrorBuf,
     ) -> Status,
 }
@@ -423,6 +445,7 @@ pub const fn layout_hash() -> u64 {
         size_of::<FilmTable>(),
         size_of::<IntegratorInfo>(),
         size_of::<StatSpec>(),
+        size_of::<StatList>(),
         size_of::<MutationRef>(),
         size_of::<WorkUnit>(),
         size_of::<IntegratorTable>(),
@@ -447,4 +470,40 @@ pub const fn layout_hash() -> u64 {
         i += 1;
     }
     h
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn str_ref_round_trips_and_tolerates_empty_null_and_bad_utf8() {
+        let s = String::from("drill#2 ✓");
+        let r = StrRef::new(&s);
+        assert_eq!(r.len, s.len());
+        // SAFETY: `s` outlives the read.
+        assert_eq!(unsafe { r.as_str() }, "drill#2 ✓");
+        // SAFETY: null and empty references read as "".
+        assert_eq!(unsafe { StrRef::EMPTY.as_str() }, "");
+        assert_eq!(unsafe { StrRef::new("").as_str() }, "");
+        let bad = [0x66, 0xff, 0x6f];
+        let r = StrRef {
+            ptr: bad.as_ptr(),
+            len: bad.len(),
+        };
+        // SAFETY: `bad` outlives the read; invalid UTF-8 is reported, not trusted.
+        assert_eq!(unsafe { r.as_str() }, "<invalid utf-8>");
+    }
+
+    #[test]
+    fn error_buf_truncates_at_a_char_boundary() {
+        let mut e = ErrorBuf::default();
+        e.set("short");
+        assert_eq!(e.message(), "short");
+        // 1023 ASCII bytes then a 3-byte character: it does not fit whole and is dropped.
+        let long = format!("{}✓tail", "a".repeat(1023));
+        e.set(&long);
+        assert_eq!(e.len, 1023);
+        assert_eq!(e.message(), "a".repeat(1023));
+    }
 }

@@ -71,17 +71,21 @@ pub trait Accumulator {
             d: *const Deposit,
             n: usize,
         ) {
-            let acc = &mut *(ctx as *mut A);
-            let deposits = if n == 0 {
-                &[][..]
-            } else {
-                std::slice::from_raw_parts(d, n)
-            };
-            // A panic must not unwind into the plugin: abort instead.
-            if std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| acc.deposit(deposits)))
-                .is_err()
-            {
-                std::process::abort();
+            // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+            // ABI rules in `abi.rs` for the C entry points).
+            unsafe {
+                let acc = &mut *(ctx as *mut A);
+                let deposits = if n == 0 {
+                    &[][..]
+                } else {
+                    std::slice::from_raw_parts(d, n)
+                };
+                // A panic must not unwind into the plugin: abort instead.
+                if std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| acc.deposit(deposits)))
+                    .is_err()
+                {
+                    std::process::abort();
+                }
             }
         }
         FilmTable {

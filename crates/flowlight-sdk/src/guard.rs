@@ -39,32 +39,36 @@ fn quiet_guarded_panics() {
 /// # Safety
 /// `err` must be null or point to a valid [`ErrorBuf`].
 pub unsafe fn guard(err: *mut ErrorBuf, f: impl FnOnce() -> Result<(), String>) -> Status {
-    quiet_guarded_panics();
-    let outer = GUARDED.with(|g| g.replace(true));
-    let result = catch_unwind(AssertUnwindSafe(f));
-    GUARDED.with(|g| g.set(outer));
-    match result {
-        Ok(Ok(())) => Status::Ok,
-        Ok(Err(msg)) => {
-            if let Some(e) = err.as_mut() {
-                e.set(&msg);
+    // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+    // ABI rules in `abi.rs` for the C entry points).
+    unsafe {
+        quiet_guarded_panics();
+        let outer = GUARDED.with(|g| g.replace(true));
+        let result = catch_unwind(AssertUnwindSafe(f));
+        GUARDED.with(|g| g.set(outer));
+        match result {
+            Ok(Ok(())) => Status::Ok,
+            Ok(Err(msg)) => {
+                if let Some(e) = err.as_mut() {
+                    e.set(&msg);
+                }
+                Status::Error
             }
-            Status::Error
-        }
-        Err(payload) => {
-            let msg = payload
-                .downcast_ref::<&str>()
-                .map(|s| s.to_string())
-                .or_else(|| payload.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "unknown panic payload".into());
-            let at = LOCATION
-                .with(|c| c.borrow_mut().take())
-                .map(|l| format!(" at {l}"))
-                .unwrap_or_default();
-            if let Some(e) = err.as_mut() {
-                e.set(&format!("panicked: {msg}{at}").replace('\n', " "));
+            Err(payload) => {
+                let msg = payload
+                    .downcast_ref::<&str>()
+                    .map(|s| s.to_string())
+                    .or_else(|| payload.downcast_ref::<String>().cloned())
+                    .unwrap_or_else(|| "unknown panic payload".into());
+                let at = LOCATION
+                    .with(|c| c.borrow_mut().take())
+                    .map(|l| format!(" at {l}"))
+                    .unwrap_or_default();
+                if let Some(e) = err.as_mut() {
+                    e.set(&format!("panicked: {msg}{at}").replace('\n', " "));
+                }
+                Status::Panic
             }
-            Status::Panic
         }
     }
 }

@@ -3,18 +3,16 @@
 
 use crate::abi::{
     ErrorBuf, FilmTable, IntegratorInfo, IntegratorTable, MutationRef, ParamSpec, ParamValue,
-    SceneView, Status, TracerTable, WorkUnit,
+    SceneView, StatList, Status, TracerTable, WorkUnit,
 };
 use crate::film::Film;
 use crate::guard::guard;
 use crate::mutation::MutationSet;
 use crate::params::Params;
 use crate::scene::Scene;
+use crate::stats::{StatTable, Stats, StatsBuilder};
 use crate::tracer::Tracer;
 use std::ffi::c_void;
-
-/// The host always hands a unit this many counter slots (only the declared ones are read).
-pub const STAT_SLOTS: usize = 256;
 
 /// A light-transport algorithm. The host creates one instance per render and calls
 /// [`Integrator::render`] for each work unit from its thread pool, concurrently.
@@ -25,13 +23,16 @@ pub trait Integrator: Sized + Send + Sync + 'static {
     /// Parameters the plugin accepts; the host refuses others.
     const PARAMS: &'static [ParamSpec];
 
-    /// Builds an instance. `scene` and `mutations` (the strategies the config lists under
-    /// `[[integrator.mutations]]`, empty for most integrators) stay valid for the instance's
-    /// whole life.
+    /// Builds an instance. `scene` and `mutations` (the strategies the config lists under the
+    /// integrator's [`ParamKind::MutationList`](crate::ParamKind::MutationList) parameter,
+    /// empty for most integrators) stay valid for the instance's whole life. Counters the
+    /// integrator reports are declared on `stats`; keep the handles for
+    /// [`Integrator::render`].
     fn create(
         params: &Params,
         mutations: MutationSet<'static>,
         scene: Scene<'static>,
+        stats: &mut StatsBuilder,
     ) -> Result<(Self, IntegratorInfo), String>;
 
     /// Runs once before the first work unit, on one thread, with ray queries.
@@ -39,15 +40,22 @@ pub trait Integrator: Sized + Send + Sync + 'static {
         Ok(())
     }
 
-    /// Renders one work unit, depositing into `film` and adding to `stats` (one slot per
-    /// declared counter, zeroed for the unit). Must not start threads.
+    /// Renders one work unit, depositing into `film` and adding to the counters declared in
+    /// `create` through `stats` (zeroed for the unit). Must not start threads.
     fn render(
         &self,
         unit: &WorkUnit,
         tracer: &Tracer,
         film: &mut Film,
-        stats: &mut [f64],
+        stats: &mut Stats,
     ) -> Result<(), String>;
+}
+
+/// What the glue boxes behind the instance pointer: the integrator and the counter list the
+/// host reads through [`StatList`] until `destroy`.
+struct Instance<T> {
+    integrator: T,
+    stats: StatTable,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -59,25 +67,50 @@ unsafe extern "C" fn create<T: Integrator>(
     scene: *const SceneView,
     instance: *mut *mut c_void,
     info: *mut IntegratorInfo,
+    stats: *mut StatList,
     err: *mut ErrorBuf,
 ) -> Status {
-    guard(err, || {
-        let params = Params::from_raw(params, param_count);
-        let scene = Scene::from_view(&*scene);
-        let mutations = MutationSet::from_raw(mutations, mutation_count);
-        let (inst, inf) = T::create(&params, mutations, scene)?;
-        *instance = Box::into_raw(Box::new(inst)) as *mut c_void;
-        *info = inf;
-        Ok(())
-    })
+    // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+    // ABI rules in `abi.rs` for the C entry points).
+    unsafe {
+        guard(err, || {
+            let params = Params::from_raw(params, param_count);
+            let scene = Scene::from_view(&*scene);
+            let mutations = MutationSet::from_raw(mutations, mutation_count);
+            let mut builder = StatsBuilder::new();
+            let (integrator, inf) = T::create(&params, mutations, scene, &mut builder)?;
+            let table = builder.finish()?;
+            let boxed = Box::new(Instance {
+                integrator,
+                stats: table,
+            });
+            // The specs live in the box, which does not move until `destroy`.
+            let specs = boxed.stats.specs();
+            *stats = StatList {
+                specs: if specs.is_empty() {
+                    std::ptr::null()
+                } else {
+                    specs.as_ptr()
+                },
+                count: specs.len(),
+            };
+            *instance = Box::into_raw(boxed) as *mut c_void;
+            *info = inf;
+            Ok(())
+        })
+    }
 }
 
 unsafe extern "C" fn destroy<T: Integrator>(instance: *mut c_void) {
-    if !instance.is_null() {
-        // Dropping must not unwind into the host.
-        let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            drop(Box::from_raw(instance as *mut T))
-        }));
+    // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+    // ABI rules in `abi.rs` for the C entry points).
+    unsafe {
+        if !instance.is_null() {
+            // Dropping must not unwind into the host.
+            let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                drop(Box::from_raw(instance as *mut Instance<T>))
+            }));
+        }
     }
 }
 
@@ -86,10 +119,14 @@ unsafe extern "C" fn prepare<T: Integrator>(
     tracer: *const TracerTable,
     err: *mut ErrorBuf,
 ) -> Status {
-    guard(err, || {
-        let inst = &mut *(instance as *mut T);
-        inst.prepare(&Tracer::new(&*tracer))
-    })
+    // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+    // ABI rules in `abi.rs` for the C entry points).
+    unsafe {
+        guard(err, || {
+            let inst = &mut *(instance as *mut Instance<T>);
+            inst.integrator.prepare(&Tracer::new(&*tracer))
+        })
+    }
 }
 
 unsafe extern "C" fn render<T: Integrator>(
@@ -98,19 +135,31 @@ unsafe extern "C" fn render<T: Integrator>(
     tracer: *const TracerTable,
     film: *const FilmTable,
     stats: *mut f64,
+    stat_count: usize,
     err: *mut ErrorBuf,
 ) -> Status {
-    guard(err, || {
-        let inst = &*(instance as *const T);
-        let tracer = Tracer::new(&*tracer);
-        let mut film = Film::new(&*film);
-        let stats = if stats.is_null() {
-            &mut [][..]
-        } else {
-            std::slice::from_raw_parts_mut(stats, STAT_SLOTS)
-        };
-        inst.render(&*unit, &tracer, &mut film, stats)
-    })
+    // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+    // ABI rules in `abi.rs` for the C entry points).
+    unsafe {
+        guard(err, || {
+            let inst = &*(instance as *const Instance<T>);
+            let tracer = Tracer::new(&*tracer);
+            let mut film = Film::new(&*film);
+            let declared = inst.stats.specs().len();
+            if stat_count < declared || (declared > 0 && stats.is_null()) {
+                return Err(format!(
+                "the host passed {stat_count} statistics slots for {declared} declared counters"
+            ));
+            }
+            let slots = if stats.is_null() || stat_count == 0 {
+                &mut [][..]
+            } else {
+                std::slice::from_raw_parts_mut(stats, declared)
+            };
+            inst.integrator
+                .render(&*unit, &tracer, &mut film, &mut Stats::new(slots))
+        })
+    }
 }
 
 /// The function table for `T`; used by [`crate::export_integrator!`].

@@ -5,7 +5,87 @@
 //! symbol `flowlight_plugin_declaration`, which returns a [`abi::PluginDeclaration`]: ABI
 //! version, SDK version, rustc version, a layout hash of every crossing type, and
 //! `#[repr(C)]` function tables. No Rust trait object, allocation or panic crosses: errors and
-//! panics become messages in a host-owned buffer.
+//! panics become messages in a host-owned buffer. A plugin writes no `unsafe`: the raw side of
+//! the boundary (tables, pointers, the statistics list) lives in this crate's glue.
+//!
+//! A complete integrator with one parameter and two counters:
+//!
+//! ```
+//! use flowlight_sdk::core::Rgb;
+//! use flowlight_sdk::stats::{Counter, Stats, StatsBuilder};
+//! use flowlight_sdk::{
+//!     export_integrator, param, Film, Integrator, IntegratorInfo, MutationSet, ParamKind,
+//!     ParamSpec, Params, Scene, Tracer, WorkUnit,
+//! };
+//!
+//! pub struct Constant {
+//!     value: f32,
+//!     samples: Counter,
+//!     largest_unit: Counter,
+//! }
+//!
+//! impl Integrator for Constant {
+//!     const NAME: &'static str = "constant";
+//!     const DESCRIPTION: &'static str = "every pixel gets `value`";
+//!     const PARAMS: &'static [ParamSpec] =
+//!         &[param("value", ParamKind::Float, "1.0", "radiance of every pixel")];
+//!
+//!     fn create(
+//!         params: &Params,
+//!         _mutations: MutationSet<'static>,
+//!         _scene: Scene<'static>,
+//!         stats: &mut StatsBuilder,
+//!     ) -> Result<(Self, IntegratorInfo), String> {
+//!         let samples = stats.sum("samples");
+//!         let largest_unit = stats.max("largest_unit");
+//!         let value = params.float("value", 1.0)? as f32;
+//!         Ok((Constant { value, samples, largest_unit }, IntegratorInfo::simple()))
+//!     }
+//!
+//!     fn render(
+//!         &self,
+//!         unit: &WorkUnit,
+//!         _tracer: &Tracer,
+//!         film: &mut Film,
+//!         stats: &mut Stats,
+//!     ) -> Result<(), String> {
+//!         let n = (unit.x1 - unit.x0) * (unit.y1 - unit.y0) * unit.sample_count;
+//!         for y in unit.y0..unit.y1 {
+//!             for x in unit.x0..unit.x1 {
+//!                 for _ in 0..unit.sample_count {
+//!                     film.deposit(x as f32 + 0.5, y as f32 + 0.5, 0, Rgb::splat(self.value));
+//!                 }
+//!             }
+//!         }
+//!         stats.add(self.samples, n as f64);
+//!         stats.add(self.largest_unit, n as f64);
+//!         Ok(())
+//!     }
+//! }
+//!
+//! export_integrator!(Constant);
+//! # fn main() {
+//! #     let decl = unsafe { &*flowlight_plugin_declaration() };
+//! #     assert_eq!(decl.abi_version, flowlight_sdk::abi::ABI_VERSION);
+//! # }
+//! ```
+//!
+//! ## Versions
+//!
+//! The host loads a plugin only when four things equal its own, checked in this order before
+//! anything in the plugin is called ([`abi::PluginDeclaration`]):
+//! [`abi::ABI_VERSION`], [`abi::layout_hash`], [`abi::SDK_VERSION`] and
+//! [`abi::RUSTC_VERSION`]. The compiler must match because the SDK's generic glue and
+//! `flowlight-core`'s types are compiled into each plugin by its own rustc, and Rust promises
+//! no layout or calling convention between compiler versions for anything not `#[repr(C)]`.
+//! The workspace pins its compiler in `rust-toolchain.toml`; a plugin built outside it must
+//! use that same toolchain. A refused plugin gets one line:
+//!
+//! ```text
+//! plugin PATH was refused: WHAT mismatch (plugin has X, host has Y); rebuild the plugin against this host's SDK
+//! ```
+//!
+//! where WHAT is `ABI version`, `type layout`, `SDK version` or `rustc version`.
 
 pub mod abi;
 pub mod film;
@@ -14,41 +94,23 @@ pub mod integrator;
 pub mod mutation;
 pub mod params;
 pub mod scene;
+pub mod stats;
 pub mod tracer;
 
 pub use abi::{
-    AccumulationStyle, Deposit, IntegratorInfo, PluginDeclaration, PluginKind, Proposal, StatMerge,
-    StatSpec, WorkUnit,
+    AccumulationStyle, Deposit, IntegratorInfo, ParamSpec, PluginDeclaration, PluginKind, Proposal,
+    StatMerge, WorkUnit,
 };
 pub use film::{Accumulator, Film};
 pub use flowlight_core as core;
 pub use integrator::Integrator;
-pub use mutation::{Mutation, MutationSet};
+pub use mutation::{Mutation, MutationSet, MAX_MUTATIONS};
 pub use params::{param, ParamKind, Params};
 pub use scene::Scene;
+pub use stats::{Counter, Ratio, Stats, StatsBuilder};
 pub use tracer::Tracer;
 
-use abi::{IntegratorTable, MutationTable, ParamSpec, StrRef};
-
-/// Declares a statistics counter in an integrator's statistics list.
-pub const fn stat(name: &'static str, merge: StatMerge) -> StatSpec {
-    StatSpec {
-        name: StrRef::new(name),
-        merge,
-        numerator: 0,
-        denominator: 0,
-    }
-}
-
-/// Declares a derived counter: `counter[numerator] / counter[denominator]`.
-pub const fn stat_ratio(name: &'static str, numerator: u32, denominator: u32) -> StatSpec {
-    StatSpec {
-        name: StrRef::new(name),
-        merge: StatMerge::Ratio,
-        numerator,
-        denominator,
-    }
-}
+use abi::{IntegratorTable, MutationTable, StrRef};
 
 /// Builds a declaration for the current SDK; used by the export macros.
 pub const fn declaration(

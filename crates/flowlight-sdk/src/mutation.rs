@@ -45,19 +45,27 @@ unsafe extern "C" fn create<T: Mutation>(
     instance: *mut *mut c_void,
     err: *mut ErrorBuf,
 ) -> Status {
-    guard(err, || {
-        let params = Params::from_raw(params, param_count);
-        let inst = T::create(&params, Scene::from_view(&*scene))?;
-        *instance = Box::into_raw(Box::new(inst)) as *mut c_void;
-        Ok(())
-    })
+    // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+    // ABI rules in `abi.rs` for the C entry points).
+    unsafe {
+        guard(err, || {
+            let params = Params::from_raw(params, param_count);
+            let inst = T::create(&params, Scene::from_view(&*scene))?;
+            *instance = Box::into_raw(Box::new(inst)) as *mut c_void;
+            Ok(())
+        })
+    }
 }
 
 unsafe extern "C" fn destroy<T: Mutation>(instance: *mut c_void) {
-    if !instance.is_null() {
-        let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            drop(Box::from_raw(instance as *mut T))
-        }));
+    // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+    // ABI rules in `abi.rs` for the C entry points).
+    unsafe {
+        if !instance.is_null() {
+            let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                drop(Box::from_raw(instance as *mut T))
+            }));
+        }
     }
 }
 
@@ -70,11 +78,15 @@ unsafe extern "C" fn propose<T: Mutation>(
     out: *mut Proposal,
     err: *mut ErrorBuf,
 ) -> Status {
-    guard(err, || {
-        let inst = &*(instance as *const T);
-        *out = inst.propose(&Tracer::new(&*tracer), &mut *rng, &*current, &mut *proposal)?;
-        Ok(())
-    })
+    // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+    // ABI rules in `abi.rs` for the C entry points).
+    unsafe {
+        guard(err, || {
+            let inst = &*(instance as *const T);
+            *out = inst.propose(&Tracer::new(&*tracer), &mut *rng, &*current, &mut *proposal)?;
+            Ok(())
+        })
+    }
 }
 
 unsafe extern "C" fn density<T: Mutation>(
@@ -84,11 +96,15 @@ unsafe extern "C" fn density<T: Mutation>(
     out: *mut f64,
     err: *mut ErrorBuf,
 ) -> Status {
-    guard(err, || {
-        let inst = &*(instance as *const T);
-        *out = inst.density(&*from, &*to);
-        Ok(())
-    })
+    // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+    // ABI rules in `abi.rs` for the C entry points).
+    unsafe {
+        guard(err, || {
+            let inst = &*(instance as *const T);
+            *out = inst.density(&*from, &*to);
+            Ok(())
+        })
+    }
 }
 
 /// The function table for `T`; used by [`crate::export_mutation!`].
@@ -101,7 +117,13 @@ pub const fn table<T: Mutation>() -> MutationTable {
     }
 }
 
-/// The mutation strategies an integrator was given, with their normalised weights.
+/// Most mutation strategies one mutation list may name. The host refuses a longer list with
+/// a one-line error before loading any of them; integrators size per-strategy state (ERPT's
+/// quality norms: 25 counters per strategy) by it.
+pub const MAX_MUTATIONS: usize = 8;
+
+/// The mutation strategies an integrator was given, with their weights as the host
+/// normalised them: finite, ≥ 0, summing to 1 (at most [`MAX_MUTATIONS`] of them).
 #[derive(Clone, Copy)]
 pub struct MutationSet<'a> {
     refs: &'a [MutationRef],
@@ -115,14 +137,19 @@ impl<'a> MutationSet<'a> {
     /// # Safety
     /// `refs` must point to `count` valid entries whose instances outlive `'a`.
     pub unsafe fn from_raw(refs: *const MutationRef, count: usize) -> Self {
-        let refs = if refs.is_null() || count == 0 {
-            &[][..]
-        } else {
-            std::slice::from_raw_parts(refs, count)
-        };
-        MutationSet { refs }
+        // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+        // ABI rules in `abi.rs` for the C entry points).
+        unsafe {
+            let refs = if refs.is_null() || count == 0 {
+                &[][..]
+            } else {
+                std::slice::from_raw_parts(refs, count)
+            };
+            MutationSet { refs }
+        }
     }
 
+    /// No strategies.
     pub fn empty() -> Self {
         MutationSet { refs: &[] }
     }
@@ -135,25 +162,47 @@ impl<'a> MutationSet<'a> {
         self.refs.is_empty()
     }
 
+    /// Plugin name of strategy `i`.
     pub fn name(&self, i: usize) -> &'a str {
         // SAFETY: the host keeps the names alive with the instances.
         unsafe { self.refs[i].name.as_str() }
     }
 
+    /// Selection probability p(sᵢ) of strategy `i` (normalised by the host).
     pub fn weight(&self, i: usize) -> f64 {
         self.refs[i].weight
     }
 
-    /// Chooses a strategy by weight: its index.
-    pub fn choose(&self, u: f32) -> usize {
+    /// Chooses a strategy by weight for `u` uniform in [0, 1): the first `i` with
+    /// `u < Σ_{j ≤ i} p(sⱼ)`, so strategy `i` is chosen with probability p(sᵢ). The weights
+    /// are `f64`, and so is `u`. A strategy of weight 0 is never chosen, also when rounding
+    /// leaves `u` at or above the last partial sum (then the last strategy of positive
+    /// weight is). 0 for an empty set.
+    ///
+    /// ```
+    /// # use flowlight_sdk::abi::{MutationRef, StrRef};
+    /// # use flowlight_sdk::MutationSet;
+    /// # let r = |weight| MutationRef { name: StrRef::EMPTY, weight, table: std::ptr::null(), instance: std::ptr::null() };
+    /// let refs = [r(0.25), r(0.0), r(0.75)];
+    /// // SAFETY (of this example): `choose` reads only the weights.
+    /// let set = unsafe { MutationSet::from_raw(refs.as_ptr(), refs.len()) };
+    /// assert_eq!(set.choose(0.1), 0);
+    /// assert_eq!(set.choose(0.25), 2);
+    /// assert_eq!(set.choose(1.0), 2);
+    /// ```
+    pub fn choose(&self, u: f64) -> usize {
         let mut acc = 0.0;
+        let mut last_positive = 0;
         for (i, r) in self.refs.iter().enumerate() {
-            acc += r.weight;
-            if (u as f64) < acc {
-                return i;
+            if r.weight > 0.0 {
+                acc += r.weight;
+                last_positive = i;
+                if u < acc {
+                    return i;
+                }
             }
         }
-        self.refs.len() - 1
+        last_positive
     }
 
     fn check(&self, i: usize, status: Status, err: &ErrorBuf) -> Result<(), String> {
@@ -201,5 +250,66 @@ impl<'a> MutationSet<'a> {
         // SAFETY: as above.
         let status = unsafe { ((*r.table).density)(r.instance, from, to, &mut out, &mut err) };
         self.check(i, status, &err).map(|_| out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::abi::StrRef;
+
+    fn refs(weights: &[f64]) -> Vec<MutationRef> {
+        weights
+            .iter()
+            .map(|&weight| MutationRef {
+                name: StrRef::new("m"),
+                weight,
+                table: std::ptr::null(),
+                instance: std::ptr::null(),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn choose_follows_the_cumulative_weights() {
+        let r = refs(&[0.2, 0.3, 0.5]);
+        // SAFETY: `choose`, `len` and `weight` read only the weights.
+        let set = unsafe { MutationSet::from_raw(r.as_ptr(), r.len()) };
+        assert_eq!(set.len(), 3);
+        let cases = [
+            (0.0, 0),
+            (0.199_999, 0),
+            (0.2, 1),
+            (0.499_999, 1),
+            (0.5, 2),
+            (0.999_999, 2),
+        ];
+        for (u, want) in cases {
+            assert_eq!(set.choose(u), want, "u = {u}");
+        }
+        // Over a fine uniform grid, each strategy is chosen in proportion to its weight.
+        let n = 100_000;
+        let mut counts = [0usize; 3];
+        for k in 0..n {
+            counts[set.choose((k as f64 + 0.5) / n as f64)] += 1;
+        }
+        assert_eq!(counts, [20_000, 30_000, 50_000]);
+    }
+
+    #[test]
+    fn zero_weights_are_never_chosen() {
+        let r = refs(&[0.0, 0.6, 0.4, 0.0]);
+        // SAFETY: as above.
+        let set = unsafe { MutationSet::from_raw(r.as_ptr(), r.len()) };
+        assert_eq!(set.choose(0.0), 1);
+        assert_eq!(set.choose(0.6), 2);
+        // u at or past the total (rounding): the last strategy with positive weight.
+        assert_eq!(set.choose(1.0), 2);
+        assert_eq!(set.choose(1.5), 2);
+        // An f64 weight below f32 resolution still gets its share.
+        let r = refs(&[1.0 - 1e-12, 1e-12]);
+        let set = unsafe { MutationSet::from_raw(r.as_ptr(), r.len()) };
+        assert_eq!(set.choose(1.0 - 5e-13), 1);
+        assert_eq!(MutationSet::empty().choose(0.3), 0);
     }
 }

@@ -51,12 +51,16 @@ impl<'a> Params<'a> {
     /// # Safety
     /// `values` must point to `count` valid entries whose strings outlive `'a`.
     pub unsafe fn from_raw(values: *const ParamValue, count: usize) -> Params<'a> {
-        let values = if values.is_null() || count == 0 {
-            &[][..]
-        } else {
-            std::slice::from_raw_parts(values, count)
-        };
-        Params { values }
+        // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+        // ABI rules in `abi.rs` for the C entry points).
+        unsafe {
+            let values = if values.is_null() || count == 0 {
+                &[][..]
+            } else {
+                std::slice::from_raw_parts(values, count)
+            };
+            Params { values }
+        }
     }
 
     pub fn from_slice(values: &'a [ParamValue]) -> Params<'a> {
@@ -133,5 +137,89 @@ impl<'a> Params<'a> {
                 "parameter '{name}' must be one of {choices:?}, got \"{s}\""
             ))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn value(name: &'static str, kind: ParamKind) -> ParamValue {
+        ParamValue {
+            name: StrRef::new(name),
+            kind,
+            int: 0,
+            float: 0.0,
+            boolean: 0,
+            string: StrRef::EMPTY,
+        }
+    }
+
+    fn values() -> Vec<ParamValue> {
+        vec![
+            ParamValue {
+                int: -3,
+                ..value("depth", ParamKind::Int)
+            },
+            ParamValue {
+                float: 0.25,
+                ..value("scale", ParamKind::Float)
+            },
+            ParamValue {
+                boolean: 1,
+                ..value("layers", ParamKind::Bool)
+            },
+            ParamValue {
+                string: StrRef::new("wide"),
+                ..value("width", ParamKind::String)
+            },
+        ]
+    }
+
+    #[test]
+    fn set_values_are_read_and_absent_ones_default() {
+        let v = values();
+        let p = Params::from_slice(&v);
+        assert_eq!(p.int("depth", 8), Ok(-3));
+        assert_eq!(p.float("scale", 1.0), Ok(0.25));
+        assert_eq!(p.boolean("layers", false), Ok(true));
+        assert_eq!(p.string("width", "narrow"), Ok("wide"));
+        assert_eq!(p.int("absent", 8), Ok(8));
+        assert_eq!(p.float("absent", 1.5), Ok(1.5));
+        assert_eq!(p.boolean("absent", true), Ok(true));
+        assert_eq!(p.string("absent", "d"), Ok("d"));
+        // An integer where a float is asked for converts exactly.
+        assert_eq!(p.float("depth", 0.0), Ok(-3.0));
+        // SAFETY: a null list of length 0 is the empty list.
+        let none = unsafe { Params::from_raw(std::ptr::null(), 0) };
+        assert_eq!(none.int("depth", 8), Ok(8));
+    }
+
+    #[test]
+    fn wrong_kinds_and_choices_are_errors_naming_the_parameter() {
+        let v = values();
+        let p = Params::from_slice(&v);
+        assert_eq!(
+            p.int("scale", 0),
+            Err("parameter 'scale' must be an integer, got a float".into())
+        );
+        assert_eq!(
+            p.float("width", 0.0),
+            Err("parameter 'width' must be a number, got a string".into())
+        );
+        assert_eq!(
+            p.boolean("depth", false),
+            Err("parameter 'depth' must be a boolean, got a integer".into())
+        );
+        assert_eq!(
+            p.string("layers", ""),
+            Err("parameter 'layers' must be a string, got a boolean".into())
+        );
+        assert_eq!(p.choice("width", "narrow", &["narrow", "wide"]), Ok("wide"));
+        assert_eq!(
+            p.choice("width", "narrow", &["narrow", "medium"]),
+            Err("parameter 'width' must be one of [\"narrow\", \"medium\"], got \"wide\"".into())
+        );
+        assert_eq!(p.choice("absent", "narrow", &["narrow"]), Ok("narrow"));
     }
 }

@@ -20,10 +20,14 @@ pub struct Scene<'a> {
 }
 
 unsafe fn slice<'a, T>(ptr: *const T, len: usize) -> &'a [T] {
-    if ptr.is_null() || len == 0 {
-        &[]
-    } else {
-        std::slice::from_raw_parts(ptr, len)
+    // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+    // ABI rules in `abi.rs` for the C entry points).
+    unsafe {
+        if ptr.is_null() || len == 0 {
+            &[]
+        } else {
+            std::slice::from_raw_parts(ptr, len)
+        }
     }
 }
 
@@ -32,26 +36,30 @@ impl<'a> Scene<'a> {
     /// The view's pointers must be valid for `'a` (the host guarantees this for the lifetime
     /// of a plugin instance).
     pub unsafe fn from_view(v: &SceneView) -> Scene<'a> {
-        let emitters: &'a [Emitter] = slice(v.emitters, v.emitter_count);
-        let punctual: &'a [PunctualLight] = slice(v.punctual_lights, v.punctual_count);
-        let light_count =
-            v.emitter_count + v.punctual_count + usize::from(v.environment.is_present());
-        let materials: &'a [Material] = slice(v.materials, v.material_count);
-        let textures: &'a [Texture] = slice(v.textures, v.texture_count);
-        Scene {
-            camera: v.camera,
-            materials,
-            textures,
-            lights: Lights {
-                emitters,
-                punctual,
-                environment: v.environment,
-                power_cdf: slice(v.light_power_cdf, light_count),
+        // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
+        // ABI rules in `abi.rs` for the C entry points).
+        unsafe {
+            let emitters: &'a [Emitter] = slice(v.emitters, v.emitter_count);
+            let punctual: &'a [PunctualLight] = slice(v.punctual_lights, v.punctual_count);
+            let light_count =
+                v.emitter_count + v.punctual_count + usize::from(v.environment.is_present());
+            let materials: &'a [Material] = slice(v.materials, v.material_count);
+            let textures: &'a [Texture] = slice(v.textures, v.texture_count);
+            Scene {
+                camera: v.camera,
                 materials,
                 textures,
-            },
-            bounds_min: v.bounds_min,
-            bounds_max: v.bounds_max,
+                lights: Lights {
+                    emitters,
+                    punctual,
+                    environment: v.environment,
+                    power_cdf: slice(v.light_power_cdf, light_count),
+                    materials,
+                    textures,
+                },
+                bounds_min: v.bounds_min,
+                bounds_max: v.bounds_max,
+            }
         }
     }
 

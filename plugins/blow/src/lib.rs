@@ -14,6 +14,9 @@
 //! | `cap_degrees` | float | 10 | cap half-angle for `"narrow"` |
 //! | `p_reconnect` | float | 0.5 | probability of reconnecting at a smooth vertex |
 
+// A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
+#![forbid(unsafe_code)]
+
 use flowlight_mcmc::strategy::{cap_degrees, probability};
 use flowlight_mcmc::{Extension, Policy, Strategy, StrategyMutation};
 use flowlight_sdk::abi::ParamSpec;

@@ -13,6 +13,9 @@
 //! | `cap_degrees` | float | by width | cap half-angle, overrides `width` |
 //! | `p_stop` | float | 0.5 | probability of reconnecting at a smooth vertex of a non-caustic remainder |
 
+// A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
+#![forbid(unsafe_code)]
+
 use flowlight_mcmc::strategy::{cap_degrees, probability};
 use flowlight_mcmc::{Extension, Policy, Strategy, StrategyMutation};
 use flowlight_sdk::abi::ParamSpec;

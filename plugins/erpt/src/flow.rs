@@ -8,13 +8,13 @@
 //! domain miss deposits the whole quantum at y.
 
 use crate::settings::{ErptSettings, MixtureRatio};
-use crate::stats::{self, add_tally};
+use crate::stats::Counters;
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
 use flowlight_mcmc::measurement;
 use flowlight_mcmc::norms::Tally;
-use flowlight_sdk::{Film, MutationSet, Scene, Tracer};
+use flowlight_sdk::{Film, MutationSet, Scene, Stats, Tracer};
 
 /// Per-unit working state of the chains.
 pub struct Flow<'a> {
@@ -22,6 +22,7 @@ pub struct Flow<'a> {
     pub tracer: &'a Tracer<'a>,
     pub settings: &'a ErptSettings,
     pub mutations: &'a MutationSet<'a>,
+    pub counters: &'a Counters,
     pub total: Tally,
     pub per_strategy: Vec<Tally>,
     pub proposal: Box<Path>,
@@ -131,12 +132,14 @@ impl<'a> Flow<'a> {
         tracer: &'a Tracer<'a>,
         settings: &'a ErptSettings,
         mutations: &'a MutationSet<'a>,
+        counters: &'a Counters,
     ) -> Self {
         Flow {
             scene,
             tracer,
             settings,
             mutations,
+            counters,
             total: Tally::default(),
             per_strategy: vec![Tally::default(); mutations.len()],
             proposal: Box::new(Path::empty()),
@@ -161,12 +164,13 @@ impl<'a> Flow<'a> {
         quantum: f64,
         rng: &mut Rng,
         film: &mut Film,
-        stats: &mut [f64],
+        stats: &mut Stats,
     ) -> Result<(), String> {
-        stats[stats::SEEDS] += 1.0;
+        let c = self.counters;
+        stats.add(c.seeds, 1.0);
         let lum_seed = estimate.luminance() as f64;
         if !(estimate.is_valid_radiance() && lum_seed.is_finite()) {
-            stats[stats::SEEDS_SKIPPED] += 1.0;
+            stats.add(c.seeds_skipped, 1.0);
             return Ok(());
         }
         if lum_seed == 0.0 || quantum.is_nan() || quantum <= 0.0 {
@@ -177,7 +181,7 @@ impl<'a> Flow<'a> {
         if !(f_seed.is_valid_radiance() && lum_f_seed > 0.0 && lum_f_seed.is_finite()) {
             // The sampler found light the target function does not see (or an overflow): a
             // chain could not start here.
-            stats[stats::SEEDS_SKIPPED] += 1.0;
+            stats.add(c.seeds_skipped, 1.0);
             return Ok(());
         }
         let (chains, quantum, capped) = chain_count(
@@ -188,7 +192,7 @@ impl<'a> Flow<'a> {
             self.settings.max_chains_per_seed as f64,
         );
         if capped {
-            stats[stats::SEEDS_CAPPED] += 1.0;
+            stats.add(c.seeds_capped, 1.0);
         }
         let e = quantum as f32;
         let mut dep = Depositor {
@@ -199,14 +203,14 @@ impl<'a> Flow<'a> {
             deposits: 0,
         };
         for _ in 0..chains {
-            stats[stats::CHAINS] += 1.0;
+            stats.add(c.chains, 1.0);
             *self.state = *seed;
             let mut f_y = f_seed;
             dep.run = 0;
             dep.last_pixel = (i64::MIN, 0);
             for _ in 0..self.settings.chain_length {
                 let s = if self.mutations.len() > 1 {
-                    self.mutations.choose(rng.uniform())
+                    self.mutations.choose(rng.uniform() as f64)
                 } else {
                     0
                 };
@@ -230,7 +234,7 @@ impl<'a> Flow<'a> {
                 };
                 let a = acceptance(f_y, f_z, ratio).unwrap_or_else(|| {
                     // Never deposit at, or move to, an invalid state: a counted rejection.
-                    stats[stats::INVALID_PROPOSALS] += 1.0;
+                    stats.add(c.invalid_proposals, 1.0);
                     0.0
                 });
                 let (at_z, at_y) = expected_deposits(a, e, f_y, f_z);
@@ -249,15 +253,15 @@ impl<'a> Flow<'a> {
                 t.end_chain();
             }
         }
-        stats[stats::DEPOSITS] += dep.deposits as f64;
+        stats.add(c.deposits, dep.deposits as f64);
         Ok(())
     }
 
     /// Adds the norms gathered so far into the unit's counters.
-    pub fn report(&self, stats: &mut [f64]) {
-        add_tally(stats, 0, &self.total);
+    pub fn report(&self, stats: &mut Stats) {
+        self.counters.add_tally(stats, 0, &self.total);
         for (i, t) in self.per_strategy.iter().enumerate() {
-            add_tally(stats, i + 1, t);
+            self.counters.add_tally(stats, i + 1, t);
         }
     }
 }

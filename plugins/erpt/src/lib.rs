@@ -22,7 +22,7 @@
 //! Per work unit (a tile × a range of samples per pixel): the deposition quantum
 //! e_d = lum(Σ X_f) / (count · M) is estimated from the unit's seeds (or once for the image,
 //! `quantum = "image"`), with M the expected number of mutations per initial sample (§5.2);
-//! then every seed runs the corrected Equal Deposition Flow ([`flow`]). Chains random-walk on
+//! then every seed runs the corrected Equal Deposition Flow (`flow.rs`). Chains random-walk on
 //! the film in a `film_window`² window around their current position, so their deposits land
 //! around the seed's tile: units use flanged tiles (§5.9).
 //!
@@ -45,6 +45,9 @@
 //! acceptance, rejection, domain hit and miss, per strategy and in total), chains per seed and
 //! deposits per pixel are reported to the host, which prints them and writes them as JSON.
 
+// A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
+#![forbid(unsafe_code)]
+
 mod flow;
 mod settings;
 mod stats;
@@ -55,10 +58,9 @@ use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
 use flowlight_pathtrace::untangled;
 use flowlight_sdk::abi::ParamSpec;
-use flowlight_sdk::integrator::STAT_SLOTS;
 use flowlight_sdk::{
     export_integrator, AccumulationStyle, Film, Integrator, IntegratorInfo, MutationSet, Params,
-    Scene, Tracer, WorkUnit,
+    Scene, Stats, StatsBuilder, Tracer, WorkUnit, MAX_MUTATIONS,
 };
 use glam::Vec2;
 use settings::{ErptSettings, QuantumScope};
@@ -69,8 +71,8 @@ pub struct Erpt {
     settings: ErptSettings,
     /// e_d from the whole-image pre-pass (`quantum = "image"`).
     image_quantum: Option<f64>,
-    /// The counters' specs, which the host reads through `IntegratorInfo::stats`.
-    _stats: stats::StatTable,
+    /// Handles of the counters declared in `create`.
+    counters: stats::Counters,
 }
 
 /// Random streams of a seed: its path, and its chains.
@@ -140,14 +142,16 @@ impl Integrator for Erpt {
         params: &Params,
         mutations: MutationSet<'static>,
         scene: Scene<'static>,
+        stats: &mut StatsBuilder,
     ) -> Result<(Self, IntegratorInfo), String> {
         let settings = ErptSettings::from_params(params)?;
         if mutations.is_empty() {
             return Err("erpt needs at least one [[integrator.mutations]] entry".into());
         }
-        if mutations.len() > 8 {
+        // The host refuses longer lists; kept for hosts that do not.
+        if mutations.len() > MAX_MUTATIONS {
             return Err(format!(
-                "erpt takes at most 8 mutation strategies, got {}",
+                "erpt takes at most {MAX_MUTATIONS} mutation strategies, got {}",
                 mutations.len()
             ));
         }
@@ -162,9 +166,7 @@ impl Integrator for Erpt {
                 }
             })
             .collect();
-        let stat_table = stats::StatTable::new(&names);
-        let specs = stat_table.specs();
-        debug_assert!(stats::slot_count(names.len()) <= STAT_SLOTS && specs.len() <= STAT_SLOTS);
+        let counters = stats::Counters::declare(stats, &names);
         let layers = params.boolean("layers", false)?;
         let info = IntegratorInfo {
             layer_count: if layers {
@@ -177,8 +179,6 @@ impl Integrator for Erpt {
             // of their deposits in the unit's buffer (the host keeps the rest).
             accumulation: AccumulationStyle::FlangedTile,
             flange: 2 * settings.film_window,
-            stats: specs.as_ptr(),
-            stat_count: specs.len(),
             ..IntegratorInfo::simple()
         };
         Ok((
@@ -187,7 +187,7 @@ impl Integrator for Erpt {
                 mutations,
                 settings,
                 image_quantum: None,
-                _stats: stat_table,
+                counters,
             },
             info,
         ))
@@ -210,7 +210,7 @@ impl Integrator for Erpt {
         unit: &WorkUnit,
         tracer: &Tracer,
         film: &mut Film,
-        stats: &mut [f64],
+        stats: &mut Stats,
     ) -> Result<(), String> {
         let mut path = Box::new(Path::empty());
         let samples = unit.sample_begin..unit.sample_begin + unit.sample_count;
@@ -222,11 +222,14 @@ impl Integrator for Erpt {
             // random streams rather than stored.
             None => self.quantum(tracer, unit.seed, pixels(), samples.clone(), &mut path),
         };
-        stats[stats::QUANTUM_SUM] += quantum;
-        stats[stats::UNITS] += 1.0;
-        stats[stats::IMAGE_PIXELS] =
-            (self.scene.camera.width as f64) * (self.scene.camera.height as f64);
-        let mut flow = Flow::new(&self.scene, tracer, &self.settings, &self.mutations);
+        let c = &self.counters;
+        stats.add(c.quantum_sum, quantum);
+        stats.add(c.units, 1.0);
+        stats.add(
+            c.image_pixels,
+            (self.scene.camera.width as f64) * (self.scene.camera.height as f64),
+        );
+        let mut flow = Flow::new(&self.scene, tracer, &self.settings, &self.mutations, c);
         for (x, y) in pixels() {
             for s in samples.clone() {
                 let (mut rng, mut chain_rng) = seed_rngs(unit.seed, x, y, s);

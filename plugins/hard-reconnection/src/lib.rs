@@ -9,6 +9,9 @@
 //!
 //! No parameters.
 
+// A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
+#![forbid(unsafe_code)]
+
 use flowlight_mcmc::{Policy, Strategy, StrategyMutation};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::{export_mutation, Params};

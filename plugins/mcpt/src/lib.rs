@@ -25,13 +25,16 @@
 //! finite and non-negative is handed to the host as one invalid deposit, which the host counts
 //! and discards.
 
+// A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
+#![forbid(unsafe_code)]
+
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
 use flowlight_pathtrace::{entangled, untangled, PathSettings, SampleContributions, Variant};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::{
     export_integrator, param, Film, Integrator, IntegratorInfo, MutationSet, ParamKind, Params,
-    Scene, Tracer, WorkUnit,
+    Scene, Stats, StatsBuilder, Tracer, WorkUnit,
 };
 use glam::Vec2;
 
@@ -71,6 +74,7 @@ impl Integrator for Mcpt {
         params: &Params,
         _mutations: MutationSet<'static>,
         scene: Scene<'static>,
+        _stats: &mut StatsBuilder,
     ) -> Result<(Self, IntegratorInfo), String> {
         let settings = PathSettings::from_params(params)?;
         let layers = params.boolean("layers", false)?;
@@ -86,7 +90,7 @@ impl Integrator for Mcpt {
         unit: &WorkUnit,
         tracer: &Tracer,
         film: &mut Film,
-        _stats: &mut [f64],
+        _stats: &mut Stats,
     ) -> Result<(), String> {
         let mut contributions = SampleContributions::default();
         for y in unit.y0..unit.y1 {

@@ -17,6 +17,9 @@
 //! |---|---|---|---|
 //! | `cap_degrees` | float | 5 | cap half-angle α |
 
+// A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
+#![forbid(unsafe_code)]
+
 use flowlight_mcmc::strategy::cap_degrees;
 use flowlight_mcmc::{Extension, Policy, Strategy, StrategyMutation};
 use flowlight_sdk::abi::ParamSpec;

@@ -1,9 +1,13 @@
 //! Test fixture: declares ABI version `ABI_VERSION + 100`. The host must refuse to load it
 //! with an error that names this file and both versions, before calling anything in it.
 
+// A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
+#![deny(unsafe_code)]
+
 use flowlight_sdk::abi::{IntegratorTable, ParamSpec, PluginDeclaration, ABI_VERSION};
 use flowlight_sdk::{
-    Film, Integrator, IntegratorInfo, MutationSet, Params, PluginKind, Scene, Tracer, WorkUnit,
+    Film, Integrator, IntegratorInfo, MutationSet, Params, PluginKind, Scene, Stats, StatsBuilder,
+    Tracer, WorkUnit,
 };
 
 pub struct NeverCalled;
@@ -17,6 +21,7 @@ impl Integrator for NeverCalled {
         _: &Params,
         _mutations: MutationSet<'static>,
         _: Scene<'static>,
+        _stats: &mut StatsBuilder,
     ) -> Result<(Self, IntegratorInfo), String> {
         let info = IntegratorInfo::simple();
         Ok((NeverCalled, info))
@@ -27,7 +32,7 @@ impl Integrator for NeverCalled {
         _: &WorkUnit,
         _: &Tracer,
         _: &mut Film,
-        _stats: &mut [f64],
+        _stats: &mut Stats,
     ) -> Result<(), String> {
         panic!("a plugin with a mismatched ABI must never be called")
     }
@@ -47,7 +52,9 @@ static DECLARATION: PluginDeclaration = {
     d
 };
 
-/// The (deliberately wrong) declaration.
+/// The (deliberately wrong) declaration, written by hand instead of by the export macro
+/// (`#[no_mangle]` counts as unsafe code).
+#[allow(unsafe_code)]
 #[no_mangle]
 pub extern "C" fn flowlight_plugin_declaration() -> *const PluginDeclaration {
     &DECLARATION
