@@ -2,8 +2,8 @@
 
 use anyhow::{anyhow, Result};
 
-pub fn run(suite: &std::path::Path, ov: flowlight_host::bench::BenchOverrides) -> Result<()> {
-    use flowlight_host::bench;
+pub fn run(suite: &std::path::Path, ov: flowlight_bench::BenchOverrides) -> Result<()> {
+    use flowlight_bench as bench;
     let s = bench::load_suite(suite).map_err(|e| anyhow!(e))?;
     if let Some(b) = &ov.budgets {
         if b.is_empty() || b.iter().any(|t| !(*t > 0.0 && t.is_finite())) {

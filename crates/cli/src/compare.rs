@@ -8,7 +8,8 @@ pub fn run(
     out: Option<&std::path::Path>,
     eps: f64,
 ) -> Result<()> {
-    use flowlight_host::{bench, metrics};
+    use flowlight_bench as bench;
+    use flowlight_host::metrics;
     let ra = bench::read_reference(a).map_err(|e| anyhow!(e))?;
     let rb = bench::read_reference(b).map_err(|e| anyhow!(e))?;
     if (ra.width, ra.height) != (rb.width, rb.height) {

@@ -190,7 +190,7 @@ pub fn main() {
             rebuild_references,
         } => bench::run(
             &suite,
-            flowlight_host::bench::BenchOverrides {
+            flowlight_bench::BenchOverrides {
                 out,
                 budgets,
                 seeds,

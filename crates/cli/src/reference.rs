@@ -15,7 +15,7 @@ pub fn run(
     set: &[String],
     from: &[PathBuf],
 ) -> Result<()> {
-    use flowlight_host::bench::{self, Budget, RenderRequest};
+    use flowlight_bench::{self as bench, Budget, RenderRequest};
     let t0 = std::time::Instant::now();
     let (r, out) = if !from.is_empty() {
         let out = out.ok_or_else(|| anyhow!("--from needs --out"))?;

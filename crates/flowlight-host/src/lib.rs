@@ -5,7 +5,6 @@
 //! owns the accumulators ([`film`]), counts statistics, and writes images atomically
 //! ([`output`]).
 
-pub mod bench;
 pub mod film;
 pub mod intersector;
 pub mod metrics;
