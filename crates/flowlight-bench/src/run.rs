@@ -6,7 +6,7 @@ use crate::reference::{read_reference, render_reference, write_reference, Refere
 use crate::report::{summarise, write_tables, BenchReport};
 use crate::suite::{Suite, SuiteScene};
 use flowlight_core::Rgb;
-use flowlight_host::film::Frame;
+use flowlight_host::accumulation::Frame;
 use flowlight_host::metrics::{self, Errors};
 use flowlight_host::session::{Overrides, Session};
 use flowlight_scene::config::{load_config, RenderConfig};

@@ -28,7 +28,7 @@
 //! * Memory: [`frame_bytes`] estimates the frame, pass and output buffers; a render that
 //!   would need more than `MemAvailable` (`/proc/meminfo`) is refused before allocating.
 
-use crate::film::{Frame, TileAccumulator};
+use crate::accumulation::{Frame, TileAccumulator};
 use crate::intersector::{Intersector, UnitTracer};
 use crate::plugin::{IntegratorInstance, PluginError};
 use flowlight_scene::Scene;

@@ -1,7 +1,7 @@
 //! One render from a config file: load the scene, build the intersector, load and create the
 //! integrator plugin, render, write the outputs.
 
-use crate::film::Frame;
+use crate::accumulation::Frame;
 use crate::intersector::{build_intersector_with, Intersector};
 use crate::output::{write_exr, write_png_preview, ExrMetadata, ImageLayer};
 use crate::plugin::{

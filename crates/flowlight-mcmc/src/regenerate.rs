@@ -19,7 +19,7 @@
 //! cap is centred on the direction from x_j to y_{j+1}. The strategies differ only by their
 //! [`Policy`].
 
-use crate::film;
+use crate::migration;
 use crate::measure::{
     area_jacobian, dirac_component, dirac_scatter, local_directions, side_consistent, vertex_bsdf,
     WeakNode,
@@ -221,7 +221,7 @@ pub fn propose(
     }
     let n = xv.len() - 1;
     let (w, h) = film_size(scene);
-    let Some(raster) = film::migrate(x.raster, x.film_window, w, h, rng) else {
+    let Some(raster) = migration::migrate(x.raster, x.film_window, w, h, rng) else {
         return MISS;
     };
     y.raster = raster;
@@ -376,7 +376,7 @@ pub fn density(scene: &Scene, policy: &Policy, x: &Path, y: &Path) -> f64 {
     }
     let n = xv.len() - 1;
     let (w, h) = film_size(scene);
-    let mut d = film::density(x.raster, y.raster, x.film_window, w, h);
+    let mut d = migration::density(x.raster, y.raster, x.film_window, w, h);
     let mut extensions = 0u32;
     for j in 1..n {
         if d == 0.0 {
