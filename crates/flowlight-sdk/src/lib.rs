@@ -8,7 +8,7 @@
 //! panics become messages in a host-owned buffer.
 
 pub mod abi;
-pub mod film;
+pub mod deposit;
 mod guard;
 pub mod integrator;
 pub mod mutation;
@@ -20,7 +20,7 @@ pub use abi::{
     AccumulationStyle, Deposit, IntegratorInfo, PluginDeclaration, PluginKind, Proposal, StatMerge,
     StatSpec, WorkUnit,
 };
-pub use film::{Accumulator, Film};
+pub use deposit::{Accumulator, Film};
 pub use flowlight_core as core;
 pub use integrator::Integrator;
 pub use mutation::{Mutation, MutationSet};
