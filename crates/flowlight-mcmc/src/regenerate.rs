@@ -1,7 +1,7 @@
 //! The prefix-regeneration engine behind every unidirectional mutation (thesis §5.4–5.5).
 //!
 //! A proposal y is built from the current path x from the eye: the raster position migrates
-//! inside its film square, the eye ray gives y₁, and then, vertex by vertex,
+//! inside its film window, the eye ray gives y₁, and then, vertex by vertex,
 //!
 //! * a Dirac vertex is followed deterministically (its lobe must match x's);
 //! * at a smooth vertex y_j the path either **reconnects** hard to x_{j+1} — y keeps x's
@@ -194,7 +194,7 @@ fn matching_vertex(
     }
 }
 
-/// Image size the film squares are clipped to.
+/// Image size film-plane migration is clipped to.
 fn film_size(scene: &Scene) -> (u32, u32) {
     (scene.camera.width, scene.camera.height)
 }
