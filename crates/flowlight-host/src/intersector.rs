@@ -239,24 +239,15 @@ const EMPTY_HIT: flowlight_core::geometry::SurfaceHit = flowlight_core::geometry
     emitter: -1,
 };
 
-unsafe extern "C" fn intersect_cb(
-    ctx: *mut c_void,
-    rays: *const Ray,
-    hits: *mut HitRecord,
-    n: usize,
-) {
+unsafe extern "C" fn intersect_cb(ctx: *mut c_void, ray: *const Ray, hit: *mut HitRecord) {
     let tracer = &mut *(ctx as *mut UnitTracer);
-    for i in 0..n {
-        *hits.add(i) = tracer.intersect(&*rays.add(i));
-    }
+    hit.write(tracer.intersect(&*ray));
 }
 
-unsafe extern "C" fn occluded_cb(ctx: *mut c_void, rays: *const Ray, blocked: *mut u8, n: usize) {
+unsafe extern "C" fn occluded_cb(ctx: *mut c_void, ray: *const Ray) -> u8 {
     let tracer = &mut *(ctx as *mut UnitTracer);
-    tracer.counts.shadow += n as u64;
-    for i in 0..n {
-        *blocked.add(i) = tracer.blocked(&*rays.add(i)) as u8;
-    }
+    tracer.counts.shadow += 1;
+    tracer.blocked(&*ray) as u8
 }
 
 #[cfg(test)]

@@ -106,8 +106,7 @@ pub struct RenderOutcome {
 /// Threads per core beyond which `threads` is clamped.
 pub const MAX_THREADS_PER_CORE: usize = 4;
 
-/// Side of the tiles of a flanged integrator under a time budget (before rounding up to its
-/// `tile_multiple`).
+/// Side of the tiles of a flanged integrator under a time budget.
 pub const FLANGED_TIME_TILE: u32 = 8;
 
 /// The pool size for `requested` threads (0: one per core), clamped to
@@ -211,13 +210,10 @@ pub fn render(
     let frame = Mutex::new(Frame::new(width, height, layer_count));
     // Flanged units deposit into a pass buffer that joins the frame when the pass is whole.
     let pass_frame = (!tiled).then(|| Mutex::new(Frame::new(width, height, layer_count)));
-    // Integrators whose deposits stay in fixed K×K squares ask for tiles aligned to K.
-    let multiple = instance.info.tile_multiple.max(1);
     let mut tile_size = opts.tile_size.max(1);
     if opts.time.is_some() && instance.info.accumulation == AccumulationStyle::FlangedTile {
         tile_size = tile_size.min(FLANGED_TIME_TILE);
     }
-    let tile_size = tile_size.div_ceil(multiple) * multiple;
     let tiles = tiles(width, height, tile_size);
     let start = Instant::now();
     let specs = instance.stat_specs();
@@ -295,7 +291,6 @@ pub fn render(
             let flange = match instance.info.accumulation {
                 AccumulationStyle::Tile => 0,
                 AccumulationStyle::FlangedTile => instance.info.flange,
-                AccumulationStyle::FullFrame => width.max(height),
             };
             let mut tile = TileAccumulator::new(x0, y0, x1, y1, flange, width, height, layer_count);
             let mut tracer = UnitTracer::new(scene, intersector);
