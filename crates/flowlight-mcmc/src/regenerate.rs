@@ -19,11 +19,11 @@
 //! cap is centred on the direction from x_j to y_{j+1}. The strategies differ only by their
 //! [`Policy`].
 
-use crate::migration;
 use crate::measure::{
     area_jacobian, dirac_component, dirac_scatter, local_directions, side_consistent, vertex_bsdf,
     WeakNode,
 };
+use crate::migration;
 use flowlight_core::bsdf::Bsdf;
 use flowlight_core::geometry::{Frame, SurfaceHit};
 use flowlight_core::path::{NodeType, Path, PathVertex};
