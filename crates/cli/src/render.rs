@@ -123,10 +123,13 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool) -> Result<()> 
     if s.interrupted {
         println!("  interrupted     yes: the image holds the samples finished before the stop");
     }
-    if s.discarded_samples > 0 {
+    if let Some(p) = s.partial_pass {
         println!(
-            "  dropped         {} samples of a pass cut short (a partial pass would bias the image)",
-            s.discarded_samples
+            "  partial pass    {} of {} tiles (random order): normalised by {} + {:.4} passes",
+            p.finished,
+            p.tiles,
+            s.full_passes,
+            p.fraction()
         );
     }
     for p in &written {
