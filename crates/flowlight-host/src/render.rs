@@ -596,7 +596,8 @@ mod tests {
             hist[below(&mut rng, 3) as usize] += 1;
         }
         assert!(
-            hist.iter().all(|&h| (h as f64 - 10_000.0).abs() < 5.0 * 81.7),
+            hist.iter()
+                .all(|&h| (h as f64 - 10_000.0).abs() < 5.0 * 81.7),
             "{hist:?}"
         );
     }
