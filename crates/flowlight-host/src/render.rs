@@ -142,7 +142,7 @@ pub struct RenderOutcome {
 pub const MAX_THREADS_PER_CORE: usize = 4;
 
 /// Side of the tiles of a flanged integrator under a time budget.
-pub const FLANGED_TIME_TILE: u32 = 8;
+pub const FLANGED_TIME_TILE: u32 = 4;
 
 /// The pool size for `requested` threads (0: one per core), clamped to
 /// [`MAX_THREADS_PER_CORE`] × the cores with a warning.
