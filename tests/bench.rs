@@ -180,7 +180,7 @@ fn reference_and_compare() {
 
     // Furnace: every pixel is 2 (up to the depth-16 tail); the variance of a 32-spp mean is
     // small but not zero.
-    let r = flowlight_host::bench::read_reference(&reference).unwrap();
+    let r = flowlight_bench::read_reference(&reference).unwrap();
     let v = r.variance.as_ref().unwrap();
     let mean_var = v.iter().map(|c| c.g as f64).sum::<f64>() / v.len() as f64;
     assert!(mean_var > 0.0 && mean_var < 0.05, "{mean_var}");
@@ -264,7 +264,7 @@ fn reference_and_compare() {
         "--out",
         ab.to_str().unwrap(),
     ]);
-    let r = flowlight_host::bench::read_reference(&ab).unwrap();
+    let r = flowlight_bench::read_reference(&ab).unwrap();
     assert_eq!(r.spp, 8.0);
     assert!(r.variance.is_some());
 }

@@ -631,3 +631,141 @@ fn erpt_agrees_with_mcpt_on_a_varnished_floor_under_sun_and_sky() {
     ]);
     check_unbiased_window(&cfg, "varnish under sun and sky", mix, &reference, 32);
 }
+
+/// A 64×64 ERPT Cornell box in 8×8 tiles (64 units a pass), one sample per pixel, with
+/// short chains (8 mutations per sample, chains of 8) to keep it quick.
+fn small_erpt(seed: u64) -> flowlight_host::session::Session {
+    let mut cfg =
+        flowlight_scene::config::load_config(&common::scene_config("cornell-box/erpt.toml"))
+            .unwrap();
+    cfg.width = 64;
+    cfg.height = 64;
+    cfg.tile_size = 8;
+    let ov = flowlight_host::session::Overrides {
+        spp: Some(1),
+        threads: Some(2),
+        seed: Some(seed),
+        params: common::toml_params(&[
+            ("mutations_per_sample", 8.into()),
+            ("chain_length", 8.into()),
+        ]),
+        ..Default::default()
+    };
+    let mut s = flowlight_host::session::Session::from_config(cfg, &ov).unwrap();
+    s.exr_path = None;
+    s.png_path = None;
+    s
+}
+
+/// Mean luminance of rows 16..64 of a 64-pixel-wide image: the walls, floor and boxes
+/// below the lamp, whose tiles differ far less in brightness than the lamp's (the
+/// estimator is unbiased per pixel, so any fixed set of pixels may be compared).
+fn mean_luminance_below_lamp(img: &[Rgb]) -> f64 {
+    let rows = &img[16 * 64..];
+    rows.iter().map(|c| c.luminance() as f64).sum::<f64>() / rows.len() as f64
+}
+
+/// A pass cut after m of its n tiles keeps a uniformly random subset of them and is
+/// normalised by m/n of a pass (render.rs): over several seeds, the cut images' mean
+/// brightness matches the full passes'. Normalised by each pixel's own samples instead
+/// (unfinished tiles black, flange deposits of finished tiles into them lost) it would be
+/// about m/n = 1/2 of it; a scan-order cut would be the top half of the box (lamp included).
+/// The cut is made by the stop flag after 32 finished units, the same path a deadline takes.
+#[test]
+fn erpt_pass_cut_inside_the_first_pass_keeps_the_mean_brightness() {
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+    let seeds = 1..=12u64;
+    let mut diffs = Vec::new();
+    let mut full_means = Vec::new();
+    for seed in seeds {
+        let s = small_erpt(seed);
+        let full = render(&s);
+        assert!(full.stats.partial_pass.is_none());
+        assert_eq!(full.stats.full_passes, 1);
+        let stop = AtomicBool::new(false);
+        let finished = AtomicUsize::new(0);
+        let cut = s
+            .render(&stop, &|_| {
+                if finished.fetch_add(1, Ordering::SeqCst) + 1 >= 32 {
+                    stop.store(true, Ordering::SeqCst);
+                }
+            })
+            .unwrap();
+        assert!(cut.error.is_none());
+        let p = cut.stats.partial_pass.expect("the pass was cut");
+        assert_eq!(cut.stats.full_passes, 0);
+        assert_eq!(p.tiles, 64);
+        // The units in flight when the flag is set (one per other thread) still finish.
+        assert!((32..=33).contains(&p.finished), "{p:?}");
+        assert_eq!(cut.stats.units, p.finished as u64);
+        let (mf, mc) = (
+            mean_luminance_below_lamp(&full.frame.image()),
+            mean_luminance_below_lamp(&cut.frame.image()),
+        );
+        full_means.push(mf);
+        diffs.push(mc - mf);
+    }
+    let n = diffs.len() as f64;
+    let mean_full = full_means.iter().sum::<f64>() / n;
+    let d = diffs.iter().sum::<f64>() / n;
+    let sd = (diffs.iter().map(|x| (x - d).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    eprintln!(
+        "full-pass mean {mean_full:.5}; cut minus full {d:+.5} ± {:.5} (sd {sd:.5})",
+        sd / n.sqrt()
+    );
+    // The seeds are independent: the mean difference is within 4 standard errors of 0 (and,
+    // as a sanity bound on that error, within 15 % of the mean).
+    assert!(
+        d.abs() < 4.0 * sd / n.sqrt() && d.abs() < 0.15 * mean_full,
+        "cut passes average {d:+.5} (± {:.5}) away from the full passes' mean {mean_full:.5} (per-seed differences {diffs:?})",
+        sd / n.sqrt()
+    );
+}
+
+/// Under a time budget no work unit starts after the deadline (the stop rule, read from the
+/// render's own report rather than a clock), the cut pass joins the image with its fraction,
+/// and the EXR says so without calling the image biased.
+#[test]
+fn erpt_time_budget_starts_no_unit_after_the_deadline_and_marks_the_fraction() {
+    let mut s = small_erpt(3);
+    let budget = std::time::Duration::from_millis(300);
+    s.options.time = Some(budget);
+    let dir = common::scratch("erpt-time-budget");
+    let exr = dir.join("t.exr");
+    s.exr_path = Some(exr.clone());
+    let out = render(&s);
+    let st = &out.stats;
+    let last = st.last_unit_start.expect("some unit started");
+    assert!(
+        last <= budget,
+        "a unit started at {last:?}, after the {budget:?} budget"
+    );
+    assert!(!st.interrupted);
+    // Under a time budget flanged units are FLANGED_TIME_TILE² pixels.
+    let side = flowlight_host::render::FLANGED_TIME_TILE.min(8) as u64;
+    let tiles = (64 / side) * (64 / side);
+    let cut = st.partial_pass.map_or(0, |p| {
+        assert_eq!(p.tiles as u64, tiles);
+        assert!(p.finished < p.tiles);
+        p.finished as u64
+    });
+    // Every started unit finished and belongs to a whole pass or the cut one.
+    assert_eq!(st.units, st.full_passes as u64 * tiles + cut);
+    assert_eq!(
+        st.pixel_samples,
+        st.full_passes as u64 * 64 * 64 + cut * side * side
+    );
+    s.write_outputs(&out.frame, st).unwrap();
+    let meta = flowlight_host::output::read_exr_metadata(&exr).unwrap();
+    let get = |k: &str| {
+        meta.entries
+            .iter()
+            .find(|(key, _)| key == k)
+            .map(|(_, v)| v.clone())
+            .unwrap()
+    };
+    let fraction: f64 = get("flowlight.partial_pass").parse().unwrap();
+    assert_eq!(fraction, cut as f64 / tiles as f64);
+    assert_eq!(get("flowlight.biased"), "false");
+    assert_eq!(get("flowlight.interrupted"), "false");
+}

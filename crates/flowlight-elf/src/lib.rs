@@ -429,7 +429,7 @@ mod tests {
         assert!(e.0.contains("section header table"), "{e}");
     }
 
-    /// Mutation fuzzing in CI (the `fuzz/` target does the same with libFuzzer): flipped
+    /// Mutation fuzzing in CI (the `fuzz/` target beside this crate does the same with libFuzzer): flipped
     /// bytes, overwritten words and truncations of a valid file never panic, and whatever is
     /// accepted has its loadable segments inside the file.
     #[test]

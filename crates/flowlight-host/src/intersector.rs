@@ -409,31 +409,21 @@ const EMPTY_HIT: flowlight_core::geometry::SurfaceHit = flowlight_core::geometry
     emitter: -1,
 };
 
-unsafe extern "C" fn intersect_cb(
-    ctx: *mut c_void,
-    rays: *const Ray,
-    hits: *mut HitRecord,
-    n: usize,
-) {
-    // SAFETY: `ctx` is the UnitTracer whose table this is, and the SDK passes `n` valid rays
-    // and `n` writable results for the call (`TracerTable`).
+unsafe extern "C" fn intersect_cb(ctx: *mut c_void, ray: *const Ray, hit: *mut HitRecord) {
+    // SAFETY: `ctx` is the UnitTracer whose table this is, and the SDK passes one valid ray
+    // and one writable result per call (`TracerTable`).
     unsafe {
         let tracer = &mut *(ctx as *mut UnitTracer);
-        for i in 0..n {
-            *hits.add(i) = tracer.intersect(&*rays.add(i));
-        }
+        hit.write(tracer.intersect(&*ray));
     }
 }
 
-unsafe extern "C" fn occluded_cb(ctx: *mut c_void, rays: *const Ray, blocked: *mut u8, n: usize) {
-    // SAFETY: `ctx` is the UnitTracer whose table this is, and the SDK passes `n` valid rays
-    // and `n` writable results for the call (`TracerTable`).
+unsafe extern "C" fn occluded_cb(ctx: *mut c_void, ray: *const Ray) -> u8 {
+    // SAFETY: as for `intersect_cb`.
     unsafe {
         let tracer = &mut *(ctx as *mut UnitTracer);
-        tracer.counts.shadow += n as u64;
-        for i in 0..n {
-            *blocked.add(i) = tracer.blocked(&*rays.add(i)) as u8;
-        }
+        tracer.counts.shadow += 1;
+        tracer.blocked(&*ray) as u8
     }
 }
 

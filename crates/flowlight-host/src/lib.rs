@@ -2,11 +2,10 @@
 //!
 //! The host loads plugins ([`plugin`]), owns the one rayon thread pool and schedules work
 //! units on it ([`render`](mod@render)), answers ray queries through an intersector ([`intersector`]),
-//! owns the accumulators ([`film`]), counts statistics, and writes images atomically
+//! owns the accumulators ([`accumulation`]), counts statistics, and writes images atomically
 //! ([`output`]).
 
-pub mod bench;
-pub mod film;
+pub mod accumulation;
 pub mod intersector;
 pub mod metrics;
 pub mod output;

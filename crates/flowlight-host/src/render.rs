@@ -11,15 +11,32 @@
 //! * tile-local integrators (MCPT): every pixel's value is the mean of its own finished
 //!   samples, sum / nᵢ, so stopping between any two units leaves every pixel unbiased;
 //! * flanged integrators (ERPT), whose chains deposit into neighbouring tiles: a pixel's
-//!   value is only unbiased when every tile around it has run the same passes. Units of a
-//!   pass therefore accumulate into a pass buffer that joins the image only when the whole
-//!   pass has finished; a pass cut short by the budget (or Ctrl-C) is dropped, wasting at
-//!   most one pass. Only when no pass at all has finished is the partial pass kept, so that
-//!   the image is not empty; it is then marked `flowlight.partial_pass = true` and
-//!   `flowlight.biased = true` (pixels near unfinished tiles lack their neighbours'
-//!   deposits, and unfinished tiles are black). Under a time budget such integrators run
-//!   units of at most [`FLANGED_TIME_TILE`]² pixels, so the units in flight at the deadline
-//!   are short.
+//!   own sample count says nothing about how much energy its neighbours' chains brought it,
+//!   so the image is normalised by a **uniform** number of passes instead. Each pass visits
+//!   its n tiles in a uniformly random order (Fisher–Yates, seeded by the render seed and the
+//!   pass index: [`tile_order`]); the workers take tiles from that order one at a time, so
+//!   when the budget (or Ctrl-C) stops the pass after m units have started, the finished
+//!   tiles are the first m of a random permutation: a uniformly random m-subset. Every tile,
+//!   hence every deposit a pixel would have received in a full pass, is then present with
+//!   probability m/n, and for a pixel p with full-pass deposit sum D_p
+//!
+//!   E[partial-pass deposits at p | m] = (m/n)·E[D_p],
+//!
+//!   so after P whole passes of s samples each and a cut one, the image
+//!
+//!   I_p = (Σ whole-pass deposits + partial-pass deposits) / (s·(P + m/n))
+//!
+//!   has E[I_p | m] = E[D_p]/s: unbiased, with no pass dropped and no black tiles. The
+//!   residual: m is not independent of the order, because it depends on how long the first
+//!   tiles took (a permutation that puts the costly tiles first finishes fewer of them before
+//!   the deadline), a second-order correlation between which tiles and how many; with a
+//!   stop after a fixed number of units it vanishes. The cut pass is also noisier than a
+//!   whole one (fewer samples, and each kept tile weighs n/m), which only matters when it is
+//!   the first. The EXR says `flowlight.partial_pass = m/n` as a decimal (`0` when no pass
+//!   was cut) and `flowlight.biased` only for the integrator's own bias. A tile-local
+//!   integrator keeps scan order (its cut needs no correction). Under a time budget flanged
+//!   integrators run units of at most [`FLANGED_TIME_TILE`]² pixels, so the units in flight
+//!   at the deadline are short and a cut pass keeps many tiles.
 //!
 //! # Limits
 //!
@@ -28,13 +45,13 @@
 //! * Memory: [`frame_bytes`] estimates the frame, pass and output buffers; a render that
 //!   would need more than `MemAvailable` (`/proc/meminfo`) is refused before allocating.
 
-use crate::film::{Frame, TileAccumulator};
+use crate::accumulation::{Frame, TileAccumulator};
 use crate::intersector::{Intersector, UnitTracer};
 use crate::plugin::{IntegratorInstance, PluginError};
 use flowlight_scene::Scene;
 use flowlight_sdk::{AccumulationStyle, Accumulator, WorkUnit};
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
@@ -68,14 +85,32 @@ pub struct RenderStats {
     pub units: u64,
     /// True when the render stopped before its budget (Ctrl-C or a plugin error).
     pub interrupted: bool,
-    /// True when a flanged integrator's image holds a pass that did not finish (no pass
-    /// had finished when the render stopped): pixels near unfinished tiles are biased.
-    pub partial_pass: bool,
-    /// Samples of a pass cut short and dropped (flanged integrators), not in `pixel_samples`.
-    pub discarded_samples: u64,
+    /// Passes every tile finished.
+    pub full_passes: u32,
+    /// A flanged integrator's pass that the budget or Ctrl-C cut: kept, and the image
+    /// normalised by `full_passes + finished/tiles` passes (module documentation).
+    pub partial_pass: Option<PartialPass>,
+    /// When the last work unit started, measured from the start of the render (the clock
+    /// the budget runs on): never after the budget.
+    pub last_unit_start: Option<Duration>,
     /// The integrator's own counters (declared on its `StatsBuilder`), merged over units,
     /// ratios resolved, in declaration order.
     pub integrator: Vec<(String, f64)>,
+}
+
+/// The finished part of a cut pass: the first `finished` of its `tiles` tiles in their
+/// random order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PartialPass {
+    pub finished: u32,
+    pub tiles: u32,
+}
+
+impl PartialPass {
+    /// m/n: the probability with which each tile's deposits are in the image.
+    pub fn fraction(&self) -> f64 {
+        self.finished as f64 / self.tiles.max(1) as f64
+    }
 }
 
 impl RenderStats {
@@ -105,9 +140,8 @@ pub struct RenderOutcome {
 /// Threads per core beyond which `threads` is clamped.
 pub const MAX_THREADS_PER_CORE: usize = 4;
 
-/// Side of the tiles of a flanged integrator under a time budget (before rounding up to its
-/// `tile_multiple`).
-pub const FLANGED_TIME_TILE: u32 = 8;
+/// Side of the tiles of a flanged integrator under a time budget.
+pub const FLANGED_TIME_TILE: u32 = 4;
 
 /// The pool size for `requested` threads (0: one per core), clamped to
 /// [`MAX_THREADS_PER_CORE`] × the cores with a warning.
@@ -177,6 +211,32 @@ pub fn check_frame_memory(width: u32, height: u32, layers: u32) -> Result<(), St
     Ok(())
 }
 
+/// Uniform integer in [0, `bound`) (Lemire's multiply-shift with rejection: exact).
+fn below(rng: &mut flowlight_core::rng::Rng, bound: u32) -> u32 {
+    let threshold = bound.wrapping_neg() % bound;
+    loop {
+        let m = rng.next_u32() as u64 * bound as u64;
+        if (m as u32) >= threshold {
+            return (m >> 32) as u32;
+        }
+    }
+}
+
+/// The order in which pass `pass` of a render seeded `seed` visits its `n` tiles: a
+/// uniformly random permutation (Fisher–Yates), the same for the same seed and pass.
+pub fn tile_order(n: usize, seed: u64, pass: u32) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..n).collect();
+    let mut rng = flowlight_core::rng::Rng::new(
+        flowlight_core::rng::Rng::hash(&[seed, pass as u64, 0x7469_6c65]),
+        0x6f72_6465,
+    );
+    for i in (1..n).rev() {
+        let j = below(&mut rng, i as u32 + 1) as usize;
+        order.swap(i, j);
+    }
+    order
+}
+
 fn tiles(width: u32, height: u32, size: u32) -> Vec<(u32, u32, u32, u32)> {
     let size = size.max(1);
     let mut out = Vec::new();
@@ -210,13 +270,10 @@ pub fn render(
     let frame = Mutex::new(Frame::new(width, height, layer_count));
     // Flanged units deposit into a pass buffer that joins the frame when the pass is whole.
     let pass_frame = (!tiled).then(|| Mutex::new(Frame::new(width, height, layer_count)));
-    // Integrators whose deposits stay in fixed K×K squares ask for tiles aligned to K.
-    let multiple = instance.info.tile_multiple.max(1);
     let mut tile_size = opts.tile_size.max(1);
     if opts.time.is_some() && instance.info.accumulation == AccumulationStyle::FlangedTile {
         tile_size = tile_size.min(FLANGED_TIME_TILE);
     }
-    let tile_size = tile_size.div_ceil(multiple) * multiple;
     let tiles = tiles(width, height, tile_size);
     let start = Instant::now();
     let specs = instance.stat_specs();
@@ -253,12 +310,16 @@ pub fn render(
     let error: Mutex<Option<PluginError>> = Mutex::new(None);
     let halted = AtomicBool::new(false);
     let out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
+    // Nanoseconds after `start` at which the last unit started (+1, so 0 means none did).
+    let last_start = AtomicU64::new(0);
 
     let mut sample_begin = 0u32;
     let mut pass_spp = 1u32;
     let mut passes_done = 0u32;
-    let mut partial_pass = false;
-    let mut discarded = 0u64;
+    let mut partial_pass = None;
+    // Samples per pixel the flanged image is normalised by: s per whole pass, s·m/n for a
+    // cut one.
+    let mut uniform_spp = 0.0f64;
     pool.install(|| loop {
         let remaining = if opts.time.is_some() {
             u32::MAX
@@ -275,13 +336,33 @@ pub fn render(
         let count = pass_spp.min(remaining);
         let skipped = AtomicBool::new(false);
         let pass_done = AtomicU64::new(0);
-        tiles.par_iter().for_each(|&(x0, y0, x1, y1)| {
-            // The budget and Ctrl-C stop every integrator between units; a flanged pass cut
-            // short is dropped below (see the module documentation).
-            if stop.load(Ordering::Relaxed) || halted.load(Ordering::Relaxed) || out_of_time() {
+        let pass_units = AtomicU64::new(0);
+        // Flanged passes take their tiles in a random order, so that a cut keeps a uniformly
+        // random subset (module documentation); tile-local ones in scan order.
+        let order = if tiled {
+            (0..tiles.len()).collect()
+        } else {
+            tile_order(tiles.len(), opts.seed, passes_done)
+        };
+        let next = AtomicUsize::new(0);
+        (0..tiles.len()).into_par_iter().for_each(|_| {
+            // The budget and Ctrl-C stop every integrator between units: no unit starts after
+            // the deadline; the units in flight finish.
+            let now = Instant::now();
+            if stop.load(Ordering::Relaxed)
+                || halted.load(Ordering::Relaxed)
+                || deadline.is_some_and(|d| now >= d)
+            {
                 skipped.store(true, Ordering::Relaxed);
                 return;
             }
+            // One fetch per closure call and as many calls as tiles: always in range. The
+            // units that start are the first ones of `order`.
+            let (x0, y0, x1, y1) = tiles[order[next.fetch_add(1, Ordering::Relaxed)]];
+            last_start.fetch_max(
+                (now - start).as_nanos().min(u64::MAX as u128 - 1) as u64 + 1,
+                Ordering::Relaxed,
+            );
             let unit = WorkUnit {
                 x0,
                 y0,
@@ -294,7 +375,6 @@ pub fn render(
             let flange = match instance.info.accumulation {
                 AccumulationStyle::Tile => 0,
                 AccumulationStyle::FlangedTile => instance.info.flange,
-                AccumulationStyle::FullFrame => width.max(height),
             };
             let mut tile = TileAccumulator::new(x0, y0, x1, y1, flange, width, height, layer_count);
             let mut tracer = UnitTracer::new(scene, intersector);
@@ -318,6 +398,7 @@ pub fn render(
                 flowlight_sdk::stats::merge(specs, &mut merged_stats.lock().unwrap(), &unit_stats);
             }
             units.fetch_add(1, Ordering::Relaxed);
+            pass_units.fetch_add(1, Ordering::Relaxed);
             let pixels = (x1 - x0) as u64 * (y1 - y0) as u64;
             let d = pixels * count as u64;
             let p = pass_done.fetch_add(d, Ordering::Relaxed) + d;
@@ -331,18 +412,22 @@ pub fn render(
         let pass_samples = pass_done.load(Ordering::Relaxed);
         let whole = !skipped.load(Ordering::Relaxed);
         if let Some(p) = &pass_frame {
+            // Whole or cut, the pass joins the image; a cut one with weight m/n.
             let mut p = p.lock().unwrap();
-            if whole || (passes_done == 0 && error.lock().unwrap().is_none()) {
-                frame.lock().unwrap().add_frame(&p);
-                done.fetch_add(pass_samples, Ordering::Relaxed);
-                partial_pass = !whole;
-            } else {
-                discarded += pass_samples;
-            }
+            frame.lock().unwrap().add_frame(&p);
             p.clear();
-        } else {
-            done.fetch_add(pass_samples, Ordering::Relaxed);
+            if whole {
+                uniform_spp += count as f64;
+            } else {
+                let cut = PartialPass {
+                    finished: pass_units.load(Ordering::Relaxed) as u32,
+                    tiles: tiles.len() as u32,
+                };
+                uniform_spp += count as f64 * cut.fraction();
+                partial_pass = Some(cut);
+            }
         }
+        done.fetch_add(pass_samples, Ordering::Relaxed);
         if whole {
             passes_done += 1;
         }
@@ -359,14 +444,18 @@ pub fn render(
     let error = error.into_inner().unwrap();
     let pixel_samples = done.load(Ordering::Relaxed);
     let interrupted = error.is_some()
-        || partial_pass
         || (opts.time.is_none() && pixel_samples < planned)
         || (opts.time.is_some() && stop.load(Ordering::Relaxed));
-    if partial_pass {
+    let mut frame = frame.into_inner().unwrap();
+    if !tiled {
+        frame.set_uniform_spp(uniform_spp);
+    }
+    if pixel_samples == 0 && error.is_none() && !stop.load(Ordering::Relaxed) {
         tracing::warn!(
-            "the render stopped inside its first pass: unfinished tiles are black and pixels near them are biased (marked in the EXR); give it more time"
+            "no work unit started inside the time budget (the integrator's preparation used it up): the image is black; give it more time"
         );
     }
+    let last_start = last_start.load(Ordering::Relaxed);
     let stats = RenderStats {
         wall: start.elapsed(),
         threads,
@@ -377,15 +466,16 @@ pub fn render(
         stray_deposits: stray.load(Ordering::Relaxed),
         units: units.load(Ordering::Relaxed),
         interrupted,
+        full_passes: passes_done,
         partial_pass,
-        discarded_samples: discarded,
+        last_unit_start: (last_start > 0).then(|| Duration::from_nanos(last_start - 1)),
         // SAFETY: the specs' names are the instance's, which outlives this call.
         integrator: unsafe {
             flowlight_sdk::stats::resolve(specs, &merged_stats.into_inner().unwrap())
         },
     };
     Ok(RenderOutcome {
-        frame: frame.into_inner().unwrap(),
+        frame,
         stats,
         error,
     })
@@ -421,6 +511,45 @@ mod tests {
         assert_eq!(effective_threads(4 * cores), 4 * cores);
         assert_eq!(effective_threads(4 * cores + 1), 4 * cores);
         assert_eq!(effective_threads(usize::MAX), 4 * cores);
+    }
+
+    #[test]
+    fn tile_orders_are_uniform_permutations_fixed_by_seed_and_pass() {
+        let n = 4;
+        assert_eq!(tile_order(n, 1, 0), tile_order(n, 1, 0));
+        assert_ne!(tile_order(64, 1, 0), tile_order(64, 1, 1));
+        assert_ne!(tile_order(64, 1, 0), tile_order(64, 2, 0));
+        // Each tile is in each position with probability 1/n, so a cut after m tiles keeps
+        // each tile with probability m/n: count over many passes.
+        let trials = 24_000u32;
+        let mut at = [[0u32; 4]; 4];
+        for pass in 0..trials {
+            let o = tile_order(n, 7, pass);
+            let mut sorted = o.clone();
+            sorted.sort();
+            assert_eq!(sorted, (0..n).collect::<Vec<_>>());
+            for (pos, &t) in o.iter().enumerate() {
+                at[t][pos] += 1;
+            }
+        }
+        let expected = trials as f64 / n as f64;
+        // Binomial standard deviation sqrt(N p (1 − p)) = 67; allow 5 of them.
+        for row in at {
+            for c in row {
+                assert!((c as f64 - expected).abs() < 5.0 * 67.1, "{at:?}");
+            }
+        }
+        // Lemire's bounded draw is uniform even for a bound that does not divide 2³².
+        let mut rng = flowlight_core::rng::Rng::new(3, 3);
+        let mut hist = [0u32; 3];
+        for _ in 0..30_000 {
+            hist[below(&mut rng, 3) as usize] += 1;
+        }
+        assert!(
+            hist.iter()
+                .all(|&h| (h as f64 - 10_000.0).abs() < 5.0 * 81.7),
+            "{hist:?}"
+        );
     }
 
     #[test]

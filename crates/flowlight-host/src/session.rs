@@ -1,7 +1,7 @@
 //! One render from a config file: load the scene, build the intersector, load and create the
 //! integrator plugin, render, write the outputs.
 
-use crate::film::Frame;
+use crate::accumulation::Frame;
 use crate::intersector::{build_intersector_with, Intersector};
 use crate::output::{write_exr, write_png_preview, ExrMetadata, ImageLayer};
 use crate::plugin::{
@@ -387,7 +387,7 @@ impl Session {
                 ),
                 (
                     "flowlight.biased".into(),
-                    (self.instance.info.biased != 0 || stats.partial_pass).to_string(),
+                    (self.instance.info.biased != 0).to_string(),
                 ),
                 (
                     "flowlight.interrupted".into(),
@@ -395,7 +395,9 @@ impl Session {
                 ),
                 (
                     "flowlight.partial_pass".into(),
-                    stats.partial_pass.to_string(),
+                    stats
+                        .partial_pass
+                        .map_or("0".to_string(), |p| p.fraction().to_string()),
                 ),
             ],
         }
@@ -513,6 +515,11 @@ pub fn stats_json(integrator: &str, s: &crate::RenderStats) -> String {
     );
     out += &format!("  \"invalid_deposits\": {},\n", s.invalid_deposits);
     out += &format!("  \"interrupted\": {},\n", s.interrupted);
+    out += &format!("  \"full_passes\": {},\n", s.full_passes);
+    out += &format!(
+        "  \"partial_pass\": {},\n",
+        s.partial_pass.map_or(0.0, |p| p.fraction())
+    );
     out += "  \"counters\": {";
     for (i, (k, v)) in s.integrator.iter().enumerate() {
         let key: String = k

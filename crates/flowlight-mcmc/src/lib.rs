@@ -2,14 +2,15 @@
 //! plugin so that the target function and the transition densities agree exactly.
 //!
 //! * [`measure`]: the target function f(x) of a stored path and its weak type;
-//! * [`film`]: film-plane migration inside fixed K×K squares;
+//! * [`migration`]: film-plane migration, a symmetric random walk in a K×K window that travels
+//!   with the chain;
 //! * [`regenerate`]: the engine all unidirectional mutations of thesis §5.4–5.5 are made of —
 //!   regenerate the eye end of the path and reconnect to the original — with its transition
 //!   density;
 //! * [`norms`]: the acceptance/rejection/hit/miss strength and streak norms of §5.5.
 
-pub mod film;
 pub mod measure;
+pub mod migration;
 pub mod norms;
 pub mod regenerate;
 pub mod strategy;

@@ -1,7 +1,7 @@
 //! The prefix-regeneration engine behind every unidirectional mutation (thesis §5.4–5.5).
 //!
 //! A proposal y is built from the current path x from the eye: the raster position migrates
-//! inside its film square, the eye ray gives y₁, and then, vertex by vertex,
+//! inside its film window, the eye ray gives y₁, and then, vertex by vertex,
 //!
 //! * a Dirac vertex is followed deterministically (its lobe must match x's);
 //! * at a smooth vertex y_j the path either **reconnects** hard to x_{j+1} — y keeps x's
@@ -36,11 +36,11 @@
 //!   correct too (an independence move for the last vertex), but it ignores the BSDF and the
 //!   current direction, so most proposals would land where the path's f is small.
 
-use crate::film;
 use crate::measure::{
     area_jacobian, dirac_component, dirac_scatter, direction, distant_vertex, is_distant,
     light_index, local_directions_towards, same_vertex, side_consistent, vertex_bsdf, WeakNode,
 };
+use crate::migration;
 use flowlight_core::bsdf::Bsdf;
 use flowlight_core::geometry::{Frame, Ray, SurfaceHit};
 use flowlight_core::light::LightKind;
@@ -247,7 +247,7 @@ fn trace_vertex(
     matching_vertex(scene, &hit, original, from)
 }
 
-/// Image size the film squares are clipped to.
+/// Image size film-plane migration is clipped to.
 fn film_size(scene: &Scene) -> (u32, u32) {
     (scene.camera.width, scene.camera.height)
 }
@@ -274,7 +274,7 @@ pub fn propose(
     }
     let n = xv.len() - 1;
     let (w, h) = film_size(scene);
-    let Some(raster) = film::migrate(x.raster, x.film_window, w, h, rng) else {
+    let Some(raster) = migration::migrate(x.raster, x.film_window, w, h, rng) else {
         return MISS;
     };
     y.raster = raster;
@@ -433,7 +433,7 @@ pub fn density(scene: &Scene, policy: &Policy, x: &Path, y: &Path) -> f64 {
     }
     let n = xv.len() - 1;
     let (w, h) = film_size(scene);
-    let mut d = film::density(x.raster, y.raster, x.film_window, w, h);
+    let mut d = migration::density(x.raster, y.raster, x.film_window, w, h);
     let mut extensions = 0u32;
     for j in 1..n {
         if d == 0.0 {

@@ -173,17 +173,15 @@ pub struct HitRecord {
     pub surface: SurfaceHit,
 }
 
-/// Ray queries the host answers. `ctx` is the host's per-work-unit context.
+/// Ray queries the host answers, one ray per call. `ctx` is the host's per-work-unit context.
 #[repr(C)]
 #[derive(Clone, Copy)]
 pub struct TracerTable {
     pub ctx: *mut c_void,
-    /// Closest hit for each of `n` rays.
-    pub intersect:
-        unsafe extern "C" fn(ctx: *mut c_void, rays: *const Ray, hits: *mut HitRecord, n: usize),
-    /// Writes 1 for each of `n` rays that is blocked before its `t_max`, else 0.
-    pub occluded:
-        unsafe extern "C" fn(ctx: *mut c_void, rays: *const Ray, blocked: *mut u8, n: usize),
+    /// Writes the closest hit of `ray` into `hit` (`hit.hit = 0` when it escapes).
+    pub intersect: unsafe extern "C" fn(ctx: *mut c_void, ray: *const Ray, hit: *mut HitRecord),
+    /// 1 when `ray` is blocked before its `t_max`, else 0.
+    pub occluded: unsafe extern "C" fn(ctx: *mut c_void, ray: *const Ray) -> u8,
 }
 
 /// One contribution to the image: radiance `value` (already divided by its sample density)
@@ -212,10 +210,9 @@ pub enum AccumulationStyle {
     /// Every deposit of a work unit lands inside its tile: the host gives each unit a private
     /// tile buffer and merges it when the unit ends (path tracing).
     Tile = 0,
-    /// Deposits may land within `flange` pixels around the tile (flanged tiles, ERPT).
+    /// Deposits may land within `flange` pixels around the tile (flanged tiles, ERPT); the
+    /// host keeps deposits beyond the flange too, so any deposit on the film counts.
     FlangedTile = 1,
-    /// Deposits may land anywhere on the film (per-thread full-frame buffers).
-    FullFrame = 2,
 }
 
 /// How the host merges a statistics counter over work units.
@@ -253,9 +250,6 @@ pub struct IntegratorInfo {
     /// 1 when the estimator is biased (e.g. ERPT's consecutive sample filter); written to the
     /// output metadata.
     pub biased: u32,
-    /// Tile sides must be a multiple of this (0 or 1: any). ERPT's film-plane migration keeps
-    /// chains inside fixed K×K squares, so tiles aligned to K contain every deposit.
-    pub tile_multiple: u32,
 }
 
 /// The counters an integrator instance declared, written by the SDK's glue after `create`:
@@ -283,7 +277,6 @@ impl IntegratorInfo {
             accumulation: AccumulationStyle::Tile,
             flange: 0,
             biased: 0,
-            tile_multiple: 0,
         }
     }
 }

@@ -5,7 +5,7 @@ use crate::abi::{
     ErrorBuf, FilmTable, IntegratorInfo, IntegratorTable, MutationRef, ParamSpec, ParamValue,
     SceneView, StatList, Status, TracerTable, WorkUnit,
 };
-use crate::film::Film;
+use crate::deposit::Film;
 use crate::guard::guard;
 use crate::mutation::MutationSet;
 use crate::params::Params;

@@ -88,7 +88,7 @@
 //! where WHAT is `ABI version`, `type layout`, `SDK version` or `rustc version`.
 
 pub mod abi;
-pub mod film;
+pub mod deposit;
 mod guard;
 pub mod integrator;
 pub mod mutation;
@@ -101,7 +101,7 @@ pub use abi::{
     AccumulationStyle, Deposit, IntegratorInfo, ParamSpec, PluginDeclaration, PluginKind, Proposal,
     StatMerge, WorkUnit,
 };
-pub use film::{Accumulator, Film};
+pub use deposit::{Accumulator, Film};
 pub use flowlight_core as core;
 pub use integrator::Integrator;
 pub use mutation::{Mutation, MutationSet, MAX_MUTATIONS};

@@ -4,8 +4,7 @@ use crate::abi::{HitRecord, TracerTable};
 use flowlight_core::geometry::{Ray, SurfaceHit};
 use std::mem::MaybeUninit;
 
-/// Ray queries answered by the host's intersector (BVH or Embree). One indirect call per
-/// batch; the single-ray helpers are batches of one.
+/// Ray queries answered by the host's intersector (BVH or Embree), one indirect call per ray.
 #[derive(Clone, Copy)]
 pub struct Tracer<'a> {
     table: &'a TracerTable,
@@ -20,45 +19,22 @@ impl<'a> Tracer<'a> {
         self.table
     }
 
-    /// Closest hit of each ray.
-    pub fn intersect_batch(&self, rays: &[Ray], hits: &mut [HitRecord]) {
-        assert_eq!(rays.len(), hits.len());
-        // SAFETY: both buffers hold `rays.len()` elements for the duration of the call.
-        unsafe {
-            (self.table.intersect)(self.table.ctx, rays.as_ptr(), hits.as_mut_ptr(), rays.len())
-        }
-    }
-
-    /// Occlusion of each ray (1 = blocked).
-    pub fn occluded_batch(&self, rays: &[Ray], blocked: &mut [u8]) {
-        assert_eq!(rays.len(), blocked.len());
-        // SAFETY: both buffers hold `rays.len()` elements for the duration of the call.
-        unsafe {
-            (self.table.occluded)(
-                self.table.ctx,
-                rays.as_ptr(),
-                blocked.as_mut_ptr(),
-                rays.len(),
-            )
-        }
-    }
-
+    /// The closest surface `ray` hits before its `t_max`, or `None` when it escapes.
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceHit> {
         let mut rec = MaybeUninit::<HitRecord>::uninit();
         // SAFETY: one ray in, one record out; the host always writes the record.
         let rec = unsafe {
-            (self.table.intersect)(self.table.ctx, ray, rec.as_mut_ptr(), 1);
+            (self.table.intersect)(self.table.ctx, ray, rec.as_mut_ptr());
             rec.assume_init()
         };
         (rec.hit != 0).then_some(rec.surface)
     }
 
+    /// Whether anything blocks `ray` before its `t_max` (a shadow ray).
     #[inline]
     pub fn occluded(&self, ray: &Ray) -> bool {
-        let mut blocked = 0u8;
         // SAFETY: one ray in, one flag out.
-        unsafe { (self.table.occluded)(self.table.ctx, ray, &mut blocked, 1) };
-        blocked != 0
+        unsafe { (self.table.occluded)(self.table.ctx, ray) != 0 }
     }
 }

@@ -1,6 +1,6 @@
 //! # `blow` — expansion near the eye (thesis §5.5)
 //!
-//! Moves the eye ray inside its film square and expands the path near the eye, reconnecting
+//! Moves the eye ray inside its film window and expands the path near the eye, reconnecting
 //! to the original path as early as possible. To escape corner and cavity traps (y₁ and x₂ on
 //! the same surface, §5.5) it chooses at each smooth vertex at random between a hard
 //! reconnection (probability `p_reconnect`) and an extension; the transition density is the

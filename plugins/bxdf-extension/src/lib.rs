@@ -1,6 +1,6 @@
 //! # `bxdf-extension` — free extension mutation
 //!
-//! Moves the eye ray inside its film square, and at the first smooth vertex y_k samples a new
+//! Moves the eye ray inside its film window, and at the first smooth vertex y_k samples a new
 //! direction from the BSDF (its smooth components) — a free extension — then reconnects hard
 //! to the original path as soon as it can (or ends on a light). Ratio, in area measure:
 //!

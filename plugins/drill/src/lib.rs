@@ -1,6 +1,6 @@
 //! # `drill` — narrow caps through the original path (thesis §5.5)
 //!
-//! Moves the eye ray inside its film square and drills along the original path: at each
+//! Moves the eye ray inside its film window and drills along the original path: at each
 //! smooth vertex the next direction is drawn uniformly in a cap around the direction to the
 //! original next vertex, Dirac vertices are followed, and a caustic remainder (any Dirac vertex
 //! before the light, e.g. EDSL, EDTTL) is drilled until the light is struck. Otherwise, after

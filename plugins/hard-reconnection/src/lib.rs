@@ -1,6 +1,6 @@
 //! # `hard-reconnection` — strict reconnection mutation
 //!
-//! Moves the eye ray inside its film square (K×K, the chain's `film_window`), follows it (and
+//! Moves the eye ray inside its film window (K×K, the chain's `film_window`), follows it (and
 //! any Dirac vertices right after the eye) to the first smooth vertex y_k, and connects y_k
 //! to the original path's next vertex x_{k+1}, keeping the rest of the original path.
 //! The reconnection is deterministic (a Dirac step, thesis §5.4) and the film move symmetric,

@@ -1,6 +1,6 @@
 //! # `soft-reconnection` — non-strict reconnection mutation
 //!
-//! Moves the eye ray inside its film square, and at the first smooth vertex y_k samples a
+//! Moves the eye ray inside its film window, and at the first smooth vertex y_k samples a
 //! direction uniformly in a spherical cap around the direction to the original x_{k+1}
 //! (thesis §5.4: "extension and termination through the soft reconnection"); the new vertex
 //! y_{k+1} lands near x_{k+1} or on another object. From y_{k+1} it reconnects hard to

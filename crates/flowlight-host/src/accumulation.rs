@@ -19,6 +19,9 @@ pub struct Frame {
     main: Vec<[f64; 3]>,
     layers: Vec<Vec<[f64; 3]>>,
     samples: Vec<u32>,
+    /// When set, every pixel is divided by this many samples instead of its own count
+    /// (flanged integrators, whose pixels also receive their neighbours' deposits).
+    uniform_spp: Option<f64>,
 }
 
 impl Frame {
@@ -31,7 +34,15 @@ impl Frame {
             main: vec![[0.0; 3]; n],
             layers: (0..layer_count).map(|_| vec![[0.0; 3]; n]).collect(),
             samples: vec![0; n],
+            uniform_spp: None,
         }
+    }
+
+    /// Normalises every pixel by `spp` samples, which may be fractional (a pass cut after
+    /// m of its n tiles counts m/n: see the scheduler's documentation), instead of by the
+    /// pixel's own sample count. With `spp` = 0 the image is black.
+    pub fn set_uniform_spp(&mut self, spp: f64) {
+        self.uniform_spp = Some(spp);
     }
 
     fn add_at(&mut self, f: usize, layer: u32, v: Rgb) {
@@ -100,6 +111,13 @@ impl Frame {
     }
 
     fn resolve_sums(&self, sums: &[[f64; 3]]) -> Vec<Rgb> {
+        if let Some(n) = self.uniform_spp {
+            let k = if n > 0.0 { 1.0 / n } else { 0.0 };
+            return sums
+                .iter()
+                .map(|s| Rgb::new((s[0] * k) as f32, (s[1] * k) as f32, (s[2] * k) as f32))
+                .collect();
+        }
         sums.iter()
             .zip(&self.samples)
             .map(|(s, &n)| {
@@ -113,7 +131,8 @@ impl Frame {
             .collect()
     }
 
-    /// The main image: each pixel's sum over its sample count (black where none finished).
+    /// The main image: each pixel's sum over its sample count (black where none finished),
+    /// or over the uniform count when one is set.
     pub fn image(&self) -> Vec<Rgb> {
         self.resolve_sums(&self.main)
     }
@@ -298,5 +317,21 @@ mod tests {
         assert_eq!(img[7 * 8], Rgb::splat(3.0));
         assert_eq!(f.samples()[4 * 8 + 4], 2);
         assert_eq!(f.samples()[0], 1);
+    }
+
+    #[test]
+    fn uniform_normalisation_divides_every_pixel_alike() {
+        // Pixel 0 got a neighbour's deposit but no sample of its own: per-pixel
+        // normalisation leaves it black, a uniform 1.5 samples does not.
+        let mut t = TileAccumulator::new(1, 0, 2, 1, 1, 2, 1, 1);
+        t.deposit(&[d(0.5, 0.5, 0, 3.0), d(1.5, 0.5, 0, 6.0)]);
+        let mut f = Frame::new(2, 1, 1);
+        f.merge(&t, 1);
+        assert_eq!(f.image(), vec![Rgb::ZERO, Rgb::splat(6.0)]);
+        f.set_uniform_spp(1.5);
+        assert_eq!(f.image(), vec![Rgb::splat(2.0), Rgb::splat(4.0)]);
+        assert_eq!(f.layer(0), vec![Rgb::splat(2.0), Rgb::splat(4.0)]);
+        f.set_uniform_spp(0.0);
+        assert_eq!(f.image(), vec![Rgb::ZERO; 2]);
     }
 }

@@ -1,4 +1,5 @@
-//! Deposits into the host's accumulators.
+//! Deposit batching: a plugin's [`Film`] gathers deposits and hands them to the host's
+//! accumulators ([`Accumulator`]) in coarse calls.
 
 use crate::abi::{Deposit, FilmTable};
 use flowlight_core::Rgb;

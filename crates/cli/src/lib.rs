@@ -1,0 +1,223 @@
+//! `flowlight`: the command-line renderer, one module per subcommand.
+//!
+//! The root package's binary (`crates/cli/main.rs`) only calls [`main`].
+//!
+//! ```text
+//! flowlight render <config.toml> [--spp N | --time SECONDS] [--threads N] [--out FILE]
+//! flowlight plugins [--path DIR]...
+//! flowlight compare <a.exr> <reference.exr> [--out error.png]
+//! flowlight reference <config.toml> [--spp N | --time SECONDS] [--out FILE] | --from A.exr [--from B.exr]
+//! flowlight bench <suite.toml> [--out DIR] [--budgets 0.5,1] [--seeds 1,2] [--threads N]
+//! ```
+
+mod bench;
+mod compare;
+mod plugins;
+mod reference;
+mod render;
+
+use anyhow::{anyhow, Result};
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+
+#[derive(Parser)]
+#[command(
+    name = "flowlight",
+    version,
+    about = "Physically based renderer for Markov-chain light transport research"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render the scene a TOML config describes.
+    Render {
+        config: PathBuf,
+        /// Samples per pixel (overrides the config).
+        #[arg(long, conflicts_with = "time")]
+        spp: Option<u32>,
+        /// Time budget in seconds (overrides the config).
+        #[arg(long)]
+        time: Option<f64>,
+        /// Worker threads (0 = one per core).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Output EXR file (overrides the config); the config's PNG preview, if it has one,
+        /// is written beside it with the extension .png.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Render seed (overrides the config).
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Set an integrator parameter, TOML syntax: `--set layers=true --set variant='"untangled"'`
+        /// (bare words are taken as strings: `--set variant=untangled`).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        /// No progress bar.
+        #[arg(long, short)]
+        quiet: bool,
+    },
+    /// List the plugins found on the search path, with versions and parameters.
+    Plugins {
+        /// Extra directories to search.
+        #[arg(long)]
+        path: Vec<PathBuf>,
+    },
+    /// Compare an image with a reference: RMSE, relMSE, mean luminance ratio, error image.
+    Compare {
+        /// The image to judge.
+        a: PathBuf,
+        /// The reference (a `variance` layer, as `flowlight reference` writes, adds the
+        /// reference's own noise floor to the report).
+        b: PathBuf,
+        /// Write a false-colour PNG of the per-pixel relative squared error.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// The ε of relMSE = mean (a−b)²/(b²+ε).
+        #[arg(long, default_value_t = flowlight_host::metrics::REL_EPS)]
+        epsilon: f64,
+    },
+    /// Render a long reference (two independent halves, for a per-pixel variance estimate),
+    /// or make one from existing EXRs.
+    Reference {
+        /// The scene's render config (not needed with --from).
+        #[arg(required_unless_present = "from")]
+        config: Option<PathBuf>,
+        /// Total samples per pixel (default: the config's budget).
+        #[arg(long, conflicts_with = "time")]
+        spp: Option<u32>,
+        /// Total time budget in seconds.
+        #[arg(long)]
+        time: Option<f64>,
+        /// Output EXR (default: `<config stem>.ref.exr` beside the config).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Seed of the first half; the second uses seed + 1.
+        #[arg(long, default_value_t = 1_000_000)]
+        seed: u64,
+        /// Worker threads (0 = one per core).
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+        /// Set an integrator parameter, as for `render`.
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        /// Use existing renders instead: one EXR, or two independent renders of the same
+        /// scene (then the variance is estimated from their difference).
+        #[arg(long, conflicts_with_all = ["spp", "time", "set"])]
+        from: Vec<PathBuf>,
+    },
+    /// Run a benchmark suite: error against wall time per scene and method (docs/bench.md).
+    Bench {
+        suite: PathBuf,
+        /// Output folder (default: the suite's `bench.out`).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Time budgets in seconds, comma separated (replace the suite's).
+        #[arg(long, value_delimiter = ',')]
+        budgets: Option<Vec<f64>>,
+        /// Seeds, comma separated (replace the suite's).
+        #[arg(long, value_delimiter = ',')]
+        seeds: Option<Vec<u64>>,
+        /// Worker threads (0 = one per core).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Samples per pixel of references that have to be rendered.
+        #[arg(long)]
+        reference_spp: Option<u32>,
+        /// Render the references again even when their files exist.
+        #[arg(long)]
+        rebuild_references: bool,
+    },
+}
+
+/// Parses the command line, runs the subcommand, and exits with status 1 on an error.
+pub fn main() {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_env("FLOWLIGHT_LOG")
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .with_writer(std::io::stderr)
+        .without_time()
+        .init();
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Render {
+            config,
+            spp,
+            time,
+            threads,
+            out,
+            seed,
+            set,
+            quiet,
+        } => match parse_sets(&set) {
+            Ok(params) => {
+                let ov = flowlight_host::session::Overrides {
+                    spp,
+                    time,
+                    threads,
+                    out,
+                    seed,
+                    params,
+                };
+                render::run(&config, &ov, quiet)
+            }
+            Err(e) => Err(e),
+        },
+        Command::Plugins { path } => plugins::run(&path),
+        Command::Compare { a, b, out, epsilon } => compare::run(&a, &b, out.as_deref(), epsilon),
+        Command::Reference {
+            config,
+            spp,
+            time,
+            out,
+            seed,
+            threads,
+            set,
+            from,
+        } => reference::run(config, spp, time, out, seed, threads, &set, &from),
+        Command::Bench {
+            suite,
+            out,
+            budgets,
+            seeds,
+            threads,
+            reference_spp,
+            rebuild_references,
+        } => bench::run(
+            &suite,
+            flowlight_bench::BenchOverrides {
+                out,
+                budgets,
+                seeds,
+                threads,
+                reference_spp,
+                rebuild_references,
+            },
+        ),
+    };
+    if let Err(e) = result {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+/// Parses `--set key=value` pairs; the value is TOML, or a bare string.
+pub(crate) fn parse_sets(sets: &[String]) -> Result<Vec<(String, toml::Value)>> {
+    sets.iter()
+        .map(|s| {
+            let (k, v) = s
+                .split_once('=')
+                .ok_or_else(|| anyhow!("--set {s}: expected KEY=VALUE"))?;
+            let value = toml::from_str::<toml::Table>(&format!("v = {v}"))
+                .ok()
+                .and_then(|mut t| t.remove("v"))
+                .unwrap_or_else(|| toml::Value::String(v.to_string()));
+            Ok((k.trim().to_string(), value))
+        })
+        .collect()
+}

@@ -1,0 +1,80 @@
+//! `flowlight reference`: a long two-half reference render, or one made from existing EXRs.
+
+use crate::parse_sets;
+use anyhow::{anyhow, Result};
+use std::path::PathBuf;
+
+#[allow(clippy::too_many_arguments)]
+pub fn run(
+    config: Option<PathBuf>,
+    spp: Option<u32>,
+    time: Option<f64>,
+    out: Option<PathBuf>,
+    seed: u64,
+    threads: usize,
+    set: &[String],
+    from: &[PathBuf],
+) -> Result<()> {
+    use flowlight_bench::{self as bench, Budget, RenderRequest};
+    let t0 = std::time::Instant::now();
+    let (r, out) = if !from.is_empty() {
+        let out = out.ok_or_else(|| anyhow!("--from needs --out"))?;
+        (
+            bench::reference_from_exrs(from).map_err(|e| anyhow!(e))?,
+            out,
+        )
+    } else {
+        let config = config.ok_or_else(|| anyhow!("a config is required"))?;
+        let cfg = flowlight_scene::config::load_config(&config).map_err(|e| anyhow!("{e}"))?;
+        let budget = match (spp, time, cfg.budget) {
+            (_, Some(t), _) if t > 0.0 && t.is_finite() => Budget::Time(t),
+            (_, Some(t), _) => {
+                return Err(anyhow!(
+                    "--time must be a positive number of seconds, got {t}"
+                ))
+            }
+            (Some(n), None, _) => Budget::Spp(n),
+            (None, None, flowlight_scene::config::SampleBudget::Spp(n)) => Budget::Spp(n),
+            (None, None, flowlight_scene::config::SampleBudget::Time(t)) => Budget::Time(t),
+        };
+        let out = out.unwrap_or_else(|| {
+            let stem = config
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "reference".into());
+            cfg.base_dir.join(format!("{stem}.ref.exr"))
+        });
+        let req = RenderRequest {
+            config,
+            plugin: None,
+            params: parse_sets(set)?,
+            width: None,
+            height: None,
+            budget,
+            seed,
+            threads,
+        };
+        let r = bench::render_reference(&req, &|m| eprintln!("flowlight reference: {m}"))
+            .map_err(|e| anyhow!(e))?;
+        (r, out)
+    };
+    bench::write_reference(&out, &r).map_err(|e| anyhow!(e))?;
+    println!("reference summary");
+    println!("  size            {}x{}", r.width, r.height);
+    println!("  samples         {} spp", r.spp);
+    if let Some(v) = &r.variance {
+        let n = v.len().max(1) as f64;
+        let mean_var = v.iter().map(|c| c.luminance() as f64).sum::<f64>() / n;
+        println!(
+            "  variance        mean per-pixel variance of the mean (luminance) {mean_var:.4e}"
+        );
+    } else {
+        println!("  variance        unknown (one image without a variance layer)");
+    }
+    if !r.layers.is_empty() {
+        println!("  layers          {}", r.layers.len());
+    }
+    println!("  wall time       {:.3} s", t0.elapsed().as_secs_f64());
+    println!("  wrote           {}", out.display());
+    Ok(())
+}

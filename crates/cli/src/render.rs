@@ -1,0 +1,190 @@
+//! `flowlight render`: one render of a TOML config, with a progress bar and a summary.
+
+use anyhow::{anyhow, Result};
+use flowlight_host::session::{Overrides, Session};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool) -> Result<()> {
+    if let Some(t) = ov.time {
+        if !(t > 0.0 && t.is_finite()) {
+            return Err(anyhow!(
+                "--time must be a positive number of seconds, got {t}"
+            ));
+        }
+    }
+    if ov.spp == Some(0) {
+        return Err(anyhow!("--spp must be at least 1"));
+    }
+    let session = Session::prepare(config, ov).map_err(|e| anyhow!(e))?;
+    // Before any work: the outputs must be writable and must not overwrite an input.
+    session.check_outputs().map_err(|e| anyhow!(e))?;
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        ctrlc::set_handler(move || {
+            if stop.swap(true, Ordering::SeqCst) {
+                eprintln!("\nsecond interrupt: exiting without saving");
+                std::process::exit(130);
+            }
+            eprintln!("\ninterrupted: finishing the work units in flight and saving what has accumulated (Ctrl-C again to abort)");
+        })
+        .map_err(|e| anyhow!("cannot install the Ctrl-C handler: {e}"))?;
+    }
+
+    let (w, h) = (session.camera.width as u64, session.camera.height as u64);
+    let bar = if quiet {
+        ProgressBar::hidden()
+    } else if let Some(t) = session.options.time {
+        let b = ProgressBar::new(t.as_millis() as u64);
+        b.set_style(
+            ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {msg}").unwrap(),
+        );
+        b
+    } else {
+        let b = ProgressBar::new(session.options.spp as u64 * w * h);
+        b.set_style(
+            ProgressStyle::with_template(
+                "[{elapsed_precise}] {wide_bar} {percent}% {msg} ETA {eta}",
+            )
+            .unwrap(),
+        );
+        b
+    };
+    let env = if session.config.environment.is_some() {
+        " + environment"
+    } else {
+        ""
+    };
+    let sc = &session.scene;
+    let triangles = if sc.is_instanced() {
+        format!(
+            "{} triangles in {} instances, {} stored",
+            sc.virtual_triangle_count(),
+            sc.instances.len(),
+            sc.triangles.len()
+        )
+    } else {
+        format!("{} triangles", sc.triangles.len())
+    };
+    eprintln!(
+        "flowlight: {} ({triangles}, {} emissive triangles, {} punctual lights{env}) with '{}' on {} ({}x{})",
+        session.config.scene.display(),
+        session.scene.emitters.len(),
+        session.scene.punctual_lights.len(),
+        session.instance.plugin().name,
+        session.intersector.name(),
+        w,
+        h
+    );
+    let progress = |p: &flowlight_host::render::Progress| {
+        let spp = p.pixel_samples as f64 / (w * h) as f64;
+        bar.set_message(format!("{spp:.1} spp"));
+        if p.budget.is_some() {
+            bar.set_position(p.elapsed.as_millis() as u64);
+        } else {
+            bar.set_position(p.pixel_samples);
+        }
+    };
+    let outcome = session.render(&stop, &progress).map_err(|e| anyhow!(e))?;
+    bar.finish_and_clear();
+    if let Some(e) = outcome.error {
+        // A failed render is not a result: keep whatever the outputs held before.
+        return Err(anyhow!("{e}; nothing was written"));
+    }
+
+    let s = &outcome.stats;
+    let secs = s.wall.as_secs_f64().max(1e-9);
+    let written = session
+        .write_outputs(&outcome.frame, s)
+        .map_err(|e| anyhow!(e))?;
+    println!("render summary");
+    println!("  integrator      {}", session.instance.plugin().name);
+    println!(
+        "  intersector     {} (load {:.3} s, build {:.3} s)",
+        session.intersector.name(),
+        session.load_time.as_secs_f64(),
+        session.build_time.as_secs_f64()
+    );
+    println!("  threads         {}", s.threads);
+    println!("  wall time       {secs:.3} s");
+    println!(
+        "  samples         {} ({:.2} spp), {:.3} M samples/s",
+        s.pixel_samples,
+        s.pixel_samples as f64 / (w * h) as f64,
+        s.pixel_samples as f64 / secs / 1e6
+    );
+    println!(
+        "  rays            {} ({} closest, {} shadow), {:.3} M rays/s",
+        s.rays(),
+        s.closest_rays,
+        s.shadow_rays,
+        s.rays() as f64 / secs / 1e6
+    );
+    println!("  NaN/Inf samples {} discarded", s.invalid_deposits);
+    if s.stray_deposits > 0 {
+        println!(
+            "  stray deposits  {} off the film (plugin bug), discarded",
+            s.stray_deposits
+        );
+    }
+    print_integrator_stats(&s.integrator);
+    if s.interrupted {
+        println!("  interrupted     yes: the image holds the samples finished before the stop");
+    }
+    if let Some(p) = s.partial_pass {
+        println!(
+            "  partial pass    {} of {} tiles (random order): normalised by {} + {:.4} passes",
+            p.finished,
+            p.tiles,
+            s.full_passes,
+            p.fraction()
+        );
+    }
+    for p in &written {
+        println!("  wrote           {}", p.display());
+    }
+    Ok(())
+}
+
+/// The integrator's counters: plain ones one per line; `group.name` ones (e.g. ERPT's quality
+/// norms per strategy) one line per group with strengths, mean and longest streaks.
+fn print_integrator_stats(stats: &[(String, f64)]) {
+    if stats.is_empty() {
+        return;
+    }
+    let fmt = |v: f64| {
+        if v.fract() == 0.0 && v.abs() < 1e15 {
+            format!("{v}")
+        } else {
+            format!("{v:.4}")
+        }
+    };
+    println!("  integrator statistics (all counters in the .stats.json beside the image)");
+    for (k, v) in stats.iter().filter(|(k, _)| !k.contains('.')) {
+        println!("    {k:<24}{}", fmt(*v));
+    }
+    let mut groups: Vec<&str> = Vec::new();
+    for (k, _) in stats {
+        if let Some((g, _)) = k.split_once('.') {
+            if !groups.contains(&g) {
+                groups.push(g);
+            }
+        }
+    }
+    for g in groups {
+        let shown: Vec<String> = stats
+            .iter()
+            .filter_map(|(k, v)| {
+                let name = k.strip_prefix(g)?.strip_prefix('.')?;
+                let keep = name == "mutations"
+                    || name.ends_with("_strength")
+                    || name.ends_with("_mean_streak")
+                    || name.ends_with("_streak_max");
+                keep.then(|| format!("{name} {}", fmt(*v)))
+            })
+            .collect();
+        println!("    {g}: {}", shown.join(", "));
+    }
+}
