@@ -38,8 +38,19 @@ static CARGO: Mutex<()> = Mutex::new(());
 /// Runs `cargo <args>` in `dir` as an outsider would, with the shared target folder.
 fn cargo(dir: &Path, args: &[&str]) {
     let _one = CARGO.lock().unwrap_or_else(|e| e.into_inner());
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let out = Command::new(cargo)
+    // The cargo running this test (under rustup, the toolchain's own binary) and the rustc
+    // beside it: the host refuses a plugin built by another compiler, and a rustup default
+    // or a folder override outside the workspace could pick another one.
+    let cargo = PathBuf::from(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
+    let mut command = Command::new(&cargo);
+    if let Some(rustc) = cargo
+        .parent()
+        .map(|d| d.join(format!("rustc{}", std::env::consts::EXE_SUFFIX)))
+        .filter(|r| r.is_file())
+    {
+        command.env("RUSTC", rustc);
+    }
+    let out = command
         .args(args)
         .current_dir(dir)
         .env("CARGO_TARGET_DIR", outsider_target())
@@ -71,7 +82,10 @@ fn build_plugin(dir: &Path, name: &str) -> PathBuf {
 fn outside(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("flowlight-outsider-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
-    assert!(!d.starts_with(common::repo()), "temp dir inside the workspace");
+    assert!(
+        !d.starts_with(common::repo()),
+        "temp dir inside the workspace"
+    );
     d
 }
 
@@ -99,8 +113,9 @@ fn image_mean(img: &[Rgb]) -> f64 {
 
 /// A session of the Cornell box at 32×32 with integrator `plugin` and `params`.
 fn cornell_with(plugin: &str, spp: u32, seed: u64, params: &[(&str, toml::Value)]) -> Session {
-    let mut cfg = flowlight_scene::config::load_config(&scene_config("cornell-box/cornell-box.toml"))
-        .unwrap_or_else(|e| panic!("{e}"));
+    let mut cfg =
+        flowlight_scene::config::load_config(&scene_config("cornell-box/cornell-box.toml"))
+            .unwrap_or_else(|e| panic!("{e}"));
     cfg.width = 32;
     cfg.height = 32;
     cfg.integrator_plugin = plugin.into();
@@ -123,12 +138,25 @@ fn cornell_with(plugin: &str, spp: u32, seed: u64, params: &[(&str, toml::Value)
 fn new_plugin_integrator_builds_outside_and_renders_the_cornell_box() {
     let dir = outside("direct");
     let out = flowlight(
-        &["new-plugin", "--kind", "integrator", "my-direct", dir.to_str().unwrap()],
+        &[
+            "new-plugin",
+            "--kind",
+            "integrator",
+            "my-direct",
+            dir.to_str().unwrap(),
+        ],
         Path::new(""),
     );
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let cargo_toml = std::fs::read_to_string(dir.join("Cargo.toml")).unwrap();
-    assert!(cargo_toml.contains("flowlight-sdk = { path = "), "{cargo_toml}");
+    assert!(
+        cargo_toml.contains("flowlight-sdk = { path = "),
+        "{cargo_toml}"
+    );
     let lib = build_plugin(&dir, "my-direct");
     let plugins = lib.parent().unwrap().to_path_buf();
 
@@ -143,13 +171,19 @@ fn new_plugin_integrator_builds_outside_and_renders_the_cornell_box() {
     )
     .unwrap();
     let out = flowlight(&["render", cfg.to_str().unwrap(), "--quiet"], &plugins);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(String::from_utf8_lossy(&out.stdout).contains("integrator      my-direct"));
     assert!(dir.join("cornell.exr").is_file());
 
     // The image: one-bounce direct light equals mcpt with path-space depth 1 (diffuse
     // scene), region by region.
-    let mine = render(&cornell_with(lib.to_str().unwrap(), 256, 1, &[])).frame.image();
+    let mine = render(&cornell_with(lib.to_str().unwrap(), 256, 1, &[]))
+        .frame
+        .image();
     let reference = render(&cornell_with(
         "mcpt",
         512,
@@ -163,7 +197,11 @@ fn new_plugin_integrator_builds_outside_and_renders_the_cornell_box() {
     let lit = mine.iter().filter(|c| c.luminance() > 0.0).count();
     assert!(lit > mine.len() * 2 / 3, "only {lit} lit pixels");
     let (m, r) = (image_mean(&mine), image_mean(&reference));
-    assert!((m / r - 1.0).abs() < 0.02, "mean {m:.5} vs mcpt depth 1 {r:.5}");
+    eprintln!("my-direct: {lit} lit pixels, mean {m:.5}; mcpt depth 1: {r:.5}");
+    assert!(
+        (m / r - 1.0).abs() < 0.02,
+        "mean {m:.5} vs mcpt depth 1 {r:.5}"
+    );
     for (k, (a, b)) in regions(&mine).iter().zip(regions(&reference)).enumerate() {
         assert!(
             (a / b - 1.0).abs() < 0.06,
@@ -177,33 +215,61 @@ fn new_plugin_integrator_builds_outside_and_renders_the_cornell_box() {
 fn new_plugin_mutation_builds_outside_passes_the_kit_and_renders() {
     let dir = outside("jitter");
     let out = flowlight(
-        &["new-plugin", "--kind", "mutation", "my-jitter", dir.to_str().unwrap()],
+        &[
+            "new-plugin",
+            "--kind",
+            "mutation",
+            "my-jitter",
+            dir.to_str().unwrap(),
+        ],
         Path::new(""),
     );
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let lib = build_plugin(&dir, "my-jitter");
     let report = flowlight_testkit::assert_mutation_conforms(lib.to_str().unwrap(), &[]);
     eprintln!("{report}");
     assert_eq!(report.name, "my-jitter");
     // ERPT renders the Cornell box with it.
     let list = toml::Value::Array(vec![toml::Value::Table(
-        [("plugin".to_string(), toml::Value::String(lib.to_str().unwrap().into()))]
-            .into_iter()
-            .collect(),
+        [(
+            "plugin".to_string(),
+            toml::Value::String(lib.to_str().unwrap().into()),
+        )]
+        .into_iter()
+        .collect(),
     )]);
-    let img = render(&session_at("cornell-box/erpt.toml", 16, 16, 2, &[("mutations", list)]))
-        .frame
-        .image();
+    let img = render(&session_at(
+        "cornell-box/erpt.toml",
+        16,
+        16,
+        2,
+        &[("mutations", list)],
+    ))
+    .frame
+    .image();
     assert!(img.iter().all(|c| c.is_valid_radiance()));
     assert!(image_mean(&img) > 0.0);
     // A second run into the same folder is refused, and the files stay.
     let out = flowlight(
-        &["new-plugin", "--kind", "mutation", "my-jitter", dir.to_str().unwrap()],
+        &[
+            "new-plugin",
+            "--kind",
+            "mutation",
+            "my-jitter",
+            dir.to_str().unwrap(),
+        ],
         Path::new(""),
     );
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("not empty") && err.trim().lines().count() == 1, "{err}");
+    assert!(
+        err.contains("not empty") && err.trim().lines().count() == 1,
+        "{err}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -211,12 +277,21 @@ fn new_plugin_mutation_builds_outside_passes_the_kit_and_renders() {
 fn a_bad_plugin_name_is_refused_in_one_line() {
     let dir = outside("bad-name");
     let out = flowlight(
-        &["new-plugin", "--kind", "integrator", "My_AO", dir.to_str().unwrap()],
+        &[
+            "new-plugin",
+            "--kind",
+            "integrator",
+            "My_AO",
+            dir.to_str().unwrap(),
+        ],
         Path::new(""),
     );
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("plugin name \"My_AO\"") && err.trim().lines().count() == 1, "{err}");
+    assert!(
+        err.contains("plugin name \"My_AO\"") && err.trim().lines().count() == 1,
+        "{err}"
+    );
     assert!(!dir.exists(), "nothing is written for a bad name");
 }
 
@@ -280,18 +355,27 @@ fn ao_example_matches_the_analytic_occlusion_next_to_a_wall() {
     for col in 0..w {
         let steps = 200;
         let expected = (0..steps)
-            .map(|k| ao_next_to_wall(1.0 - floor_x(col as f32 + (k as f32 + 0.5) / steps as f32), 1.0))
+            .map(|k| {
+                ao_next_to_wall(
+                    1.0 - floor_x(col as f32 + (k as f32 + 0.5) / steps as f32),
+                    1.0,
+                )
+            })
             .sum::<f64>()
             / steps as f64;
         let column: Vec<Rgb> = (0..h).map(|row| ao[row * w + col]).collect();
         let (mean, _) = mean_and_stderr(&column, |c| c.r);
         if expected == 1.0 {
             // Nothing within the radius: every ray is open, no noise at all.
-            assert!(column.iter().all(|c| c.r == 1.0), "column {col}: {column:?}");
+            assert!(
+                column.iter().all(|c| c.r == 1.0),
+                "column {col}: {column:?}"
+            );
         } else {
             near_wall += 1;
             let rays = (h * 32 * 16) as f64;
             let sigma = (expected * (1.0 - expected) / rays).sqrt();
+            eprintln!("column {col}: AO {mean:.4}, analytic {expected:.4} (σ {sigma:.4})");
             assert!(
                 (mean - expected).abs() < 5.0 * sigma + 2e-3,
                 "column {col}: AO {mean:.4}, analytic {expected:.4} (σ {sigma:.4})"
@@ -301,7 +385,11 @@ fn ao_example_matches_the_analytic_occlusion_next_to_a_wall() {
     assert!(near_wall >= 3, "only {near_wall} columns within the radius");
     for i in 0..w * h {
         assert!(
-            (albedo[i].to_array().iter().zip(base).all(|(a, b)| (a - b).abs() < 1e-5)),
+            (albedo[i]
+                .to_array()
+                .iter()
+                .zip(base)
+                .all(|(a, b)| (a - b).abs() < 1e-5)),
             "albedo {:?} at {i}",
             albedo[i]
         );
@@ -315,7 +403,10 @@ fn film_perturbation_example_passes_the_kit_and_erpt_with_it_matches_path_tracin
     let lib = lib.to_str().unwrap();
     let report = flowlight_testkit::assert_mutation_conforms(lib, &[("radius", 3.0.into())]);
     eprintln!("{report}");
-    assert_eq!(report.worst_ratio_error, 0.0, "a symmetric move reports ratio 1 exactly");
+    assert_eq!(
+        report.worst_ratio_error, 0.0,
+        "a symmetric move reports ratio 1 exactly"
+    );
 
     let reference = render(&cornell_with("mcpt", 2048, 77, &[])).frame.image();
     let list = toml::Value::Array(vec![toml::Value::Table(
@@ -347,15 +438,24 @@ fn film_perturbation_example_passes_the_kit_and_erpt_with_it_matches_path_tracin
     let means: Vec<f64> = per_run.iter().map(|r| r.0).collect();
     let m = means.iter().sum::<f64>() / n;
     let r = image_mean(&reference);
-    assert!((m / r - 1.0).abs() < 0.03, "ERPT mean {m:.5} vs MCPT {r:.5}");
+    eprintln!("ERPT with film-perturbation: mean {m:.5}; MCPT 2048 spp: {r:.5}");
+    assert!(
+        (m / r - 1.0).abs() < 0.03,
+        "ERPT mean {m:.5} vs MCPT {r:.5}"
+    );
     let refs = regions(&reference);
-    for k in 0..16 {
+    // The reference's own noise is below 1 % per region at 2048 spp: the floor of the
+    // standard error covers it.
+    for (k, &expected) in refs.iter().enumerate() {
         let vals: Vec<f64> = per_run.iter().map(|r| r.1[k]).collect();
         let mk = vals.iter().sum::<f64>() / n;
         let var = vals.iter().map(|v| (v - mk).powi(2)).sum::<f64>() / (n - 1.0);
-        let se = (var / n).sqrt().max(0.01 * refs[k]);
-        let z = (mk - refs[k]) / se;
-        assert!(z.abs() < 5.0, "region {k}: ERPT {mk:.5} vs MCPT {:.5} (z {z:.1})", refs[k]);
+        let se = (var / n).sqrt().max(0.01 * expected);
+        let z = (mk - expected) / se;
+        assert!(
+            z.abs() < 5.0,
+            "region {k}: ERPT {mk:.5} vs MCPT {expected:.5} (z {z:.1})"
+        );
     }
 }
 
@@ -379,8 +479,8 @@ fn the_plugin_guide_quotes_the_example_files_exactly() {
         };
         let (file, region) = (tag("file="), tag("region="));
         let block: Vec<&str> = lines.by_ref().take_while(|l| *l != "```").collect();
-        let source = std::fs::read_to_string(repo.join(&file))
-            .unwrap_or_else(|e| panic!("{file}: {e}"));
+        let source =
+            std::fs::read_to_string(repo.join(&file)).unwrap_or_else(|e| panic!("{file}: {e}"));
         let begin = format!("// region: {region}");
         let end = format!("// endregion: {region}");
         let region_lines: Vec<&str> = source
@@ -420,10 +520,20 @@ fn the_kit_refuses_a_mutation_whose_ratio_is_wrong() {
     // doubles, detailed balance fails, and the kit must say so.
     let dir = outside("wrong-ratio");
     let out = flowlight(
-        &["new-plugin", "--kind", "mutation", "wrong-ratio", dir.to_str().unwrap()],
+        &[
+            "new-plugin",
+            "--kind",
+            "mutation",
+            "wrong-ratio",
+            dir.to_str().unwrap(),
+        ],
         Path::new(""),
     );
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let lib_rs = dir.join("src/lib.rs");
     let source = std::fs::read_to_string(&lib_rs).unwrap();
     let broken = source.replace("transition_ratio: 1.0,", "transition_ratio: 2.0,");

@@ -6,7 +6,7 @@
 //! `[workspace]` table so that it is a workspace of its own), `src/lib.rs` (a documented
 //! skeleton that works as generated: a one-bounce direct-lighting integrator, or a symmetric
 //! film-jitter mutation with a hard reconnection), unit tests inside it, a `README.md` and a
-//! `.gitignore`. The SDK is referenced by the absolute path of this checkout's
+//! `.gitignore`, and runs `rustfmt` over `src/lib.rs` when it is installed. The SDK is referenced by the absolute path of this checkout's
 //! `crates/flowlight-sdk` (default), another path (`--sdk-path`) or a registry version
 //! (`--sdk-version`).
 //!
@@ -87,7 +87,10 @@ pub fn render_files(kind: Kind, name: &str, sdk: &SdkSource) -> Result<Vec<(Path
     let sdk_dep = match sdk {
         SdkSource::Path(p) => {
             let p = p.to_str().ok_or_else(|| {
-                anyhow!("SDK path {} is not valid UTF-8: pass --sdk-path", p.display())
+                anyhow!(
+                    "SDK path {} is not valid UTF-8: pass --sdk-path",
+                    p.display()
+                )
             })?;
             format!("flowlight-sdk = {{ path = {} }}", toml_string(p))
         }
@@ -120,9 +123,15 @@ pub fn render_files(kind: Kind, name: &str, sdk: &SdkSource) -> Result<Vec<(Path
             .replace("__USAGE__", &usage)
     };
     Ok(vec![
-        ("Cargo.toml".into(), fill(include_str!("templates/Cargo.toml.tmpl"))),
+        (
+            "Cargo.toml".into(),
+            fill(include_str!("templates/Cargo.toml.tmpl")),
+        ),
         ("src/lib.rs".into(), fill(lib_template)),
-        ("README.md".into(), fill(include_str!("templates/README.md.tmpl"))),
+        (
+            "README.md".into(),
+            fill(include_str!("templates/README.md.tmpl")),
+        ),
         (".gitignore".into(), "/target\n".into()),
     ])
 }
@@ -161,6 +170,13 @@ pub fn run(kind: Kind, name: &str, dir: &Path, sdk: SdkSource) -> Result<()> {
         }
         std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
     }
+    // Line widths depend on the name: let rustfmt lay the skeleton out, when it is installed
+    // (the code is valid either way).
+    let _ = std::process::Command::new("rustfmt")
+        .args(["--edition", "2021"])
+        .arg(dir.join("src/lib.rs"))
+        .stderr(std::process::Stdio::null())
+        .status();
     let lib = format!(
         "{}flowlight_{}{}",
         std::env::consts::DLL_PREFIX,
@@ -193,7 +209,10 @@ mod tests {
         }
         for bad in ["", "Ao", "2d", "my_ao", "my--ao", "ao-", "a b", "é"] {
             let e = check_name(bad).unwrap_err().to_string();
-            assert!(e.contains("plugin name") && !e.contains('\n'), "{bad:?}: {e}");
+            assert!(
+                e.contains("plugin name") && !e.contains('\n'),
+                "{bad:?}: {e}"
+            );
         }
         assert_eq!(type_name("film-perturbation-2"), "FilmPerturbation2");
     }
@@ -209,7 +228,10 @@ mod tests {
             let cargo = &files[0].1;
             let parsed: toml::Table = toml::from_str(cargo).unwrap();
             assert_eq!(parsed["lib"]["name"].as_str(), Some("flowlight_my_thing"));
-            assert_eq!(parsed["package"]["name"].as_str(), Some("flowlight-my-thing"));
+            assert_eq!(
+                parsed["package"]["name"].as_str(),
+                Some("flowlight-my-thing")
+            );
             assert_eq!(
                 parsed["dependencies"]["flowlight-sdk"]["path"].as_str(),
                 Some("/x/flowlight-sdk")
@@ -219,7 +241,10 @@ mod tests {
         }
         let files = render_files(Kind::Mutation, "j", &SdkSource::Version("0.1".into())).unwrap();
         let parsed: toml::Table = toml::from_str(&files[0].1).unwrap();
-        assert_eq!(parsed["dependencies"]["flowlight-sdk"].as_str(), Some("0.1"));
+        assert_eq!(
+            parsed["dependencies"]["flowlight-sdk"].as_str(),
+            Some("0.1")
+        );
     }
 
     #[test]
@@ -227,11 +252,19 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("flowlight-new-plugin-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::write(dir.join("keep.txt"), "mine").unwrap();
-        let e = run(Kind::Integrator, "x", &dir, SdkSource::Version("0.1".into()))
-            .unwrap_err()
-            .to_string();
+        let e = run(
+            Kind::Integrator,
+            "x",
+            &dir,
+            SdkSource::Version("0.1".into()),
+        )
+        .unwrap_err()
+        .to_string();
         assert!(e.contains("not empty"), "{e}");
-        assert_eq!(std::fs::read_to_string(dir.join("keep.txt")).unwrap(), "mine");
+        assert_eq!(
+            std::fs::read_to_string(dir.join("keep.txt")).unwrap(),
+            "mine"
+        );
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

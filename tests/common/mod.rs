@@ -92,6 +92,7 @@ pub fn mean_and_stderr(img: &[Rgb], f: impl Fn(Rgb) -> f32) -> (f64, f64) {
 }
 
 /// The glTF builders of the conformance kit (one writer for every test).
+#[allow(unused_imports)]
 pub use flowlight_testkit::gltf::{base64, emitting_square, quads_gltf};
 
 /// Writes `gltf` and a config (`body` is everything after the `scene =` line) into a scratch

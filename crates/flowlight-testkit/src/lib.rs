@@ -192,7 +192,8 @@ pub fn check_densities(
         }
         x.film_window = FILM_WINDOW;
         let f_x = measurement(&scene, &x);
-        if !(f_x.luminance() > 0.0) {
+        // NaN counts as no energy.
+        if f_x.luminance().partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
             continue;
         }
         for _ in 0..2 {
@@ -202,11 +203,9 @@ pub fn check_densities(
                 continue;
             }
             valid += 1;
-            let types = |path: &Path| -> String { path.heckbert() };
-            let what = || format!("{} → {}", types(&x), types(&y));
+            let what = || format!("{} → {}", x.heckbert(), y.heckbert());
             if y.vertex_count != x.vertex_count
-                || x
-                    .vertices()
+                || x.vertices()
                     .iter()
                     .zip(y.vertices())
                     .any(|(a, b)| WeakNode::of(a) != WeakNode::of(b))
@@ -218,7 +217,7 @@ pub fn check_densities(
             }
             let f_y = measurement(&scene, &y);
             let ratio = p.transition_ratio as f64;
-            if !(ratio.is_finite() && ratio >= 0.0) || !f_y.is_valid_radiance() {
+            if !ratio.is_finite() || ratio < 0.0 || !f_y.is_valid_radiance() {
                 return Err(format!(
                     "{name}: invalid ratio {ratio} or contribution {f_y:?} ({})",
                     what()
@@ -226,7 +225,7 @@ pub fn check_densities(
             }
             let forward = set.density(0, &x, &y)?;
             let reverse = set.density(0, &y, &x)?;
-            if !(forward > 0.0) {
+            if forward.is_nan() || forward <= 0.0 {
                 return Err(format!(
                     "{name}: proposed a path its density says it cannot reach: T(x→y) = {forward} ({})",
                     what()

@@ -67,7 +67,12 @@ const PARAMS: &[ParamSpec] = &[
         "0",
         "occlusion radius in scene units (0: a tenth of the scene's diagonal)",
     ),
-    param("ao_samples", ParamKind::Int, "4", "occlusion rays per pixel sample"),
+    param(
+        "ao_samples",
+        ParamKind::Int,
+        "4",
+        "occlusion rays per pixel sample",
+    ),
     param(
         "aovs",
         ParamKind::Bool,
@@ -112,7 +117,11 @@ pub fn ambient_occlusion(
 
 /// The shading normal on the camera's side, encoded as (n + 1)/2.
 fn encoded_normal(hit: &SurfaceHit, wo: Vec3) -> Rgb {
-    let n = if hit.ng.dot(wo) < 0.0 { -hit.ns } else { hit.ns };
+    let n = if hit.ng.dot(wo) < 0.0 {
+        -hit.ns
+    } else {
+        hit.ns
+    };
     let c = (n + Vec3::ONE) * 0.5;
     Rgb::from_array([c.x, c.y, c.z])
 }
@@ -179,7 +188,8 @@ impl Integrator for AmbientOcclusion {
                         continue; // nothing there: 0 in every layer
                     };
                     let wo = -ray.dir;
-                    let ao = ambient_occlusion(tracer, &mut rng, &hit, wo, self.radius, self.samples);
+                    let ao =
+                        ambient_occlusion(tracer, &mut rng, &hit, wo, self.radius, self.samples);
                     // Box filter: every deposit goes to the centre of the sample's pixel.
                     let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
                     film.deposit(cx, cy, AO_LAYER, Rgb::splat(ao));

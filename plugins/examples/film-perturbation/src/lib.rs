@@ -138,15 +138,22 @@ impl FilmPerturbation {
     }
 
     /// `hit` standing in for the path's light vertex: an area light seen from `from`.
-    fn light_vertex(&self, hit: &SurfaceHit, original: &PathVertex, from: Vec3) -> Option<PathVertex> {
+    fn light_vertex(
+        &self,
+        hit: &SurfaceHit,
+        original: &PathVertex,
+        from: Vec3,
+    ) -> Option<PathVertex> {
         let lights = &self.scene.lights;
         let area = |e: i32| usize::try_from(e).is_ok_and(|i| i < lights.emitters.len());
         if !area(original.emitter) || !area(hit.emitter) {
             return None; // a point light's vertex is never moved
         }
         let towards = (from - hit.p).try_normalize()?;
-        (!lights.emitted(hit.emitter as usize, hit.p, towards).is_black())
-            .then(|| PathVertex::from_hit(hit, NodeType::Light, 0))
+        (!lights
+            .emitted(hit.emitter as usize, hit.p, towards)
+            .is_black())
+        .then(|| PathVertex::from_hit(hit, NodeType::Light, 0))
     }
 }
 
@@ -192,8 +199,7 @@ impl Mutation for FilmPerturbation {
             return Ok(MISS); // a shadow ray cannot end on a mirror or glass vertex
         }
         let camera = &self.scene.camera;
-        let Some(raster) = perturb(x.raster, self.radius, camera.width, camera.height, rng)
-        else {
+        let Some(raster) = perturb(x.raster, self.radius, camera.width, camera.height, rng) else {
             return Ok(MISS);
         };
         *y = *x;
@@ -248,7 +254,13 @@ impl Mutation for FilmPerturbation {
             return 0.0; // this strategy never moves the vertices after x_j
         }
         let camera = &self.scene.camera;
-        disk_density(from.raster, to.raster, self.radius, camera.width, camera.height)
+        disk_density(
+            from.raster,
+            to.raster,
+            self.radius,
+            camera.width,
+            camera.height,
+        )
     }
     // endregion: density
 }
@@ -281,7 +293,10 @@ mod tests {
         // A uniform disk has a quarter of its area within half its radius.
         let share = inner as f64 / trials as f64;
         assert!((share - 0.25).abs() < 0.01, "{share}");
-        assert_eq!(disk_density(start, start + Vec2::new(3.1, 0.0), r, 64, 64), 0.0);
+        assert_eq!(
+            disk_density(start, start + Vec2::new(3.1, 0.0), r, 64, 64),
+            0.0
+        );
         let expected = 1.0 / (std::f64::consts::PI * 9.0);
         assert!((disk_density(start, start, r, 64, 64) - expected).abs() < 1e-12);
     }
@@ -296,6 +311,10 @@ mod tests {
         assert_eq!(first_free(&v), 3);
         assert_eq!(first_free(&v[..2]), 1);
         v[3].node = NodeType::SpecularReflection;
-        assert_eq!(first_free(&v), 4, "E S T S L: the light is the first free vertex");
+        assert_eq!(
+            first_free(&v),
+            4,
+            "E S T S L: the light is the first free vertex"
+        );
     }
 }
