@@ -264,7 +264,7 @@ mod tests {
     use super::*;
     use flowlight_core::geometry::Ray;
     use flowlight_scene::gltf_loader::load_gltf;
-    use flowlight_scene::testutil::{png8, temp_dir, Quad};
+    use flowlight_testkit::gltf::{png8, temp_dir, Quad};
     use glam::Vec3;
     use std::collections::BTreeMap;
 

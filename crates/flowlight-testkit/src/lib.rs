@@ -56,6 +56,7 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
 pub mod gltf;
+pub mod scenes;
 
 /// Fewest valid proposals the kit accepts from the seed paths it tries.
 pub const MIN_VALID: usize = 100;
