@@ -116,8 +116,7 @@ impl Document {
         self.buffer_views.len() - 1
     }
 
-    /// A view of `data` and an accessor over it; the accessor's index. `min_max` for
-    /// POSITION accessors (glTF requires them).
+    /// A view of `data` and an accessor over it; the accessor's index.
     pub fn accessor(
         &mut self,
         data: &[u8],
@@ -125,20 +124,17 @@ impl Document {
         component_type: u32,
         count: usize,
         ty: &str,
-        normalized: bool,
-        min_max: Option<(Vec<f64>, Vec<f64>)>,
     ) -> usize {
         let view = self.view(data, target);
-        let mut a = json!({"bufferView": view, "componentType": component_type, "count": count, "type": ty});
-        if normalized {
-            a["normalized"] = json!(true);
-        }
-        if let Some((lo, hi)) = min_max {
-            a["min"] = json!(lo);
-            a["max"] = json!(hi);
-        }
+        let a = json!({"bufferView": view, "componentType": component_type, "count": count, "type": ty});
         self.accessors.push(a);
         self.accessors.len() - 1
+    }
+
+    /// Sets accessor `i`'s `min` and `max` (glTF requires them on POSITION).
+    pub fn bounds(&mut self, i: usize, min: Vec<f64>, max: Vec<f64>) {
+        self.accessors[i]["min"] = json!(min);
+        self.accessors[i]["max"] = json!(max);
     }
 
     /// A VEC3 float accessor of `points` (with min/max when `bounds`).
@@ -153,30 +149,18 @@ impl Document {
             )
         });
         let data = f32_bytes(points.iter().flatten().copied());
-        self.accessor(
-            &data,
-            Some(ARRAY_BUFFER),
-            FLOAT,
-            points.len(),
-            "VEC3",
-            false,
-            min_max,
-        )
+        let i = self.accessor(&data, Some(ARRAY_BUFFER), FLOAT, points.len(), "VEC3");
+        if let Some((lo, hi)) = min_max {
+            self.bounds(i, lo, hi);
+        }
+        i
     }
 
     /// A u32 SCALAR index accessor.
     pub fn indices_u32(&mut self, indices: &[u32]) -> usize {
         let data: Vec<u8> = indices.iter().flat_map(|i| i.to_le_bytes()).collect();
         let target = Some(ELEMENT_ARRAY_BUFFER);
-        self.accessor(
-            &data,
-            target,
-            UNSIGNED_INT,
-            indices.len(),
-            "SCALAR",
-            false,
-            None,
-        )
+        self.accessor(&data, target, UNSIGNED_INT, indices.len(), "SCALAR")
     }
 
     /// The document as JSON text (compact); the buffer is embedded as a data URI.
@@ -372,15 +356,10 @@ impl Quad {
             QUAD_POSITIONS.map(|p| [p[0], 1.0 - p[1]]),
         ));
         for a in standard.iter().chain(&self.extra) {
-            let i = d.accessor(
-                &a.bytes,
-                None,
-                a.component_type,
-                4,
-                a.ty,
-                a.normalized,
-                None,
-            );
+            let i = d.accessor(&a.bytes, None, a.component_type, 4, a.ty);
+            if a.normalized {
+                d.accessors[i]["normalized"] = json!(true);
+            }
             attrs.insert(a.semantic.clone(), json!(i));
         }
         d.meshes
@@ -426,14 +405,17 @@ pub struct MaterialOptions {
     pub thickness: Option<f64>,
 }
 
+/// One mesh of a [`SceneBuilder`]: material name, positions, normals (smooth meshes only)
+/// and indices (written as u16).
+type SceneMesh = (String, Vec<[f64; 3]>, Option<Vec<[f64; 3]>>, Vec<u32>);
+
 /// Builder of the benchmark scenes (module docs): one mesh per material, in the order the
 /// materials are first used; quads and boxes flat-shaded, spheres smooth.
 pub struct SceneBuilder {
     generator: String,
     materials: Vec<(String, Value)>,
     extensions: BTreeSet<String>,
-    /// Per material name: positions, normals (smooth meshes) and u16 indices.
-    meshes: Vec<(String, Vec<[f64; 3]>, Option<Vec<[f64; 3]>>, Vec<u32>)>,
+    meshes: Vec<SceneMesh>,
 }
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
@@ -650,19 +632,11 @@ impl SceneBuilder {
                 .collect();
             let target = Some(ARRAY_BUFFER);
             let count = positions.len();
-            let pa = d.accessor(
-                &f32s(positions),
-                target,
-                FLOAT,
-                count,
-                "VEC3",
-                false,
-                Some((lo, hi)),
-            );
+            let pa = d.accessor(&f32s(positions), target, FLOAT, count, "VEC3");
+            d.bounds(pa, lo, hi);
             let mut attrs = json!({"POSITION": pa});
             if let Some(n) = normals {
-                attrs["NORMAL"] =
-                    json!(d.accessor(&f32s(n), target, FLOAT, n.len(), "VEC3", false, None));
+                attrs["NORMAL"] = json!(d.accessor(&f32s(n), target, FLOAT, n.len(), "VEC3"));
             }
             assert!(
                 positions.len() < 65536,
@@ -678,8 +652,6 @@ impl SceneBuilder {
                 UNSIGNED_SHORT,
                 indices.len(),
                 "SCALAR",
-                false,
-                None,
             );
             let material = self
                 .materials
@@ -740,7 +712,7 @@ mod tests {
     #[test]
     fn views_are_aligned_and_accessors_point_at_them() {
         let mut d = Document::default();
-        let a = d.accessor(&[1, 2, 3], None, 5121, 3, "SCALAR", false, None);
+        let a = d.accessor(&[1, 2, 3], None, 5121, 3, "SCALAR");
         let b = d.vec3(&[[1.0, -2.0, 3.0], [0.5, 4.0, -1.0]], true);
         assert_eq!((a, b), (0, 1));
         assert_eq!(
