@@ -547,3 +547,92 @@ fn the_kit_refuses_a_mutation_whose_ratio_is_wrong() {
     assert!(err.contains("ratio 2 but T(y→x)/T(x→y)"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Another Rust toolchain installed beside this one (rustup), whose `rustc --version`
+/// differs from the host's.
+fn other_rustc() -> Option<PathBuf> {
+    let home = std::env::var_os("RUSTUP_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".rustup")))?;
+    let mut found: Vec<PathBuf> = std::fs::read_dir(home.join("toolchains"))
+        .ok()?
+        .flatten()
+        .map(|e| e.path().join("bin").join("rustc"))
+        .filter(|r| r.is_file())
+        .collect();
+    found.sort();
+    found.into_iter().find(|r| {
+        Command::new(r)
+            .arg("--version")
+            .output()
+            .ok()
+            .filter(|o| o.status.success())
+            .is_some_and(|o| {
+                String::from_utf8_lossy(&o.stdout).trim() != flowlight_sdk::abi::RUSTC_VERSION
+            })
+    })
+}
+
+#[test]
+fn a_plugin_built_by_another_rustc_is_refused_with_the_documented_message() {
+    let Some(rustc) = other_rustc() else {
+        eprintln!("skipped: no second Rust toolchain installed (rustup toolchain install nightly)");
+        return;
+    };
+    let dir = outside("other-rustc");
+    let out = flowlight(
+        &[
+            "new-plugin",
+            "--kind",
+            "integrator",
+            "other-rustc",
+            dir.to_str().unwrap(),
+        ],
+        Path::new(""),
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // Its own target folder: the other compiler's artefacts must not mix with ours.
+    let target = common::repo().join("target").join("outsider-other-rustc");
+    let _one = CARGO.lock().unwrap_or_else(|e| e.into_inner());
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let built = Command::new(cargo)
+        .args(["build", "--release", "--offline", "--quiet"])
+        .current_dir(&dir)
+        .env("CARGO_TARGET_DIR", &target)
+        .env("RUSTC", &rustc)
+        .env_remove("RUSTFLAGS")
+        .output()
+        .expect("running cargo");
+    drop(_one);
+    assert!(
+        built.status.success(),
+        "building with {}: {}",
+        rustc.display(),
+        String::from_utf8_lossy(&built.stderr)
+    );
+    let lib = target
+        .join("release")
+        .join(flowlight_host::plugin::plugin_file_name("other-rustc"));
+    let err = match flowlight_host::plugin::PluginLibrary::load(&lib) {
+        Ok(_) => panic!("a plugin built by {} was accepted", rustc.display()),
+        Err(e) => e.to_string(),
+    };
+    // The message docs/writing-a-plugin.md shows.
+    let expected = format!(
+        "plugin {} was refused: rustc version mismatch (plugin has rustc ",
+        lib.display()
+    );
+    assert!(err.starts_with(&expected), "{err}");
+    assert!(
+        err.ends_with(&format!(
+            "host has {}); rebuild the plugin against this host's SDK",
+            flowlight_sdk::abi::RUSTC_VERSION
+        )),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
