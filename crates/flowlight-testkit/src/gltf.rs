@@ -213,7 +213,7 @@ fn object(text: &str) -> Value {
 }
 
 /// A glTF document with one mesh made of `quads` (each four corners, counter-clockwise seen
-/// from its front), material `material` (JSON of materials[0]), and `extra_nodes` (JSON
+/// from its front), material `material` (JSON of `materials[0]`), and `extra_nodes` (JSON
 /// objects, e.g. `KHR_lights_punctual` light nodes) after the mesh node. `lights` is the JSON
 /// array of `KHR_lights_punctual` lights (empty: the extension is not used).
 pub fn quads_gltf(
@@ -395,7 +395,7 @@ impl Quad {
 #[derive(Clone, Copy, Debug, Default)]
 pub struct MaterialOptions {
     pub metallic: f64,
-    /// Default 1 (see [`MaterialOptions::rough`]).
+    /// `None`: 1 (fully rough).
     pub roughness: Option<f64>,
     /// Emitted colour and `KHR_materials_emissive_strength`.
     pub emission: Option<([f64; 3], f64)>,
