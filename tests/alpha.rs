@@ -7,7 +7,7 @@ mod common;
 
 use common::{render, scratch};
 use flowlight_host::session::{Overrides, Session};
-use flowlight_scene::testutil::{png8, Quad};
+use flowlight_testkit::gltf::{png8, Quad};
 
 fn render_cut(intersector: &str, mode: &str) -> Vec<Vec<f32>> {
     let dir = scratch(&format!("alpha-{intersector}-{mode}"));

@@ -6,7 +6,7 @@
 mod common;
 
 use common::{mean_and_stderr, render, session_from};
-use flowlight_scene::testutil::{octahedra_gltf, octahedra_placements};
+use flowlight_testkit::gltf::{octahedra_gltf, octahedra_placements};
 
 const BODY_BVH: &str = r#"
 [render]

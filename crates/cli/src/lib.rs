@@ -8,10 +8,12 @@
 //! flowlight compare <a.exr> <reference.exr> [--out error.png]
 //! flowlight reference <config.toml> [--spp N | --time SECONDS] [--out FILE] | --from A.exr [--from B.exr]
 //! flowlight bench <suite.toml> [--out DIR] [--budgets 0.5,1] [--seeds 1,2] [--threads N]
+//! flowlight new-plugin --kind integrator|mutation NAME DIR [--sdk-path DIR | --sdk-version V]
 //! ```
 
 mod bench;
 mod compare;
+mod new_plugin;
 mod plugins;
 mod reference;
 mod render;
@@ -131,6 +133,22 @@ enum Command {
         #[arg(long)]
         rebuild_references: bool,
     },
+    /// Write a new plugin crate that builds outside this workspace (docs/writing-a-plugin.md).
+    NewPlugin {
+        /// What the plugin implements.
+        #[arg(long, value_enum)]
+        kind: new_plugin::Kind,
+        /// Plugin name as configs write it: lowercase letters, digits and '-'.
+        name: String,
+        /// Folder to create (must not exist, or be empty).
+        dir: PathBuf,
+        /// Depend on the SDK at this path (default: this checkout's crates/flowlight-sdk).
+        #[arg(long, conflicts_with = "sdk_version")]
+        sdk_path: Option<PathBuf>,
+        /// Depend on this registry version of flowlight-sdk instead of a path.
+        #[arg(long)]
+        sdk_version: Option<String>,
+    },
 }
 
 /// Parses the command line, runs the subcommand, and exits with status 1 on an error.
@@ -199,6 +217,20 @@ pub fn main() {
                 rebuild_references,
             },
         ),
+        Command::NewPlugin {
+            kind,
+            name,
+            dir,
+            sdk_path,
+            sdk_version,
+        } => {
+            let sdk = match (sdk_path, sdk_version) {
+                (_, Some(v)) => new_plugin::SdkSource::Version(v),
+                (Some(p), None) => new_plugin::SdkSource::Path(p),
+                (None, None) => new_plugin::SdkSource::Path(new_plugin::default_sdk_path()),
+            };
+            new_plugin::run(kind, &name, &dir, sdk)
+        }
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

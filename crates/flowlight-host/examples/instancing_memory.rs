@@ -8,7 +8,7 @@
 //! (`/proc/self/statm`) after each step. Run each mode in its own process.
 
 use flowlight_host::intersector::{BvhIntersector, EmbreeIntersector};
-use flowlight_scene::testutil::base64;
+use flowlight_testkit::gltf::base64;
 use std::collections::BTreeMap;
 
 fn rss() -> u64 {

@@ -432,7 +432,7 @@ mod tests {
     use super::*;
     use flowlight_core::geometry::Ray;
     use flowlight_scene::gltf_loader::load_gltf;
-    use flowlight_scene::testutil::{png8, temp_dir, Quad};
+    use flowlight_testkit::gltf::{png8, temp_dir, Quad};
     use glam::Vec3;
     use std::collections::BTreeMap;
 
@@ -545,7 +545,7 @@ mod tests {
 
     #[test]
     fn instanced_scene_hits_what_its_flattened_copy_hits_in_both_intersectors() {
-        use flowlight_scene::testutil::{octahedra_gltf, octahedra_placements};
+        use flowlight_testkit::gltf::{octahedra_gltf, octahedra_placements};
         let placements = octahedra_placements(9);
         let shared = load_json("inst-shared", &octahedra_gltf(&placements, false, "{}"));
         let flat = load_json("inst-flat", &octahedra_gltf(&placements, true, "{}"));
@@ -607,7 +607,7 @@ mod tests {
 
     #[test]
     fn all_27_gpu_instances_are_hit_and_stored_once() {
-        use flowlight_scene::testutil::octahedra_ext_gltf;
+        use flowlight_testkit::gltf::octahedra_ext_gltf;
         let t: Vec<[f32; 3]> = (0..27)
             .map(|i| {
                 [

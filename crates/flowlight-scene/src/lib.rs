@@ -27,7 +27,6 @@ pub mod lights;
 pub mod material;
 pub mod scene;
 pub mod source;
-pub mod testutil;
 pub mod texture;
 
 pub use config::{

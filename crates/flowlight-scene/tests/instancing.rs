@@ -2,7 +2,7 @@
 //! and shows, triangle by triangle, what the flattened scene shows.
 
 use flowlight_core::geometry::Ray;
-use flowlight_scene::testutil::{
+use flowlight_testkit::gltf::{
     octahedra_ext_gltf, octahedra_gltf, octahedra_placements, temp_dir,
 };
 use flowlight_scene::{load_gltf, Scene};

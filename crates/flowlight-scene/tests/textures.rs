@@ -4,9 +4,9 @@
 use flowlight_core::geometry::{Ray, SurfaceHit};
 use flowlight_core::material::{AlphaMode, Filter, Wrap};
 use flowlight_scene::gltf_loader::load_gltf;
-use flowlight_scene::testutil::{png8, temp_dir, Attribute, Quad};
 use flowlight_scene::texture::srgb_to_linear;
 use flowlight_scene::{Scene, Texels};
+use flowlight_testkit::gltf::{png8, temp_dir, Attribute, Quad};
 use glam::{Vec2, Vec3};
 use std::collections::BTreeMap;
 

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-pub use flowlight_scene::testutil::base64;
+pub use flowlight_testkit::gltf::base64;
 
 /// A fresh empty temporary directory for one test.
 pub fn temp_dir(tag: &str) -> PathBuf {
