@@ -22,7 +22,8 @@
 //! world space therefore agree on every hit up to that tolerance (the agreement test in
 //! `tests/instanced.rs`).
 
-use crate::{build_parallel, Aabb, Bvh, Node, PrimRef, SlabRay, STACK_SIZE};
+use crate::build::{build_parallel, Aabb, Bvh, Node, PrimRef};
+use crate::traverse::{SlabRay, STACK_SIZE};
 use flowlight_core::geometry::Ray;
 use glam::{Affine3A, Mat4, Vec3};
 
