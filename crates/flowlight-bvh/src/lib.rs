@@ -27,10 +27,16 @@
 //!   it, like Embree's filter callbacks; a rejected candidate leaves `t_max` unchanged, so
 //!   the closest accepted hit is found. The unfiltered queries compile the filter away.
 //!
-//!
 //! Module map: `build` (the binned-SAH build, the node layout and [`Bvh`] itself), `traverse`
-//! (slab test and the closest/any-hit queries), `triangle` (the watertight ray/triangle test
-//! and [`TriangleHit`]) and `instanced` ([`TwoLevelBvh`]).
+//! (slab test and the closest/any-hit queries), `triangle` (the watertight ray/triangle test)
+//! and `instanced` ([`TwoLevelBvh`]). The hits and filters ([`TriangleHit`], [`InstanceHit`],
+//! [`HitFilter`], [`InstanceHitFilter`]) live in `flowlight_core::geometry`, shared with the
+//! Embree intersector.
+//!
+//! [`TriangleHit`]: flowlight_core::geometry::TriangleHit
+//! [`InstanceHit`]: flowlight_core::geometry::InstanceHit
+//! [`HitFilter`]: flowlight_core::geometry::HitFilter
+//! [`InstanceHitFilter`]: flowlight_core::geometry::InstanceHitFilter
 //!
 //! Instancing: [`TwoLevelBvh`] is a hierarchy over instances (affine transforms) of per-mesh
 //! [`Bvh`]s; see the `instanced` module.
@@ -44,6 +50,5 @@ mod traverse;
 mod triangle;
 
 pub use build::{Bvh, MAX_LEAF_SIZE, SAH_BINS};
-pub use instanced::{Instance, InstanceHit, InstanceHitFilter, TwoLevelBvh};
-pub use traverse::HitFilter;
-pub use triangle::{intersect_triangle, is_degenerate, TriangleHit, WatertightRay};
+pub use instanced::{Instance, TwoLevelBvh};
+pub use triangle::{intersect_triangle, is_degenerate, WatertightRay};

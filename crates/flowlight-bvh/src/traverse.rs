@@ -3,17 +3,11 @@
 //! crate documentation.
 
 use crate::build::{Bvh, Node};
-use crate::triangle::{gamma, TriangleHit, WatertightRay};
-use flowlight_core::geometry::Ray;
+use crate::triangle::{gamma, WatertightRay};
+use flowlight_core::geometry::{HitFilter, Ray, TriangleHit};
 
 /// Traversal stack size. The build caps the depth well below this (see [`MAX_SAH_DEPTH`]).
 pub(crate) const STACK_SIZE: usize = 128;
-
-/// Decides whether a candidate hit of triangle `prim` at barycentrics `(b1, b2)` counts
-/// (`true`) or the ray passes through it (`false`): alpha testing. It is called for
-/// candidates in any order, possibly more than once per triangle, so it must be a pure
-/// function of its arguments (and of the ray it was made for).
-pub type HitFilter<'a> = &'a dyn Fn(u32, f32, f32) -> bool;
 
 impl Bvh {
     /// Closest hit with `t ∈ (0, ray.t_max)`, or `None`.

@@ -1,9 +1,9 @@
 //! The watertight ray/triangle test (Woop, Benthin & Wald, JCGT 2013) with pbrt-v4's
-//! conservative `t` bound (§6.5.3, §6.8.4), and the hit it reports; see the crate documentation.
+//! conservative `t` bound (§6.5.3, §6.8.4); see the crate documentation.
 
 #[cfg(doc)]
 use crate::Bvh;
-use flowlight_core::geometry::Ray;
+use flowlight_core::geometry::{Ray, TriangleHit};
 use glam::Vec3;
 
 /// γ_n = nε/(1-nε), ε = 2⁻²⁴: bound on the relative error of n floating-point operations
@@ -11,19 +11,6 @@ use glam::Vec3;
 pub(crate) const fn gamma(n: u32) -> f32 {
     let e = f32::EPSILON * 0.5;
     (n as f32 * e) / (1.0 - n as f32 * e)
-}
-
-/// Closest hit of a ray with the triangles of a [`Bvh`].
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TriangleHit {
-    /// Ray parameter, `0 < t < ray.t_max`.
-    pub t: f32,
-    /// Index of the triangle in the slice given to [`Bvh::build`].
-    pub prim: u32,
-    /// Barycentric coordinate of the second vertex: `p = (1-b1-b2)·p0 + b1·p1 + b2·p2`.
-    pub b1: f32,
-    /// Barycentric coordinate of the third vertex.
-    pub b2: f32,
 }
 
 /// Whether a triangle can never be hit: a non-finite coordinate, or a cross product of two edges
