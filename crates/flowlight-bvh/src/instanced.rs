@@ -22,13 +22,10 @@
 //! world space therefore agree on every hit up to that tolerance (the agreement test in
 //! `tests/instanced.rs`).
 
-use crate::{build_parallel, Aabb, Bvh, Node, PrimRef, SlabRay, STACK_SIZE};
-use flowlight_core::geometry::Ray;
+use crate::build::{build_parallel, Aabb, Bvh, Node, PrimRef};
+use crate::traverse::{SlabRay, STACK_SIZE};
+use flowlight_core::geometry::{InstanceHit, InstanceHitFilter, Ray};
 use glam::{Affine3A, Mat4, Vec3};
-
-/// [`crate::HitFilter`] for instances: `(instance, prim, b1, b2)`, `prim` the triangle's
-/// index in its mesh. The same purity rules apply.
-pub type InstanceHitFilter<'a> = &'a dyn Fn(u32, u32, f32, f32) -> bool;
 
 /// One placement of a mesh.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -37,20 +34,6 @@ pub struct Instance {
     pub mesh: u32,
     /// Object to world; must be affine and invertible.
     pub object_to_world: Mat4,
-}
-
-/// Closest hit of a ray with a [`TwoLevelBvh`].
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct InstanceHit {
-    /// Ray parameter in world (= object) space, `0 < t < ray.t_max`.
-    pub t: f32,
-    /// Index of the instance.
-    pub instance: u32,
-    /// Index of the triangle in its mesh.
-    pub prim: u32,
-    /// Barycentric coordinates of vertices 1 and 2, as in [`crate::TriangleHit`].
-    pub b1: f32,
-    pub b2: f32,
 }
 
 /// A BVH over instances of per-mesh BVHs.

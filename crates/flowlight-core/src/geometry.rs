@@ -1,4 +1,4 @@
-//! Rays, surface hits, local frames and explicit floating-point error handling for ray spawning.
+//! Rays, surface hits, the hits intersectors report, local frames and explicit floating-point error handling for ray spawning.
 
 use glam::{Vec2, Vec3};
 
@@ -52,6 +52,46 @@ pub struct SurfaceHit {
     /// Index into the scene's emitter table, or -1 when the triangle does not emit.
     pub emitter: i32,
 }
+
+/// Closest hit of a ray with a set of triangles, as the host's intersectors report it (the
+/// pure-Rust `flowlight_bvh::Bvh` and Embree alike); the host turns it into a [`SurfaceHit`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TriangleHit {
+    /// Ray parameter, `0 < t < ray.t_max`.
+    pub t: f32,
+    /// Index of the triangle in the intersector's triangle list (for `flowlight_bvh::Bvh`, the
+    /// slice given to `Bvh::build`).
+    pub prim: u32,
+    /// Barycentric coordinate of the second vertex: `p = (1-b1-b2)·p0 + b1·p1 + b2·p2`.
+    pub b1: f32,
+    /// Barycentric coordinate of the third vertex.
+    pub b2: f32,
+}
+
+/// Closest hit of a ray with instanced meshes (`flowlight_bvh::TwoLevelBvh`, Embree's
+/// instances).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InstanceHit {
+    /// Ray parameter in world (= object) space, `0 < t < ray.t_max`.
+    pub t: f32,
+    /// Index of the instance.
+    pub instance: u32,
+    /// Index of the triangle in its mesh.
+    pub prim: u32,
+    /// Barycentric coordinates of vertices 1 and 2, as in [`TriangleHit`].
+    pub b1: f32,
+    pub b2: f32,
+}
+
+/// Decides whether a candidate hit of triangle `prim` at barycentrics `(b1, b2)` counts
+/// (`true`) or the ray passes through it (`false`): alpha testing. It is called for
+/// candidates in any order, possibly more than once per triangle, so it must be a pure
+/// function of its arguments (and of the ray it was made for).
+pub type HitFilter<'a> = &'a dyn Fn(u32, f32, f32) -> bool;
+
+/// [`HitFilter`] for instances: `(instance, prim, b1, b2)`, `prim` the triangle's
+/// index in its mesh. The same purity rules apply.
+pub type InstanceHitFilter<'a> = &'a dyn Fn(u32, u32, f32, f32) -> bool;
 
 /// Float error growth bound γ_n = nε/(1-nε) with ε = 2^-24 (pbrt-v4 §6.8.1).
 #[inline]

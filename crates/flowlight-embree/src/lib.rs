@@ -17,8 +17,7 @@ use embree4_sys::{
     RTCBufferType, RTCBuildQuality, RTCDevice, RTCFeatureFlags, RTCFormat, RTCGeometry,
     RTCGeometryType, RTCRay, RTCRayQueryFlags, RTCScene, RTCSceneFlags,
 };
-use flowlight_bvh::{HitFilter, InstanceHit, InstanceHitFilter, TriangleHit};
-use flowlight_core::geometry::Ray;
+use flowlight_core::geometry::{HitFilter, InstanceHit, InstanceHitFilter, Ray, TriangleHit};
 use glam::{Mat4, Vec3};
 use std::ffi::{c_char, c_uint, c_void};
 use std::sync::OnceLock;

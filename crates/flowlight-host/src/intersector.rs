@@ -1,7 +1,7 @@
 //! Intersectors and the host's answer to plugins' ray queries.
 
-use flowlight_bvh::{Bvh, HitFilter, Instance, InstanceHit, TriangleHit, TwoLevelBvh};
-use flowlight_core::geometry::Ray;
+use flowlight_bvh::{Bvh, Instance, TwoLevelBvh};
+use flowlight_core::geometry::{HitFilter, InstanceHit, Ray, TriangleHit};
 use flowlight_scene::config::Intersector as IntersectorChoice;
 use flowlight_scene::Scene;
 use flowlight_sdk::abi::{HitRecord, TracerTable};

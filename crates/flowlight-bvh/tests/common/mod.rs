@@ -3,8 +3,8 @@
 
 use std::collections::HashMap;
 
-use flowlight_bvh::{intersect_triangle, is_degenerate, TriangleHit, WatertightRay};
-use flowlight_core::geometry::Ray;
+use flowlight_bvh::{intersect_triangle, is_degenerate, WatertightRay};
+use flowlight_core::geometry::{Ray, TriangleHit};
 use flowlight_core::rng::Rng;
 use glam::Vec3;
 
