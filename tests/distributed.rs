@@ -19,12 +19,16 @@ fn small_config(dir: &Path, base: &str, size: u32, spp: u32, extra: &str) -> Pat
     let text = std::fs::read_to_string(&src).unwrap();
     let scene_dir = src.parent().unwrap();
     let mut out = String::new();
+    let mut in_render = false;
     for line in text.lines() {
         let t = line.trim_start();
+        if t.starts_with('[') {
+            in_render = t.starts_with("[render]");
+        }
         if t.starts_with("scene =") {
             let name = t.split('"').nth(1).unwrap();
             out += &format!("scene = {:?}\n", scene_dir.join(name).display().to_string());
-        } else if t.starts_with("width =") || t.starts_with("height =") {
+        } else if in_render && (t.starts_with("width =") || t.starts_with("height =")) {
             out += &format!("{} = {size}\n", &t[..t.find(' ').unwrap()]);
         } else if t.starts_with("tile_size =") {
             out += "tile_size = 16\n";
@@ -39,7 +43,7 @@ fn small_config(dir: &Path, base: &str, size: u32, spp: u32, extra: &str) -> Pat
             out += "\n";
         }
     }
-    let path = dir.join(format!("{}.toml", base.replace('/', "-")));
+    let path = dir.join(base.replace('/', "-"));
     std::fs::write(&path, out).unwrap();
     path
 }
