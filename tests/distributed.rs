@@ -67,7 +67,14 @@ fn run_err(cmd: &mut Command) -> String {
 }
 
 fn render_part(cfg: &Path, out: &Path, args: &[&str]) {
-    run_ok(flowlight().arg("render").arg(cfg).args(["-q", "--out"]).arg(out).args(args));
+    run_ok(
+        flowlight()
+            .arg("render")
+            .arg(cfg)
+            .args(["-q", "--out"])
+            .arg(out)
+            .args(args),
+    );
 }
 
 fn merge(out: &Path, parts: &[PathBuf], extra: &[&str]) -> Command {
@@ -114,9 +121,19 @@ fn mcpt_parts_merged_equal_the_full_render_bitwise() {
         render_part(
             &cfg,
             &p,
-            &["--part", &format!("{k}/4"), "--threads", threads, "--set", "layers=true"],
+            &[
+                "--part",
+                &format!("{k}/4"),
+                "--threads",
+                threads,
+                "--set",
+                "layers=true",
+            ],
         );
-        assert_eq!(meta(&p, "flowlight.samples"), format!("{}..{}", 4 * k, 4 * k + 4));
+        assert_eq!(
+            meta(&p, "flowlight.samples"),
+            format!("{}..{}", 4 * k, 4 * k + 4)
+        );
         assert_eq!(meta(&p, "flowlight.part"), format!("{k}/4"));
         parts.push(p);
     }
@@ -129,7 +146,11 @@ fn mcpt_parts_merged_equal_the_full_render_bitwise() {
     let (_, _, b) = read_exr_rgb(&merged).unwrap();
     assert!(a.len() > 2, "the lighting layers are in the files");
     assert!(a[0].1.iter().any(|c| c.luminance() > 0.0));
-    assert_eq!(bits(&a), bits(&b), "merged parts differ from the full render");
+    assert_eq!(
+        bits(&a),
+        bits(&b),
+        "merged parts differ from the full render"
+    );
     assert_eq!(meta(&merged, "flowlight.partial"), "false");
     assert_eq!(meta(&merged, "flowlight.spp"), "16");
     // A part alone is a quarter of the samples: a different image.
@@ -172,8 +193,17 @@ fn erpt_parts_merge_to_the_full_render_and_agree_with_path_tracing() {
     );
     let stats = std::fs::read_to_string(dir.join("merged.stats.json")).unwrap();
     let seeds = |text: &str| -> f64 {
-        let line = text.lines().find(|l| l.trim().starts_with("\"seeds\":")).unwrap();
-        line.split(':').nth(1).unwrap().trim().trim_end_matches(',').parse().unwrap()
+        let line = text
+            .lines()
+            .find(|l| l.trim().starts_with("\"seeds\":"))
+            .unwrap();
+        line.split(':')
+            .nth(1)
+            .unwrap()
+            .trim()
+            .trim_end_matches(',')
+            .parse()
+            .unwrap()
     };
     let part_seeds: f64 = (0..n)
         .map(|k| seeds(&std::fs::read_to_string(dir.join(format!("part-{k}.stats.json"))).unwrap()))
@@ -182,7 +212,11 @@ fn erpt_parts_merge_to_the_full_render_and_agree_with_path_tracing() {
     let (_, _, a) = read_exr_rgb(&full).unwrap();
     let (_, _, b) = read_exr_rgb(&merged).unwrap();
     // Same tiles, same per-(tile, sample) quanta and chains, exact sums: the same bits.
-    assert_eq!(bits(&a), bits(&b), "merged ERPT parts differ from the full render");
+    assert_eq!(
+        bits(&a),
+        bits(&b),
+        "merged ERPT parts differ from the full render"
+    );
 
     // And unbiased: per region, the merged image against a path-traced reference, with the
     // noise of the mean estimated from the spread of the 8 one-sample parts.
@@ -195,7 +229,10 @@ fn erpt_parts_merge_to_the_full_render_and_agree_with_path_tracing() {
     for k in 0..16 {
         let vals: Vec<f64> = per_part.iter().map(|r| r[k]).collect();
         let mean = vals.iter().sum::<f64>() / n as f64;
-        assert!((mean - m[k]).abs() <= 1e-5 * m[k].max(1e-3), "region {k}: the merge is the mean of the parts");
+        assert!(
+            (mean - m[k]).abs() <= 1e-5 * m[k].max(1e-3),
+            "region {k}: the merge is the mean of the parts"
+        );
         let var = vals.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n as f64 - 1.0);
         let px: Vec<Rgb> = reference
             .iter()
@@ -222,19 +259,35 @@ fn merge_refuses_mismatched_parts_overlaps_and_gaps_naming_the_files() {
     let p = |name: &str| dir.join(name);
     render_part(&cfg, &p("a.exr"), &["--part", "0/2"]);
     render_part(&cfg, &p("b.exr"), &["--part", "1/2"]);
-    render_part(&cfg, &p("depth.exr"), &["--part", "1/2", "--set", "path_depth=3"]);
+    render_part(
+        &cfg,
+        &p("depth.exr"),
+        &["--part", "1/2", "--set", "path_depth=3"],
+    );
     render_part(&cfg, &p("seed.exr"), &["--part", "1/2", "--seed", "9"]);
     render_part(&cfg, &p("over.exr"), &["--samples", "2..6"]);
     render_part(&cfg, &p("whole.exr"), &[]);
     let out = p("out.exr");
 
     let e = run_err(&mut merge(&out, &[p("a.exr"), p("depth.exr")], &[]));
-    assert!(e.contains("different configs") && e.contains("a.exr") && e.contains("depth.exr"), "{e}");
-    let e = run_err(&mut merge(&out, &[p("a.exr"), p("seed.exr")], &[]));
-    assert!(e.contains("different seeds (1 vs 9)") && e.contains("seed.exr"), "{e}");
-    let e = run_err(&mut merge(&out, &[p("a.exr"), p("over.exr"), p("b.exr")], &[]));
     assert!(
-        e.contains("a.exr (samples 0..4) and") && e.contains("over.exr (samples 2..6)") && e.contains("overlap"),
+        e.contains("different configs") && e.contains("a.exr") && e.contains("depth.exr"),
+        "{e}"
+    );
+    let e = run_err(&mut merge(&out, &[p("a.exr"), p("seed.exr")], &[]));
+    assert!(
+        e.contains("different seeds (1 vs 9)") && e.contains("seed.exr"),
+        "{e}"
+    );
+    let e = run_err(&mut merge(
+        &out,
+        &[p("a.exr"), p("over.exr"), p("b.exr")],
+        &[],
+    ));
+    assert!(
+        e.contains("a.exr (samples 0..4) and")
+            && e.contains("over.exr (samples 2..6)")
+            && e.contains("overlap"),
         "{e}"
     );
     let e = run_err(&mut merge(&out, &[p("whole.exr"), p("b.exr")], &[]));
@@ -245,16 +298,33 @@ fn merge_refuses_mismatched_parts_overlaps_and_gaps_naming_the_files() {
 
     // A gap: refused, or written as partial with --allow-missing.
     let e = run_err(&mut merge(&out, &[p("b.exr")], &[]));
-    assert!(e.contains("samples 0..4 of 0..8 are in none of the parts"), "{e}");
-    let o = merge(&out, &[p("b.exr")], &["--allow-missing"]).output().unwrap();
+    assert!(
+        e.contains("samples 0..4 of 0..8 are in none of the parts"),
+        "{e}"
+    );
+    let o = merge(&out, &[p("b.exr")], &["--allow-missing"])
+        .output()
+        .unwrap();
     assert!(o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("samples 0..4 of 0..8 are missing"));
     assert_eq!(meta(&out, "flowlight.partial"), "true");
     assert_eq!(meta(&out, "flowlight.missing"), "0..4");
     // A part with a time budget cannot be: it has no fixed range.
-    let e = run_err(flowlight().arg("render").arg(&cfg).args(["--part", "0/2", "--time", "1"]));
+    let e = run_err(
+        flowlight()
+            .arg("render")
+            .arg(&cfg)
+            .args(["--part", "0/2", "--time", "1"]),
+    );
     assert!(e.contains("--time"), "{e}");
-    let e = run_err(flowlight().arg("render").arg(&cfg).args(["--part", "2/2", "-q"]).arg("--out").arg(p("x.exr")));
+    let e = run_err(
+        flowlight()
+            .arg("render")
+            .arg(&cfg)
+            .args(["--part", "2/2", "-q"])
+            .arg("--out")
+            .arg(p("x.exr")),
+    );
     assert!(e.contains("K must be in 0..N"), "{e}");
 }
 
@@ -274,7 +344,10 @@ fn the_recipes_render_the_cornell_box_in_four_parts() {
     let recipes = common::repo().join("docs/distributed");
 
     // GNU parallel when CI has it, else the xargs -P fallback; both when it is installed.
-    let has_parallel = Command::new("parallel").arg("--version").output().is_ok_and(|o| o.status.success());
+    let has_parallel = Command::new("parallel")
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success());
     let mut modes = vec![true];
     if has_parallel {
         modes.push(false);
@@ -296,7 +369,10 @@ fn the_recipes_render_the_cornell_box_in_four_parts() {
         let o = c.output().unwrap();
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(o.status.success(), "{err}");
-        assert!(err.contains(if force_xargs { "xargs" } else { "GNU parallel" }), "{err}");
+        assert!(
+            err.contains(if force_xargs { "xargs" } else { "GNU parallel" }),
+            "{err}"
+        );
         assert_eq!(bits(&read_exr_rgb(&out).unwrap().2), full_bits);
     }
 
@@ -313,7 +389,9 @@ fn the_recipes_render_the_cornell_box_in_four_parts() {
             .env("SLURM_CPUS_PER_TASK", "1");
         run_ok(&mut c);
     }
-    let parts: Vec<PathBuf> = (0..4).map(|k| slurm_parts.join(format!("part-{k}.exr"))).collect();
+    let parts: Vec<PathBuf> = (0..4)
+        .map(|k| slurm_parts.join(format!("part-{k}.exr")))
+        .collect();
     let out = dir.join("slurm.exr");
     run_ok(&mut merge(&out, &parts, &[]));
     assert_eq!(bits(&read_exr_rgb(&out).unwrap().2), full_bits);
@@ -339,7 +417,9 @@ fn the_recipes_render_the_cornell_box_in_four_parts() {
             .env("JOB_COMPLETION_INDEX", k.to_string());
         run_ok(&mut c);
     }
-    let parts: Vec<PathBuf> = (0..4).map(|k| k8s_parts.join(format!("part-{k}.exr"))).collect();
+    let parts: Vec<PathBuf> = (0..4)
+        .map(|k| k8s_parts.join(format!("part-{k}.exr")))
+        .collect();
     let out = dir.join("k8s.exr");
     run_ok(&mut merge(&out, &parts, &[]));
     assert_eq!(bits(&read_exr_rgb(&out).unwrap().2), full_bits);

@@ -325,8 +325,9 @@ fn swapping_strategies_in_the_config_changes_the_loaded_plugins() {
 /// A 64×64 ERPT Cornell box in 8×8 tiles (64 units a pass), one sample per pixel, with
 /// short chains (8 mutations per sample, chains of 8) to keep it quick.
 fn small_erpt(seed: u64) -> flowlight_host::session::Session {
-    let mut cfg = flowlight_scene::config::load_config(&common::scene_config("cornell-box/erpt.toml"))
-        .unwrap();
+    let mut cfg =
+        flowlight_scene::config::load_config(&common::scene_config("cornell-box/erpt.toml"))
+            .unwrap();
     cfg.width = 64;
     cfg.height = 64;
     cfg.tile_size = 8;
@@ -398,7 +399,10 @@ fn erpt_pass_cut_inside_the_first_pass_keeps_the_mean_brightness() {
     let mean_full = full_means.iter().sum::<f64>() / n;
     let d = diffs.iter().sum::<f64>() / n;
     let sd = (diffs.iter().map(|x| (x - d).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
-    eprintln!("full-pass mean {mean_full:.5}; cut minus full {d:+.5} ± {:.5} (sd {sd:.5})", sd / n.sqrt());
+    eprintln!(
+        "full-pass mean {mean_full:.5}; cut minus full {d:+.5} ± {:.5} (sd {sd:.5})",
+        sd / n.sqrt()
+    );
     // The seeds are independent: the mean difference is within 4 standard errors of 0 (and,
     // as a sanity bound on that error, within 15 % of the mean).
     assert!(
@@ -422,7 +426,10 @@ fn erpt_time_budget_starts_no_unit_after_the_deadline_and_marks_the_fraction() {
     let out = render(&s);
     let st = &out.stats;
     let last = st.last_unit_start.expect("some unit started");
-    assert!(last <= budget, "a unit started at {last:?}, after the {budget:?} budget");
+    assert!(
+        last <= budget,
+        "a unit started at {last:?}, after the {budget:?} budget"
+    );
     assert!(!st.interrupted);
     let tiles = 64u64;
     let cut = st.partial_pass.map_or(0, |p| {

@@ -550,7 +550,10 @@ fn item13_time_budget_erpt_furnace_is_unbiased() {
     };
     let fraction: f64 = get("flowlight.partial_pass").parse().unwrap();
     assert!((0.0..1.0).contains(&fraction), "{fraction}");
-    let spp: f64 = get("flowlight.spp").trim_end_matches(" (mean)").parse().unwrap();
+    let spp: f64 = get("flowlight.spp")
+        .trim_end_matches(" (mean)")
+        .parse()
+        .unwrap();
     let (_, _, layers) = flowlight_host::output::read_exr_rgb(&out).unwrap();
     let expected = 2.0 * (1.0 - 0.5f64.powi(9));
     let (mean, se) = common::mean_and_stderr(&layers[0].1, |c| c.luminance());

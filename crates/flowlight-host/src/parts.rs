@@ -52,8 +52,8 @@
 
 use crate::accumulation::Frame;
 use crate::output::{
-    read_exr_metadata, read_exr_u32, write_atomically, write_exr_with_raw, ExrMetadata,
-    ImageLayer, OutputError, RawChannel,
+    read_exr_metadata, read_exr_u32, write_atomically, write_exr_with_raw, ExrMetadata, ImageLayer,
+    OutputError, RawChannel,
 };
 use crate::render::{PartialPass, RenderStats};
 use flowlight_scene::config::RenderConfig;
@@ -203,8 +203,13 @@ pub fn config_hash(text: &str, config: &RenderConfig) -> Result<u64, String> {
         files.push(m);
     }
     for f in files {
-        let bytes = std::fs::read(&f)
-            .map_err(|e| format!("{}: cannot read {} for the config hash: {e}", config.path.display(), f.display()))?;
+        let bytes = std::fs::read(&f).map_err(|e| {
+            format!(
+                "{}: cannot read {} for the config hash: {e}",
+                config.path.display(),
+                f.display()
+            )
+        })?;
         h = fnv1a(h, &bytes);
     }
     Ok(h)
@@ -298,7 +303,8 @@ pub fn write_part_exr(path: &Path, frame: &Frame, meta: &ExrMetadata) -> Result<
             pixels: l,
         });
     }
-    write_exr_with_raw(path, w, h, &exr_layers, &sum_channels(frame), meta).map_err(|e| e.to_string())
+    write_exr_with_raw(path, w, h, &exr_layers, &sum_channels(frame), meta)
+        .map_err(|e| e.to_string())
 }
 
 /// A part read back.
@@ -329,8 +335,12 @@ pub fn read_part(path: &Path) -> Result<PartFile, String> {
             format!("{p}: not a part of a distributed render (no {key} in its metadata): render it with --part K/N or --samples A..B")
         })
     };
-    let ranges = parse_ranges(field(KEY_SAMPLES)?)
-        .ok_or_else(|| format!("{p}: {KEY_SAMPLES} = {:?} is not a list of ranges A..B", meta[KEY_SAMPLES]))?;
+    let ranges = parse_ranges(field(KEY_SAMPLES)?).ok_or_else(|| {
+        format!(
+            "{p}: {KEY_SAMPLES} = {:?} is not a list of ranges A..B",
+            meta[KEY_SAMPLES]
+        )
+    })?;
     let total: u32 = field(KEY_SPP_TOTAL)?
         .parse()
         .map_err(|_| format!("{p}: {KEY_SPP_TOTAL} is not a whole number"))?;
@@ -432,12 +442,16 @@ pub fn merge(out: &Path, inputs: &[PathBuf], allow_missing: bool) -> Result<Merg
         return Err("flowlight merge: no parts given".into());
     }
     let same = |a: &Path, b: &Path| {
-        let c = |p: &Path| p.canonicalize().unwrap_or_else(|_| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf()));
+        let c = |p: &Path| {
+            p.canonicalize()
+                .unwrap_or_else(|_| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf()))
+        };
         c(a) == c(b)
     };
     let out_stats = out.with_extension("stats.json");
     for i in inputs {
-        if same(out, i) || same(&out_stats, i) || same(&out_stats, &i.with_extension("stats.json")) {
+        if same(out, i) || same(&out_stats, i) || same(&out_stats, &i.with_extension("stats.json"))
+        {
             return Err(format!(
                 "{}: the merge output (or its statistics file) is the input {}; refusing to overwrite an input",
                 out.display(),
@@ -447,7 +461,11 @@ pub fn merge(out: &Path, inputs: &[PathBuf], allow_missing: bool) -> Result<Merg
     }
     for (i, a) in inputs.iter().enumerate() {
         if let Some(b) = inputs[..i].iter().find(|b| same(a, b)) {
-            return Err(format!("{} is given twice (also as {})", a.display(), b.display()));
+            return Err(format!(
+                "{} is given twice (also as {})",
+                a.display(),
+                b.display()
+            ));
         }
     }
     let parts = inputs
@@ -654,7 +672,11 @@ fn parse_stats_json(text: &str) -> Option<FlatJson> {
         } else if v == "{}" {
             continue;
         } else {
-            let value = if v.starts_with('"') { unquote(v)? } else { v.to_string() };
+            let value = if v.starts_with('"') {
+                unquote(v)?
+            } else {
+                v.to_string()
+            };
             out.push((section.clone(), key, value));
         }
     }
@@ -690,7 +712,10 @@ fn merge_stats_files(parts: &[PartFile]) -> (Option<String>, Option<String>) {
         let Ok(text) = std::fs::read_to_string(&path) else {
             return (
                 None,
-                Some(format!("{} is missing: statistics not merged", path.display())),
+                Some(format!(
+                    "{} is missing: statistics not merged",
+                    path.display()
+                )),
             );
         };
         match parse_stats_json(&text) {
@@ -698,7 +723,10 @@ fn merge_stats_files(parts: &[PartFile]) -> (Option<String>, Option<String>) {
             None => {
                 return (
                     None,
-                    Some(format!("{}: cannot parse it: statistics not merged", path.display())),
+                    Some(format!(
+                        "{}: cannot parse it: statistics not merged",
+                        path.display()
+                    )),
                 )
             }
         }
@@ -836,7 +864,10 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("flowlight-parts-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let mut parts = Vec::new();
-        for (i, s) in [stats(2.0, 10.0, 3.0), stats(6.0, 6.0, 5.0)].iter().enumerate() {
+        for (i, s) in [stats(2.0, 10.0, 3.0), stats(6.0, 6.0, 5.0)]
+            .iter()
+            .enumerate()
+        {
             let path = dir.join(format!("p{i}.exr"));
             let json = stats_json_with_kinds(&crate::session::stats_json("erpt", s), &kinds);
             std::fs::write(path.with_extension("stats.json"), json).unwrap();
@@ -860,7 +891,9 @@ mod tests {
         assert_eq!(c("seeds"), 8.0);
         assert_eq!(c("longest"), 5.0);
         assert_eq!(c("chains_per_seed"), 2.0);
-        assert!(flat.iter().any(|(s, k, v)| s.is_none() && k == "pixel_samples" && v == "20"));
+        assert!(flat
+            .iter()
+            .any(|(s, k, v)| s.is_none() && k == "pixel_samples" && v == "20"));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -550,7 +550,10 @@ mod tests {
         assert_eq!(frame_bytes(u32::MAX, u32::MAX, 0), None);
         // 4294967295 · (143 + 132·4294967295) > 2⁶⁴.
         assert_eq!(frame_bytes(u32::MAX, 1, u32::MAX), None);
-        assert_eq!(frame_bytes(u32::MAX, 1, 1000), Some(4_294_967_295 * 132_143));
+        assert_eq!(
+            frame_bytes(u32::MAX, 1, 1000),
+            Some(4_294_967_295 * 132_143)
+        );
         let e = check_frame_memory(u32::MAX, u32::MAX, 3).unwrap_err();
         assert!(
             e.contains("4294967295x4294967295") && e.contains("3 lighting layers"),
@@ -602,7 +605,8 @@ mod tests {
             hist[below(&mut rng, 3) as usize] += 1;
         }
         assert!(
-            hist.iter().all(|&h| (h as f64 - 10_000.0).abs() < 5.0 * 81.7),
+            hist.iter()
+                .all(|&h| (h as f64 - 10_000.0).abs() < 5.0 * 81.7),
             "{hist:?}"
         );
     }
