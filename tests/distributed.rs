@@ -156,6 +156,7 @@ fn mcpt_parts_merged_equal_the_full_render_bitwise() {
     // A part alone is a quarter of the samples: a different image.
     let (_, _, one) = read_exr_rgb(&parts[0]).unwrap();
     assert_ne!(bits(&one)[0], bits(&a)[0]);
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Region means of a `size`² image in 4 × 4 blocks.
@@ -250,6 +251,7 @@ fn erpt_parts_merge_to_the_full_render_and_agree_with_path_tracing() {
             refs[k]
         );
     }
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -326,6 +328,7 @@ fn merge_refuses_mismatched_parts_overlaps_and_gaps_naming_the_files() {
             .arg(p("x.exr")),
     );
     assert!(e.contains("K must be in 0..N"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -423,4 +426,5 @@ fn the_recipes_render_the_cornell_box_in_four_parts() {
     let out = dir.join("k8s.exr");
     run_ok(&mut merge(&out, &parts, &[]));
     assert_eq!(bits(&read_exr_rgb(&out).unwrap().2), full_bits);
+    let _ = std::fs::remove_dir_all(&dir);
 }

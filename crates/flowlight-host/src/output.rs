@@ -479,11 +479,12 @@ fn smallvec_of_channels(capacity: usize) -> exr::prelude::SmallVec<[AnyChannel<F
     exr::prelude::SmallVec::with_capacity(capacity)
 }
 
+/// Integer channels by name, as [`read_exr_u32`] returns them.
+pub type U32Channels = BTreeMap<String, Vec<u32>>;
+
 /// The 32-bit unsigned integer channels of an EXR file ([`RawChannel`]) as
 /// `(width, height, name → samples)`; float channels are skipped.
-pub fn read_exr_u32(
-    path: &Path,
-) -> Result<(usize, usize, BTreeMap<String, Vec<u32>>), OutputError> {
+pub fn read_exr_u32(path: &Path) -> Result<(usize, usize, U32Channels), OutputError> {
     use exr::prelude::traits::*;
     let image = exr::prelude::read()
         .no_deep_data()
