@@ -428,3 +428,42 @@ fn the_recipes_render_the_cornell_box_in_four_parts() {
     assert_eq!(bits(&read_exr_rgb(&out).unwrap().2), full_bits);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn parts_of_an_enormously_bright_scene_keep_their_energy_through_the_merge() {
+    // Emission 1e30: channel values beyond the fixed-point range go to the f64 side sums,
+    // which the parts store and the merge adds.
+    let dir = common::scratch("dist-bright");
+    let src = common::scene_config("furnace/furnace.gltf");
+    let gltf = std::fs::read_to_string(&src).unwrap();
+    let patched = gltf.replace("\"emissiveStrength\": 1.0", "\"emissiveStrength\": 1e30");
+    assert_ne!(gltf, patched);
+    std::fs::write(dir.join("furnace.gltf"), patched).unwrap();
+    let cfg_text = std::fs::read_to_string(common::scene_config("furnace/furnace.toml"))
+        .unwrap()
+        .replace("width = 32", "width = 8")
+        .replace("height = 32", "height = 8");
+    let cfg = dir.join("furnace.toml");
+    std::fs::write(&cfg, cfg_text).unwrap();
+    let full = dir.join("full.exr");
+    render_part(&cfg, &full, &["--spp", "8"]);
+    let parts: Vec<PathBuf> = (0..2).map(|k| dir.join(format!("p{k}.exr"))).collect();
+    for (k, p) in parts.iter().enumerate() {
+        render_part(&cfg, p, &["--spp", "8", "--part", &format!("{k}/2")]);
+    }
+    let merged = dir.join("merged.exr");
+    run_ok(&mut merge(&merged, &parts, &[]));
+    let (_, _, a) = read_exr_rgb(&full).unwrap();
+    let (_, _, b) = read_exr_rgb(&merged).unwrap();
+    let mean = |l: &[Rgb]| l.iter().map(|c| c.luminance() as f64).sum::<f64>() / l.len() as f64;
+    // The furnace's pixels are 2·(1 − 0.5⁹)·1e30 in expectation.
+    assert!(
+        (mean(&a[0].1) / 1.996e30 - 1.0).abs() < 0.1,
+        "{}",
+        mean(&a[0].1)
+    );
+    for (x, y) in a[0].1.iter().zip(&b[0].1) {
+        assert!((x.r / y.r - 1.0).abs() < 1e-5, "{x:?} vs {y:?}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

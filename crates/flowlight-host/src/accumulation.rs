@@ -16,8 +16,11 @@
 //! integers, and resolve to the same bits (docs/distributed.md). Floating-point sums could
 //! not promise that (f64 addition is not associative). The scale 2⁻⁶⁴ ≈ 5.4·10⁻²⁰ keeps
 //! every f32 value down to 2⁻⁴¹ ≈ 4.5·10⁻¹³ exactly (smaller ones lose their bits below
-//! 2⁻⁶⁴, an absolute error under 10⁻¹⁹ per deposit); sums saturate at 2⁶⁴ ≈ 1.8·10¹⁹ per
-//! pixel and channel, far beyond any radiance sum.
+//! 2⁻⁶⁴, an absolute error under 10⁻¹⁹ per deposit). Channel values of [`FIXED_LIMIT`]
+//! (2³² ≈ 4.3·10⁹) or more, which only absurdly bright scenes deposit (a 10³⁰ emitter is
+//! legal), go to a sparse per-pixel f64 sum instead ([`Frame`]'s large-value map), so the
+//! fixed-point sums never saturate before 2³² such deposits; those large values are added
+//! in floating point, where the order can matter, and only they.
 
 use flowlight_core::Rgb;
 use flowlight_sdk::abi::Deposit;
@@ -36,7 +39,13 @@ pub struct Frame {
     /// When set, every pixel is divided by this many samples instead of its own count
     /// (flanged integrators, whose pixels also receive their neighbours' deposits).
     uniform_spp: Option<f64>,
+    /// Channel values ≥ [`FIXED_LIMIT`], summed in f64 per pixel: index 0 the main image,
+    /// k + 1 layer k (sparse: empty in ordinary renders).
+    large: Vec<LargeSums>,
 }
+
+/// Per-pixel f64 sums of large channel values (pixel index → RGB).
+pub type LargeSums = std::collections::BTreeMap<usize, [f64; 3]>;
 
 impl Frame {
     pub fn new(width: u32, height: u32, layer_count: u32) -> Frame {
@@ -49,6 +58,7 @@ impl Frame {
             layers: (0..layer_count).map(|_| vec![[0; 3]; n]).collect(),
             samples: vec![0; n],
             uniform_spp: None,
+            large: vec![LargeSums::new(); layer_count as usize + 1],
         }
     }
 
@@ -61,9 +71,11 @@ impl Frame {
         layers: Vec<Vec<[u128; 3]>>,
         samples: Vec<u32>,
         uniform_spp: Option<f64>,
+        large: Vec<LargeSums>,
     ) -> Frame {
         let n = width as usize * height as usize;
         debug_assert!(main.len() == n && samples.len() == n && layers.iter().all(|l| l.len() == n));
+        debug_assert_eq!(large.len(), layers.len() + 1);
         Frame {
             width,
             height,
@@ -72,7 +84,13 @@ impl Frame {
             layers,
             samples,
             uniform_spp,
+            large,
         }
+    }
+
+    /// The f64 sums of large channel values: `k` = 0 the main image, k + 1 layer k.
+    pub fn large_sums(&self, k: usize) -> &LargeSums {
+        &self.large[k]
     }
 
     /// The fixed-point sums of the main image.
@@ -98,9 +116,30 @@ impl Frame {
     }
 
     fn add_at(&mut self, f: usize, layer: u32, v: Rgb) {
-        add(&mut self.main[f], v);
+        let mut large = [0.0f64; 3];
+        let mut small = [0u128; 3];
+        for (c, x) in v.to_array().into_iter().enumerate() {
+            if x >= FIXED_LIMIT {
+                large[c] = x as f64;
+            } else {
+                small[c] = to_fixed(x);
+            }
+        }
+        add_sums(&mut self.main[f], &small);
         if let Some(l) = self.layers.get_mut(layer as usize) {
-            add(&mut l[f], v);
+            add_sums(&mut l[f], &small);
+        }
+        if large != [0.0; 3] {
+            let mut put = |k: usize| {
+                let e = self.large[k].entry(f).or_insert([0.0; 3]);
+                for c in 0..3 {
+                    e[c] += large[c];
+                }
+            };
+            put(0);
+            if (layer as usize) < self.layers.len() {
+                put(layer as usize + 1);
+            }
         }
     }
 
@@ -143,6 +182,14 @@ impl Frame {
         for (a, b) in self.samples.iter_mut().zip(&other.samples) {
             *a += b;
         }
+        for (la, lb) in self.large.iter_mut().zip(&other.large) {
+            for (f, v) in lb {
+                let e = la.entry(*f).or_insert([0.0; 3]);
+                for c in 0..3 {
+                    e[c] += v[c];
+                }
+            }
+        }
     }
 
     /// Zeroes every sum and count, keeping the buffers.
@@ -152,31 +199,40 @@ impl Frame {
             l.fill([0; 3]);
         }
         self.samples.fill(0);
+        for l in &mut self.large {
+            l.clear();
+        }
     }
 
     pub fn samples(&self) -> &[u32] {
         &self.samples
     }
 
-    fn resolve_sums(&self, sums: &[[u128; 3]]) -> Vec<Rgb> {
-        let scaled = |s: &[u128; 3], k: f64| {
+    fn resolve_sums(&self, sums: &[[u128; 3]], large: &LargeSums) -> Vec<Rgb> {
+        let scaled = |i: usize, s: &[u128; 3], k: f64| {
+            let l = large.get(&i).copied().unwrap_or([0.0; 3]);
             Rgb::new(
-                (from_fixed(s[0]) * k) as f32,
-                (from_fixed(s[1]) * k) as f32,
-                (from_fixed(s[2]) * k) as f32,
+                ((from_fixed(s[0]) + l[0]) * k) as f32,
+                ((from_fixed(s[1]) + l[1]) * k) as f32,
+                ((from_fixed(s[2]) + l[2]) * k) as f32,
             )
         };
         if let Some(n) = self.uniform_spp {
             let k = if n > 0.0 { 1.0 / n } else { 0.0 };
-            return sums.iter().map(|s| scaled(s, k)).collect();
+            return sums
+                .iter()
+                .enumerate()
+                .map(|(i, s)| scaled(i, s, k))
+                .collect();
         }
         sums.iter()
             .zip(&self.samples)
-            .map(|(s, &n)| {
+            .enumerate()
+            .map(|(i, (s, &n))| {
                 if n == 0 {
                     Rgb::ZERO
                 } else {
-                    scaled(s, 1.0 / n as f64)
+                    scaled(i, s, 1.0 / n as f64)
                 }
             })
             .collect()
@@ -185,17 +241,20 @@ impl Frame {
     /// The main image: each pixel's sum over its sample count (black where none finished),
     /// or over the uniform count when one is set.
     pub fn image(&self) -> Vec<Rgb> {
-        self.resolve_sums(&self.main)
+        self.resolve_sums(&self.main, &self.large[0])
     }
 
     /// Lighting layer `k`, normalised like the main image.
     pub fn layer(&self, k: usize) -> Vec<Rgb> {
-        self.resolve_sums(&self.layers[k])
+        self.resolve_sums(&self.layers[k], &self.large[k + 1])
     }
 }
 
 /// Fractional bits of the fixed-point sums (module documentation).
 pub const FIXED_FRAC_BITS: i32 = 64;
+
+/// Channel values from here on are summed in f64 rather than in fixed point (2³²).
+pub const FIXED_LIMIT: f32 = 4_294_967_296.0;
 
 /// q(v) = ⌊v · 2⁶⁴⌋ for a deposit value v ≥ 0 (the cast truncates and saturates; NaN and
 /// negative values, which never reach an accumulator, would give 0).
@@ -313,6 +372,17 @@ impl Accumulator for TileAccumulator {
                 continue;
             }
             let (px, py) = (fx as u32, fy as u32);
+            let large = d.value.to_array().iter().any(|&c| c >= FIXED_LIMIT);
+            if large {
+                // The frame sums large values in f64 (module documentation).
+                self.overflow.push(PixelDeposit {
+                    x: px,
+                    y: py,
+                    layer: d.layer,
+                    value: d.value,
+                });
+                continue;
+            }
             if px < self.bx0 || py < self.by0 || px >= self.bx1 || py >= self.by1 {
                 self.counts.overflow += 1;
                 self.overflow.push(PixelDeposit {
@@ -436,6 +506,15 @@ mod tests {
         let exact: f64 = values.iter().map(|&v| v as f64).sum();
         assert!((from_fixed(a.main_sums()[0][0]) - exact).abs() <= 1e-9 * exact);
         assert_eq!(to_fixed(1.0), 1u128 << 64);
+        // A 10³⁰ deposit keeps its energy (f64 side sum), beside a small one in fixed point.
+        let mut t = TileAccumulator::new(0, 0, 1, 1, 0, 1, 1, 1);
+        t.deposit(&[d(0.5, 0.5, 0, 1.0e30), d(0.5, 0.5, 0, 0.5)]);
+        let mut f = Frame::new(1, 1, 1);
+        f.merge(&t, 2);
+        let r = f.image()[0].r as f64;
+        assert!((r / 5.0e29 - 1.0).abs() < 1e-6, "{r}");
+        assert_eq!(f.layer(0)[0], f.image()[0]);
+        assert_eq!(f.large_sums(0).len(), 1);
         assert_eq!(to_fixed(0.5) + to_fixed(0.25), to_fixed(0.75));
     }
 }

@@ -260,6 +260,15 @@ fn sum_channel_names(layer: Option<usize>) -> [[String; 4]; 3] {
     ["R", "G", "B"].map(|c| std::array::from_fn(|w| format!("{prefix}.{c}.w{w}")))
 }
 
+fn large_channel_names(k: usize) -> [[String; 2]; 3] {
+    let prefix = if k == 0 {
+        "large".to_string()
+    } else {
+        format!("large.layer{}", k - 1)
+    };
+    ["R", "G", "B"].map(|c| std::array::from_fn(|w| format!("{prefix}.{c}.w{w}")))
+}
+
 /// The frame's exact sums and sample counts as `u32` channels (module documentation).
 pub fn sum_channels(frame: &Frame) -> Vec<RawChannel> {
     let mut out = Vec::new();
@@ -277,6 +286,24 @@ pub fn sum_channels(frame: &Frame) -> Vec<RawChannel> {
     push(frame.main_sums(), None);
     for k in 0..frame.layer_count as usize {
         push(frame.layer_sums(k), Some(k));
+    }
+    // Large values' f64 sums (accumulation docs), as the two halves of their bits; only
+    // where there are any.
+    let n = frame.width as usize * frame.height as usize;
+    for k in 0..=frame.layer_count as usize {
+        let large = frame.large_sums(k);
+        if large.is_empty() {
+            continue;
+        }
+        for (c, words) in large_channel_names(k).into_iter().enumerate() {
+            for (w, name) in words.into_iter().enumerate() {
+                let mut samples = vec![0u32; n];
+                for (&i, v) in large {
+                    samples[i] = (v[c].to_bits() >> (32 * w)) as u32;
+                }
+                out.push(RawChannel { name, samples });
+            }
+        }
     }
     out.push(RawChannel {
         name: "samples".into(),
@@ -381,7 +408,23 @@ pub fn read_part(path: &Path) -> Result<PartFile, String> {
     let samples = channels
         .remove("samples")
         .ok_or_else(|| format!("{p}: the sample-count channel `samples` is missing"))?;
-    let frame = Frame::from_sums(w as u32, h as u32, main, layer_sums, samples, uniform);
+    let mut large = vec![crate::accumulation::LargeSums::new(); layers + 1];
+    for (k, map) in large.iter_mut().enumerate() {
+        for (c, [lo, hi]) in large_channel_names(k).into_iter().enumerate() {
+            let (Some(lo), Some(hi)) = (channels.remove(&lo), channels.remove(&hi)) else {
+                continue;
+            };
+            for (i, (l, h)) in lo.into_iter().zip(hi).enumerate() {
+                let v = f64::from_bits(l as u64 | (h as u64) << 32);
+                if v != 0.0 {
+                    map.entry(i).or_insert([0.0; 3])[c] = v;
+                }
+            }
+        }
+    }
+    let frame = Frame::from_sums(
+        w as u32, h as u32, main, layer_sums, samples, uniform, large,
+    );
     Ok(PartFile {
         path: path.to_path_buf(),
         meta,
@@ -536,6 +579,9 @@ pub fn merge(out: &Path, inputs: &[PathBuf], allow_missing: bool) -> Result<Merg
             .collect(),
         first.frame.samples().to_vec(),
         first.frame.uniform_spp(),
+        (0..=first.frame.layer_count as usize)
+            .map(|k| first.frame.large_sums(k).clone())
+            .collect(),
     );
     let mut uniform = first.frame.uniform_spp();
     for p in &parts[1..] {
