@@ -3,7 +3,8 @@
 //! The root package's binary (`crates/cli/main.rs`) only calls [`main`].
 //!
 //! ```text
-//! flowlight render <config.toml> [--spp N | --time SECONDS] [--threads N] [--out FILE]
+//! flowlight render <config.toml> [--spp N | --time SECONDS] [--threads N] [--out FILE] [--part K/N | --samples A..B]
+//! flowlight merge <out.exr> <part.exr>... [--allow-missing]
 //! flowlight plugins [--path DIR]...
 //! flowlight compare <a.exr> <reference.exr> [--out error.png]
 //! flowlight reference <config.toml> [--spp N | --time SECONDS] [--out FILE] | --from A.exr [--from B.exr]
@@ -13,7 +14,9 @@
 
 mod bench;
 mod compare;
+mod merge;
 mod new_plugin;
+mod part_args;
 mod plugins;
 mod reference;
 mod render;
@@ -61,6 +64,25 @@ enum Command {
         /// No progress bar.
         #[arg(long, short)]
         quiet: bool,
+        /// Render part K of N (K from 0) of the samples per pixel, for a distributed render
+        /// merged with `flowlight merge` (docs/distributed.md).
+        #[arg(long, value_name = "K/N", conflicts_with_all = ["time", "samples"])]
+        part: Option<String>,
+        /// Render samples A..B (B exclusive) of every pixel, for `flowlight merge`.
+        #[arg(long, value_name = "A..B", conflicts_with = "time")]
+        samples: Option<String>,
+    },
+    /// Merge the parts of a distributed render (`render --part` / `--samples`) into one EXR.
+    Merge {
+        /// The merged EXR (never one of the parts).
+        out: PathBuf,
+        /// The parts.
+        #[arg(required = true)]
+        parts: Vec<PathBuf>,
+        /// Write the image even when some samples are in no part (marked
+        /// `flowlight.partial = true`); without it missing ranges are an error.
+        #[arg(long)]
+        allow_missing: bool,
     },
     /// List the plugins found on the search path, with versions and parameters.
     Plugins {
@@ -172,6 +194,8 @@ pub fn main() {
             seed,
             set,
             quiet,
+            part,
+            samples,
         } => match parse_sets(&set) {
             Ok(params) => {
                 let ov = flowlight_host::session::Overrides {
@@ -182,10 +206,19 @@ pub fn main() {
                     seed,
                     params,
                 };
-                render::run(&config, &ov, quiet)
+                let part = render::PartFlags {
+                    part: part.as_deref(),
+                    samples: samples.as_deref(),
+                };
+                render::run(&config, &ov, quiet, part)
             }
             Err(e) => Err(e),
         },
+        Command::Merge {
+            out,
+            parts,
+            allow_missing,
+        } => merge::run(&out, &parts, allow_missing),
         Command::Plugins { path } => plugins::run(&path),
         Command::Compare { a, b, out, epsilon } => compare::run(&a, &b, out.as_deref(), epsilon),
         Command::Reference {

@@ -6,7 +6,14 @@ use indicatif::{ProgressBar, ProgressStyle};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool) -> Result<()> {
+/// `--part K/N` / `--samples A..B` ([`crate::part_args`]).
+#[derive(Clone, Copy, Default)]
+pub struct PartFlags<'a> {
+    pub part: Option<&'a str>,
+    pub samples: Option<&'a str>,
+}
+
+pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlags) -> Result<()> {
     if let Some(t) = ov.time {
         if !(t > 0.0 && t.is_finite()) {
             return Err(anyhow!(
@@ -17,7 +24,8 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool) -> Result<()> 
     if ov.spp == Some(0) {
         return Err(anyhow!("--spp must be at least 1"));
     }
-    let session = Session::prepare(config, ov).map_err(|e| anyhow!(e))?;
+    let mut session = Session::prepare(config, ov).map_err(|e| anyhow!(e))?;
+    crate::part_args::apply(&mut session, part.part, part.samples)?;
     // Before any work: the outputs must be writable and must not overwrite an input.
     session.check_outputs().map_err(|e| anyhow!(e))?;
     let stop = Arc::new(AtomicBool::new(false));
@@ -115,6 +123,12 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool) -> Result<()> 
         s.pixel_samples as f64 / (w * h) as f64,
         s.pixel_samples as f64 / secs / 1e6
     );
+    if let Some((spec, _)) = &session.part {
+        println!(
+            "  part            samples {}..{} of 0..{} (flowlight merge joins the parts)",
+            spec.begin, spec.end, spec.total
+        );
+    }
     println!(
         "  rays            {} ({} closest, {} shadow), {:.3} M rays/s",
         s.rays(),

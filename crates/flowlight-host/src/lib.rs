@@ -3,13 +3,14 @@
 //! The host loads plugins ([`plugin`]), owns the one rayon thread pool and schedules work
 //! units on it ([`render`](mod@render)), answers ray queries through an intersector ([`intersector`]),
 //! owns the accumulators ([`accumulation`]), counts statistics, and writes images atomically
-//! ([`output`]).
+//! ([`output`]); [`parts`] splits a render into sample ranges and merges them back.
 
 pub mod accumulation;
 pub mod intersector;
 pub mod metrics;
 pub mod output;
 pub mod params;
+pub mod parts;
 pub mod plugin;
 pub mod render;
 pub mod session;

@@ -255,6 +255,16 @@ fn check_layer_name(path: &Path, name: &str) -> Result<(), OutputError> {
     Ok(())
 }
 
+/// One 32-bit unsigned integer channel written beside the RGB layers (the exact sums and
+/// sample counts of a distributed render's part: [`crate::parts`]). Readers of the RGB
+/// layers ignore it: its name ends in neither `R`, `G` nor `B`.
+#[derive(Clone, Debug)]
+pub struct RawChannel {
+    pub name: String,
+    /// `width * height` samples, row-major, top row first.
+    pub samples: Vec<u32>,
+}
+
 /// Writes `layers` (each `width * height` pixels) as one multi-layer EXR, atomically.
 ///
 /// Fails without touching the file system when a layer has the wrong pixel count, a pixel
@@ -267,7 +277,39 @@ pub fn write_exr(
     layers: &[ImageLayer],
     meta: &ExrMetadata,
 ) -> Result<(), OutputError> {
-    pixel_count(path, width, height)?;
+    write_exr_with_raw(path, width, height, layers, &[], meta)
+}
+
+/// [`write_exr`] with extra `u32` channels ([`RawChannel`]), e.g. a part's exact sums.
+pub fn write_exr_with_raw(
+    path: &Path,
+    width: usize,
+    height: usize,
+    layers: &[ImageLayer],
+    raw: &[RawChannel],
+    meta: &ExrMetadata,
+) -> Result<(), OutputError> {
+    let count = pixel_count(path, width, height)?;
+    for r in raw {
+        let suffix = r.name.rsplit('.').next().unwrap_or("");
+        if r.name.is_empty() || r.name.contains('\0') || ["R", "G", "B"].contains(&suffix) {
+            return Err(OutputError::InvalidLayer {
+                path: path.to_owned(),
+                layer: r.name.clone(),
+                reason: "integer channel names must not end in R, G or B".to_owned(),
+            });
+        }
+        if r.samples.len() != count {
+            return Err(OutputError::PixelCount {
+                path: path.to_owned(),
+                layer: r.name.clone(),
+                width,
+                height,
+                expected: count,
+                actual: r.samples.len(),
+            });
+        }
+    }
     if layers.is_empty() {
         return Err(OutputError::InvalidLayer {
             path: path.to_owned(),
@@ -336,6 +378,12 @@ pub fn write_exr(
             let samples: Vec<f32> = layer.pixels.iter().map(|p| p.to_array()[c]).collect();
             channels.push(AnyChannel::new(text(&name), FlatSamples::F32(samples)));
         }
+    }
+    for r in raw {
+        channels.push(AnyChannel::new(
+            text(&r.name),
+            FlatSamples::U32(r.samples.clone()),
+        ));
     }
 
     let encoding = Encoding {
@@ -429,6 +477,34 @@ pub fn sort_header_attributes(file: &mut [u8]) -> Result<(), String> {
 
 fn smallvec_of_channels(capacity: usize) -> exr::prelude::SmallVec<[AnyChannel<FlatSamples>; 4]> {
     exr::prelude::SmallVec::with_capacity(capacity)
+}
+
+/// Integer channels by name, as [`read_exr_u32`] returns them.
+pub type U32Channels = BTreeMap<String, Vec<u32>>;
+
+/// The 32-bit unsigned integer channels of an EXR file ([`RawChannel`]) as
+/// `(width, height, name → samples)`; float channels are skipped.
+pub fn read_exr_u32(path: &Path) -> Result<(usize, usize, U32Channels), OutputError> {
+    use exr::prelude::traits::*;
+    let image = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .map_err(|source| OutputError::ExrDecode {
+            path: path.to_owned(),
+            source,
+        })?;
+    let layer = &image.layer_data;
+    let mut out = BTreeMap::new();
+    for channel in &layer.channel_data.list {
+        if let FlatSamples::U32(v) = &channel.sample_data {
+            out.insert(text_to_string(&channel.name), v.clone());
+        }
+    }
+    Ok((layer.size.0, layer.size.1, out))
 }
 
 /// Layers as read back: `(layer name, width * height pixels)`, main layer (`""`) first.

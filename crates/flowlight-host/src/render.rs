@@ -62,6 +62,10 @@ pub struct RenderOptions {
     pub height: u32,
     /// Samples per pixel; ignored when `time` is set.
     pub spp: u32,
+    /// Index of the first sample: the render computes samples
+    /// [`sample_begin`, `sample_begin` + `spp`) of every pixel (a part of a distributed
+    /// render, [`crate::parts`]); 0 for a whole render.
+    pub sample_begin: u32,
     /// Wall-clock budget: passes are started until it runs out.
     pub time: Option<Duration>,
     /// Threads in the pool (0: one per core).
@@ -159,12 +163,13 @@ pub fn effective_threads(requested: usize) -> usize {
 }
 
 /// Bytes a `width` × `height` render with `layers` lighting layers needs for its image
-/// buffers, or `None` beyond 2⁶⁴: per pixel, the frame (f64 RGB sums for the image and each
-/// layer, 24 B each, plus a u32 sample count), the same again for the pass buffer, and at
-/// write time the resolved f32 images, the EXR channel copies and encoded data (12 B each
-/// per layer and image) and 3 B of PNG: 2·(28 + 24L) + 36·(1 + L) + 3 = 95 + 84L bytes.
+/// buffers, or `None` beyond 2⁶⁴: per pixel, the frame (fixed-point u128 RGB sums for the
+/// image and each layer, 48 B each, plus a u32 sample count), the same again for the pass
+/// buffer, and at write time the resolved f32 images, the EXR channel copies and encoded
+/// data (12 B each per layer and image) and 3 B of PNG: 2·(52 + 48L) + 36·(1 + L) + 3 =
+/// 143 + 132L bytes.
 pub fn frame_bytes(width: u32, height: u32, layers: u32) -> Option<u64> {
-    let per_pixel = 95u64.checked_add(84u64.checked_mul(layers as u64)?)?;
+    let per_pixel = 143u64.checked_add(132u64.checked_mul(layers as u64)?)?;
     (width as u64)
         .checked_mul(height as u64)?
         .checked_mul(per_pixel)
@@ -313,7 +318,8 @@ pub fn render(
     // Nanoseconds after `start` at which the last unit started (+1, so 0 means none did).
     let last_start = AtomicU64::new(0);
 
-    let mut sample_begin = 0u32;
+    let mut sample_begin = opts.sample_begin;
+    let sample_end = opts.sample_begin.saturating_add(opts.spp);
     let mut pass_spp = 1u32;
     let mut passes_done = 0u32;
     let mut partial_pass = None;
@@ -324,7 +330,7 @@ pub fn render(
         let remaining = if opts.time.is_some() {
             u32::MAX
         } else {
-            opts.spp - sample_begin
+            sample_end - sample_begin
         };
         if remaining == 0
             || stop.load(Ordering::Relaxed)
@@ -487,14 +493,17 @@ mod tests {
 
     #[test]
     fn frame_bytes_counts_frame_pass_and_output_buffers_without_overflow() {
-        // Per pixel: 2·(24 + 4 + 24L) + 12·(1 + L)·3 + 3 = 95 + 84L.
-        assert_eq!(frame_bytes(1, 1, 0), Some(95));
-        assert_eq!(frame_bytes(512, 512, 9), Some(512 * 512 * (95 + 84 * 9)));
-        assert_eq!(frame_bytes(100_000, 100_000, 0), Some(950_000_000_000));
+        // Per pixel: 2·(48 + 4 + 48L) + 12·(1 + L)·3 + 3 = 143 + 132L.
+        assert_eq!(frame_bytes(1, 1, 0), Some(143));
+        assert_eq!(frame_bytes(512, 512, 9), Some(512 * 512 * (143 + 132 * 9)));
+        assert_eq!(frame_bytes(100_000, 100_000, 0), Some(1_430_000_000_000));
         assert_eq!(frame_bytes(u32::MAX, u32::MAX, 0), None);
-        // 4294967295 · (95 + 84·4294967295) > 2⁶⁴.
+        // 4294967295 · (143 + 132·4294967295) > 2⁶⁴.
         assert_eq!(frame_bytes(u32::MAX, 1, u32::MAX), None);
-        assert_eq!(frame_bytes(u32::MAX, 1, 1000), Some(4_294_967_295 * 84_095));
+        assert_eq!(
+            frame_bytes(u32::MAX, 1, 1000),
+            Some(4_294_967_295 * 132_143)
+        );
         let e = check_frame_memory(u32::MAX, u32::MAX, 3).unwrap_err();
         assert!(
             e.contains("4294967295x4294967295") && e.contains("3 lighting layers"),

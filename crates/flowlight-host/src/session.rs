@@ -53,6 +53,11 @@ pub struct Session {
     pub scene: Scene,
     /// The plugin libraries loaded (integrator first), for the output checks.
     plugin_files: Vec<PathBuf>,
+    /// The resolved config as hashed for a part ([`crate::parts::config_text`]).
+    config_text: String,
+    /// The share of the samples this session renders, with the config hash
+    /// ([`Session::set_part`]); `None` for a whole render.
+    pub part: Option<(crate::parts::PartSpec, u64)>,
 }
 
 /// A plugin named by a relative file path is relative to the config's folder, like every
@@ -134,6 +139,8 @@ impl Session {
         let plugin = Arc::new(PluginLibrary::load(&plugin_path).map_err(|e| e.to_string())?);
 
         let textures = scene.texture_views();
+        // Hashed with the mutations still among the parameters.
+        let config_text = crate::parts::config_text(&config, &camera, &config.integrator_params);
         // The mutation list lives under the name of the parameter the integrator declares as
         // a mutation list; weights are checked here, before any mutation plugin loads.
         let list_name = plugin
@@ -221,6 +228,7 @@ impl Session {
             width: camera.width,
             height: camera.height,
             spp,
+            sample_begin: 0,
             time: time.map(Duration::from_secs_f64),
             threads: ov.threads.unwrap_or(config.threads),
             tile_size: config.tile_size,
@@ -241,8 +249,28 @@ impl Session {
             scene,
             config,
             plugin_files,
+            config_text,
+            part: None,
         };
         Ok(session)
+    }
+
+    /// Renders only `spec`'s samples [begin, end) of the `spec.total` the config asks for (a
+    /// part of a distributed render: [`crate::parts`]); the EXR then records the range, the
+    /// config hash and the exact sums. Refused under a time budget (a part needs a fixed
+    /// number of samples).
+    pub fn set_part(&mut self, spec: crate::parts::PartSpec) -> Result<(), String> {
+        if self.options.time.is_some() {
+            return Err(format!(
+                "{}: --part/--samples need a sample budget (render.spp or --spp), not a time budget",
+                self.config.path.display()
+            ));
+        }
+        let hash = crate::parts::config_hash(&self.config_text, &self.config)?;
+        self.options.sample_begin = spec.begin;
+        self.options.spp = spec.end - spec.begin;
+        self.part = Some((spec, hash));
+        Ok(())
     }
 
     /// The files the render will write: the EXR, its `.stats.json` and the PNG preview.
@@ -330,12 +358,22 @@ impl Session {
                     pixels: l,
                 });
             }
-            let meta = self.metadata(outcome_stats);
-            write_exr(path, w, h, &exr_layers, &meta).map_err(|e| e.to_string())?;
+            let mut meta = self.metadata(outcome_stats);
+            if let Some((spec, hash)) = &self.part {
+                meta.entries
+                    .extend(crate::parts::part_entries(spec, *hash, frame));
+                crate::parts::write_part_exr(path, frame, &meta)?;
+            } else {
+                write_exr(path, w, h, &exr_layers, &meta).map_err(|e| e.to_string())?;
+            }
             written.push(path.clone());
             if !outcome_stats.integrator.is_empty() {
                 let json_path = path.with_extension("stats.json");
-                let json = stats_json(&self.instance.plugin().name, outcome_stats);
+                let mut json = stats_json(&self.instance.plugin().name, outcome_stats);
+                if self.part.is_some() {
+                    let kinds = crate::parts::counter_kinds(self.instance.stat_specs());
+                    json = crate::parts::stats_json_with_kinds(&json, &kinds);
+                }
                 crate::output::write_atomically(&json_path, |tmp| {
                     std::fs::write(tmp, &json).map_err(|e| crate::output::OutputError::Io {
                         path: json_path.clone(),
