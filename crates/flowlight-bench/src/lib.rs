@@ -17,7 +17,7 @@
 //!
 //! # Modules
 //!
-//! - [`reference`]: two-half references, their variance layer, reading and writing them;
+//! - [`reference`](mod@reference): two-half references, their variance layer, reading and writing them;
 //! - [`suite`]: the suite TOML (`docs/bench.md`), parsed and validated;
 //! - [`run`]: one render through the host API, and a whole suite's runs;
 //! - [`report`]: means over seeds, efficiencies, the CSV and Markdown tables;

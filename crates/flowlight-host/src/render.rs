@@ -20,13 +20,13 @@
 //!   hence every deposit a pixel would have received in a full pass, is then present with
 //!   probability m/n, and for a pixel p with full-pass deposit sum D_p
 //!
-//!   E[partial-pass deposits at p | m] = (m/n)·E[D_p],
+//!   E\[partial-pass deposits at p | m\] = (m/n)·E\[D_p\],
 //!
 //!   so after P whole passes of s samples each and a cut one, the image
 //!
 //!   I_p = (Σ whole-pass deposits + partial-pass deposits) / (s·(P + m/n))
 //!
-//!   has E[I_p | m] = E[D_p]/s: unbiased, with no pass dropped and no black tiles. The
+//!   has E\[I_p | m\] = E\[D_p\]/s: unbiased, with no pass dropped and no black tiles. The
 //!   residual: m is not independent of the order, because it depends on how long the first
 //!   tiles took (a permutation that puts the costly tiles first finishes fewer of them before
 //!   the deadline), a second-order correlation between which tiles and how many; with a

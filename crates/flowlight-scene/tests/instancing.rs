@@ -2,10 +2,8 @@
 //! and shows, triangle by triangle, what the flattened scene shows.
 
 use flowlight_core::geometry::Ray;
-use flowlight_testkit::gltf::{
-    octahedra_ext_gltf, octahedra_gltf, octahedra_placements, temp_dir,
-};
 use flowlight_scene::{load_gltf, Scene};
+use flowlight_testkit::gltf::{octahedra_ext_gltf, octahedra_gltf, octahedra_placements, temp_dir};
 use glam::{Mat4, Vec3};
 use std::collections::BTreeMap;
 

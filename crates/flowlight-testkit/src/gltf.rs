@@ -696,66 +696,6 @@ impl SceneBuilder {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn base64_matches_the_standard_alphabet_and_padding() {
-        assert_eq!(base64(b""), "");
-        assert_eq!(base64(b"f"), "Zg==");
-        assert_eq!(base64(b"fo"), "Zm8=");
-        assert_eq!(base64(b"foo"), "Zm9v");
-        assert_eq!(base64(&[0xfb, 0xff]), "+/8=");
-    }
-
-    #[test]
-    fn views_are_aligned_and_accessors_point_at_them() {
-        let mut d = Document::default();
-        let a = d.accessor(&[1, 2, 3], None, 5121, 3, "SCALAR");
-        let b = d.vec3(&[[1.0, -2.0, 3.0], [0.5, 4.0, -1.0]], true);
-        assert_eq!((a, b), (0, 1));
-        assert_eq!(
-            d.buffer_views[1]["byteOffset"],
-            json!(4),
-            "padded to 4 bytes"
-        );
-        assert_eq!(d.accessors[1]["min"], json!([0.5, -2.0, -1.0]));
-        assert_eq!(d.accessors[1]["max"], json!([1.0, 4.0, 3.0]));
-        assert_eq!(d.buffer.len(), 4 + 24);
-        let doc: Value = serde_json::from_str(&d.json()).unwrap();
-        assert_eq!(doc["buffers"][0]["byteLength"], json!(28));
-    }
-
-    #[test]
-    fn quads_face_where_they_are_told() {
-        let mut b = SceneBuilder::new("test");
-        b.material("m", [0.5; 3], MaterialOptions::default());
-        let p = [
-            [0.0, 0.0, 0.0],
-            [1.0, 0.0, 0.0],
-            [1.0, 1.0, 0.0],
-            [0.0, 1.0, 0.0],
-        ];
-        b.quad("m", p, Some([0.0, 0.0, -1.0]));
-        let mesh = &b.meshes[0];
-        let v = &mesh.1;
-        let n = cross(sub(v[1], v[0]), sub(v[2], v[0]));
-        assert!(n[2] < 0.0, "winding flipped to face -z: {v:?}");
-        b.cuboid("m", [0.0; 3], [1.0; 3]);
-        assert_eq!(b.meshes[0].3.len(), 6 + 36);
-        b.material("s", [0.5; 3], MaterialOptions::default());
-        b.sphere("s", [0.0; 3], 1.0, 1);
-        assert_eq!(b.meshes.len(), 2, "one mesh per material");
-        // 12 vertices, 30 edges: one subdivision adds a vertex per edge, 80 faces.
-        assert_eq!((b.meshes[1].1.len(), b.meshes[1].3.len()), (42, 240));
-        assert!(b.meshes[1]
-            .1
-            .iter()
-            .all(|p| (dot(*p, *p) - 1.0).abs() < 1e-12));
-    }
-}
-
 /// A glTF with one mesh — an octahedron of radius 1 around the origin (8 triangles, smooth
 /// NORMALs pointing out, TEXCOORD_0 from the position) with material `material` — placed
 /// by one node per matrix of `placements` (column-major, as glTF's `matrix`). With
@@ -891,4 +831,64 @@ pub fn octahedra_placements(n: usize) -> Vec<[f32; 16]> {
             m.to_cols_array()
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn base64_matches_the_standard_alphabet_and_padding() {
+        assert_eq!(base64(b""), "");
+        assert_eq!(base64(b"f"), "Zg==");
+        assert_eq!(base64(b"fo"), "Zm8=");
+        assert_eq!(base64(b"foo"), "Zm9v");
+        assert_eq!(base64(&[0xfb, 0xff]), "+/8=");
+    }
+
+    #[test]
+    fn views_are_aligned_and_accessors_point_at_them() {
+        let mut d = Document::default();
+        let a = d.accessor(&[1, 2, 3], None, 5121, 3, "SCALAR");
+        let b = d.vec3(&[[1.0, -2.0, 3.0], [0.5, 4.0, -1.0]], true);
+        assert_eq!((a, b), (0, 1));
+        assert_eq!(
+            d.buffer_views[1]["byteOffset"],
+            json!(4),
+            "padded to 4 bytes"
+        );
+        assert_eq!(d.accessors[1]["min"], json!([0.5, -2.0, -1.0]));
+        assert_eq!(d.accessors[1]["max"], json!([1.0, 4.0, 3.0]));
+        assert_eq!(d.buffer.len(), 4 + 24);
+        let doc: Value = serde_json::from_str(&d.json()).unwrap();
+        assert_eq!(doc["buffers"][0]["byteLength"], json!(28));
+    }
+
+    #[test]
+    fn quads_face_where_they_are_told() {
+        let mut b = SceneBuilder::new("test");
+        b.material("m", [0.5; 3], MaterialOptions::default());
+        let p = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+        ];
+        b.quad("m", p, Some([0.0, 0.0, -1.0]));
+        let mesh = &b.meshes[0];
+        let v = &mesh.1;
+        let n = cross(sub(v[1], v[0]), sub(v[2], v[0]));
+        assert!(n[2] < 0.0, "winding flipped to face -z: {v:?}");
+        b.cuboid("m", [0.0; 3], [1.0; 3]);
+        assert_eq!(b.meshes[0].3.len(), 6 + 36);
+        b.material("s", [0.5; 3], MaterialOptions::default());
+        b.sphere("s", [0.0; 3], 1.0, 1);
+        assert_eq!(b.meshes.len(), 2, "one mesh per material");
+        // 12 vertices, 30 edges: one subdivision adds a vertex per edge, 80 faces.
+        assert_eq!((b.meshes[1].1.len(), b.meshes[1].3.len()), (42, 240));
+        assert!(b.meshes[1]
+            .1
+            .iter()
+            .all(|p| (dot(*p, *p) - 1.0).abs() < 1e-12));
+    }
 }

@@ -179,7 +179,6 @@ impl Integrator for Erpt {
             // of their deposits in the unit's buffer (the host keeps the rest).
             accumulation: AccumulationStyle::FlangedTile,
             flange: 2 * settings.film_window,
-            ..IntegratorInfo::simple()
         };
         Ok((
             Erpt {
