@@ -49,6 +49,20 @@ pub struct ImageLayer<'a> {
     pub pixels: &'a [Rgb],
 }
 
+/// The EXR layers of a frame: the main image (unnamed) then `layer0`, `layer1`, … over
+/// `layers` (the frame's per-depth lighting layers, already resolved to pixels).
+pub fn frame_layers<'a>(image: &'a [Rgb], layers: &'a [Vec<Rgb>]) -> Vec<ImageLayer<'a>> {
+    let mut out = vec![ImageLayer {
+        name: String::new(),
+        pixels: image,
+    }];
+    out.extend(layers.iter().enumerate().map(|(k, l)| ImageLayer {
+        name: format!("layer{k}"),
+        pixels: l,
+    }));
+    out
+}
+
 /// String attributes written into the EXR header (e.g. `integrator`, `spp`, `seed`,
 /// `biased`). Keys must be unique, non-empty, free of NUL bytes and not a structural OpenEXR
 /// attribute name (see the module documentation).

@@ -52,7 +52,7 @@
 
 use crate::accumulation::Frame;
 use crate::output::{
-    read_exr_metadata, read_exr_u32, write_atomically, write_exr_with_raw, ExrMetadata, ImageLayer,
+    read_exr_metadata, read_exr_u32, write_atomically, write_exr_with_raw, ExrMetadata,
     OutputError, RawChannel,
 };
 use crate::render::{PartialPass, RenderStats};
@@ -321,16 +321,7 @@ pub fn write_part_exr(path: &Path, frame: &Frame, meta: &ExrMetadata) -> Result<
     let layers: Vec<Vec<flowlight_core::Rgb>> = (0..frame.layer_count as usize)
         .map(|k| frame.layer(k))
         .collect();
-    let mut exr_layers = vec![ImageLayer {
-        name: String::new(),
-        pixels: &image,
-    }];
-    for (k, l) in layers.iter().enumerate() {
-        exr_layers.push(ImageLayer {
-            name: format!("layer{k}"),
-            pixels: l,
-        });
-    }
+    let exr_layers = crate::output::frame_layers(&image, &layers);
     write_exr_with_raw(path, w, h, &exr_layers, &sum_channels(frame), meta)
         .map_err(|e| e.to_string())
 }

@@ -3,7 +3,7 @@
 
 use crate::accumulation::Frame;
 use crate::intersector::{build_intersector_with, Intersector};
-use crate::output::{write_exr, write_png_preview, ExrMetadata, ImageLayer};
+use crate::output::{write_exr, write_png_preview, ExrMetadata};
 use crate::plugin::{
     find_plugin, normalised_weights, search_dirs, IntegratorInstance, MutationInstance,
     PluginLibrary,
@@ -348,16 +348,7 @@ impl Session {
             let layers: Vec<Vec<flowlight_core::Rgb>> = (0..frame.layer_count as usize)
                 .map(|k| frame.layer(k))
                 .collect();
-            let mut exr_layers = vec![ImageLayer {
-                name: String::new(),
-                pixels: &image,
-            }];
-            for (k, l) in layers.iter().enumerate() {
-                exr_layers.push(ImageLayer {
-                    name: format!("layer{k}"),
-                    pixels: l,
-                });
-            }
+            let exr_layers = crate::output::frame_layers(&image, &layers);
             let mut meta = self.metadata(outcome_stats);
             if let Some((spec, hash)) = &self.part {
                 meta.entries
