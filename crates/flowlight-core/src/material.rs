@@ -825,7 +825,11 @@ mod tests {
         let uv = [Vec2::splat(0.5), Vec2::splat(0.5)];
         let r = m.resolve(uv, [1.0; 4], &ts).material;
         let lin = |v: u8| v as f32 / 255.0;
-        assert!((r.transmission - 0.5 * lin(51)).abs() < 1e-6, "{}", r.transmission);
+        assert!(
+            (r.transmission - 0.5 * lin(51)).abs() < 1e-6,
+            "{}",
+            r.transmission
+        );
         assert!((r.specular - 0.8 * lin(204)).abs() < 1e-6, "{}", r.specular);
         let want = Rgb::new(
             2.0 * srgb_to_linear(lin(51)),

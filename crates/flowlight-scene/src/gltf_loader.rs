@@ -545,8 +545,8 @@ impl Loader<'_> {
             reason,
         };
         let count = self.src.document.textures().len();
-        let coat = crate::material::clearcoat_textures(m, count)
-            .map_err(|e| merr(self.file(), e))?;
+        let coat =
+            crate::material::clearcoat_textures(m, count).map_err(|e| merr(self.file(), e))?;
         for (slot, raw) in coat.into_iter().enumerate() {
             let Some(raw) = raw else { continue };
             let t = transform_from_json(raw.transform.as_ref())

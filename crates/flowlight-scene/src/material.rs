@@ -217,7 +217,10 @@ pub fn clearcoat_textures(
             transform,
         }))
     };
-    Ok([info("clearcoatTexture")?, info("clearcoatRoughnessTexture")?])
+    Ok([
+        info("clearcoatTexture")?,
+        info("clearcoatRoughnessTexture")?,
+    ])
 }
 
 /// Converts the scalar parts of a glTF material (everything but the texture references, which
@@ -232,12 +235,10 @@ pub fn convert(m: &gltf::Material) -> Result<Material, String> {
     let metallic = check_unit("metallicFactor", pbr.metallic_factor())?;
     let roughness = check_unit("roughnessFactor", pbr.roughness_factor())?;
     let transmission = match m.transmission() {
-        Some(t) => {
-            check_unit(
-                "KHR_materials_transmission.transmissionFactor",
-                t.transmission_factor(),
-            )?
-        }
+        Some(t) => check_unit(
+            "KHR_materials_transmission.transmissionFactor",
+            t.transmission_factor(),
+        )?,
         None => 0.0,
     };
     let ior = m.ior().unwrap_or(1.5);

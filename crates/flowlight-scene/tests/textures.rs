@@ -580,7 +580,10 @@ fn transmission_texture_red_channel_switches_what_passes_through() {
     let s = load(&q, "ext-transmission");
     assert!(s.materials[0].transmission_texture.is_some());
     let (l, r) = left_right(&s);
-    assert_eq!((l.material.transmission, r.material.transmission), (0.0, 0.8));
+    assert_eq!(
+        (l.material.transmission, r.material.transmission),
+        (0.0, 0.8)
+    );
     let (_, down_l) = scattered(&bsdf(&l));
     let (up_r, down_r) = scattered(&bsdf(&r));
     // Left: opaque, nothing below. Right: the thin dielectric at normal incidence passes
@@ -666,13 +669,19 @@ fn clearcoat_textures_scale_the_coat_and_its_roughness() {
     let s = load(&q, "ext-clearcoat");
     let m = &s.materials[0];
     assert_eq!(
-        (m.clearcoat_texture.index, m.clearcoat_roughness_texture.index),
+        (
+            m.clearcoat_texture.index,
+            m.clearcoat_roughness_texture.index
+        ),
         (0, 1)
     );
     let (l, r) = left_right(&s);
     assert_eq!((l.material.clearcoat, r.material.clearcoat), (0.0, 1.0));
     assert_eq!(
-        (l.material.clearcoat_roughness, r.material.clearcoat_roughness),
+        (
+            l.material.clearcoat_roughness,
+            r.material.clearcoat_roughness
+        ),
         (0.5, 0.0)
     );
     let (up_l, _) = scattered(&bsdf(&l));
@@ -712,7 +721,10 @@ fn extension_textures_follow_their_texcoord_and_transform() {
     assert_eq!(s.materials[0].transmission_texture.tex_coord, 1);
     let (l, r) = left_right(&s);
     assert_eq!((l.material.clearcoat, r.material.clearcoat), (1.0, 0.0));
-    assert_eq!((l.material.transmission, r.material.transmission), (1.0, 0.0));
+    assert_eq!(
+        (l.material.transmission, r.material.transmission),
+        (1.0, 0.0)
+    );
 }
 
 #[test]
