@@ -771,3 +771,21 @@ fn a_bad_clearcoat_texture_reference_is_a_clear_error() {
         assert!(e.contains(want) && e.contains("bad.gltf"), "{e}");
     }
 }
+
+#[test]
+fn a_clearcoat_normal_texture_is_ignored_and_the_coat_still_applies() {
+    let q = halves(
+        3,
+        &[128, 128, 255],
+        &[128, 128, 255],
+        r#"{"extensions": {"KHR_materials_clearcoat": {"clearcoatFactor": 0.5,
+            "clearcoatNormalTexture": {"index": 0}}}}"#,
+        "KHR_materials_clearcoat",
+    );
+    let s = load(&q, "ext-coat-normal");
+    let m = &s.materials[0];
+    assert_eq!(m.clearcoat, 0.5);
+    assert!(!m.clearcoat_texture.is_some() && !m.normal_texture.is_some());
+    // No texture reads it, so it is not even decoded.
+    assert!(s.textures.is_empty() && s.stats.images_decoded == 0);
+}
