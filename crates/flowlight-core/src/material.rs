@@ -38,6 +38,37 @@
 //! approximation for rasterisers of the visibility a path tracer computes by tracing rays,
 //! and applying it too would darken cavities twice. Normal maps are applied by the host when
 //! it builds the shading normal of a hit.
+//!
+//! The textures of the BRDF extensions multiply their factors the same way, each at its own
+//! texture-coordinate set, transform and sampler, with the channels the extensions name:
+//!
+//! | texture | channel | multiplies |
+//! |---|---|---|
+//! | `transmissionTexture` (KHR_materials_transmission) | R | `transmission` |
+//! | `specularTexture` (KHR_materials_specular) | A | `specular` |
+//! | `specularColorTexture` (KHR_materials_specular, sRGB) | RGB | `specular_color` |
+//! | `clearcoatTexture` (KHR_materials_clearcoat) | R | `clearcoat` |
+//! | `clearcoatRoughnessTexture` (KHR_materials_clearcoat) | G | `clearcoat_roughness` |
+//!
+//! A texture without an alpha channel reads A = 1 (so an RGB `specularTexture` leaves the
+//! factor as it is, as a GPU sampler would).
+//!
+//! `thicknessTexture` (KHR_materials_volume, G × `thicknessFactor`) is read and kept in
+//! [`Material::thickness_texture`] but, like occlusion, never applied. The extension's
+//! thickness is "the thickness of the volume beneath the surface", a baked stand-in for the
+//! distance a refracted ray travels inside the mesh, for renderers that cannot trace it.
+//! Flowlight traces it: the inside of a closed volumetric mesh is a homogeneous medium whose
+//! Beer–Lambert transmittance exp(−σ_a s) uses the true segment length s between hits
+//! ([`crate::bsdf::volume`]); the factor only decides *whether* the material is a volume
+//! boundary (thickness > 0) or thin-walled (0), which must hold for the whole mesh, not per
+//! texel. Multiplying it in would change nothing but that switch, and wrongly so where a
+//! texel is 0.
+//!
+//! `clearcoatNormalTexture` is not loaded: the BSDF has one shading frame for every lobe
+//! ([`crate::bsdf::Bsdf::eval`] takes directions in it), so the coat reflects about the same
+//! (normal-mapped) shading normal as the base. The extension says a coat without its own
+//! normal texture is *not* normal-mapped; Flowlight's coat follows the base normal map
+//! instead. The loader warns when a file has a coat normal texture.
 
 use crate::Rgb;
 use glam::{Vec2, Vec4};
@@ -210,6 +241,20 @@ pub struct Material {
     pub clearcoat: f32,
     /// KHR_materials_clearcoat clearcoatRoughnessFactor in [0, 1]; GGX α = roughness².
     pub clearcoat_roughness: f32,
+    // Textures of the BRDF extensions (see the module docs, "Resolving a material").
+    /// KHR_materials_transmission transmissionTexture (linear): R multiplies `transmission`.
+    pub transmission_texture: TextureRef,
+    /// KHR_materials_volume thicknessTexture (linear, G); read, never applied (module docs).
+    pub thickness_texture: TextureRef,
+    /// KHR_materials_specular specularTexture (linear): A multiplies `specular`.
+    pub specular_texture: TextureRef,
+    /// KHR_materials_specular specularColorTexture (sRGB): RGB multiplies `specular_color`.
+    pub specular_color_texture: TextureRef,
+    /// KHR_materials_clearcoat clearcoatTexture (linear): R multiplies `clearcoat`.
+    pub clearcoat_texture: TextureRef,
+    /// KHR_materials_clearcoat clearcoatRoughnessTexture (linear): G multiplies
+    /// `clearcoat_roughness`.
+    pub clearcoat_roughness_texture: TextureRef,
 }
 
 impl Default for Material {
@@ -239,6 +284,12 @@ impl Default for Material {
             attenuation_distance: f32::INFINITY,
             clearcoat: 0.0,
             clearcoat_roughness: 0.0,
+            transmission_texture: TextureRef::NONE,
+            thickness_texture: TextureRef::NONE,
+            specular_texture: TextureRef::NONE,
+            specular_color_texture: TextureRef::NONE,
+            clearcoat_texture: TextureRef::NONE,
+            clearcoat_roughness_texture: TextureRef::NONE,
         }
     }
 }
@@ -246,7 +297,8 @@ impl Default for Material {
 /// A material evaluated at one surface point: factors times textures.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ResolvedMaterial {
-    /// The material with `metallic`, `roughness` and `emission` textured; pass it with
+    /// The material with `metallic`, `roughness`, `emission`, `transmission`, `specular`,
+    /// `specular_color`, `clearcoat` and `clearcoat_roughness` textured; pass it with
     /// `base` to [`crate::bsdf::Bsdf::from_material`].
     pub material: Material,
     /// Base colour: factor × texture × vertex colour.
@@ -316,6 +368,22 @@ impl Material {
             m.metallic = self.metallic * t.z;
         }
         m.emission = self.emission_at(uv, textures);
+        let linear = |r: &TextureRef| r.sample(uv, textures, false);
+        if let Some(t) = linear(&self.transmission_texture) {
+            m.transmission = self.transmission * t.x;
+        }
+        if let Some(t) = linear(&self.specular_texture) {
+            m.specular = self.specular * t.w;
+        }
+        if let Some(t) = self.specular_color_texture.sample(uv, textures, true) {
+            m.specular_color = self.specular_color * Rgb::new(t.x, t.y, t.z);
+        }
+        if let Some(t) = linear(&self.clearcoat_texture) {
+            m.clearcoat = self.clearcoat * t.x;
+        }
+        if let Some(t) = linear(&self.clearcoat_roughness_texture) {
+            m.clearcoat_roughness = self.clearcoat_roughness * t.y;
+        }
         ResolvedMaterial {
             material: m,
             base,
@@ -727,5 +795,62 @@ mod tests {
         let plain = Material::default().resolve(uv, [1.0; 4], &ts);
         assert_eq!(plain.material, Material::default());
         assert_eq!(plain.base, Rgb::splat(0.8));
+    }
+
+    #[test]
+    fn resolve_multiplies_the_extension_factors_by_their_channels() {
+        // One RGBA texel (R = 51, G = 102, B = 153, A = 204) read by every extension texture,
+        // each through its own channel; a second texture (all zero) through TEXCOORD_1.
+        let px = [51u8, 102, 153, 204];
+        let zero = [0u8; 4];
+        let mut ts = [tex(1, 1, 4, &px), tex(1, 1, 4, &zero)];
+        for t in &mut ts {
+            t.filter = Filter::Nearest;
+        }
+        let m = Material {
+            transmission: 0.5,
+            transmission_texture: TextureRef::new(0, 0),
+            specular: 0.8,
+            specular_texture: TextureRef::new(0, 0),
+            specular_color: Rgb::new(2.0, 1.0, 0.5),
+            specular_color_texture: TextureRef::new(0, 0),
+            clearcoat: 0.9,
+            clearcoat_texture: TextureRef::new(0, 0),
+            clearcoat_roughness: 0.6,
+            clearcoat_roughness_texture: TextureRef::new(0, 0),
+            thickness: 0.25,
+            thickness_texture: TextureRef::new(1, 1),
+            ..Default::default()
+        };
+        let uv = [Vec2::splat(0.5), Vec2::splat(0.5)];
+        let r = m.resolve(uv, [1.0; 4], &ts).material;
+        let lin = |v: u8| v as f32 / 255.0;
+        assert!(
+            (r.transmission - 0.5 * lin(51)).abs() < 1e-6,
+            "{}",
+            r.transmission
+        );
+        assert!((r.specular - 0.8 * lin(204)).abs() < 1e-6, "{}", r.specular);
+        let want = Rgb::new(
+            2.0 * srgb_to_linear(lin(51)),
+            srgb_to_linear(lin(102)),
+            0.5 * srgb_to_linear(lin(153)),
+        );
+        let (g, w) = (r.specular_color.to_array(), want.to_array());
+        assert!((0..3).all(|i| (g[i] - w[i]).abs() < 1e-6), "{g:?} vs {w:?}");
+        assert!((r.clearcoat - 0.9 * lin(51)).abs() < 1e-6);
+        assert!((r.clearcoat_roughness - 0.6 * lin(102)).abs() < 1e-6);
+        // The thickness texture (all zero here) is read but never applied.
+        assert_eq!(r.thickness, 0.25);
+        // The second set reads the zero texture: every factor goes to 0.
+        let z = Material {
+            transmission_texture: TextureRef::new(1, 1),
+            specular_texture: TextureRef::new(1, 1),
+            clearcoat_texture: TextureRef::new(1, 1),
+            ..m
+        }
+        .resolve(uv, [1.0; 4], &ts)
+        .material;
+        assert_eq!((z.transmission, z.specular, z.clearcoat), (0.0, 0.0, 0.0));
     }
 }

@@ -495,6 +495,7 @@ impl Loader<'_> {
             r.scale = o.strength();
             mat.occlusion_texture = r;
         }
+        self.extension_textures(m, &mut mat, &name)?;
         if let Some(o) = self.overrides.get(&name) {
             o.validate()
                 .map_err(|e| merr(self.file(), format!("config override: {e}")))?;
@@ -505,6 +506,61 @@ impl Loader<'_> {
         let i = (self.scene.materials.len() - 1) as u32;
         self.material_map.insert(m.index(), i);
         Ok(i)
+    }
+
+    /// The texture references of the BRDF extensions (transmission, volume thickness,
+    /// specular, specular colour, clearcoat, clearcoat roughness); see
+    /// [`crate::material::clearcoat_textures`] for the clearcoat ones.
+    fn extension_textures(
+        &mut self,
+        m: &gltf::Material,
+        mat: &mut Material,
+        name: &str,
+    ) -> Result<(), SceneError> {
+        let mut info = |i: Option<gltf::texture::Info>| -> Result<TextureRef, SceneError> {
+            let Some(i) = i else {
+                return Ok(TextureRef::NONE);
+            };
+            let t = i.texture_transform().map(|t| Transform {
+                offset: t.offset(),
+                rotation: t.rotation(),
+                scale: t.scale(),
+                tex_coord: t.tex_coord(),
+            });
+            self.texture_ref(&i.texture(), i.tex_coord(), t, name)
+        };
+        if let Some(t) = m.transmission() {
+            mat.transmission_texture = info(t.transmission_texture())?;
+        }
+        if let Some(v) = m.volume() {
+            mat.thickness_texture = info(v.thickness_texture())?;
+        }
+        if let Some(s) = m.specular() {
+            mat.specular_texture = info(s.specular_texture())?;
+            mat.specular_color_texture = info(s.specular_color_texture())?;
+        }
+        let merr = |file: PathBuf, reason: String| SceneError::Material {
+            file,
+            material: name.to_string(),
+            reason,
+        };
+        let count = self.src.document.textures().len();
+        let coat =
+            crate::material::clearcoat_textures(m, count).map_err(|e| merr(self.file(), e))?;
+        for (slot, raw) in coat.into_iter().enumerate() {
+            let Some(raw) = raw else { continue };
+            let t = transform_from_json(raw.transform.as_ref())
+                .map_err(|e| merr(self.file(), format!("KHR_materials_clearcoat: {e}")))?;
+            let doc = self.src.document.clone();
+            let tex = doc.textures().nth(raw.index).expect("index checked");
+            let r = self.texture_ref(&tex, raw.tex_coord, t, name)?;
+            if slot == 0 {
+                mat.clearcoat_texture = r;
+            } else {
+                mat.clearcoat_roughness_texture = r;
+            }
+        }
+        Ok(())
     }
 
     /// The scene texture for glTF texture `tex` (decoding its image on first use; images are

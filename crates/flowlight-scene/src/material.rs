@@ -7,6 +7,14 @@
 //! The diffuse model comes from, in increasing priority: Lambert by default; the material's
 //! glTF extras `{"flowlight": {"diffuse": "oren-nayar", "sigma_degrees": 20}}`; a
 //! `[materials.NAME]` table of the render config ([`MaterialOverride`]).
+//!
+//! The extensions' textures (`transmissionTexture`, `thicknessTexture`, `specularTexture`,
+//! `specularColorTexture`, `clearcoatTexture`, `clearcoatRoughnessTexture`) are assigned by the
+//! loader like the core ones (texCoord, `KHR_texture_transform`, sampler); the clearcoat ones
+//! come from the raw extension JSON through [`clearcoat_textures`]. Which channel multiplies
+//! which factor, and why the thickness texture is read but not applied, is in
+//! `flowlight_core::material`'s module docs. `clearcoatNormalTexture` is ignored with a
+//! warning: the BSDF has one shading frame for all its lobes.
 
 use flowlight_core::material::{DiffuseModel, Material};
 use flowlight_core::Rgb;
@@ -142,27 +150,82 @@ fn clearcoat(m: &gltf::Material) -> Result<(f32, f32), String> {
     };
     let c = factor("clearcoatFactor")?;
     let r = factor("clearcoatRoughnessFactor")?;
-    let textures: Vec<&str> = [
-        "clearcoatTexture",
-        "clearcoatRoughnessTexture",
-        "clearcoatNormalTexture",
-    ]
-    .into_iter()
-    .filter(|k| obj.contains_key(*k))
-    .collect();
-    if !textures.is_empty() {
+    if obj.contains_key("clearcoatNormalTexture") {
         tracing::warn!(
-            "material '{}': KHR_materials_clearcoat {} not applied (the factors are)",
-            label(m),
-            textures.join(", ")
+            "material '{}': KHR_materials_clearcoat clearcoatNormalTexture not applied (the coat \
+             shares the base's shading normal)",
+            label(m)
         );
     }
     Ok((c, r))
 }
 
-/// Converts the scalar parts of a glTF material (everything but the texture index, which the
-/// loader assigns) and checks every value. Material extensions this renderer does not know are
-/// ignored with a warning naming them, and so are the textures of the BRDF extensions.
+/// A texture reference of `KHR_materials_clearcoat`, read from the raw extension JSON (the
+/// gltf crate has no type for it): texture index, `texCoord`, and the raw
+/// `KHR_texture_transform` object, if any.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RawTextureInfo {
+    pub index: usize,
+    pub tex_coord: u32,
+    pub transform: Option<gltf::json::Value>,
+}
+
+/// The `clearcoatTexture` and `clearcoatRoughnessTexture` of `m` (`None` where absent),
+/// checked against the document's `texture_count`.
+pub fn clearcoat_textures(
+    m: &gltf::Material,
+    texture_count: usize,
+) -> Result<[Option<RawTextureInfo>; 2], String> {
+    let Some(obj) = m
+        .extension_value("KHR_materials_clearcoat")
+        .and_then(|v| v.as_object())
+    else {
+        return Ok([None, None]);
+    };
+    let info = |key: &str| -> Result<Option<RawTextureInfo>, String> {
+        let Some(v) = obj.get(key) else {
+            return Ok(None);
+        };
+        let what = format!("KHR_materials_clearcoat.{key}");
+        let v = v
+            .as_object()
+            .ok_or_else(|| format!("{what} is not a JSON object"))?;
+        let index = v
+            .get("index")
+            .and_then(|i| i.as_u64())
+            .ok_or_else(|| format!("{what}.index is missing or not a non-negative integer"))?;
+        let index = usize::try_from(index)
+            .ok()
+            .filter(|&i| i < texture_count)
+            .ok_or_else(|| {
+                format!("{what}.index = {index} is out of range ({texture_count} textures)")
+            })?;
+        let tex_coord = match v.get("texCoord") {
+            None => 0,
+            Some(c) => c
+                .as_u64()
+                .and_then(|c| u32::try_from(c).ok())
+                .ok_or_else(|| format!("{what}.texCoord is not a non-negative integer"))?,
+        };
+        let transform = v
+            .get("extensions")
+            .and_then(|e| e.get("KHR_texture_transform"))
+            .cloned();
+        Ok(Some(RawTextureInfo {
+            index,
+            tex_coord,
+            transform,
+        }))
+    };
+    Ok([
+        info("clearcoatTexture")?,
+        info("clearcoatRoughnessTexture")?,
+    ])
+}
+
+/// Converts the scalar parts of a glTF material (everything but the texture references, which
+/// the loader assigns) and checks every value. Material extensions this renderer does not know
+/// are ignored with a warning naming them, and so is `clearcoatNormalTexture`.
 pub fn convert(m: &gltf::Material) -> Result<Material, String> {
     let pbr = m.pbr_metallic_roughness();
     let [r, g, b, a] = pbr.base_color_factor();
@@ -171,17 +234,11 @@ pub fn convert(m: &gltf::Material) -> Result<Material, String> {
     }
     let metallic = check_unit("metallicFactor", pbr.metallic_factor())?;
     let roughness = check_unit("roughnessFactor", pbr.roughness_factor())?;
-    let mut ignored_textures = Vec::new();
     let transmission = match m.transmission() {
-        Some(t) => {
-            if t.transmission_texture().is_some() {
-                ignored_textures.push("KHR_materials_transmission.transmissionTexture");
-            }
-            check_unit(
-                "KHR_materials_transmission.transmissionFactor",
-                t.transmission_factor(),
-            )?
-        }
+        Some(t) => check_unit(
+            "KHR_materials_transmission.transmissionFactor",
+            t.transmission_factor(),
+        )?,
         None => 0.0,
     };
     let ior = m.ior().unwrap_or(1.5);
@@ -192,12 +249,6 @@ pub fn convert(m: &gltf::Material) -> Result<Material, String> {
     }
     let (specular, specular_color) = match m.specular() {
         Some(s) => {
-            if s.specular_texture().is_some() {
-                ignored_textures.push("KHR_materials_specular.specularTexture");
-            }
-            if s.specular_color_texture().is_some() {
-                ignored_textures.push("KHR_materials_specular.specularColorTexture");
-            }
             let f = check_unit("KHR_materials_specular.specularFactor", s.specular_factor())?;
             let c = s.specular_color_factor();
             for (ch, v) in ["r", "g", "b"].iter().zip(c) {
@@ -213,9 +264,6 @@ pub fn convert(m: &gltf::Material) -> Result<Material, String> {
     };
     let (thickness, attenuation_color, attenuation_distance) = match m.volume() {
         Some(v) => {
-            if v.thickness_texture().is_some() {
-                ignored_textures.push("KHR_materials_volume.thicknessTexture");
-            }
             let t = v.thickness_factor();
             if !(t.is_finite() && t >= 0.0) {
                 return Err(format!(
@@ -250,13 +298,6 @@ pub fn convert(m: &gltf::Material) -> Result<Material, String> {
     let emission = Rgb::new(er, eg, eb) * strength;
     if !emission.is_valid_radiance() {
         return Err("emissive factor × strength overflows".into());
-    }
-    if !ignored_textures.is_empty() {
-        tracing::warn!(
-            "material '{}': {} not applied (the factors are)",
-            label(m),
-            ignored_textures.join(", ")
-        );
     }
     if let Some(others) = m.extensions() {
         let unknown: Vec<&str> = others

@@ -498,3 +498,294 @@ fn a_small_lit_feature_keeps_its_triangle_a_light() {
         "mean radiance {mean}, the texel's share {share}"
     );
 }
+
+// ---- Textures of the BRDF extensions: each a 2×1 texture (left half | right half), nearest
+// filtering, so the quad's x < 0.5 reads the left texel and x > 0.5 the right one.
+
+use flowlight_core::bsdf::Bsdf;
+use flowlight_core::material::{Material, ResolvedMaterial};
+use flowlight_core::Rgb;
+
+/// A quad whose `material` reads a 2×1 texture of `channels` channels, `left` | `right`.
+fn halves(channels: u32, left: &[u8], right: &[u8], material: &str, used: &str) -> Quad {
+    Quad {
+        images: vec![png8(2, 1, channels, &[left, right].concat())],
+        textures: r#"{"source": 0, "sampler": 0}"#.into(),
+        samplers: NEAREST.into(),
+        material: material.into(),
+        extensions_used: format!(r#""{used}""#),
+        ..Quad::default()
+    }
+}
+
+/// The resolved material at the quad's left (x = 0.25) and right (x = 0.75) halves.
+fn left_right(s: &Scene) -> (ResolvedMaterial, ResolvedMaterial) {
+    let at = |x: f32| {
+        let h = hit(s, x, 0.5);
+        s.materials[0].resolve(h.uvs(), h.color, &s.texture_table)
+    };
+    (at(0.25), at(0.75))
+}
+
+fn bsdf(r: &ResolvedMaterial) -> Bsdf {
+    Bsdf::from_material(&r.material, r.base)
+}
+
+/// Energy that light arriving along the normal (ω_o = +z) leaves with, above and below the
+/// surface: E[f |cos θ_i| / pdf] over stratified samples of the mixture (component choice
+/// × 2D direction). Exact for Dirac lobes, which is all these tests use where they compare.
+fn scattered(b: &Bsdf) -> (Rgb, Rgb) {
+    // Component choice in 4096 strata: a lobe of weight w is chosen w ± 1/4096 of the time.
+    const N: usize = 4096;
+    const M: usize = 4;
+    // Summed in f64: 2¹⁶ f32 additions would drift by ~10⁻⁴ relative.
+    let (mut up, mut down) = ([0f64; 3], [0f64; 3]);
+    for c in 0..N {
+        for i in 0..M {
+            for j in 0..M {
+                let uc = (c as f32 + 0.5) / N as f32;
+                let u = Vec2::new((i as f32 + 0.5) / M as f32, (j as f32 + 0.5) / M as f32);
+                if let Some(s) = b.sample(Vec3::Z, uc, u) {
+                    let w = (s.f * (s.wi.z.abs() / s.pdf)).to_array();
+                    let sum = if s.wi.z > 0.0 { &mut up } else { &mut down };
+                    for k in 0..3 {
+                        sum[k] += w[k] as f64;
+                    }
+                }
+            }
+        }
+    }
+    let n = (N * M * M) as f64;
+    let mean = |a: [f64; 3]| Rgb::new((a[0] / n) as f32, (a[1] / n) as f32, (a[2] / n) as f32);
+    (mean(up), mean(down))
+}
+
+fn near(a: f32, b: f32, tol: f32) -> bool {
+    (a - b).abs() <= tol
+}
+
+#[test]
+fn transmission_texture_red_channel_switches_what_passes_through() {
+    // White smooth dielectric, transmissionFactor 0.8; texture R = 0 | 255 (G, B = 255 | 0
+    // so a wrong channel would swap the halves).
+    let q = halves(
+        3,
+        &[0, 255, 255],
+        &[255, 0, 0],
+        r#"{"pbrMetallicRoughness": {"metallicFactor": 0, "roughnessFactor": 0},
+            "extensions": {"KHR_materials_transmission": {"transmissionFactor": 0.8,
+            "transmissionTexture": {"index": 0}}}}"#,
+        "KHR_materials_transmission",
+    );
+    let s = load(&q, "ext-transmission");
+    assert!(s.materials[0].transmission_texture.is_some());
+    let (l, r) = left_right(&s);
+    assert_eq!(
+        (l.material.transmission, r.material.transmission),
+        (0.0, 0.8)
+    );
+    let (_, down_l) = scattered(&bsdf(&l));
+    let (up_r, down_r) = scattered(&bsdf(&r));
+    // Left: opaque, nothing below. Right: the thin dielectric at normal incidence passes
+    // t (1 − F0) = 0.8 · 0.96 of white light and reflects F0 = 0.04 specularly, the rest
+    // (1 − t)(1 − F0) = 0.192 diffusely.
+    assert_eq!(down_l, Rgb::ZERO);
+    assert!(near(down_r.g, 0.8 * 0.96, 2e-3), "{down_r:?}");
+    assert!(near(up_r.g, 0.04 + 0.2 * 0.96, 2e-2), "{up_r:?}");
+}
+
+#[test]
+fn specular_texture_alpha_zero_removes_the_dielectric_specular() {
+    // Black smooth dielectric: all it reflects is the specular layer, F0 = 0.04 at ior 1.5.
+    // specularTexture RGBA: A = 0 | 255 (RGB 255 | 0, the wrong channels).
+    let q = halves(
+        4,
+        &[255, 255, 255, 0],
+        &[0, 0, 0, 255],
+        r#"{"pbrMetallicRoughness": {"baseColorFactor": [0, 0, 0, 1], "metallicFactor": 0,
+            "roughnessFactor": 0},
+            "extensions": {"KHR_materials_specular": {"specularFactor": 1,
+            "specularTexture": {"index": 0}}}}"#,
+        "KHR_materials_specular",
+    );
+    let s = load(&q, "ext-specular");
+    let (l, r) = left_right(&s);
+    assert_eq!((l.material.specular, r.material.specular), (0.0, 1.0));
+    let (up_l, down_l) = scattered(&bsdf(&l));
+    let (up_r, _) = scattered(&bsdf(&r));
+    assert_eq!((up_l, down_l), (Rgb::ZERO, Rgb::ZERO));
+    for v in up_r.to_array() {
+        assert!(near(v, 0.04, 1e-5), "{up_r:?}");
+    }
+}
+
+#[test]
+fn specular_color_texture_tints_f0_after_the_srgb_decode() {
+    // specularColorTexture (sRGB): (255, 128, 0) | white, × specularColorFactor (1, 2, 1).
+    let q = halves(
+        3,
+        &[255, 128, 0],
+        &[255, 255, 255],
+        r#"{"pbrMetallicRoughness": {"baseColorFactor": [0, 0, 0, 1], "metallicFactor": 0,
+            "roughnessFactor": 0},
+            "extensions": {"KHR_materials_specular": {"specularColorFactor": [1, 2, 1],
+            "specularColorTexture": {"index": 0}}}}"#,
+        "KHR_materials_specular",
+    );
+    let s = load(&q, "ext-specular-color");
+    let (l, r) = left_right(&s);
+    let dec = srgb_to_linear(128.0 / 255.0);
+    assert!(near(l.material.specular_color.g, 2.0 * dec, 1e-6));
+    assert_eq!(l.material.specular_color.b, 0.0);
+    assert_eq!(r.material.specular_color, Rgb::new(1.0, 2.0, 1.0));
+    // F0 = min(0.04 C, 1) per channel: (0.04, 0.08 · 0.2158, 0) on the left.
+    let (up_l, _) = scattered(&bsdf(&l));
+    let (up_r, _) = scattered(&bsdf(&r));
+    assert!(near(up_l.r, 0.04, 1e-5), "{up_l:?}");
+    assert!(near(up_l.g, 0.08 * dec, 1e-5), "{up_l:?}");
+    assert!(near(up_l.b, 0.0, 1e-6), "{up_l:?}");
+    assert!(near(up_r.g, 0.08, 1e-5), "{up_r:?}");
+}
+
+#[test]
+fn clearcoat_textures_scale_the_coat_and_its_roughness() {
+    // A black base with no dielectric specular (specularFactor 0), so all that reflects is
+    // the coat: F0 = 0.04 at normal incidence where clearcoat = 1, nothing where it is 0.
+    // clearcoatTexture reads R (0 | 255); clearcoatRoughnessTexture, the same image through
+    // a second texture, reads G (255 | 0): the left half's coat would be rough.
+    let q = Quad {
+        images: vec![png8(2, 1, 3, &[0, 255, 0, 255, 0, 255])],
+        textures: r#"{"source": 0, "sampler": 0}, {"source": 0, "sampler": 0}"#.into(),
+        samplers: NEAREST.into(),
+        material: r#"{"pbrMetallicRoughness": {"baseColorFactor": [0, 0, 0, 1],
+            "metallicFactor": 0, "roughnessFactor": 0},
+            "extensions": {"KHR_materials_specular": {"specularFactor": 0},
+            "KHR_materials_clearcoat": {"clearcoatFactor": 1, "clearcoatRoughnessFactor": 0.5,
+            "clearcoatTexture": {"index": 0}, "clearcoatRoughnessTexture": {"index": 1}}}}"#
+            .into(),
+        extensions_used: r#""KHR_materials_specular", "KHR_materials_clearcoat""#.into(),
+        ..Quad::default()
+    };
+    let s = load(&q, "ext-clearcoat");
+    let m = &s.materials[0];
+    assert_eq!(
+        (
+            m.clearcoat_texture.index,
+            m.clearcoat_roughness_texture.index
+        ),
+        (0, 1)
+    );
+    let (l, r) = left_right(&s);
+    assert_eq!((l.material.clearcoat, r.material.clearcoat), (0.0, 1.0));
+    assert_eq!(
+        (
+            l.material.clearcoat_roughness,
+            r.material.clearcoat_roughness
+        ),
+        (0.5, 0.0)
+    );
+    let (up_l, _) = scattered(&bsdf(&l));
+    let (up_r, _) = scattered(&bsdf(&r));
+    assert_eq!(up_l, Rgb::ZERO);
+    for v in up_r.to_array() {
+        assert!(near(v, 0.04, 1e-5), "{up_r:?}");
+    }
+    assert!(bsdf(&r).is_delta());
+    // The same coat at full factor and the texture's roughness 0.5 (left half) is a rough
+    // lobe, no longer a mirror.
+    let rough = Material {
+        clearcoat: 1.0,
+        ..l.material
+    };
+    assert!(!Bsdf::from_material(&rough, l.base).is_delta());
+}
+
+#[test]
+fn extension_textures_follow_their_texcoord_and_transform() {
+    // clearcoatTexture through KHR_texture_transform offset (0.5, 0) swaps the halves (with
+    // REPEAT); transmissionTexture reads TEXCOORD_1 = (1 − u, v), which swaps them too.
+    let uv1 = [[1.0, 1.0], [0.0, 1.0], [0.0, 0.0], [1.0, 0.0]];
+    let mut q = halves(
+        1,
+        &[0],
+        &[255],
+        r#"{"extensions": {
+            "KHR_materials_clearcoat": {"clearcoatFactor": 1, "clearcoatTexture": {"index": 0,
+              "extensions": {"KHR_texture_transform": {"offset": [0.5, 0]}}}},
+            "KHR_materials_transmission": {"transmissionFactor": 1,
+              "transmissionTexture": {"index": 0, "texCoord": 1}}}}"#,
+        "KHR_materials_clearcoat",
+    );
+    q.extra.push(Attribute::floats("TEXCOORD_1", uv1));
+    let s = load(&q, "ext-transform");
+    assert_eq!(s.materials[0].transmission_texture.tex_coord, 1);
+    let (l, r) = left_right(&s);
+    assert_eq!((l.material.clearcoat, r.material.clearcoat), (1.0, 0.0));
+    assert_eq!(
+        (l.material.transmission, r.material.transmission),
+        (1.0, 0.0)
+    );
+}
+
+#[test]
+fn thickness_texture_is_read_but_does_not_change_the_material() {
+    // thicknessTexture G = 0 | 255: loaded, but the volume model traces the distance inside
+    // the mesh, so the resolved thickness stays the factor on both halves.
+    let q = halves(
+        3,
+        &[255, 0, 255],
+        &[0, 255, 0],
+        r#"{"extensions": {"KHR_materials_transmission": {"transmissionFactor": 1},
+            "KHR_materials_volume": {"thicknessFactor": 0.5, "thicknessTexture": {"index": 0}}}}"#,
+        "KHR_materials_volume",
+    );
+    let s = load(&q, "ext-thickness");
+    assert!(s.materials[0].thickness_texture.is_some());
+    let (l, r) = left_right(&s);
+    assert_eq!((l.material.thickness, r.material.thickness), (0.5, 0.5));
+    assert_eq!(l.material, r.material);
+}
+
+#[test]
+fn a_bad_clearcoat_texture_reference_is_a_clear_error() {
+    let dir = temp_dir("ext-bad");
+    for (material, want) in [
+        (
+            r#"{"extensions": {"KHR_materials_clearcoat": {"clearcoatTexture": {"index": 7}}}}"#,
+            "clearcoatTexture.index = 7 is out of range",
+        ),
+        (
+            r#"{"extensions": {"KHR_materials_clearcoat": {"clearcoatRoughnessTexture": {"texCoord": 0}}}}"#,
+            "clearcoatRoughnessTexture.index is missing",
+        ),
+        (
+            r#"{"extensions": {"KHR_materials_clearcoat": {"clearcoatTexture": {"index": 0,
+                "extensions": {"KHR_texture_transform": {"scale": 2}}}}}}"#,
+            "KHR_texture_transform.scale",
+        ),
+    ] {
+        let q = halves(1, &[0], &[255], material, "KHR_materials_clearcoat");
+        let e = load_gltf(&q.write(&dir, "bad.gltf"), &BTreeMap::new())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(want) && e.contains("bad.gltf"), "{e}");
+    }
+}
+
+#[test]
+fn a_clearcoat_normal_texture_is_ignored_and_the_coat_still_applies() {
+    let q = halves(
+        3,
+        &[128, 128, 255],
+        &[128, 128, 255],
+        r#"{"extensions": {"KHR_materials_clearcoat": {"clearcoatFactor": 0.5,
+            "clearcoatNormalTexture": {"index": 0}}}}"#,
+        "KHR_materials_clearcoat",
+    );
+    let s = load(&q, "ext-coat-normal");
+    let m = &s.materials[0];
+    assert_eq!(m.clearcoat, 0.5);
+    assert!(!m.clearcoat_texture.is_some() && !m.normal_texture.is_some());
+    // No texture reads it, so it is not even decoded.
+    assert!(s.textures.is_empty() && s.stats.images_decoded == 0);
+}
