@@ -99,12 +99,12 @@ pub const KNOWN: &[Extension] = &[
     ext(
         "KHR_materials_specular",
         Status::Supported,
-        "specularFactor and specularColorFactor set the dielectric's F0 colour and F90 (see the materials section)",
+        "specularFactor and specularColorFactor, times specularTexture (A) and specularColorTexture (RGB, sRGB), set the dielectric's F0 colour and F90 (see the materials section)",
     ),
     ext(
         "KHR_materials_clearcoat",
         Status::Supported,
-        "a GGX layer with F0 0.04 over the rest (see the materials section)",
+        "a GGX layer with F0 0.04 over the rest; clearcoatTexture (R) and clearcoatRoughnessTexture (G) applied, clearcoatNormalTexture ignored with a warning (see the materials section)",
     ),
     ext(
         "KHR_materials_sheen",
