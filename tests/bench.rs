@@ -169,12 +169,7 @@ fn reference_and_compare() {
     let (_, _, layers) = flowlight_host::output::read_exr_rgb(&reference).unwrap();
     assert!(layers.iter().any(|(n, _)| n == "variance"));
     let meta = flowlight_host::output::read_exr_metadata(&reference).unwrap();
-    let get = |k: &str| {
-        meta.entries
-            .iter()
-            .find(|(e, _)| e == k)
-            .map(|(_, v)| v.clone())
-    };
+    let get = |k: &str| meta.get(k).map(str::to_string);
     assert_eq!(get("flowlight.reference").as_deref(), Some("true"));
     assert_eq!(get("flowlight.spp").as_deref(), Some("32"));
 

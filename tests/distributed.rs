@@ -100,10 +100,8 @@ fn bits(layers: &[(String, Vec<Rgb>)]) -> Vec<(String, Vec<[u32; 3]>)> {
 fn meta(path: &Path, key: &str) -> String {
     read_exr_metadata(path)
         .unwrap()
-        .entries
-        .into_iter()
-        .find(|(k, _)| k == key)
-        .map(|(_, v)| v)
+        .get(key)
+        .map(str::to_string)
         .unwrap_or_else(|| panic!("{} has no {key}", path.display()))
 }
 

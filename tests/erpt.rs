@@ -757,13 +757,7 @@ fn erpt_time_budget_starts_no_unit_after_the_deadline_and_marks_the_fraction() {
     );
     s.write_outputs(&out.frame, st).unwrap();
     let meta = flowlight_host::output::read_exr_metadata(&exr).unwrap();
-    let get = |k: &str| {
-        meta.entries
-            .iter()
-            .find(|(key, _)| key == k)
-            .map(|(_, v)| v.clone())
-            .unwrap()
-    };
+    let get = |k: &str| meta.get(k).unwrap().to_string();
     let fraction: f64 = get("flowlight.partial_pass").parse().unwrap();
     assert_eq!(fraction, cut as f64 / tiles as f64);
     assert_eq!(get("flowlight.biased"), "false");

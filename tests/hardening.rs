@@ -496,13 +496,7 @@ fn item13_time_budgets_hold_for_erpt_and_mcpt() {
             .unwrap();
         assert!(o.status.success(), "{config}: {}", stderr(&o));
         let meta = flowlight_host::output::read_exr_metadata(&out).unwrap();
-        let get = |k: &str| {
-            meta.entries
-                .iter()
-                .find(|(key, _)| key == k)
-                .map(|(_, v)| v.clone())
-                .unwrap_or_default()
-        };
+        let get = |k: &str| meta.get(k).unwrap_or_default().to_string();
         // A cut pass is kept and marked with the fraction of its tiles that finished; it
         // neither biases the image nor counts as an interruption.
         let fraction: f64 = get("flowlight.partial_pass").parse().unwrap();
@@ -529,13 +523,7 @@ fn item13_time_budget_erpt_furnace_is_unbiased() {
         .unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
     let meta = flowlight_host::output::read_exr_metadata(&out).unwrap();
-    let get = |k: &str| {
-        meta.entries
-            .iter()
-            .find(|(key, _)| key == k)
-            .map(|(_, v)| v.clone())
-            .unwrap_or_default()
-    };
+    let get = |k: &str| meta.get(k).unwrap_or_default().to_string();
     let fraction: f64 = get("flowlight.partial_pass").parse().unwrap();
     assert!((0.0..1.0).contains(&fraction), "{fraction}");
     let spp: f64 = get("flowlight.spp")

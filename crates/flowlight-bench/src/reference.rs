@@ -104,10 +104,11 @@ pub fn render_reference(req: &RenderRequest, progress: &dyn Fn(&str)) -> Result<
 }
 
 fn parse_spp(meta: &ExrMetadata) -> Option<f64> {
-    meta.entries
-        .iter()
-        .find(|(k, _)| k == "flowlight.spp")
-        .and_then(|(_, v)| v.split_whitespace().next()?.parse().ok())
+    meta.get("flowlight.spp")?
+        .split_whitespace()
+        .next()?
+        .parse()
+        .ok()
 }
 
 /// Makes a reference from existing renders: one EXR (its variance is unknown unless it is

@@ -71,6 +71,16 @@ pub struct ExrMetadata {
     pub entries: Vec<(String, String)>,
 }
 
+impl ExrMetadata {
+    /// The value of attribute `key`, if the header has it.
+    pub fn get(&self, key: &str) -> Option<&str> {
+        self.entries
+            .iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v.as_str())
+    }
+}
+
 /// Everything that can go wrong while writing or reading an image. Every variant names the
 /// file it concerns.
 #[derive(Debug, thiserror::Error)]
