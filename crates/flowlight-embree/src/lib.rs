@@ -225,6 +225,39 @@ pub fn device() -> Result<&'static Device, String> {
 }
 
 impl Device {
+    /// `rtcIntersect1` of `ray` against the committed `scene`, with filter `args` when given
+    /// (their context must outlive the call): the hit record, or `None` for a miss.
+    #[inline]
+    fn closest_hit(
+        &self,
+        scene: RTCScene,
+        ray: &Ray,
+        args: Option<&mut filter::IntersectArguments>,
+    ) -> Option<abi::RTCRayHit> {
+        let mut rh = EmbreeScene::rtc_ray_hit(ray);
+        let args = args.map_or(std::ptr::null_mut(), |a| a as *mut _ as *mut c_void);
+        // SAFETY: a committed scene, a 4.4-layout ray/hit, and NULL (defaults) or arguments
+        // the caller keeps alive; the filter callback only reads the context it is given.
+        unsafe { (self.api.intersect1)(scene, &mut rh, args) };
+        (rh.hit.geom_id != u32::MAX).then_some(rh)
+    }
+
+    /// `rtcOccluded1`: whether anything lies at `0 < t < ray.t_max` in `scene` (filter `args`
+    /// as in [`Device::closest_hit`]; RTCOccludedArguments has the same layout).
+    #[inline]
+    fn any_hit(
+        &self,
+        scene: RTCScene,
+        ray: &Ray,
+        args: Option<&mut filter::IntersectArguments>,
+    ) -> bool {
+        let mut r = EmbreeScene::rtc_ray(ray);
+        let args = args.map_or(std::ptr::null_mut(), |a| a as *mut _ as *mut c_void);
+        // SAFETY: as in `closest_hit`; Embree sets tfar to -inf when the ray is blocked.
+        unsafe { (self.api.occluded1)(scene, &mut r, args) };
+        r.tfar == f32::NEG_INFINITY
+    }
+
     fn check(&self, what: &str) -> Result<(), String> {
         // SAFETY: a valid device; the error code is per thread.
         let e = unsafe { (self.api.get_device_error)(self.handle) };
@@ -309,6 +342,29 @@ impl SceneOptions {
             };
         }
         Ok(o)
+    }
+}
+
+/// The hit of a flat scene's ray/hit record.
+#[inline]
+fn triangle_hit(rh: abi::RTCRayHit) -> TriangleHit {
+    TriangleHit {
+        t: rh.ray.tfar,
+        prim: rh.hit.prim_id,
+        b1: rh.hit.u,
+        b2: rh.hit.v,
+    }
+}
+
+/// The hit of an instanced scene's ray/hit record (one instancing level).
+#[inline]
+fn instance_hit(rh: abi::RTCRayHit) -> InstanceHit {
+    InstanceHit {
+        t: rh.ray.tfar,
+        instance: rh.hit.inst_id[0],
+        prim: rh.hit.prim_id,
+        b1: rh.hit.u,
+        b2: rh.hit.v,
     }
 }
 
@@ -469,24 +525,15 @@ impl EmbreeScene {
     /// Closest hit with `0 < t < ray.t_max`.
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<TriangleHit> {
-        let mut rh = EmbreeScene::rtc_ray_hit(ray);
-        // SAFETY: a committed scene and a 4.4-layout ray/hit; NULL arguments = defaults.
-        unsafe { (self.dev.api.intersect1)(self.scene, &mut rh, std::ptr::null_mut()) };
-        (rh.hit.geom_id != u32::MAX).then_some(TriangleHit {
-            t: rh.ray.tfar,
-            prim: rh.hit.prim_id,
-            b1: rh.hit.u,
-            b2: rh.hit.v,
-        })
+        self.dev
+            .closest_hit(self.scene, ray, None)
+            .map(triangle_hit)
     }
 
     /// Whether anything lies at `0 < t < ray.t_max`.
     #[inline]
     pub fn occluded(&self, ray: &Ray) -> bool {
-        let mut r = Self::rtc_ray(ray);
-        // SAFETY: as in `intersect`; Embree sets tfar to -inf when the ray is blocked.
-        unsafe { (self.dev.api.occluded1)(self.scene, &mut r, std::ptr::null_mut()) };
-        r.tfar == f32::NEG_INFINITY
+        self.dev.any_hit(self.scene, ray, None)
     }
 
     /// [`EmbreeScene::intersect`] counting only the hits `accept` keeps (alpha testing),
@@ -495,38 +542,16 @@ impl EmbreeScene {
     pub fn intersect_filtered(&self, ray: &Ray, accept: HitFilter) -> Option<TriangleHit> {
         let mut ctx = FilterContext::new(&accept);
         let mut args = ctx.arguments();
-        let mut rh = EmbreeScene::rtc_ray_hit(ray);
-        // SAFETY: a committed scene, a 4.4-layout ray/hit, and arguments whose context
-        // outlives the call; the callback only reads the context it is given.
-        unsafe {
-            (self.dev.api.intersect1)(
-                self.scene,
-                &mut rh,
-                &mut args as *mut filter::IntersectArguments as *mut c_void,
-            )
-        };
-        (rh.hit.geom_id != u32::MAX).then_some(TriangleHit {
-            t: rh.ray.tfar,
-            prim: rh.hit.prim_id,
-            b1: rh.hit.u,
-            b2: rh.hit.v,
-        })
+        self.dev
+            .closest_hit(self.scene, ray, Some(&mut args))
+            .map(triangle_hit)
     }
 
     /// [`EmbreeScene::occluded`] counting only the hits `accept` keeps.
     pub fn occluded_filtered(&self, ray: &Ray, accept: HitFilter) -> bool {
         let mut ctx = FilterContext::new(&accept);
         let mut args = ctx.arguments();
-        let mut r = Self::rtc_ray(ray);
-        // SAFETY: as in `intersect_filtered` (RTCOccludedArguments has the same layout).
-        unsafe {
-            (self.dev.api.occluded1)(
-                self.scene,
-                &mut r,
-                &mut args as *mut filter::IntersectArguments as *mut c_void,
-            )
-        };
-        r.tfar == f32::NEG_INFINITY
+        self.dev.any_hit(self.scene, ray, Some(&mut args))
     }
 
     /// Raw `rtcIntersect1` into caller memory, for the ABI test: `buf` must be at least
@@ -647,25 +672,13 @@ impl EmbreeInstancedScene {
     /// Closest hit with `0 < t < ray.t_max`.
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<InstanceHit> {
-        let mut rh = EmbreeScene::rtc_ray_hit(ray);
-        // SAFETY: a committed scene and a 4.4-layout ray/hit; NULL arguments = defaults.
-        unsafe { (self.dev.api.intersect1)(self.top, &mut rh, std::ptr::null_mut()) };
-        (rh.hit.geom_id != u32::MAX).then_some(InstanceHit {
-            t: rh.ray.tfar,
-            instance: rh.hit.inst_id[0],
-            prim: rh.hit.prim_id,
-            b1: rh.hit.u,
-            b2: rh.hit.v,
-        })
+        self.dev.closest_hit(self.top, ray, None).map(instance_hit)
     }
 
     /// Whether anything lies at `0 < t < ray.t_max`.
     #[inline]
     pub fn occluded(&self, ray: &Ray) -> bool {
-        let mut r = EmbreeScene::rtc_ray(ray);
-        // SAFETY: as in `intersect`.
-        unsafe { (self.dev.api.occluded1)(self.top, &mut r, std::ptr::null_mut()) };
-        r.tfar == f32::NEG_INFINITY
+        self.dev.any_hit(self.top, ray, None)
     }
 
     /// [`EmbreeInstancedScene::intersect`] counting only the hits `accept(instance, prim,
@@ -674,38 +687,16 @@ impl EmbreeInstancedScene {
     pub fn intersect_filtered(&self, ray: &Ray, accept: InstanceHitFilter) -> Option<InstanceHit> {
         let mut ctx = FilterContext::instanced(&accept);
         let mut args = ctx.arguments();
-        let mut rh = EmbreeScene::rtc_ray_hit(ray);
-        // SAFETY: as in `EmbreeScene::intersect_filtered`.
-        unsafe {
-            (self.dev.api.intersect1)(
-                self.top,
-                &mut rh,
-                &mut args as *mut filter::IntersectArguments as *mut c_void,
-            )
-        };
-        (rh.hit.geom_id != u32::MAX).then_some(InstanceHit {
-            t: rh.ray.tfar,
-            instance: rh.hit.inst_id[0],
-            prim: rh.hit.prim_id,
-            b1: rh.hit.u,
-            b2: rh.hit.v,
-        })
+        self.dev
+            .closest_hit(self.top, ray, Some(&mut args))
+            .map(instance_hit)
     }
 
     /// [`EmbreeInstancedScene::occluded`] counting only the hits `accept` keeps.
     pub fn occluded_filtered(&self, ray: &Ray, accept: InstanceHitFilter) -> bool {
         let mut ctx = FilterContext::instanced(&accept);
         let mut args = ctx.arguments();
-        let mut r = EmbreeScene::rtc_ray(ray);
-        // SAFETY: as in `EmbreeScene::occluded_filtered`.
-        unsafe {
-            (self.dev.api.occluded1)(
-                self.top,
-                &mut r,
-                &mut args as *mut filter::IntersectArguments as *mut c_void,
-            )
-        };
-        r.tfar == f32::NEG_INFINITY
+        self.dev.any_hit(self.top, ray, Some(&mut args))
     }
 }
 
