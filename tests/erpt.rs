@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{mean_and_stderr, render, session_at};
+use common::{mean_and_stderr, render, session_at, FLOOR, LAMBERT};
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
@@ -344,13 +344,6 @@ fn swapping_strategies_in_the_config_changes_the_loaded_plugins() {
 // Lights at infinity: a directional light (a fixed direction) and the environment (a direction
 // the mutations perturb). Synthetic scenes: a Lambert floor (albedo ½) and a short wall.
 
-const LAMBERT: &str = r#"{"name": "white", "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0}, "extensions": {"KHR_materials_specular": {"specularFactor": 0.0}}}"#;
-const FLOOR: [[f32; 3]; 4] = [
-    [-10.0, 0.0, -10.0],
-    [-10.0, 0.0, 10.0],
-    [10.0, 0.0, 10.0],
-    [10.0, 0.0, -10.0],
-];
 /// A wall one unit high at z = −1 facing +Z: it shadows the floor in front of it from a sun
 /// behind it, hides part of the sky from the floor and bounces light onto it.
 const SHORT_WALL: [[f32; 3]; 4] = [

@@ -16,7 +16,7 @@
 
 mod common;
 
-use common::{mean_and_stderr, quads_gltf, render, session_from};
+use common::{mean_and_stderr, quads_gltf, render, session_from, FLOOR, LAMBERT};
 use flowlight_core::Rgb;
 use flowlight_host::session::Session;
 use glam::{Vec2, Vec3};
@@ -25,13 +25,6 @@ const ALBEDO: f64 = 0.5;
 /// glTF's photometric units (cd, lx) per radiometric unit (W/sr, W/m²): the loader divides by it.
 const LUMENS_PER_WATT: f64 = 683.0;
 
-const LAMBERT: &str = r#"{"name": "white", "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0}, "extensions": {"KHR_materials_specular": {"specularFactor": 0.0}}}"#;
-const FLOOR: [[f32; 3]; 4] = [
-    [-10.0, 0.0, -10.0],
-    [-10.0, 0.0, 10.0],
-    [10.0, 0.0, 10.0],
-    [10.0, 0.0, -10.0],
-];
 /// A wall at z = −1 facing +Z.
 const WALL: [[f32; 3]; 4] = [
     [-10.0, 0.0, -1.0],

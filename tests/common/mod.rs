@@ -112,3 +112,15 @@ pub fn session_from(name: &str, gltf: &str, body: &str, spp: u32) -> Session {
     s.png_path = None;
     s
 }
+
+/// A Lambertian white of albedo ½ (glTF: metallic 0, roughness 1, and no specular layer, as
+/// `KHR_materials_specular.specularFactor = 0` defines it), for scenes with a known answer.
+pub const LAMBERT: &str = r#"{"name": "white", "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0}, "extensions": {"KHR_materials_specular": {"specularFactor": 0.0}}}"#;
+
+/// A 20 × 20 floor quad at y = 0 facing +Y, centred on the origin.
+pub const FLOOR: [[f32; 3]; 4] = [
+    [-10.0, 0.0, -10.0],
+    [-10.0, 0.0, 10.0],
+    [10.0, 0.0, 10.0],
+    [10.0, 0.0, -10.0],
+];
