@@ -353,3 +353,192 @@ pub fn density(scene: &Scene, cone: &ExpCone, x: &Path, y: &Path) -> f64 {
         0.0
     }
 }
+
+#[cfg(test)]
+mod tests {
+    //! The leaf Jacobian against a finite-difference Jacobian of the traced chain: planar
+    //! mirrors and refracting planes in f64, the lamp point and direction moved in local
+    //! coordinates (area, solid angle), the raster position and the first Dirac vertex read
+    //! back (film, area): J = |det ∂(u, x_{d+1}) / ∂(x_m, ω_m)|.
+    use super::*;
+    use crate::testscene::*;
+    use flowlight_core::path::NodeType;
+
+    #[derive(Clone, Copy)]
+    enum Kind {
+        Mirror,
+        Glass,
+    }
+
+    /// A plane through `p` with unit normal `n` (for glass: pointing out of the glass).
+    #[derive(Clone, Copy)]
+    struct Plane {
+        p: DVec3,
+        n: DVec3,
+        kind: Kind,
+    }
+
+    fn plane(p: [f64; 3], n: [f64; 3], kind: Kind) -> Plane {
+        Plane {
+            p: DVec3::from(p),
+            n: DVec3::from(n).normalize(),
+            kind,
+        }
+    }
+
+    fn hit(o: DVec3, d: DVec3, pl: &Plane) -> Option<DVec3> {
+        let t = (pl.p - o).dot(pl.n) / d.dot(pl.n);
+        (t > 1e-9).then(|| o + d * t)
+    }
+
+    /// The direction after the Dirac surface, travelling along `d`.
+    fn scatter(d: DVec3, pl: &Plane) -> Option<DVec3> {
+        match pl.kind {
+            Kind::Mirror => Some(d - 2.0 * d.dot(pl.n) * pl.n),
+            Kind::Glass => {
+                let (n, eta) = if d.dot(pl.n) < 0.0 {
+                    (pl.n, 1.0 / 1.5)
+                } else {
+                    (-pl.n, 1.5)
+                };
+                let c = -d.dot(n);
+                let k = 1.0 - eta * eta * (1.0 - c * c);
+                (k >= 0.0).then(|| eta * d + (eta * c - k.sqrt()) * n)
+            }
+        }
+    }
+
+    /// Traces from `o` along `d` through `surfaces` onto `end`: the hit points.
+    fn trace(o: DVec3, mut d: DVec3, surfaces: &[Plane], end: &Plane) -> Option<Vec<DVec3>> {
+        let mut pts = Vec::new();
+        let mut o = o;
+        for s in surfaces {
+            o = hit(o, d, s)?;
+            d = scatter(d, s)?;
+            pts.push(o);
+        }
+        pts.push(hit(o, d, end)?);
+        Some(pts)
+    }
+
+    fn tangents(n: DVec3) -> (DVec3, DVec3) {
+        let a = if n.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
+        let t1 = n.cross(a).normalize();
+        (t1, n.cross(t1))
+    }
+
+    fn raster(scene: &Scene, p: DVec3) -> [f64; 2] {
+        let cam = &scene.camera;
+        let d = p - dv(cam.position);
+        let z = d.dot(dv(cam.forward));
+        let ey = cam.tan_half_fov_y as f64;
+        let ex = ey * cam.aspect() as f64;
+        let (sx, sy) = (
+            d.dot(dv(cam.right)) / (z * ex),
+            d.dot(dv(cam.up)) / (z * ey),
+        );
+        [
+            (sx + 1.0) * 0.5 * cam.width as f64,
+            (1.0 - sy) * 0.5 * cam.height as f64,
+        ]
+    }
+
+    fn det4(m: [[f64; 4]; 4]) -> f64 {
+        let mut a = m;
+        let mut det = 1.0;
+        for c in 0..4 {
+            let p = (c..4)
+                .max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))
+                .unwrap();
+            if p != c {
+                a.swap(p, c);
+                det = -det;
+            }
+            det *= a[c][c];
+            for r in c + 1..4 {
+                let f = a[r][c] / a[c][c];
+                for k in c..4 {
+                    a[r][k] -= f * a[c][k];
+                }
+            }
+        }
+        det
+    }
+
+    /// Checks the leaf Jacobian of the chain from floor point `x1` leaving along `dir`
+    /// through `surfaces` (eye side first) to the lamp.
+    fn check(x1: [f64; 3], dir: [f64; 3], surfaces: &[Plane]) {
+        let scene = scene();
+        let floor_plane = plane([0.0; 3], [0.0, 1.0, 0.0], Kind::Mirror);
+        let lamp_plane = plane([0.0, 2.0, 0.0], [0.0, -1.0, 0.0], Kind::Mirror);
+        let x1 = DVec3::from(x1);
+        let pts = trace(x1, DVec3::from(dir).normalize(), surfaces, &lamp_plane)
+            .unwrap_or_else(|| panic!("{} surfaces: the nominal chain misses", surfaces.len()));
+        let xm = *pts.last().unwrap();
+        let w0 = (pts[pts.len() - 2] - xm).normalize();
+        // The map (lamp point, direction) → (raster, first Dirac vertex), from the light.
+        let reversed: Vec<Plane> = surfaces.iter().rev().copied().collect();
+        let (e1, e2) = tangents(lamp_plane.n);
+        let (f1, f2) = tangents(w0);
+        let (g1, g2) = tangents(surfaces[0].n);
+        let map = |a: [f64; 4]| -> [f64; 4] {
+            let o = xm + e1 * a[0] + e2 * a[1];
+            let w = (w0 + f1 * a[2] + f2 * a[3]).normalize();
+            let back = trace(o, w, &reversed, &floor_plane).unwrap();
+            let (y1, y2) = (back[back.len() - 1], back[back.len() - 2]);
+            let u = raster(&scene, y1);
+            let q = y2 - pts[0];
+            [u[0], u[1], q.dot(g1), q.dot(g2)]
+        };
+        let h = 1e-6;
+        let mut jac = [[0.0; 4]; 4];
+        for c in 0..4 {
+            let (mut ap, mut am) = ([0.0; 4], [0.0; 4]);
+            ap[c] = h;
+            am[c] = -h;
+            let (fp, fm) = (map(ap), map(am));
+            for r in 0..4 {
+                jac[r][c] = (fp[r] - fm[r]) / (2.0 * h);
+            }
+        }
+        let want = det4(jac).abs();
+        // The stored path: eye, floor, Dirac vertices, lamp.
+        let mut verts = vec![eye(), floor(x1.as_vec3())];
+        for (s, p) in surfaces.iter().zip(&pts) {
+            let mut v = mirror(p.as_vec3(), s.n.as_vec3());
+            if let Kind::Glass = s.kind {
+                v.node = NodeType::SpecularTransmission;
+                v.material = 0; // ior 1.5 (the material default)
+            }
+            verts.push(v);
+        }
+        verts.push(lamp(xm.as_vec3()));
+        let m = verts.len() - 1;
+        assert_eq!(caustic_chain(&scene, &verts), Some((1, m)));
+        let got = leaf_jacobian(&scene, &verts, 1, m);
+        assert!(
+            (got / want - 1.0).abs() < 2e-3,
+            "{} Dirac vertices: closed form {got}, finite differences {want}",
+            surfaces.len()
+        );
+    }
+
+    #[test]
+    fn the_leaf_jacobian_matches_finite_differences_of_the_traced_chain() {
+        // One tilted mirror.
+        let m1 = plane([0.6, 1.0, -1.2], [-1.0, 0.1, 0.3], Kind::Mirror);
+        check([0.05, 0.0, -1.0], [0.5, 0.6, -0.1], &[m1]);
+        // Two mirrors facing each other (a corridor).
+        let m2 = plane([-0.5, 0.0, -1.0], [1.0, 0.0, 0.1], Kind::Mirror);
+        let m3 = plane([0.5, 0.0, -1.0], [-1.0, 0.05, 0.0], Kind::Mirror);
+        check([0.1, 0.0, -1.1], [-0.6, 0.3, 0.05], &[m2, m3]);
+        // A glass slab: in through its bottom face, out through its tilted top face.
+        let bottom = plane([0.0, 0.8, 0.0], [0.0, -1.0, 0.0], Kind::Glass);
+        let top = plane([0.0, 1.1, 0.0], [0.15, 1.0, -0.1], Kind::Glass);
+        check([0.0, 0.0, -1.0], [0.7, 1.0, 0.2], &[bottom, top]);
+        // Two slabs: four refractions in a row.
+        let b2 = plane([0.0, 1.4, 0.0], [0.1, -1.0, 0.0], Kind::Glass);
+        let t2 = plane([0.0, 1.6, 0.0], [0.0, 1.0, 0.2], Kind::Glass);
+        check([0.0, 0.0, -1.0], [0.6, 1.0, -0.3], &[bottom, top, b2, t2]);
+    }
+}
