@@ -516,3 +516,152 @@ fn perturbations_are_unbiased_on_the_glass_caustic_and_a_mirror_caustic() {
         }
     }
 }
+
+/// The path E (floor) (mirror) (lamp point `xm`) whose lamp direction is `w`, built without
+/// the plugin: the mirror hit, its Dirac reflection, the floor hit, the eye; `None` when the
+/// ray misses the mirror, the floor is hidden or off the film. Node types from `like`.
+fn mirror_path(scene: &Scene, tracer: &Tracer, like: &Path, w: glam::Vec3) -> Option<Path> {
+    use flowlight_core::geometry::Frame;
+    use flowlight_core::path::PathVertex;
+    use flowlight_mcmc::measure::{dirac_component, dirac_scatter};
+    let xv = like.vertices();
+    let xm = xv[3];
+    let h2 = tracer.intersect(&xm.surface().spawn_ray(w))?;
+    let bsdf = scene.bsdf(&h2);
+    let frame = Frame::from_z(h2.ns);
+    let wo = frame.to_local(-w);
+    let (c, component, _) = dirac_component(&bsdf, wo, false)?;
+    let (wi, _) = dirac_scatter(&component, wo, false)?;
+    let v2 = PathVertex::from_hit(&h2, xv[2].node, c as u8);
+    let h1 = tracer.intersect(&h2.spawn_ray(frame.to_world(wi)))?;
+    if !scene.bsdf(&h1).has_non_delta() {
+        return None;
+    }
+    let v1 = PathVertex::from_hit(&h1, xv[1].node, xv[1].component);
+    let raster = scene.camera.project(v1.p)?;
+    let ray = scene.camera.generate_ray(raster);
+    let eye = PathVertex::eye(ray.origin, scene.camera.forward);
+    if tracer.occluded(&h1.spawn_ray_to(eye.p, glam::Vec3::ZERO, eye.ng)) {
+        return None;
+    }
+    let mut y = *like;
+    y.raster = raster;
+    y.vertices[..4].copy_from_slice(&[eye, v1, v2, xm]);
+    Some(y)
+}
+
+#[test]
+fn the_caustic_chain_samples_its_leaf_in_proportion_to_f_times_the_leaf_jacobian() {
+    // On the mirror caustic, the caustic perturbation alone never moves the lamp point x_m:
+    // a Metropolis–Hastings chain of its proposals (acceptance min(1, f(y)/f(x) · ratio))
+    // stays on one leaf, where its stationary density in the lamp direction ω is ∝ f·J
+    // (flowlight_mcmc::specular_chain). The chain's mean raster position must equal the
+    // f·J-weighted mean by quadrature over ω (uniform directions in a cone around the
+    // mirror, paths built without the plugin). With T = q instead of q/J, the chain samples
+    // ∝ f instead, and its mean moves by many standard errors.
+    let size = 64;
+    let s = session_of(
+        "caustic-leaf",
+        &mirror_caustic_scene(),
+        "plugin = \"erpt\"\npath_depth = 10",
+        size,
+        1,
+        &[(
+            "mutations",
+            toml::Value::Array(vec![table(&[
+                ("plugin", CAUSTIC.into()),
+                ("theta2", 0.3.into()),
+            ])]),
+        )],
+    );
+    let set = s.instance.mutation_set();
+    // SAFETY: the session keeps the view's data alive.
+    let scene = unsafe { Scene::from_view(s.instance.view()) };
+    let mut unit_tracer = UnitTracer::new(&s.scene, s.intersector.as_ref());
+    let table = unit_tracer.table();
+    let tracer = Tracer::new(&table);
+    let mut settings = PathSettings::from_params(&flowlight_sdk::Params::from_slice(&[])).unwrap();
+    settings.variant = Variant::Untangled;
+
+    // A seed on an E D S L path.
+    let mut rng = Rng::new(5, 9);
+    let mut x = Box::new(Path::empty());
+    let mut y = Box::new(Path::empty());
+    loop {
+        let raster = glam::Vec2::new(rng.uniform(), rng.uniform()) * size as f32;
+        untangled::trace(&scene, &tracer, &settings, &mut rng, raster, Some(&mut x));
+        if x.heckbert() == "EDSL" && measurement(&scene, &x).luminance() > 0.0 {
+            break;
+        }
+    }
+    x.film_window = size; // the window never binds: the stationary law is the leaf's
+    let lum = |p: &Path| measurement(&scene, p).luminance() as f64;
+
+    // The chain, with batch means for its standard error.
+    let (steps, batches) = (200_000usize, 50usize);
+    let mut f_x = lum(&x);
+    let mut batch = vec![glam::DVec2::ZERO; batches];
+    let mut accepted = 0usize;
+    for step in 0..steps {
+        let p = set.propose(0, &tracer, &mut rng, &x, &mut y).unwrap();
+        if p.valid != 0 && p.transition_ratio > 0.0 {
+            let f_y = lum(&y);
+            if rng.uniform() < (f_y / f_x * p.transition_ratio as f64).min(1.0) as f32 {
+                std::mem::swap(&mut x, &mut y);
+                f_x = f_y;
+                accepted += 1;
+            }
+        }
+        batch[step * batches / steps] += x.raster.as_dvec2();
+    }
+    let per = (steps / batches) as f64;
+    let means: Vec<glam::DVec2> = batch.iter().map(|b| *b / per).collect();
+    let chain = means.iter().sum::<glam::DVec2>() / batches as f64;
+    let var = means
+        .iter()
+        .map(|m| (*m - chain) * (*m - chain))
+        .sum::<glam::DVec2>()
+        / (batches as f64 - 1.0);
+    let chain_se = (var / batches as f64)
+        .max(glam::DVec2::splat(1e-12))
+        .powf(0.5);
+
+    // Quadrature: uniform in a cone of 0.9 rad around the seed's lamp direction.
+    let xm = x.vertices()[3];
+    let axis = (x.vertices()[2].p - xm.p).normalize();
+    let frame = flowlight_core::geometry::Frame::from_z(axis);
+    let cos_max = 0.9f32.cos();
+    let (mut sw, mut swu, mut swu2) = (0.0f64, glam::DVec2::ZERO, glam::DVec2::ZERO);
+    let mut qrng = Rng::new(6, 1);
+    let n = 200_000;
+    for _ in 0..n {
+        let w = frame.to_world(flowlight_core::sampling::uniform_cone(
+            qrng.uniform2(),
+            cos_max,
+        ));
+        let Some(p) = mirror_path(&scene, &tracer, &x, w) else {
+            continue;
+        };
+        let wt =
+            lum(&p) * flowlight_mcmc::specular_chain::leaf_jacobian(&scene, p.vertices(), 1, 3);
+        let u = p.raster.as_dvec2();
+        sw += wt;
+        swu += u * wt;
+        swu2 += u * u * wt;
+    }
+    let quad = swu / sw;
+    let spread = (swu2 / sw - quad * quad).max(glam::DVec2::ZERO).powf(0.5);
+    eprintln!(
+        "caustic leaf: chain {chain:?} ± {chain_se:?} ({accepted} of {steps} accepted), quadrature {quad:?} (spread {spread:?})"
+    );
+    for k in 0..2 {
+        let z = (chain[k] - quad[k]) / chain_se[k];
+        assert!(
+            z.abs() < 4.5,
+            "caustic leaf, raster axis {k}: chain {:.3} ± {:.3}, quadrature {:.3} (z = {z:.1})",
+            chain[k],
+            chain_se[k],
+            quad[k]
+        );
+    }
+}
