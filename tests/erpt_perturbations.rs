@@ -665,3 +665,105 @@ fn the_caustic_chain_samples_its_leaf_in_proportion_to_f_times_the_leaf_jacobian
         );
     }
 }
+
+/// ∫_S f dμ over the paths S that strategies `i` and `j` can both propose from `x`,
+/// estimated with each one's proposals: mean of f(y)·1[T_other(x→y) > 0] / T(x→y). Both are
+/// unbiased when each `density` is the density its `propose` samples, so they must agree:
+/// (estimate, standard error) for `i` and for `j`.
+fn common_integral(
+    set: &flowlight_sdk::MutationSet,
+    scene: &Scene,
+    tracer: &Tracer,
+    rng: &mut Rng,
+    x: &Path,
+    (i, j): (usize, usize),
+    n: usize,
+) -> [(f64, f64); 2] {
+    let mut y = Box::new(Path::empty());
+    [(i, j), (j, i)].map(|(a, b)| {
+        let (mut s, mut s2) = (0.0f64, 0.0f64);
+        for _ in 0..n {
+            let p = set.propose(a, tracer, rng, x, &mut y).unwrap();
+            if p.valid == 0 || set.density(b, x, &y).unwrap() <= 0.0 {
+                continue;
+            }
+            let v = measurement(scene, &y).luminance() as f64 / set.density(a, x, &y).unwrap();
+            s += v;
+            s2 += v * v;
+        }
+        let m = s / n as f64;
+        (m, ((s2 / n as f64 - m * m).max(0.0) / n as f64).sqrt())
+    })
+}
+
+#[test]
+fn each_perturbation_density_is_the_density_its_proposals_have() {
+    // Lens jump against window migration (hard reconnection, the same regeneration) on
+    // Cornell box paths; the multi-chain perturbation against blow's BSDF extension on the
+    // mirror corridor's E S D S L paths, whose second chain both must follow to the lamp.
+    let size = 48;
+    let corridor = common::scene_config("mirror-chain/mirror-chain.gltf")
+        .to_string_lossy()
+        .into_owned();
+    for (config, pair, kind, seeds) in [
+        ("cornell-box", (LENS, "hard-reconnection"), "", 6),
+        ("mirror-chain", (MULTICHAIN, "blow"), "ESDSL", 6),
+    ] {
+        let mut second = vec![("plugin", toml::Value::from(pair.1))];
+        if pair.1 == "blow" {
+            second.push(("width", "wide".into()));
+        }
+        let list = toml::Value::Array(vec![table(&[("plugin", pair.0.into())]), table(&second)]);
+        let params = [("mutations", list), ("path_depth", 8.into())];
+        let s = if config == "cornell-box" {
+            session_at("cornell-box/erpt.toml", size, size, 1, &params)
+        } else {
+            session_of(config, &corridor, "plugin = \"erpt\"", size, 1, &params)
+        };
+        let set = s.instance.mutation_set();
+        // SAFETY: the session keeps the view's data alive.
+        let scene = unsafe { Scene::from_view(s.instance.view()) };
+        let mut unit_tracer = UnitTracer::new(&s.scene, s.intersector.as_ref());
+        let table = unit_tracer.table();
+        let tracer = Tracer::new(&table);
+        let mut settings =
+            PathSettings::from_params(&flowlight_sdk::Params::from_slice(&[])).unwrap();
+        settings.variant = Variant::Untangled;
+        let mut rng = Rng::new(31, 2);
+        let mut x = Box::new(Path::empty());
+        let mut done = 0;
+        let mut tries = 0;
+        while done < seeds {
+            tries += 1;
+            assert!(tries < 200_000, "{config}: no {kind} seeds");
+            let raster = glam::Vec2::new(rng.uniform(), rng.uniform()) * size as f32;
+            untangled::trace(&scene, &tracer, &settings, &mut rng, raster, Some(&mut x));
+            let h = x.heckbert();
+            if x.vertex_count < 3
+                || (!kind.is_empty() && h != kind)
+                || (kind.is_empty() && h.contains('S'))
+                || !(measurement(&scene, &x).luminance() > 0.0)
+            {
+                continue;
+            }
+            x.film_window = 8;
+            let [(a, sa), (b, sb)] =
+                common_integral(&set, &scene, &tracer, &mut rng, &x, (0, 1), 20_000);
+            if a == 0.0 && b == 0.0 {
+                continue; // nothing both can reach from this seed
+            }
+            done += 1;
+            let z = (a - b) / (sa * sa + sb * sb).sqrt().max(1e-12 * a.abs());
+            eprintln!(
+                "{config} {h}: {} {a:.4e} ± {sa:.1e}, {} {b:.4e} ± {sb:.1e}, z = {z:.2}",
+                pair.0, pair.1
+            );
+            assert!(
+                z.abs() < 4.5,
+                "{config} {h}: ∫f over the common support: {} gives {a:.4e} ± {sa:.1e}, {} gives {b:.4e} ± {sb:.1e} (z = {z:.1})",
+                pair.0,
+                pair.1
+            );
+        }
+    }
+}

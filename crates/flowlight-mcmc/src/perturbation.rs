@@ -24,16 +24,23 @@
 //! is a domain miss; with K = 0 the raster position never moves (as for migration).
 //!
 //! **Exponential cone** ([`ExpCone`]): a direction ω' at angle θ from an axis ω, with θ
-//! log-uniform between θ₁ and θ₂ and a uniform azimuth. In solid angle,
+//! log-uniform between θ₁ and θ₂ and a uniform azimuth — and, unlike Veach's, a uniform
+//! *core* inside θ₁ instead of a hole, so that the density has no edge at θ₁:
 //!
 //! ```text
-//! p(ω') = 1 / (2π · θ · sin θ · ln(θ₂/θ₁)),   θ = ∠(ω, ω') ∈ [θ₁, θ₂]
+//! p(ω') = g(θ) / Z,   g(θ) = 1/(θ sin θ) for θ₁ ≤ θ ≤ θ₂,  1/(θ₁ sin θ₁) for θ < θ₁,
+//! Z = 2π (ln(θ₂/θ₁) + (1 − cos θ₁)/(θ₁ sin θ₁))
 //! ```
 //!
-//! again a function of the angle alone. Veach's defaults for the caustic and multi-chain
-//! perturbations are θ₁ = 10⁻⁴ and θ₂ = 0.1 radians. The angle is computed as
-//! atan2(|ω × ω'|, ω·ω') in f64, which resolves angles of 10⁻⁴ (acos of an f32 dot product
-//! does not).
+//! (the core, sampled uniformly in solid angle, takes (1 − cos θ₁)/(θ₁ sin θ₁) / (Z/2π) ≈
+//! 1/(1 + 2 ln(θ₂/θ₁)) of the moves: 6.7 % with Veach's angles). The densities are evaluated
+//! from stored vertex positions, whose directions differ from the sampled ones by rounding
+//! and the ray-origin offset (about 10⁻⁶ over a short segment): at a hard edge at θ₁ = 10⁻⁴
+//! such a proposal could get density 0, an impossible move that was made. With the core, the
+//! density is continuous and the rounding only perturbs it slightly. Again a function of the
+//! angle alone (symmetric); Veach's defaults for the caustic and multi-chain perturbations are
+//! θ₁ = 10⁻⁴ and θ₂ = 0.1 radians. The angle is computed as atan2(|ω × ω'|, ω·ω') in f64,
+//! which resolves angles of 10⁻⁴ (acos of an f32 dot product does not).
 
 use flowlight_core::geometry::Frame;
 use flowlight_core::rng::Rng;
@@ -111,7 +118,7 @@ fn on_film(p: Vec2, width: u32, height: u32) -> bool {
 /// Directions in an exponentially distributed cone around an axis (module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ExpCone {
-    /// Smallest angle, radians.
+    /// Smallest angle of the log-uniform part, radians (below it: the uniform core).
     pub theta1: f32,
     /// Largest angle, radians.
     pub theta2: f32,
@@ -137,27 +144,59 @@ impl ExpCone {
         })
     }
 
-    /// A direction around the unit `axis`.
-    pub fn sample(&self, axis: Vec3, rng: &mut Rng) -> Vec3 {
-        let theta = self.theta2 * (self.theta1 / self.theta2).powf(rng.uniform());
-        let phi = 2.0 * std::f32::consts::PI * rng.uniform();
-        let (s, c) = theta.sin_cos();
-        let local = Vec3::new(s * phi.cos(), s * phi.sin(), c);
-        Frame::from_z(axis).to_world(local).normalize()
+    fn angles(&self) -> (f64, f64) {
+        (self.theta1 as f64, self.theta2 as f64)
     }
 
-    /// Solid-angle density of `w` around `axis` (both unit vectors).
+    /// Solid angle of the core θ < θ₁ weighted by g = 1/(θ₁ sin θ₁), over 2π.
+    fn core_mass(&self) -> f64 {
+        let (t1, _) = self.angles();
+        (1.0 - t1.cos()) / (t1 * t1.sin())
+    }
+
+    /// Normalisation Z = ∫ g dω = 2π (ln(θ₂/θ₁) + (1 − cos θ₁)/(θ₁ sin θ₁)).
+    fn norm(&self) -> f64 {
+        let (t1, t2) = self.angles();
+        2.0 * PI * ((t2 / t1).ln() + self.core_mass())
+    }
+
+    /// A direction around the unit `axis`.
+    pub fn sample(&self, axis: Vec3, rng: &mut Rng) -> Vec3 {
+        let (t1, t2) = self.angles();
+        let p_core = 2.0 * PI * self.core_mass() / self.norm();
+        let theta = if (rng.uniform() as f64) < p_core {
+            // Uniform in solid angle inside θ₁: cos θ = 1 − u (1 − cos θ₁), written with
+            // half-angle sines to keep its precision.
+            let u = rng.uniform() as f64;
+            2.0 * (u * (1.0 - t1.cos()) * 0.5).sqrt().asin()
+        } else {
+            t2 * (t1 / t2).powf(rng.uniform() as f64)
+        };
+        let phi = 2.0 * PI * rng.uniform() as f64;
+        let (s, c) = theta.sin_cos();
+        let local = DVec3::new(s * phi.cos(), s * phi.sin(), c);
+        let f = Frame::from_z(axis);
+        let (x, y, z) = (f.x.as_dvec3(), f.y.as_dvec3(), f.z.as_dvec3());
+        (x * local.x + y * local.y + z * local.z)
+            .normalize()
+            .as_vec3()
+    }
+
+    /// Solid-angle density of `w` around `axis` (both unit vectors): g(θ)/Z with
+    /// g = 1/(θ sin θ) on [θ₁, θ₂] and 1/(θ₁ sin θ₁) below θ₁ (module docs).
     pub fn pdf(&self, axis: Vec3, w: Vec3) -> f64 {
-        let theta = angle(axis, w);
-        let (t1, t2) = (self.theta1 as f64, self.theta2 as f64);
-        // Directions are f32 and, in the engine, recomputed from vertex positions: an angle
-        // drawn as θ₁ comes back up to about 1 % smaller (1e-7 position error over a short
-        // segment, against θ₁ = 1e-4). The slack keeps such samples reachable; the mass it
-        // adds is below 10⁻³ of the proposals and only where the true density is the same.
-        if theta < t1 * (1.0 - 2e-2) || theta > t2 * (1.0 + 1e-3) || theta <= 0.0 {
+        self.pdf_angle(angle(axis, w))
+    }
+
+    /// [`ExpCone::pdf`] of the angle θ.
+    pub fn pdf_angle(&self, theta: f64) -> f64 {
+        let (t1, t2) = self.angles();
+        // The sampled largest angle may come back a rounding error larger.
+        if theta > t2 * (1.0 + 1e-4) || theta.is_nan() {
             return 0.0;
         }
-        1.0 / (2.0 * PI * theta * theta.sin() * (t2 / t1).ln())
+        let t = theta.max(t1);
+        1.0 / (t * t.sin() * self.norm())
     }
 }
 
@@ -217,33 +256,48 @@ mod tests {
     }
 
     #[test]
-    fn cone_angles_are_log_uniform_and_the_density_integrates_to_one() {
+    fn cone_angles_are_log_uniform_above_theta1_and_the_density_is_what_is_sampled() {
         let cone = ExpCone::VEACH;
         let axis = Vec3::new(0.3, -0.5, 0.8).normalize();
         let mut rng = Rng::new(9, 4);
         let (lo, hi) = (1e-4f64.ln(), 0.1f64.ln());
         let mut bins = [0usize; 4];
-        let n = 40_000;
+        let (n, mut core) = (40_000, 0usize);
+        let mut inv = 0.0;
         for _ in 0..n {
             let w = cone.sample(axis, &mut rng);
             let t = angle(axis, w);
+            let p = cone.pdf(axis, w);
+            assert!(p > 0.0, "{t}");
+            inv += 1.0 / p;
+            if t < 1e-4 {
+                core += 1;
+                continue;
+            }
             let b = ((t.ln() - lo) / (hi - lo) * 4.0).floor().clamp(0.0, 3.0) as usize;
             bins[b] += 1;
-            assert!(cone.pdf(axis, w) > 0.0);
         }
+        // The core's share, 1/(1 + 2 ln 1000) to first order; the rest log-uniform.
+        let share = core as f64 / n as f64;
+        assert!(
+            (share / (1.0 / (1.0 + 2.0 * 1000f64.ln())) - 1.0).abs() < 0.06,
+            "{share}"
+        );
+        let rest = (n - core) as f64 / 4.0;
         for b in bins {
-            assert!((b as f64 / (n as f64 / 4.0) - 1.0).abs() < 0.05, "{bins:?}");
+            assert!((b as f64 / rest - 1.0).abs() < 0.05, "{bins:?}");
         }
-        // E[1/p(ω)] over the samples is the solid angle of the support, 2π(cos θ₁ − cos θ₂):
+        // E[1/p(ω)] over the samples is the solid angle of the support, 2π(1 − cos θ₂):
         // the density is the one the sampler draws from.
-        let mut rng = Rng::new(10, 4);
-        let inv: f64 = (0..n)
-            .map(|_| 1.0 / cone.pdf(axis, cone.sample(axis, &mut rng)))
-            .sum::<f64>()
-            / n as f64;
-        let support = 2.0 * PI * (1e-4f64.cos() - 0.1f64.cos());
-        assert!((inv / support - 1.0).abs() < 0.05, "{inv} vs {support}");
-        assert_eq!(cone.pdf(axis, axis), 0.0);
+        let support = 2.0 * PI * (1.0 - 0.1f64.cos());
+        assert!(
+            (inv / n as f64 / support - 1.0).abs() < 0.05,
+            "{inv} vs {support}"
+        );
+        // Continuous at θ₁, 0 beyond θ₂.
+        let (a, b) = (cone.pdf_angle(0.99e-4), cone.pdf_angle(1.01e-4));
+        assert!((a / b - 1.0).abs() < 0.03, "{a} {b}");
+        assert_eq!(cone.pdf_angle(0.2), 0.0);
         assert!(ExpCone::new(0.1, 0.01).is_err());
     }
 }

@@ -43,7 +43,7 @@ use crate::measure::{
 use crate::migration;
 use crate::perturbation::{ExpCone, LensJump};
 use flowlight_core::bsdf::Bsdf;
-use flowlight_core::geometry::{Frame, Ray, SurfaceHit};
+use flowlight_core::geometry::{offset_ray_origin, Frame, Ray, SurfaceHit};
 use flowlight_core::light::LightKind;
 use flowlight_core::path::{NodeType, Path, PathVertex};
 use flowlight_core::rng::Rng;
@@ -171,7 +171,15 @@ fn extension_density(
             let Some(axis) = direction(scene, from, target) else {
                 return 0.0;
             };
-            return cone.pdf(axis, wi_w)
+            // The angle as the ray left: from the offset origin the extension's ray had (the
+            // cone's angles go down to 10⁻⁴, the offset is 10⁻⁶ across a short segment).
+            let w = if is_distant(scene, to) {
+                wi_w
+            } else {
+                let o = offset_ray_origin(from.p, from.p_error, from.ng, wi_w);
+                (to.p - o).try_normalize().unwrap_or(wi_w)
+            };
+            return cone.pdf(axis, w)
                 * if is_distant(scene, to) {
                     1.0
                 } else {

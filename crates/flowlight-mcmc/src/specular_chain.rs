@@ -10,8 +10,8 @@
 //! moved the same way.
 //!
 //! **The move.** Keep x_m … xₙ and x₀ … x_{d−1}. Draw a new direction ω' at x_m from the
-//! exponential cone around ω = (x_{m−1} − x_m)/|·| ([`ExpCone`]: θ log-uniform in [θ₁, θ₂],
-//! Veach's θ₁ = 10⁻⁴, θ₂ = 0.1 rad), trace it through the Dirac vertices (same lobe kind at
+//! exponential cone around ω = (x_{m−1} − x_m)/|·| ([`ExpCone`]: θ log-uniform in [θ₁, θ₂]
+//! with a uniform core inside θ₁, Veach's θ₁ = 10⁻⁴, θ₂ = 0.1 rad), trace it through the Dirac vertices (same lobe kind at
 //! each, else a domain miss) to a smooth y_d, and connect y_d to x_{d−1} with a shadow ray.
 //! With d = 1 the new raster position is the projection of y₁; it must lie in the chain's
 //! K×K film window around x's (the convention of [`crate::migration`], symmetric; with K = 0
@@ -67,7 +67,7 @@ use crate::measure::{dirac_scatter, light_index, side_consistent, vertex_bsdf, W
 use crate::perturbation::ExpCone;
 use crate::regenerate::trace_vertex;
 use flowlight_core::camera::Projection;
-use flowlight_core::geometry::Frame;
+use flowlight_core::geometry::{offset_ray_origin, Frame};
 use flowlight_core::path::{Path, PathVertex};
 use flowlight_core::rng::Rng;
 use flowlight_sdk::{Proposal, Scene, Tracer};
@@ -336,10 +336,13 @@ pub fn density(scene: &Scene, cone: &ExpCone, x: &Path, y: &Path) -> f64 {
     if xv[m - 1].p == yv[m - 1].p {
         return 0.0;
     }
-    let (Some(wx), Some(wy)) = (
-        (xv[m - 1].p - xv[m].p).try_normalize(),
-        (yv[m - 1].p - yv[m].p).try_normalize(),
-    ) else {
+    // The axis from the positions (as the proposal took it), the new direction from the
+    // offset origin its ray left from (module docs of crate::perturbation).
+    let Some(wx) = (xv[m - 1].p - xv[m].p).try_normalize() else {
+        return 0.0;
+    };
+    let o = offset_ray_origin(yv[m].p, yv[m].p_error, yv[m].ng, yv[m - 1].p - yv[m].p);
+    let Some(wy) = (yv[m - 1].p - o).try_normalize() else {
         return 0.0;
     };
     let q = cone.pdf(wx, wy);

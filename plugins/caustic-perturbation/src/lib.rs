@@ -21,7 +21,7 @@
 //! conservation along the chain, Snell's factor at refractions, the film Jacobian when d = 1):
 //!
 //! ```text
-//! T(x → y) = q(ω → ω') / J(y),   q(ω → ω') = 1 / (2π θ sin θ ln(θ₂/θ₁)),  θ = ∠(ω, ω') ∈ [θ₁, θ₂]
+//! T(x → y) = q(ω → ω') / J(y),   q(ω → ω') = g(θ)/Z,  g = 1/(θ sin θ) on [θ₁, θ₂], 1/(θ₁ sin θ₁) below θ₁,  Z = 2π(ln(θ₂/θ₁) + (1 − cos θ₁)/(θ₁ sin θ₁))
 //! T(y → x) / T(x → y) = J(y) / J(x)
 //! ```
 //!

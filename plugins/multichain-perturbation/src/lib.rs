@@ -18,7 +18,7 @@
 //!
 //! ```text
 //! T(x → y) = T₀(u_x → u_y) · Π_{perturbed j} q(ω_{y_j→y_{j+1}} | axis y_j→x_{j+1}) · J(y_j → y_{j+1})
-//! T₀ = 1 / (2π r² ln(r₂'/r₁)),   q(ω | a) = 1 / (2π θ sin θ ln(θ₂/θ₁)),  θ = ∠(ω, a) ∈ [θ₁, θ₂]
+//! T₀ = 1 / (2π r² ln(r₂'/r₁)),   q(ω | a) = g(θ)/Z,  θ = ∠(ω, a) ≤ θ₂,  g and Z as in flowlight_mcmc::perturbation
 //! ```
 //!
 //! with J(a→b) = |n_b·ω|/|b − a|² (1 for a direction at infinity). The reverse move is
