@@ -458,10 +458,11 @@ mod tests {
                 det = -det;
             }
             det *= a[c][c];
-            for r in c + 1..4 {
-                let f = a[r][c] / a[c][c];
-                for k in c..4 {
-                    a[r][k] -= f * a[c][k];
+            let pivot = a[c];
+            for row in a.iter_mut().skip(c + 1) {
+                let f = row[c] / pivot[c];
+                for (v, p) in row.iter_mut().zip(pivot).skip(c) {
+                    *v -= f * p;
                 }
             }
         }
