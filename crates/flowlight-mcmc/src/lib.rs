@@ -7,16 +7,22 @@
 //! * [`regenerate`]: the engine all unidirectional mutations of thesis §5.4–5.5 are made of —
 //!   regenerate the eye end of the path and reconnect to the original — with its transition
 //!   density;
+//! * [`perturbation`]: Veach's jump distributions (lens jump, exponential cone) for the lens
+//!   and multi-chain perturbations, which run on the [`regenerate`] engine;
+//! * [`specular_chain`]: the caustic perturbation, which moves a specular chain from its light
+//!   side, with the Jacobian that expresses it in the target function's measure;
 //! * [`norms`]: the acceptance/rejection/hit/miss strength and streak norms of §5.5.
 
 pub mod measure;
 pub mod migration;
 pub mod norms;
+pub mod perturbation;
 pub mod regenerate;
+pub mod specular_chain;
 pub mod strategy;
 #[cfg(test)]
 mod testscene;
 
 pub use measure::{measurement, WeakNode};
-pub use regenerate::{Extension, Policy};
+pub use regenerate::{Extension, FilmMove, Policy};
 pub use strategy::{Strategy, StrategyMutation};

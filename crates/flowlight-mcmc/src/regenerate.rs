@@ -41,8 +41,9 @@ use crate::measure::{
     light_index, local_directions_towards, same_vertex, side_consistent, vertex_bsdf, WeakNode,
 };
 use crate::migration;
+use crate::perturbation::{ExpCone, LensJump};
 use flowlight_core::bsdf::Bsdf;
-use flowlight_core::geometry::{Frame, Ray, SurfaceHit};
+use flowlight_core::geometry::{offset_ray_origin, Frame, Ray, SurfaceHit};
 use flowlight_core::light::LightKind;
 use flowlight_core::path::{NodeType, Path, PathVertex};
 use flowlight_core::rng::Rng;
@@ -58,6 +59,34 @@ pub enum Extension {
     /// Uniform in the cap of half-angle acos(`cos_max`) around the direction to the original
     /// path's next vertex (soft reconnection).
     Cap { cos_max: f32 },
+    /// Veach's exponential cone around the direction to the original path's next vertex
+    /// (the multi-chain perturbation, [`crate::perturbation`]).
+    Cone(ExpCone),
+}
+
+/// How the raster position moves at the start of a proposal.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum FilmMove {
+    /// Film-plane migration, uniform in the chain's K×K window ([`crate::migration`]).
+    Window,
+    /// Veach's lens jump, bounded by the film window ([`crate::perturbation::LensJump`]).
+    Lens(LensJump),
+}
+
+impl FilmMove {
+    fn sample(&self, x: &Path, w: u32, h: u32, rng: &mut Rng) -> Option<glam::Vec2> {
+        match self {
+            FilmMove::Window => migration::migrate(x.raster, x.film_window, w, h, rng),
+            FilmMove::Lens(j) => j.sample(x.raster, x.film_window, w, h, rng),
+        }
+    }
+
+    fn density(&self, x: &Path, y: &Path, w: u32, h: u32) -> f64 {
+        match self {
+            FilmMove::Window => migration::density(x.raster, y.raster, x.film_window, w, h),
+            FilmMove::Lens(j) => j.density(x.raster, y.raster, x.film_window, w, h),
+        }
+    }
 }
 
 impl Extension {
@@ -137,6 +166,25 @@ fn extension_density(
             } else {
                 0.0
             }
+        }
+        Extension::Cone(cone) => {
+            let Some(axis) = direction(scene, from, target) else {
+                return 0.0;
+            };
+            // The angle as the ray left: from the offset origin the extension's ray had (the
+            // cone's angles go down to 10⁻⁴, the offset is 10⁻⁶ across a short segment).
+            let w = if is_distant(scene, to) {
+                wi_w
+            } else {
+                let o = offset_ray_origin(from.p, from.p_error, from.ng, wi_w);
+                (to.p - o).try_normalize().unwrap_or(wi_w)
+            };
+            return cone.pdf(axis, w)
+                * if is_distant(scene, to) {
+                    1.0
+                } else {
+                    area_jacobian(from.p, to.p, to.ng) as f64
+                };
         }
     };
     let jacobian = if is_distant(scene, to) {
@@ -227,7 +275,7 @@ fn matching_vertex(
 /// Traces `ray`, leaving the vertex at `from`, to the vertex that stands in for `original`: a
 /// hit [`matching_vertex`] accepts or, when `original` is the environment, an escape along a
 /// direction the environment shines from (a directional light cannot be reached by a ray).
-fn trace_vertex(
+pub(crate) fn trace_vertex(
     scene: &Scene,
     tracer: &Tracer,
     ray: &Ray,
@@ -268,13 +316,26 @@ pub fn propose(
     x: &Path,
     y: &mut Path,
 ) -> Proposal {
+    propose_with(scene, tracer, rng, policy, FilmMove::Window, x, y)
+}
+
+/// [`propose`] with the raster position moved by `film` instead of film-plane migration.
+pub fn propose_with(
+    scene: &Scene,
+    tracer: &Tracer,
+    rng: &mut Rng,
+    policy: &Policy,
+    film: FilmMove,
+    x: &Path,
+    y: &mut Path,
+) -> Proposal {
     let xv = x.vertices();
     if xv.len() < 2 {
         return MISS;
     }
     let n = xv.len() - 1;
     let (w, h) = film_size(scene);
-    let Some(raster) = migration::migrate(x.raster, x.film_window, w, h, rng) else {
+    let Some(raster) = film.sample(x, w, h, rng) else {
         return MISS;
     };
     y.raster = raster;
@@ -393,6 +454,7 @@ fn continue_from(
                     let axis = direction(scene, &yj, &xv[j + 1])?;
                     Frame::from_z(axis).to_world(uniform_cone(rng.uniform2(), cos_max))
                 }
+                Extension::Cone(cone) => cone.sample(direction(scene, &yj, &xv[j + 1])?, rng),
             };
             if !side_consistent(yj.ng, dir, frame.to_local(dir)) {
                 return None;
@@ -420,6 +482,11 @@ fn continue_from(
 /// raster measure, vertices in the target function's measure). 0 when `policy` cannot turn
 /// `x` into `y`.
 pub fn density(scene: &Scene, policy: &Policy, x: &Path, y: &Path) -> f64 {
+    density_with(scene, policy, FilmMove::Window, x, y)
+}
+
+/// [`density`] with the raster position moved by `film`.
+pub fn density_with(scene: &Scene, policy: &Policy, film: FilmMove, x: &Path, y: &Path) -> f64 {
     let (xv, yv) = (x.vertices(), y.vertices());
     if xv.len() != yv.len() || xv.len() < 2 || x.film_window != y.film_window {
         return 0.0;
@@ -433,13 +500,22 @@ pub fn density(scene: &Scene, policy: &Policy, x: &Path, y: &Path) -> f64 {
     }
     let n = xv.len() - 1;
     let (w, h) = film_size(scene);
-    let mut d = migration::density(x.raster, y.raster, x.film_window, w, h);
+    let mut d = film.density(x, y, w, h);
     let mut extensions = 0u32;
     for j in 1..n {
         if d == 0.0 {
             return 0.0;
         }
         if WeakNode::of(&xv[j]).is_dirac() {
+            // A point traced after a moved Dirac vertex lands exactly on x's next vertex with
+            // probability 0: such a y lies on a leaf of the caustic perturbation
+            // ([`crate::specular_chain`]), which this engine gives no density.
+            if !same_vertex(scene, &yv[j], &xv[j])
+                && !is_distant(scene, &xv[j + 1])
+                && same_vertex(scene, &yv[j + 1], &xv[j + 1])
+            {
+                return 0.0;
+            }
             continue;
         }
         let p_r = p_reconnect(scene, policy, xv, j, extensions);
