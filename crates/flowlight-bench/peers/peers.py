@@ -156,8 +156,8 @@ def prepare_dragon(a, out):
                                     "fov_y": cam["fov_y"]})
 
     # Mitsuba: one PLY per mesh (cached: the glTF's stamp names the conversion).
-    stamp = hashlib.sha256(open(os.path.join(src_dir, g["buffers"][0]["uri"].split("/")[-1]),
-                                "rb").read()).hexdigest()[:16]
+    src_bins = [os.path.join(src_dir, b["uri"]) for b in json.load(open(src))["buffers"]]
+    stamp = hashlib.sha256(b"".join(open(b, "rb").read() for b in src_bins)).hexdigest()[:16]
     shapes = []
     for name, mat, pos, idx in gltf_meshes(src):
         ply = os.path.join(out, f"dragon-{name}-{stamp}.ply")
@@ -329,11 +329,11 @@ def report(a, name, rows, flowlight_label):
     ok = True
     for r, runs in rows.items():
         lums = [x["lum"] for x in runs]
-        se = statistics.stdev(lums) / len(lums) ** 0.5 if len(lums) > 1 else float("nan")
+        se = statistics.stdev(lums) / len(lums) ** 0.5 if len(lums) > 1 else None
         mean = statistics.fmean(lums)
         good = abs(mean - 1) < 0.005
         ok &= good
-        print(f"- {label(r, flowlight_label)}: {mean:.4f} ± {se:.4f} {'(ok, within 0.5%)' if good else '(FAILS the 0.5% check)'}")
+        print(f"- {label(r, flowlight_label)}: {mean:.4f}{f' ± {se:.4f}' if se is not None else ''} {'(ok, within 0.5%)' if good else '(FAILS the 0.5% check)'}")
     print()
     print("| renderer | CPU per sample vs ours | wall per sample vs ours | relMSE × spp (variance per sample) | efficiency vs ours (CPU) | efficiency vs ours (wall) |")
     print("|---|---:|---:|---:|---:|---:|")
@@ -375,16 +375,17 @@ def main():
     ap.add_argument("--width", type=int, default=256)
     ap.add_argument("--height", type=int, default=256)
     ap.add_argument("--depth", type=int, default=32, help="Flowlight path_depth; Mitsuba gets max_depth = depth + 1 (it counts segments)")
-    ap.add_argument("--mitsuba-depth-offset", type=int, default=1, help=argparse.SUPPRESS)
+    ap.add_argument("--mitsuba-depth-offset", type=int, default=1, help="Mitsuba max_depth = --depth + this (1: the same paths; other values only to check the convention)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--spp", type=int, default=64, help="samples per pixel of each timed render")
     ap.add_argument("--mitsuba-pass-spp", type=int, default=64, help="Mitsuba renders in passes of at most this many spp")
-    ap.add_argument("--runs", type=int, default=3, help="rounds (each renderer once per round)")
+    ap.add_argument("--runs", type=int, default=4, help="rounds (each renderer once per round)")
     ap.add_argument("--reference-spp", type=int, default=4096)
     ap.add_argument("--rebuild-reference", action="store_true")
     ap.add_argument("--out", default=os.path.join(ROOT, "target", "peers", "out"))
     a = ap.parse_args()
     a.flowlight = os.path.abspath(a.flowlight)
+    a.out = os.path.abspath(a.out)
     if not os.access(a.flowlight, os.X_OK):
         die(f"{a.flowlight} is not an executable: `cargo build --release -p flowlight -p flowlight-mcpt`, or pass --flowlight")
     variants = [v for v in a.variants.split(",") if v]
@@ -392,8 +393,20 @@ def main():
         if v not in VARIANTS:
             die(f"--variants: unknown variant '{v}' (known: {', '.join(VARIANTS)})")
     os.makedirs(a.out, exist_ok=True)
-    fl_label = "Flowlight MCPT (entangled" + "".join(f", {s}" for s in a.set) + ")"
-    print(f"# Peers: Flowlight ({a.flowlight}) vs Mitsuba {MITSUBA_VERSION} {', '.join(variants)}")
+    # The label names the termination in use: the user's --set, else the plugin's default.
+    sets = dict(s.split("=", 1) for s in a.set if "=" in s)
+    if "termination" not in sets:
+        text = run([a.flowlight, "plugins"])
+        m = re.search(r"^mcpt \(Integrator\).*?^\s+termination\s+string\s+default \"(\w+)\"", text, re.M | re.S)
+        sets = {"termination": (m.group(1) if m else "?") + " (default)", **sets}
+    fl_label = "Flowlight MCPT (entangled, " + ", ".join(f"{k} {v}" for k, v in sets.items()) + ")"
+    rev = subprocess.run(["git", "-C", ROOT, "describe", "--always", "--dirty"], capture_output=True, text=True).stdout.strip()
+    print(f"# Peers: Flowlight {rev or '?'} ({a.flowlight}) vs Mitsuba {MITSUBA_VERSION} {', '.join(variants)}")
+    print(f"\nCommand: {' '.join(sys.argv)}")
+    cpu = next((l.split(":", 1)[1].strip() for l in open("/proc/cpuinfo") if l.startswith("model name")), "?") \
+        if os.path.exists("/proc/cpuinfo") else "?"
+    print(f"Machine: {os.cpu_count()} CPUs ({cpu}), load average at start "
+          f"{', '.join(f'{x:.1f}' for x in os.getloadavg())}")
     all_ok = True
     for name in [s for s in a.scenes.split(",") if s]:
         if name not in SCENES:
