@@ -24,7 +24,7 @@ What it does, per scene (`cornell-box`, `stanford-dragon`):
      (paired), then the median and range over rounds are printed.
 
 CPU time is the process's user + system time over the render only (scene loading, BVH
-building and, for Mitsuba, a 1-spp warm-up render that JIT-compiles the kernels are left
+building and, for Mitsuba, a warm-up render that JIT-compiles the kernels are left
 out): Flowlight's render summary prints it (`cpu time`), Mitsuba's is time.process_time()
 around mi.render() in a worker process. relMSE is floor-corrected: the reference floor
 (its own variance, in relMSE units) is subtracted. Deterministic given the seeds, except for
@@ -258,7 +258,7 @@ def mitsuba_render(a, variant, xml, seed, out):
 
 
 def mitsuba_worker(job):
-    """In the venv: load, warm up (1 spp: JIT compilation, kernel cache), then render spp in
+    """In the venv: load, warm up (JIT compilation, kernel cache), then render spp in
     passes of at most pass_spp (bounded memory for the wavefront variants), timing only the
     passes, and write their mean as EXR."""
     import drjit as dr
@@ -270,7 +270,10 @@ def mitsuba_worker(job):
     if xml.endswith("cbox.xml") and job["width"] != job["height"]:
         raise SystemExit("the Cornell box's Mitsuba file renders square images only")
     scene = mi.load_file(xml, max_depth=job["depth"], **size)
-    dr.eval(mi.render(scene, seed=0xFFFF, spp=1))
+    # Warm-up: the wavefront (llvm) variants trace and JIT-compile a kernel per launch size,
+    # so they render one untimed pass of the timed passes' size; scalar needs 1 spp only.
+    warm = min(job["spp"], job["pass_spp"]) if job["variant"].startswith("llvm") else 1
+    dr.eval(mi.render(scene, seed=0xFFFF, spp=warm))
     dr.sync_thread()
     passes, left, acc = 0, job["spp"], None
     c0, w0 = time.process_time(), time.perf_counter()
@@ -380,8 +383,9 @@ def main():
     ap.add_argument("--spp", type=int, default=64, help="samples per pixel of each timed render")
     ap.add_argument("--mitsuba-pass-spp", type=int, default=64, help="Mitsuba renders in passes of at most this many spp")
     ap.add_argument("--runs", type=int, default=4, help="rounds (each renderer once per round)")
-    ap.add_argument("--reference-spp", type=int, default=4096)
-    ap.add_argument("--rebuild-reference", action="store_true")
+    ap.add_argument("--reference-spp", type=int, default=1024, help="samples per pixel of the Flowlight reference (its noise floor is subtracted)")
+    ap.add_argument("--rebuild-reference", action="store_true", help="render the references again even when cached")
+    ap.add_argument("--reference-only", action="store_true", help="only prepare the scenes and render (or keep) the references")
     ap.add_argument("--out", default=os.path.join(ROOT, "target", "peers", "out"))
     a = ap.parse_args()
     a.flowlight = os.path.abspath(a.flowlight)
@@ -413,6 +417,8 @@ def main():
             die(f"--scenes: unknown scene '{name}' (known: {', '.join(SCENES)})")
         cfg, xml = SCENES[name](a, a.out)
         ref = reference(a, name, cfg, a.out)
+        if a.reference_only:
+            continue
         renderers = ["flowlight"] + variants
         rows = {r: [] for r in renderers}
         for k in range(a.runs):
