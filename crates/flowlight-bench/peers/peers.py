@@ -270,8 +270,9 @@ def mitsuba_worker(job):
     if xml.endswith("cbox.xml") and job["width"] != job["height"]:
         raise SystemExit("the Cornell box's Mitsuba file renders square images only")
     scene = mi.load_file(xml, max_depth=job["depth"], **size)
-    # Warm-up: the wavefront (llvm) variants trace and JIT-compile a kernel per launch size,
-    # so they render one untimed pass of the timed passes' size; scalar needs 1 spp only.
+    # Warm-up: the wavefront (llvm) variants trace and JIT-compile kernels on first use; one
+    # untimed pass of the timed passes' size keeps compilation out of the timing whatever the
+    # kernels depend on. Scalar compiles nothing: 1 spp.
     warm = min(job["spp"], job["pass_spp"]) if job["variant"].startswith("llvm") else 1
     dr.eval(mi.render(scene, seed=0xFFFF, spp=warm))
     dr.sync_thread()
