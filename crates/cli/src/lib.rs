@@ -14,6 +14,7 @@
 
 mod bench;
 mod compare;
+mod cpu_time;
 mod merge;
 mod new_plugin;
 mod part_args;

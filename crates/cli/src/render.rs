@@ -95,7 +95,11 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
             bar.set_position(p.pixel_samples);
         }
     };
+    let cpu0 = crate::cpu_time::process_cpu_time();
     let outcome = session.render(&stop, &progress).map_err(|e| anyhow!(e))?;
+    let cpu = crate::cpu_time::process_cpu_time()
+        .zip(cpu0)
+        .map(|(b, a)| b.saturating_sub(a));
     bar.finish_and_clear();
     if let Some(e) = outcome.error {
         // A failed render is not a result: keep whatever the outputs held before.
@@ -117,6 +121,12 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
     );
     println!("  threads         {}", s.threads);
     println!("  wall time       {secs:.3} s");
+    if let Some(cpu) = cpu {
+        println!(
+            "  cpu time        {:.3} s (all threads, render only)",
+            cpu.as_secs_f64()
+        );
+    }
     println!(
         "  samples         {} ({:.2} spp), {:.3} M samples/s",
         s.pixel_samples,
