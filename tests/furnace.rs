@@ -192,3 +192,23 @@ fn throughput_layers_match_the_analytic_furnace_layers() {
         }
     }
 }
+
+/// Out-of-range roulette settings are refused with the parameter's name and value.
+#[test]
+fn bad_roulette_settings_are_named() {
+    use flowlight_host::session::{Overrides, Session};
+    for (key, value, shown) in [
+        ("rr_depth", toml::Value::Integer(0), "got 0"),
+        ("rr_max_survival", toml::Value::Float(1.0), "got 1"),
+        ("termination", "roulette".into(), "\"roulette\""),
+    ] {
+        let ov = Overrides {
+            params: common::toml_params(&[("termination", "throughput".into()), (key, value)]),
+            ..Default::default()
+        };
+        let err = Session::prepare(&common::scene_config("furnace/furnace.toml"), &ov)
+            .err()
+            .unwrap_or_else(|| panic!("{key} accepted"));
+        assert!(err.contains(key) && err.contains(shown), "{err}");
+    }
+}

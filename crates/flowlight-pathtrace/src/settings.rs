@@ -33,7 +33,7 @@ pub const PATH_PARAMS: [flowlight_sdk::abi::ParamSpec; 6] = [
     param("path_depth", ParamKind::Int, "8", "path-space depth N: deepest lighting layer rendered (1..=32)"),
     param("max_ray_depth", ParamKind::Int, "64", "maximal physical ray depth, mirror and glass bounces included (>= path_depth)"),
     param("rr_depth", ParamKind::Int, "5", "termination = \"throughput\", entangled: first lighting vertex where the roulette may stop a path (1..=1024)"),
-    param("rr_max_survival", ParamKind::Float, "0.95", "termination = \"throughput\": cap on the survival probability min(max(beta)*albedo, cap), in [0.01, 0.999]"),
+    param("rr_max_survival", ParamKind::Float, "0.95", "termination = \"throughput\": cap on the survival probability min(max(beta)*albedo, cap) (untangled: min(albedo, cap)), in [0.01, 0.999]"),
 ];
 
 impl PathSettings {
