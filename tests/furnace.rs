@@ -212,3 +212,26 @@ fn bad_roulette_settings_are_named() {
         assert!(err.contains(key) && err.contains(shown), "{err}");
     }
 }
+
+/// ERPT's untangled seeds under `throughput`, with a survival cap below the furnace's albedo
+/// (so T = 0.6, not the 0.5 of `bxdf`): the image mean stays 2·(1 − 0.5^9).
+#[test]
+fn erpt_seeds_with_throughput_termination_keep_the_furnace() {
+    let s = session(
+        "furnace/erpt.toml",
+        16,
+        &[
+            ("termination", "throughput".into()),
+            ("rr_max_survival", toml::Value::Float(0.4)),
+        ],
+    );
+    let out = render(&s);
+    assert_eq!(out.stats.invalid_deposits, 0);
+    let img = out.frame.image();
+    let (mean, stderr) = mean_and_stderr(&img, |c| c.luminance());
+    let expected = 2.0 * (1.0 - 0.5f64.powi(9));
+    assert!(
+        (mean / expected - 1.0).abs() < 0.02,
+        "ERPT furnace: mean {mean:.5} ± {stderr:.5}, expected {expected:.5}"
+    );
+}
