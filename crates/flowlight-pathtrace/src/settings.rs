@@ -29,7 +29,7 @@ pub struct PathSettings {
 /// Parameters every path-sampling plugin accepts (user documentation in each plugin header).
 pub const PATH_PARAMS: [flowlight_sdk::abi::ParamSpec; 6] = [
     param("variant", ParamKind::String, "\"entangled\"", "\"untangled\" (one light connection per path) or \"entangled\" (NEE + MIS at every vertex)"),
-    param("termination", ParamKind::String, "\"bxdf\"", "termination distribution: \"bxdf\", \"equi\", \"expo\" (thesis §3.8) or \"throughput\" (roulette on the path throughput)"),
+    param("termination", ParamKind::String, "\"throughput\"", "termination distribution: \"bxdf\", \"equi\", \"expo\" (thesis §3.8) or \"throughput\" (roulette on the path throughput)"),
     param("path_depth", ParamKind::Int, "8", "path-space depth N: deepest lighting layer rendered (1..=32)"),
     param("max_ray_depth", ParamKind::Int, "64", "maximal physical ray depth, mirror and glass bounces included (>= path_depth)"),
     param("rr_depth", ParamKind::Int, "5", "termination = \"throughput\", entangled: first lighting vertex where the roulette may stop a path (1..=1024)"),
@@ -44,7 +44,7 @@ impl PathSettings {
         };
         let termination = TerminationDistribution::parse(p.choice(
             "termination",
-            "bxdf",
+            "throughput",
             &["bxdf", "equi", "expo", "throughput"],
         )?)
         .expect("validated choice");
