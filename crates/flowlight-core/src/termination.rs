@@ -51,6 +51,10 @@
 //! got T = 0.05 and the furnace's standard error tripled. k₀ applies to the entangled sampler
 //! only, which estimates every layer by its light connections whether or not the path goes
 //! on.
+//!
+//! `throughput` is the path samplers' default (`crates/flowlight-pathtrace/src/settings.rs`):
+//! on the benchmark suite it had the best efficiency, 1.18× `bxdf` in the geometric mean over
+//! five scenes (docs/results.md, "relMSE × spp per termination distribution").
 
 /// The termination distribution chosen in the integrator's config.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -124,7 +124,10 @@ pub fn trace(
         // 1 − T_k.
         let t = if depth > 0 {
             let beta_max = beta.max_component();
-            (settings.termination).probability_with_throughput(depth, bsdf.albedo(), beta_max)
+            let albedo = bsdf.albedo();
+            settings
+                .termination
+                .probability_with_throughput(depth, albedo, beta_max)
         } else {
             0.0
         };
