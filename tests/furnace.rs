@@ -1,7 +1,7 @@
 //! White furnace: a closed sphere of albedo a = 0.5 emitting Le = 1 everywhere, seen from
 //! inside, has radiance Le/(1−a) = 2 in every direction (up to the tail beyond the path-space
 //! depth N: Le·(1 − a^{N+1})/(1 − a)). Both MCPT variants with all three termination
-//! distributions must get it within 1%. The expodistribution starves shallow layers (thesis
+//! distributions of the thesis and the throughput roulette must get it within 1%. The expodistribution starves shallow layers (thesis
 //! §3.8: "too aggressive"): layer 1 gets a share of 2^-(N-1), so the untangled estimator's
 //! variance grows like 2^N; that case runs at N = 6 with more samples.
 
@@ -12,15 +12,23 @@ use common::{mean_and_stderr, render, session};
 /// `depth` N leaves a tail of 0.5^(N+1)·2 beyond the path-space depth; the check uses the
 /// exact truncated value Le(1 − a^{N+1})/(1 − a).
 fn check(variant: &str, termination: &str, depth: i64, spp: u32) {
-    let s = session(
-        "furnace/furnace.toml",
-        spp,
-        &[
-            ("variant", variant.into()),
-            ("termination", termination.into()),
-            ("path_depth", toml::Value::Integer(depth)),
-        ],
-    );
+    check_with(variant, termination, depth, spp, &[]);
+}
+
+fn check_with(
+    variant: &str,
+    termination: &str,
+    depth: i64,
+    spp: u32,
+    extra: &[(&str, toml::Value)],
+) {
+    let mut params = vec![
+        ("variant", variant.into()),
+        ("termination", termination.into()),
+        ("path_depth", toml::Value::Integer(depth)),
+    ];
+    params.extend_from_slice(extra);
+    let s = session("furnace/furnace.toml", spp, &params);
     let out = render(&s);
     assert_eq!(out.stats.invalid_deposits, 0, "no NaN/Inf samples expected");
     let img = out.frame.image();
@@ -102,4 +110,128 @@ shallow! {
     untangled_expo_depth1: "untangled", "expo", 1;
     untangled_expo_depth2: "untangled", "expo", 2;
     untangled_expo_depth3: "untangled", "expo", 3;
+}
+
+// The throughput roulette (default start depth 5) at every path-space depth 1..=8: below 5
+// the entangled sampler never stops early, at 6..=8 the roulette acts on layers 5..N−1.
+shallow! {
+    entangled_throughput_depth1: "entangled", "throughput", 1;
+    entangled_throughput_depth2: "entangled", "throughput", 2;
+    entangled_throughput_depth3: "entangled", "throughput", 3;
+    entangled_throughput_depth4: "entangled", "throughput", 4;
+    entangled_throughput_depth5: "entangled", "throughput", 5;
+    entangled_throughput_depth6: "entangled", "throughput", 6;
+    entangled_throughput_depth7: "entangled", "throughput", 7;
+    untangled_throughput_depth1: "untangled", "throughput", 1;
+    untangled_throughput_depth2: "untangled", "throughput", 2;
+    untangled_throughput_depth3: "untangled", "throughput", 3;
+    untangled_throughput_depth4: "untangled", "throughput", 4;
+    untangled_throughput_depth5: "untangled", "throughput", 5;
+    untangled_throughput_depth6: "untangled", "throughput", 6;
+    untangled_throughput_depth7: "untangled", "throughput", 7;
+}
+
+#[test]
+fn entangled_throughput() {
+    check("entangled", "throughput", 8, 256);
+}
+#[test]
+fn untangled_throughput() {
+    check("untangled", "throughput", 8, 256);
+}
+
+/// Roulette from the first vertex, with a low survival cap: most of the image then comes from
+/// survivors, so a sampler that forgot to divide them by q would lose far more than 1%.
+#[test]
+fn entangled_throughput_from_first_vertex() {
+    let extra = [
+        ("rr_depth", toml::Value::Integer(1)),
+        ("rr_max_survival", toml::Value::Float(0.6)),
+    ];
+    check_with("entangled", "throughput", 8, 256, &extra);
+}
+
+/// Each lighting layer k of the furnace holds exactly Le·a^k (layer 0: the emitter seen
+/// directly). Under the throughput roulette the layers' sample shares depend on the paths'
+/// history, so this checks every layer on its own against its analytic value, with the
+/// roulette from vertex 2 (rr_depth = 2): in the entangled variant layers 2..N are estimated
+/// by survivors only, each divided by its survival probability (the untangled one ignores
+/// rr_depth and connects by the albedo rule). Both variants.
+#[test]
+fn throughput_layers_match_the_analytic_furnace_layers() {
+    // Untangled paths carry one connection each, so deep layers get few samples: N = 4 there.
+    for (variant, n) in [("entangled", 6i64), ("untangled", 4)] {
+        let s = session(
+            "furnace/furnace.toml",
+            512,
+            &[
+                ("variant", variant.into()),
+                ("termination", "throughput".into()),
+                ("path_depth", toml::Value::Integer(n)),
+                ("rr_depth", toml::Value::Integer(2)),
+                ("layers", true.into()),
+            ],
+        );
+        let out = render(&s);
+        assert_eq!(out.stats.invalid_deposits, 0);
+        assert_eq!(out.frame.layer_count as i64, n + 1, "layers 0..=N");
+        for k in 0..=n as usize {
+            let layer = out.frame.layer(k);
+            let (mean, stderr) = mean_and_stderr(&layer, |c| c.g);
+            let expected = 0.5f64.powi(k as i32);
+            let rel = (mean / expected - 1.0).abs();
+            assert!(
+                rel < 0.03 && (mean - expected).abs() < 5.0 * stderr + 1e-3 * expected,
+                "{variant}: layer {k}: mean {mean:.5} ± {stderr:.5}, expected {expected:.5}"
+            );
+            // Tight enough that a 3% error is 3 standard errors.
+            assert!(
+                stderr / expected < 0.01,
+                "{variant}: layer {k} too noisy ({stderr})"
+            );
+        }
+    }
+}
+
+/// Out-of-range roulette settings are refused with the parameter's name and value.
+#[test]
+fn bad_roulette_settings_are_named() {
+    use flowlight_host::session::{Overrides, Session};
+    for (key, value, shown) in [
+        ("rr_depth", toml::Value::Integer(0), "got 0"),
+        ("rr_max_survival", toml::Value::Float(1.0), "got 1"),
+        ("termination", "roulette".into(), "\"roulette\""),
+    ] {
+        let ov = Overrides {
+            params: common::toml_params(&[("termination", "throughput".into()), (key, value)]),
+            ..Default::default()
+        };
+        let err = Session::prepare(&common::scene_config("furnace/furnace.toml"), &ov)
+            .err()
+            .unwrap_or_else(|| panic!("{key} accepted"));
+        assert!(err.contains(key) && err.contains(shown), "{err}");
+    }
+}
+
+/// ERPT's untangled seeds under `throughput`, with a survival cap below the furnace's albedo
+/// (so T = 0.6, not the 0.5 of `bxdf`): the image mean stays 2·(1 − 0.5^9).
+#[test]
+fn erpt_seeds_with_throughput_termination_keep_the_furnace() {
+    let s = session(
+        "furnace/erpt.toml",
+        16,
+        &[
+            ("termination", "throughput".into()),
+            ("rr_max_survival", toml::Value::Float(0.4)),
+        ],
+    );
+    let out = render(&s);
+    assert_eq!(out.stats.invalid_deposits, 0);
+    let img = out.frame.image();
+    let (mean, stderr) = mean_and_stderr(&img, |c| c.luminance());
+    let expected = 2.0 * (1.0 - 0.5f64.powi(9));
+    assert!(
+        (mean / expected - 1.0).abs() < 0.02,
+        "ERPT furnace: mean {mean:.5} ± {stderr:.5}, expected {expected:.5}"
+    );
 }

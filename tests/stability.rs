@@ -845,7 +845,7 @@ fn degenerate_geometry_extreme_albedo_and_lights_give_finite_counted_output() {
         loaded.stats
     );
     for variant in ["entangled", "untangled"] {
-        for termination in ["bxdf", "equi", "expo"] {
+        for termination in ["bxdf", "equi", "expo", "throughput"] {
             let what = format!("{variant}/{termination}");
             let pairs = params(&[
                 ("variant", variant.into()),

@@ -1,8 +1,9 @@
 //! Entangled MCPT (thesis §3.7): at every vertex a light connection (next-event estimation)
 //! and a BSDF-sampled extension, whose emitter hits (and escapes to the environment) are
 //! combined with the connections by the power heuristic (Veach 1997). Delta lights (point,
-//! spot, directional) are reached only by the connection, with weight 1. Depth-based termination decides after each vertex
-//! whether the path goes on; survivors are divided by 1 − T_k.
+//! spot, directional) are reached only by the connection, with weight 1. The termination
+//! distribution (depth-based, or the throughput roulette from `rr_depth` on) decides after
+//! each vertex's light connection whether the path goes on; survivors are divided by 1 − T_k.
 //!
 //! Where the path cannot go on (T_k = 1 at the path-space depth N, or the physical depth cap)
 //! the vertex's BSDF sample is still traced, for emission only: its light connection was
@@ -122,7 +123,11 @@ pub fn trace(
         // and the path ends there. A random stop (T_k < 1) is fine: survivors are divided by
         // 1 − T_k.
         let t = if depth > 0 {
-            settings.termination.probability(depth, bsdf.albedo())
+            let beta_max = beta.max_component();
+            let albedo = bsdf.albedo();
+            settings
+                .termination
+                .probability_with_throughput(depth, albedo, beta_max)
         } else {
             0.0
         };

@@ -1,7 +1,9 @@
 //! Parameters of the path samplers.
 
 use flowlight_core::bsdf::NARROW_GLOSSY_ALPHA;
-use flowlight_core::termination::{TerminationDistribution, TerminationSchedule};
+use flowlight_core::termination::{
+    TerminationDistribution, TerminationSchedule, DEFAULT_MAX_SURVIVAL, DEFAULT_RR_DEPTH,
+};
 use flowlight_sdk::{param, ParamKind, Params};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -25,11 +27,13 @@ pub struct PathSettings {
 }
 
 /// Parameters every path-sampling plugin accepts (user documentation in each plugin header).
-pub const PATH_PARAMS: [flowlight_sdk::abi::ParamSpec; 4] = [
+pub const PATH_PARAMS: [flowlight_sdk::abi::ParamSpec; 6] = [
     param("variant", ParamKind::String, "\"entangled\"", "\"untangled\" (one light connection per path) or \"entangled\" (NEE + MIS at every vertex)"),
-    param("termination", ParamKind::String, "\"bxdf\"", "depth-based termination distribution: \"bxdf\", \"equi\" or \"expo\" (thesis §3.8)"),
+    param("termination", ParamKind::String, "\"throughput\"", "termination distribution: \"bxdf\", \"equi\", \"expo\" (thesis §3.8) or \"throughput\" (roulette on the path throughput)"),
     param("path_depth", ParamKind::Int, "8", "path-space depth N: deepest lighting layer rendered (1..=32)"),
     param("max_ray_depth", ParamKind::Int, "64", "maximal physical ray depth, mirror and glass bounces included (>= path_depth)"),
+    param("rr_depth", ParamKind::Int, "5", "termination = \"throughput\", entangled: first lighting vertex where the roulette may stop a path (1..=1024)"),
+    param("rr_max_survival", ParamKind::Float, "0.95", "termination = \"throughput\": cap on the survival probability min(max(beta)*albedo, cap) (untangled: min(albedo, cap)), in [0.01, 0.999]"),
 ];
 
 impl PathSettings {
@@ -40,10 +44,22 @@ impl PathSettings {
         };
         let termination = TerminationDistribution::parse(p.choice(
             "termination",
-            "bxdf",
-            &["bxdf", "equi", "expo"],
+            "throughput",
+            &["bxdf", "equi", "expo", "throughput"],
         )?)
         .expect("validated choice");
+        let rr_depth = p.int("rr_depth", DEFAULT_RR_DEPTH as i64)?;
+        if !(1..=1024).contains(&rr_depth) {
+            return Err(format!(
+                "parameter 'rr_depth' must be in 1..=1024, got {rr_depth}"
+            ));
+        }
+        let rr_max_survival = p.float("rr_max_survival", DEFAULT_MAX_SURVIVAL as f64)?;
+        if !(0.01..=0.999).contains(&rr_max_survival) {
+            return Err(format!(
+                "parameter 'rr_max_survival' must be in [0.01, 0.999], got {rr_max_survival}"
+            ));
+        }
         let path_depth = p.int("path_depth", 8)?;
         if !(1..=32).contains(&path_depth) {
             return Err(format!(
@@ -69,7 +85,8 @@ impl PathSettings {
             narrow_glossy_alpha: narrow_glossy_alpha as f32,
             path_depth: path_depth as u32,
             max_ray_depth: max_ray_depth as u32,
-            termination: TerminationSchedule::new(termination, path_depth as u32),
+            termination: TerminationSchedule::new(termination, path_depth as u32)
+                .with_roulette(rr_depth as u32, rr_max_survival as f32),
         })
     }
 }

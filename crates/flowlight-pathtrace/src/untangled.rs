@@ -204,7 +204,9 @@ pub fn trace(
         depth = next_depth;
 
         if class == NodeClass::Beta {
-            let t = settings.termination.probability(depth, component.albedo());
+            let t = settings
+                .termination
+                .connection_probability(depth, component.albedo());
             if rng.uniform() < t {
                 // Explicit path: connect this vertex to a point on a light.
                 let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) else {

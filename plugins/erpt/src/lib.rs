@@ -36,7 +36,7 @@
 //! | `mixture` | string | `"mixture"` | `"mixture"`: acceptance with Σ p(sᵢ)T^{sᵢ}; `"selected"`: the chosen strategy's ratio |
 //! | `max_chains_per_seed` | int | 1024 | cap on chains per seed; capped seeds deposit larger quanta (still unbiased) |
 //! | `max_consecutive` | int | 0 | consecutive sample filter, **biased**: at most this many consecutive deposits of a chain in one pixel |
-//! | `termination`, `path_depth`, `max_ray_depth` | | `"bxdf"`, 8, 32 | the seed sampler's (see `mcpt`) |
+//! | `termination`, `path_depth`, `max_ray_depth`, `rr_max_survival` | | `"throughput"`, 8, 32, 0.95 | the seed sampler's (see `mcpt`; seeds are untangled, so `"throughput"` is T = 1 − min(albedo, `rr_max_survival`) and takes no `rr_depth`) |
 //! | `layers` | bool | false | write lighting layers `layer0…layerN` |
 //!
 //! Seeds whose estimate is NaN, infinite or negative, or whose path the target function gives

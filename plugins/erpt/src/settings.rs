@@ -37,7 +37,7 @@ pub struct ErptSettings {
     pub max_consecutive: u32,
 }
 
-pub const PARAMS: [ParamSpec; 12] = [
+pub const PARAMS: [ParamSpec; 13] = [
     param("mutations", ParamKind::MutationList, "(required)", "[[integrator.mutations]] plugin = \"...\", weight = w, and that plugin's parameters"),
     param("mutations_per_sample", ParamKind::Float, "8", "expected mutations per initial MC sample (M, §5.2): e_d = lum(ΣX_f) / (count · M)"),
     param("chain_length", ParamKind::Int, "16", "mutations per chain (N); every chain of a seed has this length"),
@@ -46,7 +46,8 @@ pub const PARAMS: [ParamSpec; 12] = [
     param("mixture", ParamKind::String, "\"mixture\"", "acceptance ratio with several strategies: \"mixture\" density (§5.4) or \"selected\" strategy's own"),
     param("max_chains_per_seed", ParamKind::Int, "1024", "cap on chains per seed; a capped seed's chains carry a larger quantum (unbiased)"),
     param("max_consecutive", ParamKind::Int, "0", "consecutive sample filter (BIASED): at most this many consecutive deposits of a chain in one pixel, 0 = off"),
-    param("termination", ParamKind::String, "\"bxdf\"", "seed sampler's termination distribution: \"bxdf\", \"equi\" or \"expo\""),
+    param("termination", ParamKind::String, "\"throughput\"", "seed sampler's termination distribution: \"bxdf\", \"equi\", \"expo\" or \"throughput\""),
+    param("rr_max_survival", ParamKind::Float, "0.95", "termination = \"throughput\": cap on the seeds' survival probability, in [0.01, 0.999]"),
     param("path_depth", ParamKind::Int, "8", "path-space depth N of the seeds (1..=32)"),
     param("max_ray_depth", ParamKind::Int, "32", "maximal physical ray depth of the seeds (path_depth..=32)"),
     param("layers", ParamKind::Bool, "false", "also write lighting layers layer0..layerN"),

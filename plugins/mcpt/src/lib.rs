@@ -14,7 +14,8 @@
 //! | name | type | default | meaning |
 //! |---|---|---|---|
 //! | `variant` | string | `"entangled"` | `"entangled"` or `"untangled"` |
-//! | `termination` | string | `"bxdf"` | `"bxdf"` (albedo roulette), `"equi"` (T_k = 1/(N−k+1)), `"expo"` (layer shares double with depth) — §3.8 |
+//! | `termination` | string | `"throughput"` | `"bxdf"` (albedo roulette), `"equi"` (T_k = 1/(N−k+1)), `"expo"` (layer shares double with depth) — §3.8; `"throughput"`: roulette with survival min(max(β)·albedo, `rr_max_survival`) from lighting vertex `rr_depth` on (untangled: 1 − min(albedo, `rr_max_survival`) at every vertex) |
+//! | `rr_depth`, `rr_max_survival` | int, float | 5, 0.95 | `"throughput"` only: start depth (entangled) and survival cap, in [0.01, 0.999] |
 //! | `path_depth` | int | 8 | path-space depth N: deepest lighting layer; a chain of mirrors seen from the eye does not use it up (virtual depth, §2) |
 //! | `max_ray_depth` | int | 64 | physical ray depth cap, every bounce counted |
 //! | `narrow_glossy_alpha` | float | 0.05 | untangled only: a glossy lobe with GGX α below it is Λα — no light connection there, light is found only by hitting it. A small lamp seen in a surface of roughness 0.2 (α = 0.04) is then nearly black; set 0 to connect at every non-Dirac vertex. Entangled MCPT connects at every non-Dirac vertex regardless |
@@ -43,13 +44,15 @@ pub struct Mcpt {
     settings: PathSettings,
 }
 
-const PARAMS: [ParamSpec; 6] = {
+const PARAMS: [ParamSpec; 8] = {
     let p = flowlight_pathtrace::settings::PATH_PARAMS;
     [
         p[0],
         p[1],
         p[2],
         p[3],
+        p[4],
+        p[5],
         param(
             "layers",
             ParamKind::Bool,
