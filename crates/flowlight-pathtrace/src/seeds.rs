@@ -123,47 +123,36 @@ impl SeedStore {
         out.contribution = s.estimate;
     }
 
-    /// Stores a whole path (an untangled seed, `path.contribution` its estimate). A path
+    /// Stores a whole path (an untangled seed, `path.contribution` its estimate). Every camera
+    /// sample is one untangled seed, so a path that carries no light is stored too, without
+    /// vertices (one record, so that the seeds count the samples as the thesis' do); a path
     /// without a light vertex but with a non-zero estimate is stored with a NaN estimate, so
-    /// that the flow counts it as invalid; black paths are not stored.
+    /// that the flow counts it as invalid.
     pub fn push_path(&mut self, path: &Path) {
         self.samples += 1;
         let n = path.vertex_count as usize;
         let estimate = path.contribution;
-        if n < 2 {
-            if !estimate.is_black() {
-                self.seeds.push(Seed {
-                    trunk: self.vertices.len() as u32,
-                    prefix: 0,
-                    connect: None,
-                    light: path.vertices[0],
-                    raster: path.raster,
-                    estimate: Rgb::splat(f32::NAN),
-                    layer: path.layer,
-                    mis_weight: 1.0,
-                    density: f64::NAN,
-                    technique: Technique::Untangled,
-                });
-            }
-            return;
-        }
-        if estimate.is_black() {
-            return;
-        }
-        let trunk = self.vertices.len() as u32;
-        self.vertices.extend_from_slice(&path.vertices[..n - 1]);
-        self.seeds.push(Seed {
-            trunk,
-            prefix: n as u32 - 1,
+        let record = |trunk: usize, prefix: usize, estimate: Rgb| Seed {
+            trunk: trunk as u32,
+            prefix: prefix as u32,
             connect: None,
-            light: path.vertices[n - 1],
+            light: path.vertices[n.saturating_sub(1)],
             raster: path.raster,
             estimate,
             layer: path.layer,
             mis_weight: 1.0,
             density: f64::NAN,
             technique: Technique::Untangled,
-        });
+        };
+        let trunk = self.vertices.len();
+        if estimate.is_black() {
+            self.seeds.push(record(trunk, 0, Rgb::ZERO));
+        } else if n < 2 {
+            self.seeds.push(record(trunk, 0, Rgb::splat(f32::NAN)));
+        } else {
+            self.vertices.extend_from_slice(&path.vertices[..n - 1]);
+            self.seeds.push(record(trunk, n - 1, estimate));
+        }
     }
 }
 

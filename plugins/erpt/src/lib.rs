@@ -1,9 +1,13 @@
 //! # `erpt` — Energy Redistribution Path Tracing
 //!
 //! Cline, Talbot & Egbert 2005, as corrected and extended in thesis ch. 5. Initial Monte Carlo
-//! samples come from the untangled path tracer (`flowlight-pathtrace`, the MCPT plugin's own
-//! sampler); each spawns chains that redistribute its energy over nearby paths with the
-//! mutation strategies listed in the config, each its own plugin:
+//! samples (seeds) come from the MCPT plugin's own samplers (`flowlight-pathtrace`): untangled
+//! paths, one light connection each (`seeds = "untangled"`, the thesis'), or entangled paths
+//! split into their techniques (`seeds = "entangled"`: every light connection, emitter hit
+//! and environment escape is a seed with its MIS-weighted estimate; `flowlight_pathtrace::seeds`
+//! has the argument why their energy density is f). Each seed spawns chains that redistribute
+//! its energy over nearby paths with the mutation strategies listed in the config, each its own
+//! plugin:
 //!
 //! ```toml
 //! [integrator]
@@ -19,10 +23,14 @@
 //! weight = 0.7
 //! ```
 //!
-//! Per work unit (a tile × a range of samples per pixel): the deposition quantum
-//! e_d = lum(Σ X_f) / (count · M) is estimated from the unit's seeds (or once for the image,
-//! `quantum = "image"`), with M the expected number of mutations per initial sample (§5.2);
-//! then every seed runs the corrected Equal Deposition Flow (`flow.rs`). Chains random-walk on
+//! Per work unit (a tile × a range of samples per pixel) the seeds are traced once and stored;
+//! the deposition quantum e_d = lum(Σ X) / (samples · M) is estimated from them (or once for
+//! the image, `quantum = "image"`), with M the expected number of mutations per camera sample
+//! (§5.2; an entangled camera sample gives several seeds); then every seed runs the corrected
+//! Equal Deposition Flow (`flow.rs`) from the stored path. With a split (`direct`,
+//! `chains_for`; `part.rs`) only the seeds of the chains' part of path space run chains, and
+//! only their energy enters e_d; every other seed's estimate goes to its pixel, as path
+//! tracing would deposit it, and a proposal that leaves the part is a counted domain miss. Chains random-walk on
 //! the film in a `film_window`² window around their current position, so their deposits land
 //! around the seed's tile: units use flanged tiles (§5.9).
 //!
@@ -38,12 +46,17 @@
 //! | `max_consecutive` | int | 0 | consecutive sample filter, **biased**: at most this many consecutive deposits of a chain in one pixel |
 //! | `termination`, `path_depth`, `max_ray_depth` | | `"bxdf"`, 8, 32 | the seed sampler's (see `mcpt`) |
 //! | `layers` | bool | false | write lighting layers `layer0…layerN` |
+//! | `seeds` | string | `"untangled"` | `"untangled"` (one light connection per path) or `"entangled"` (every connection, emitter hit and escape of an entangled path, MIS-weighted) |
+//! | `direct` | string | `"erpt"` | `"mcpt"`: direct light (layers 0 and 1, `ES*L`, `ES*[DG]L`) by path tracing, as Mitsuba 0.6's `directSamples` |
+//! | `chains_for` | string | `"all"` | paths the chains render: `"all"`, `"caustics"` (`E.*[DG].*S.*L`) or a Heckbert pattern over `E D G S L` with `. [] [^] * + ? \| ()` (`part.rs`); the rest by MCPT |
 //!
 //! Seeds whose estimate is NaN, infinite or negative, or whose path the target function gives
 //! no energy, are skipped and counted; proposals with invalid densities or contributions are
 //! rejected and counted, never deposited. The quality norms of §5.5 (strength and streaks of
 //! acceptance, rejection, domain hit and miss, per strategy and in total), chains per seed and
-//! deposits per pixel are reported to the host, which prints them and writes them as JSON.
+//! deposits per pixel are reported to the host, which prints them and writes them as JSON,
+//! with the costs: time proposing and density calls per strategy, target-function calls,
+//! seed-tracing and flow time (`stats.rs`).
 
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]
@@ -330,7 +343,9 @@ impl Integrator for Erpt {
                 // Outside the chains' part: the seed's estimate goes to its pixel, as path
                 // tracing deposits it.
                 stats.add(c.seeds, 1.0);
-                if estimate.is_valid_radiance() {
+                if estimate.is_black() {
+                    // An untangled sample that found no light.
+                } else if estimate.is_valid_radiance() {
                     stats.add(c.mcpt_part_seeds, 1.0);
                     film.deposit(
                         path.raster.x.floor() + 0.5,
