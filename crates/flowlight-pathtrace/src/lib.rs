@@ -3,6 +3,8 @@
 //! * [`untangled`]: one light connection per path (thesis §3.7); ERPT's seed sampler.
 //! * [`entangled`]: next-event estimation at every vertex combined with BSDF sampling by
 //!   multiple importance sampling.
+//! * [`seeds`]: the entangled sampler split into its techniques, each a stored path with its
+//!   MIS-weighted estimate: ERPT's entangled seeds.
 //!
 //! Both track the physical ray depth (every scattering event, capped by `max_ray_depth`) and
 //! the virtual, lighting depth (thesis §2): scattering events counted from the first
@@ -11,6 +13,7 @@
 //! virtual length k + 1); the path-space depth N is the deepest layer.
 
 pub mod entangled;
+pub mod seeds;
 pub mod settings;
 mod shading;
 pub mod untangled;

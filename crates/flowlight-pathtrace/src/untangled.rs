@@ -28,7 +28,7 @@ use glam::{Vec2, Vec3};
 /// and normal; a point or spot light its position (the normal slot holds the direction to
 /// `p_ref`); a distant light a point one unit from `p_ref` towards it, with that direction
 /// as its normal.
-fn light_vertex(scene: &Scene, ls: &LightSample, p_ref: Vec3) -> PathVertex {
+pub(crate) fn light_vertex(scene: &Scene, ls: &LightSample, p_ref: Vec3) -> PathVertex {
     let (p, n, prim) = match ls.kind {
         LightKind::Area => (ls.p, ls.n, scene.lights.emitters[ls.light as usize].prim),
         LightKind::Positional => (ls.p, (p_ref - ls.p).normalize_or_zero(), u32::MAX),

@@ -8,13 +8,14 @@
 //! domain miss deposits the whole quantum at y.
 
 use crate::settings::{ErptSettings, MixtureRatio};
-use crate::stats::Counters;
+use crate::stats::{Costs, Counters};
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
 use flowlight_mcmc::measurement;
 use flowlight_mcmc::norms::Tally;
 use flowlight_sdk::{Film, MutationSet, Scene, Stats, Tracer};
+use std::time::Instant;
 
 /// Per-unit working state of the chains.
 pub struct Flow<'a> {
@@ -25,6 +26,10 @@ pub struct Flow<'a> {
     pub counters: &'a Counters,
     pub total: Tally,
     pub per_strategy: Vec<Tally>,
+    pub costs: Vec<Costs>,
+    pub measure_calls: u64,
+    pub measure_seconds: f64,
+    pub part_misses: u64,
     pub proposal: Box<Path>,
     pub state: Box<Path>,
 }
@@ -142,16 +147,30 @@ impl<'a> Flow<'a> {
             counters,
             total: Tally::default(),
             per_strategy: vec![Tally::default(); mutations.len()],
+            costs: vec![Costs::default(); mutations.len()],
+            measure_calls: 0,
+            measure_seconds: 0.0,
+            part_misses: 0,
             proposal: Box::new(Path::empty()),
             state: Box::new(Path::empty()),
         }
     }
 
-    /// T(from → to) of the mixture, Σ p(sᵢ)·T^{sᵢ}(from → to).
-    fn mixture_density(&self, from: &Path, to: &Path) -> Result<f64, String> {
+    /// T(from → to) of the mixture, Σ p(sᵢ)·T^{sᵢ}(from → to): one density call per strategy,
+    /// each timed and counted under its strategy.
+    fn mixture_density(
+        mutations: &MutationSet,
+        costs: &mut [Costs],
+        from: &Path,
+        to: &Path,
+    ) -> Result<f64, String> {
         let mut t = 0.0;
-        for i in 0..self.mutations.len() {
-            t += self.mutations.weight(i) * self.mutations.density(i, from, to)?;
+        for (i, c) in costs.iter_mut().enumerate().take(mutations.len()) {
+            let start = Instant::now();
+            let d = mutations.density(i, from, to)?;
+            c.density_seconds += start.elapsed().as_secs_f64();
+            c.density_calls += 1;
+            t += mutations.weight(i) * d;
         }
         Ok(t)
     }
@@ -214,20 +233,32 @@ impl<'a> Flow<'a> {
                 } else {
                     0
                 };
+                let start = Instant::now();
                 let proposal =
                     self.mutations
                         .propose(s, self.tracer, rng, &self.state, &mut self.proposal)?;
-                if proposal.valid == 0 {
+                self.costs[s].propose_seconds += start.elapsed().as_secs_f64();
+                // A proposal outside the chains' part of path space has f = 0 in their target:
+                // a domain miss, counted.
+                let outside = proposal.valid != 0 && !self.settings.part.contains(&self.proposal);
+                if outside {
+                    self.part_misses += 1;
+                }
+                if proposal.valid == 0 || outside {
                     dep.deposit(&self.state, colour(f_y) * e);
                     self.total.record(false, false);
                     self.per_strategy[s].record(false, false);
                     continue;
                 }
+                let start = Instant::now();
                 let f_z = measurement(self.scene, &self.proposal);
+                self.measure_seconds += start.elapsed().as_secs_f64();
+                self.measure_calls += 1;
                 let ratio = match self.settings.mixture {
                     MixtureRatio::Mixture if self.mutations.len() > 1 => {
-                        let forward = self.mixture_density(&self.state, &self.proposal)?;
-                        let reverse = self.mixture_density(&self.proposal, &self.state)?;
+                        let (m, costs) = (self.mutations, &mut self.costs);
+                        let forward = Self::mixture_density(m, costs, &self.state, &self.proposal)?;
+                        let reverse = Self::mixture_density(m, costs, &self.proposal, &self.state)?;
                         reverse / forward
                     }
                     _ => proposal.transition_ratio as f64,
@@ -259,10 +290,20 @@ impl<'a> Flow<'a> {
 
     /// Adds the norms gathered so far into the unit's counters.
     pub fn report(&self, stats: &mut Stats) {
-        self.counters.add_tally(stats, 0, &self.total);
+        let c = self.counters;
+        c.add_tally(stats, 0, &self.total);
         for (i, t) in self.per_strategy.iter().enumerate() {
-            self.counters.add_tally(stats, i + 1, t);
+            c.add_tally(stats, i + 1, t);
         }
+        let mut all = Costs::default();
+        for (i, k) in self.costs.iter().enumerate() {
+            c.add_costs(stats, i + 1, k);
+            all.add(k);
+        }
+        c.add_costs(stats, 0, &all);
+        stats.add(c.measure_calls, self.measure_calls as f64);
+        stats.add(c.measure_seconds, self.measure_seconds);
+        stats.add(c.part_misses, self.part_misses as f64);
     }
 }
 

@@ -1,9 +1,13 @@
 //! # `erpt` — Energy Redistribution Path Tracing
 //!
 //! Cline, Talbot & Egbert 2005, as corrected and extended in thesis ch. 5. Initial Monte Carlo
-//! samples come from the untangled path tracer (`flowlight-pathtrace`, the MCPT plugin's own
-//! sampler); each spawns chains that redistribute its energy over nearby paths with the
-//! mutation strategies listed in the config, each its own plugin:
+//! samples (seeds) come from the MCPT plugin's own samplers (`flowlight-pathtrace`): untangled
+//! paths, one light connection each (`seeds = "untangled"`, the thesis'), or entangled paths
+//! split into their techniques (`seeds = "entangled"`: every light connection, emitter hit
+//! and environment escape is a seed with its MIS-weighted estimate; `flowlight_pathtrace::seeds`
+//! has the argument why their energy density is f). Each seed spawns chains that redistribute
+//! its energy over nearby paths with the mutation strategies listed in the config, each its own
+//! plugin:
 //!
 //! ```toml
 //! [integrator]
@@ -19,10 +23,14 @@
 //! weight = 0.7
 //! ```
 //!
-//! Per work unit (a tile × a range of samples per pixel): the deposition quantum
-//! e_d = lum(Σ X_f) / (count · M) is estimated from the unit's seeds (or once for the image,
-//! `quantum = "image"`), with M the expected number of mutations per initial sample (§5.2);
-//! then every seed runs the corrected Equal Deposition Flow (`flow.rs`). Chains random-walk on
+//! Per work unit (a tile × a range of samples per pixel) the seeds are traced once and stored;
+//! the deposition quantum e_d = lum(Σ X) / (samples · M) is estimated from them (or once for
+//! the image, `quantum = "image"`), with M the expected number of mutations per camera sample
+//! (§5.2; an entangled camera sample gives several seeds); then every seed runs the corrected
+//! Equal Deposition Flow (`flow.rs`) from the stored path. With a split (`direct`,
+//! `chains_for`; `part.rs`) only the seeds of the chains' part of path space run chains, and
+//! only their energy enters e_d; every other seed's estimate goes to its pixel, as path
+//! tracing would deposit it, and a proposal that leaves the part is a counted domain miss. Chains random-walk on
 //! the film in a `film_window`² window around their current position, so their deposits land
 //! around the seed's tile: units use flanged tiles (§5.9).
 //!
@@ -38,17 +46,23 @@
 //! | `max_consecutive` | int | 0 | consecutive sample filter, **biased**: at most this many consecutive deposits of a chain in one pixel |
 //! | `termination`, `path_depth`, `max_ray_depth`, `rr_max_survival` | | `"throughput"`, 8, 32, 0.95 | the seed sampler's (see `mcpt`; seeds are untangled, so `"throughput"` is T = 1 − min(albedo, `rr_max_survival`) and takes no `rr_depth`) |
 //! | `layers` | bool | false | write lighting layers `layer0…layerN` |
+//! | `seeds` | string | `"untangled"` | `"untangled"` (one light connection per path) or `"entangled"` (every connection, emitter hit and escape of an entangled path, MIS-weighted) |
+//! | `direct` | string | `"erpt"` | `"mcpt"`: direct light (layers 0 and 1, `ES*L`, `ES*[DG]L`) by path tracing, as Mitsuba 0.6's `directSamples` |
+//! | `chains_for` | string | `"all"` | paths the chains render: `"all"`, `"caustics"` (`E.*[DG].*S.*L`) or a Heckbert pattern over `E D G S L` with `. [] [^] * + ? \| ()` (`part.rs`); the rest by MCPT |
 //!
 //! Seeds whose estimate is NaN, infinite or negative, or whose path the target function gives
 //! no energy, are skipped and counted; proposals with invalid densities or contributions are
 //! rejected and counted, never deposited. The quality norms of §5.5 (strength and streaks of
 //! acceptance, rejection, domain hit and miss, per strategy and in total), chains per seed and
-//! deposits per pixel are reported to the host, which prints them and writes them as JSON.
+//! deposits per pixel are reported to the host, which prints them and writes them as JSON,
+//! with the costs: time proposing and density calls per strategy, target-function calls,
+//! seed-tracing and flow time (`stats.rs`).
 
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]
 
 mod flow;
+mod part;
 mod settings;
 mod stats;
 
@@ -56,6 +70,7 @@ use flow::Flow;
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
+use flowlight_pathtrace::seeds::{self, SeedStore};
 use flowlight_pathtrace::untangled;
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::{
@@ -63,7 +78,8 @@ use flowlight_sdk::{
     Scene, Stats, StatsBuilder, Tracer, WorkUnit, MAX_MUTATIONS,
 };
 use glam::Vec2;
-use settings::{ErptSettings, QuantumScope};
+use settings::{ErptSettings, QuantumScope, SeedKind};
+use std::time::Instant;
 
 pub struct Erpt {
     scene: Scene<'static>,
@@ -81,54 +97,114 @@ fn seed_rngs(seed: u64, x: u32, y: u32, s: u32) -> (Rng, Rng) {
     (Rng::new(h, 0), Rng::new(h, 1))
 }
 
+/// A camera sample of a unit and the first of its seeds in the unit's store.
+struct SampleKey {
+    x: u32,
+    y: u32,
+    s: u32,
+    first: usize,
+}
+
+/// The seeds of a work unit, traced once: the store, each sample's first seed, and whether
+/// each seed lies in the chains' part of path space.
+#[derive(Default)]
+struct UnitSeeds {
+    store: SeedStore,
+    keys: Vec<SampleKey>,
+    in_part: Vec<bool>,
+}
+
 impl Erpt {
-    /// Traces the seed of pixel (x, y), sample `s`, into `path`; returns its estimate X_f.
-    fn seed(&self, tracer: &Tracer, rng: &mut Rng, x: u32, y: u32, path: &mut Path) -> Rgb {
+    /// Traces the seeds of camera sample `s` of pixel (x, y) into `store` (random stream
+    /// `rng`); `path` is scratch space.
+    fn trace_sample(
+        &self,
+        tracer: &Tracer,
+        rng: &mut Rng,
+        x: u32,
+        y: u32,
+        store: &mut SeedStore,
+        path: &mut Path,
+    ) {
         let raster = Vec2::new(x as f32, y as f32) + rng.uniform2();
-        let sample = untangled::trace(
-            &self.scene,
-            tracer,
-            &self.settings.seeds,
-            rng,
-            raster,
-            Some(path),
-        );
-        path.film_window = self.settings.film_window;
-        if path.vertex_count < 2 {
-            return if sample.value.is_black() {
-                Rgb::ZERO
-            } else {
-                Rgb::splat(f32::NAN)
-            };
+        match self.settings.seed_kind {
+            SeedKind::Untangled => {
+                untangled::trace(
+                    &self.scene,
+                    tracer,
+                    &self.settings.seeds,
+                    rng,
+                    raster,
+                    Some(path),
+                );
+                store.push_path(path);
+            }
+            SeedKind::Entangled => {
+                seeds::trace(
+                    &self.scene,
+                    tracer,
+                    &self.settings.seeds,
+                    rng,
+                    raster,
+                    store,
+                );
+            }
         }
-        sample.value
     }
 
-    /// Algorithm 1: e_d = lum(Σ X_f) / (count · M) over the valid estimates of the seeds of
-    /// `pixels` × `samples` (random streams from `seed`, so they can be traced again).
-    fn quantum(
+    /// Traces every seed of `pixels` × `samples` once (random streams from `seed`).
+    fn trace_unit(
         &self,
         tracer: &Tracer,
         seed: u64,
         pixels: impl Iterator<Item = (u32, u32)>,
         samples: std::ops::Range<u32>,
+        out: &mut UnitSeeds,
         path: &mut Path,
-    ) -> f64 {
-        let (mut sum, mut count) = (Rgb::ZERO, 0u64);
+    ) {
         for (x, y) in pixels {
             for s in samples.clone() {
+                out.keys.push(SampleKey {
+                    x,
+                    y,
+                    s,
+                    first: out.store.seeds.len(),
+                });
                 let (mut rng, _) = seed_rngs(seed, x, y, s);
-                let e = self.seed(tracer, &mut rng, x, y, path);
-                if e.is_valid_radiance() {
-                    sum += e;
-                    count += 1;
-                }
+                self.trace_sample(tracer, &mut rng, x, y, &mut out.store, path);
             }
         }
-        if count == 0 {
+        let part = &self.settings.part;
+        let everything = part.is_everything();
+        out.in_part = (0..out.store.seeds.len())
+            .map(|i| {
+                everything || {
+                    out.store.path(i, path);
+                    part.contains(path)
+                }
+            })
+            .collect();
+    }
+
+    /// Algorithm 1: e_d = lum(Σ X) / (samples · M), the sum over the valid estimates of the
+    /// seeds in the chains' part, `samples` the camera samples traced (each one entangled
+    /// path, or one untangled path): M mutations per camera sample in expectation.
+    fn quantum(&self, sum: Rgb, samples: u64) -> f64 {
+        if samples == 0 {
             return 0.0;
         }
-        sum.luminance() as f64 / (count as f64 * self.settings.mutations_per_sample)
+        sum.luminance() as f64 / (samples as f64 * self.settings.mutations_per_sample)
+    }
+
+    /// Σ of the valid estimates of a unit's seeds in the chains' part.
+    fn part_energy(seeds: &UnitSeeds) -> Rgb {
+        seeds
+            .store
+            .seeds
+            .iter()
+            .zip(&seeds.in_part)
+            .filter(|(s, &inside)| inside && s.estimate.is_valid_radiance())
+            .fold(Rgb::ZERO, |a, (s, _)| a + s.estimate)
     }
 }
 
@@ -196,11 +272,29 @@ impl Integrator for Erpt {
         if self.settings.quantum != QuantumScope::Image {
             return Ok(());
         }
-        // Algorithm 1 over the whole image: one seed per pixel.
+        // Algorithm 1 over the whole image: one camera sample per pixel, a row at a time.
         let (w, h) = (self.scene.camera.width, self.scene.camera.height);
-        let pixels = (0..h).flat_map(|y| (0..w).map(move |x| (x, y)));
-        let q = self.quantum(tracer, 0x5eed_f1a6, pixels, 0..1, &mut Path::empty());
-        self.image_quantum = Some(q);
+        let (mut sum, mut samples) = (Rgb::ZERO, 0u64);
+        let mut row = UnitSeeds::default();
+        let mut path = Box::new(Path::empty());
+        for y in 0..h {
+            row = UnitSeeds {
+                store: std::mem::take(&mut row.store),
+                ..UnitSeeds::default()
+            };
+            row.store.clear();
+            self.trace_unit(
+                tracer,
+                0x5eed_f1a6,
+                (0..w).map(|x| (x, y)),
+                0..1,
+                &mut row,
+                &mut path,
+            );
+            sum += Self::part_energy(&row);
+            samples += row.store.samples;
+        }
+        self.image_quantum = Some(self.quantum(sum, samples));
         Ok(())
     }
 
@@ -213,29 +307,58 @@ impl Integrator for Erpt {
     ) -> Result<(), String> {
         let mut path = Box::new(Path::empty());
         let samples = unit.sample_begin..unit.sample_begin + unit.sample_count;
-        let pixels =
-            || (unit.y0..unit.y1).flat_map(move |y| (unit.x0..unit.x1).map(move |x| (x, y)));
+        let pixels = (unit.y0..unit.y1).flat_map(move |y| (unit.x0..unit.x1).map(move |x| (x, y)));
+        // Every seed of the unit is traced once, here; the quantum and the flow use the store.
+        let start = Instant::now();
+        let mut seeds = UnitSeeds::default();
+        self.trace_unit(tracer, unit.seed, pixels, samples, &mut seeds, &mut path);
+        let c = &self.counters;
+        stats.add(c.seed_seconds, start.elapsed().as_secs_f64());
+        stats.add(c.camera_samples, seeds.store.samples as f64);
         let quantum = match self.image_quantum {
             Some(q) => q,
-            // Algorithm 1 over this unit's seeds; they are traced again below from the same
-            // random streams rather than stored.
-            None => self.quantum(tracer, unit.seed, pixels(), samples.clone(), &mut path),
+            None => self.quantum(Self::part_energy(&seeds), seeds.store.samples),
         };
-        let c = &self.counters;
         stats.add(c.quantum_sum, quantum);
         stats.add(c.units, 1.0);
         stats.add(
             c.image_pixels,
             (self.scene.camera.width as f64) * (self.scene.camera.height as f64),
         );
+        let start = Instant::now();
         let mut flow = Flow::new(&self.scene, tracer, &self.settings, &self.mutations, c);
-        for (x, y) in pixels() {
-            for s in samples.clone() {
-                let (mut rng, mut chain_rng) = seed_rngs(unit.seed, x, y, s);
-                let estimate = self.seed(tracer, &mut rng, x, y, &mut path);
-                flow.run_seed(&path, estimate, quantum, &mut chain_rng, film, stats)?;
+        let count = seeds.store.seeds.len();
+        for (k, key) in seeds.keys.iter().enumerate() {
+            let end = seeds.keys.get(k + 1).map_or(count, |n| n.first);
+            // The chains of all seeds of one camera sample draw from its chain stream.
+            let (_, mut chain_rng) = seed_rngs(unit.seed, key.x, key.y, key.s);
+            for i in key.first..end {
+                seeds.store.path(i, &mut path);
+                path.film_window = self.settings.film_window;
+                let estimate = seeds.store.seeds[i].estimate;
+                if seeds.in_part[i] {
+                    flow.run_seed(&path, estimate, quantum, &mut chain_rng, film, stats)?;
+                    continue;
+                }
+                // Outside the chains' part: the seed's estimate goes to its pixel, as path
+                // tracing deposits it.
+                stats.add(c.seeds, 1.0);
+                if estimate.is_black() {
+                    // An untangled sample that found no light.
+                } else if estimate.is_valid_radiance() {
+                    stats.add(c.mcpt_part_seeds, 1.0);
+                    film.deposit(
+                        path.raster.x.floor() + 0.5,
+                        path.raster.y.floor() + 0.5,
+                        path.layer,
+                        estimate,
+                    );
+                } else {
+                    stats.add(c.seeds_skipped, 1.0);
+                }
             }
         }
+        stats.add(c.flow_seconds, start.elapsed().as_secs_f64());
         flow.report(stats);
         Ok(())
     }

@@ -1,5 +1,6 @@
 //! ERPT parameters.
 
+use crate::part::Part;
 use flowlight_pathtrace::{PathSettings, Variant};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::{param, ParamKind, Params};
@@ -35,9 +36,23 @@ pub struct ErptSettings {
     /// Consecutive-sample filter: 0 = off; else at most this many consecutive deposits of a
     /// chain into one pixel (biased).
     pub max_consecutive: u32,
+    /// Seed sampler: untangled (thesis) or entangled paths split into their techniques.
+    pub seed_kind: SeedKind,
+    /// The part of path space the chains render (the rest by MCPT).
+    pub part: Part,
 }
 
-pub const PARAMS: [ParamSpec; 13] = [
+/// Which sampler draws the seeds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SeedKind {
+    /// One light connection per path (thesis §3.6–3.7, ch. 5).
+    Untangled,
+    /// Every connection, emitter hit and escape of an entangled path, MIS-weighted
+    /// (`flowlight_pathtrace::seeds`).
+    Entangled,
+}
+
+pub const PARAMS: [ParamSpec; 17] = [
     param("mutations", ParamKind::MutationList, "(required)", "[[integrator.mutations]] plugin = \"...\", weight = w, and that plugin's parameters"),
     param("mutations_per_sample", ParamKind::Float, "8", "expected mutations per initial MC sample (M, §5.2): e_d = lum(ΣX_f) / (count · M)"),
     param("chain_length", ParamKind::Int, "16", "mutations per chain (N); every chain of a seed has this length"),
@@ -48,9 +63,13 @@ pub const PARAMS: [ParamSpec; 13] = [
     param("max_consecutive", ParamKind::Int, "0", "consecutive sample filter (BIASED): at most this many consecutive deposits of a chain in one pixel, 0 = off"),
     param("termination", ParamKind::String, "\"throughput\"", "seed sampler's termination distribution: \"bxdf\", \"equi\", \"expo\" or \"throughput\""),
     param("rr_max_survival", ParamKind::Float, "0.95", "termination = \"throughput\": cap on the seeds' survival probability, in [0.01, 0.999]"),
+    param("rr_depth", ParamKind::Int, "5", "termination = \"throughput\", entangled seeds: first lighting vertex where the roulette may stop a seed path (1..=1024)"),
     param("path_depth", ParamKind::Int, "8", "path-space depth N of the seeds (1..=32)"),
     param("max_ray_depth", ParamKind::Int, "32", "maximal physical ray depth of the seeds (path_depth..=32)"),
     param("layers", ParamKind::Bool, "false", "also write lighting layers layer0..layerN"),
+    param("seeds", ParamKind::String, "\"untangled\"", "seed sampler: \"untangled\" (one light connection per path, the thesis') or \"entangled\" (every connection and emitter hit of an entangled path, MIS-weighted)"),
+    param("direct", ParamKind::String, "\"erpt\"", "direct lighting (layers 0 and 1: ES*L, ES*[DG]L) by \"erpt\" chains or \"mcpt\" (seeds deposited as path tracing would)"),
+    param("chains_for", ParamKind::String, "\"all\"", "paths the chains render, the rest by MCPT: \"all\", \"caustics\" (E.*[DG].*S.*L) or a Heckbert pattern over E D G S L with . [] ^ * + ? | ()"),
 ];
 
 impl ErptSettings {
@@ -104,7 +123,18 @@ impl ErptSettings {
                 "parameter 'max_consecutive' must be >= 0, got {max_consecutive}"
             ));
         }
+        let seed_kind = match p.choice("seeds", "untangled", &["untangled", "entangled"])? {
+            "untangled" => SeedKind::Untangled,
+            _ => SeedKind::Entangled,
+        };
+        if seed_kind == SeedKind::Entangled {
+            seeds.variant = Variant::Entangled;
+        }
+        let direct_by_mcpt = p.choice("direct", "erpt", &["erpt", "mcpt"])? == "mcpt";
+        let part = Part::new(p.string("chains_for", "all")?, direct_by_mcpt)?;
         Ok(ErptSettings {
+            seed_kind,
+            part,
             seeds,
             mutations_per_sample,
             chain_length: chain_length as u32,

@@ -7,9 +7,37 @@
 //! and the mean streak `g.e_mean_streak` = `g.e_streak_total` / `g.e_streaks`. Globals:
 //! `chains_per_seed` = chains / seeds, `deposits_per_pixel` = deposits / image pixels,
 //! `mean_quantum` = Σ e_d / units.
+//!
+//! The split and the seeds: `camera_samples` (camera paths traced for seeds, once per unit),
+//! `seeds` (stored seeds: paths with an estimate), `seeds_per_sample`, `mcpt_part_seeds`
+//! (seeds outside the chains' part, deposited directly), `part_misses` (proposals outside it).
+//!
+//! Costs (§5.5 leaves them out; they decide whether a mixture pays): per group g
+//! `g.propose_seconds` (time in the strategy's `propose`), `g.density_calls` and
+//! `g.density_seconds` (the mixture density asks every strategy for T(y→z) and T(z→y): 2k calls
+//! per step with k strategies, reported under the strategy asked), their ratios per mutation
+//! `g.propose_seconds_per_mutation`, `g.density_calls_per_mutation`; globally `measure_calls` and
+//! `measure_seconds` (target function at proposals), `seed_seconds` (tracing the unit's seeds)
+//! and `flow_seconds` (everything the chains do). Seconds are summed over threads.
 
 use flowlight_mcmc::norms::{Tally, EVENTS};
 use flowlight_sdk::stats::{Counter, Stats, StatsBuilder};
+
+/// What one strategy's steps cost: time proposing, density calls and their time.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Costs {
+    pub propose_seconds: f64,
+    pub density_calls: u64,
+    pub density_seconds: f64,
+}
+
+impl Costs {
+    pub fn add(&mut self, o: &Costs) {
+        self.propose_seconds += o.propose_seconds;
+        self.density_calls += o.density_calls;
+        self.density_seconds += o.density_seconds;
+    }
+}
 
 /// The counters of one quality-norm group.
 #[derive(Clone, Debug)]
@@ -19,6 +47,9 @@ pub struct GroupCounters {
     pub streaks: [Counter; 4],
     pub streak_total: [Counter; 4],
     pub streak_max: [Counter; 4],
+    pub propose_seconds: Counter,
+    pub density_calls: Counter,
+    pub density_seconds: Counter,
 }
 
 /// Handles of every counter of an ERPT instance, declared on the SDK's builder.
@@ -33,6 +64,13 @@ pub struct Counters {
     pub quantum_sum: Counter,
     pub units: Counter,
     pub image_pixels: Counter,
+    pub camera_samples: Counter,
+    pub mcpt_part_seeds: Counter,
+    pub part_misses: Counter,
+    pub measure_calls: Counter,
+    pub measure_seconds: Counter,
+    pub seed_seconds: Counter,
+    pub flow_seconds: Counter,
     /// Group 0: all strategies; group i ≥ 1: strategy i − 1.
     pub groups: Vec<GroupCounters>,
 }
@@ -49,6 +87,13 @@ impl Counters {
         let quantum_sum = b.sum("quantum_sum");
         let units = b.sum("units");
         let image_pixels = b.max("image_pixels");
+        let camera_samples = b.sum("camera_samples");
+        let mcpt_part_seeds = b.sum("mcpt_part_seeds");
+        let part_misses = b.sum("part_misses");
+        let measure_calls = b.sum("measure_calls");
+        let measure_seconds = b.sum("measure_seconds");
+        let seed_seconds = b.sum("seed_seconds");
+        let flow_seconds = b.sum("flow_seconds");
         let names: Vec<&str> = std::iter::once("total")
             .chain(strategies.iter().map(String::as_str))
             .collect();
@@ -71,13 +116,27 @@ impl Counters {
                     streaks: per_event(b, "_streaks", false),
                     streak_total: per_event(b, "_streak_total", false),
                     streak_max: per_event(b, "_streak_max", true),
+                    propose_seconds: b.sum(format!("{g}.propose_seconds")),
+                    density_calls: b.sum(format!("{g}.density_calls")),
+                    density_seconds: b.sum(format!("{g}.density_seconds")),
                 }
             })
             .collect();
         b.ratio("chains_per_seed", chains, seeds);
         b.ratio("deposits_per_pixel", deposits, image_pixels);
         b.ratio("mean_quantum", quantum_sum, units);
+        b.ratio("seeds_per_sample", seeds, camera_samples);
         for (g, c) in names.iter().zip(&groups) {
+            b.ratio(
+                format!("{g}.density_calls_per_mutation"),
+                c.density_calls,
+                c.mutations,
+            );
+            b.ratio(
+                format!("{g}.propose_seconds_per_mutation"),
+                c.propose_seconds,
+                c.mutations,
+            );
             for (ei, e) in EVENTS.iter().enumerate() {
                 b.ratio(
                     format!("{g}.{}_strength", e.name()),
@@ -103,8 +162,23 @@ impl Counters {
             quantum_sum,
             units,
             image_pixels,
+            camera_samples,
+            mcpt_part_seeds,
+            part_misses,
+            measure_calls,
+            measure_seconds,
+            seed_seconds,
+            flow_seconds,
             groups,
         }
+    }
+
+    /// Adds costs into group `g`'s counters.
+    pub fn add_costs(&self, stats: &mut Stats, g: usize, c: &Costs) {
+        let k = &self.groups[g];
+        stats.add(k.propose_seconds, c.propose_seconds);
+        stats.add(k.density_calls, c.density_calls as f64);
+        stats.add(k.density_seconds, c.density_seconds);
     }
 
     /// Adds a tally into group `g`'s counters.
@@ -132,8 +206,8 @@ mod tests {
         let mut b = StatsBuilder::new();
         let c = Counters::declare(&mut b, &names);
         assert!(b.error().is_none(), "{:?}", b.error());
-        // 9 globals + 3 ratios, and per group (total + 8) 17 counters + 8 ratios.
-        assert_eq!(b.len(), 9 + 3 + 9 * (17 + 8));
+        // 16 globals + 4 ratios, and per group (total + 8) 20 counters + 10 ratios.
+        assert_eq!(b.len(), 16 + 4 + 9 * (20 + 10));
         assert_eq!(c.groups.len(), 9);
     }
 
