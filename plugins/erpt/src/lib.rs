@@ -44,7 +44,7 @@
 //! | `mixture` | string | `"mixture"` | `"mixture"`: acceptance with Σ p(sᵢ)T^{sᵢ}; `"selected"`: the chosen strategy's ratio |
 //! | `max_chains_per_seed` | int | 1024 | cap on chains per seed; capped seeds deposit larger quanta (still unbiased) |
 //! | `max_consecutive` | int | 0 | consecutive sample filter, **biased**: at most this many consecutive deposits of a chain in one pixel |
-//! | `termination`, `path_depth`, `max_ray_depth`, `rr_max_survival` | | `"throughput"`, 8, 32, 0.95 | the seed sampler's (see `mcpt`; seeds are untangled, so `"throughput"` is T = 1 − min(albedo, `rr_max_survival`) and takes no `rr_depth`) |
+//! | `termination`, `path_depth`, `max_ray_depth`, `rr_depth`, `rr_max_survival` | | `"throughput"`, 8, 32, 5, 0.95 | the seed sampler's (see `mcpt`; for untangled seeds `"throughput"` is T = 1 − min(albedo, `rr_max_survival`) and `rr_depth` is unused; entangled seeds roll it on the throughput from `rr_depth`, as MCPT) |
 //! | `layers` | bool | false | write lighting layers `layer0…layerN` |
 //! | `seeds` | string | `"untangled"` | `"untangled"` (one light connection per path) or `"entangled"` (every connection, emitter hit and escape of an entangled path, MIS-weighted) |
 //! | `direct` | string | `"erpt"` | `"mcpt"`: direct light (layers 0 and 1, `ES*L`, `ES*[DG]L`) by path tracing, as Mitsuba 0.6's `directSamples` |
