@@ -3,6 +3,7 @@
 
 use crate::run::{render_request, Budget, RenderRequest};
 use flowlight_core::Rgb;
+use flowlight_host::metrics;
 use flowlight_host::output::{read_exr_metadata, read_exr_rgb, write_exr, ExrMetadata, ImageLayer};
 use std::path::{Path, PathBuf};
 
@@ -23,6 +24,28 @@ pub struct Reference {
 }
 
 impl Reference {
+    /// The metadata value of `key` (`flowlight.spp`, `flowlight.path_depth`, …), if recorded.
+    pub fn meta_value(&self, key: &str) -> Option<&str> {
+        self.meta
+            .iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v.as_str())
+    }
+
+    /// The reference floor, mean Var(b) / (b² + ε) over pixels and channels (the relMSE its
+    /// own noise adds to every comparison; `docs/bench.md`), from the `variance` layer.
+    pub fn floor(&self) -> Option<f64> {
+        let v = self.variance.as_deref()?;
+        metrics::compare(&self.image, &self.image, Some(v))
+            .ok()?
+            .reference_floor
+    }
+
+    /// The integrator's `path_depth` it was rendered with (metadata `flowlight.path_depth`).
+    pub fn path_depth(&self) -> Option<u32> {
+        self.meta_value("flowlight.path_depth")?.trim().parse().ok()
+    }
+
     /// Layer `k` (`layerK`), if the reference has it.
     pub fn layer(&self, k: usize) -> Option<&[Rgb]> {
         let name = format!("layer{k}");
@@ -99,8 +122,23 @@ pub fn render_reference(req: &RenderRequest, progress: &dyn Fn(&str)) -> Result<
                 "flowlight.reference.invalid_samples".into(),
                 (a.invalid_samples + b.invalid_samples).to_string(),
             ),
-        ],
+            (
+                "flowlight.reference.halves".into(),
+                format!(
+                    "{} spp (seed {}) + {} spp (seed {})",
+                    a.spp, a_req.seed, b.spp, b_req.seed
+                ),
+            ),
+        ]
+        .into_iter()
+        .chain(depth_meta("flowlight.path_depth", a.path_depth))
+        .chain(depth_meta("flowlight.max_ray_depth", a.max_ray_depth))
+        .collect(),
     })
+}
+
+fn depth_meta(key: &str, v: Option<u32>) -> Option<(String, String)> {
+    v.map(|d| (key.to_string(), d.to_string()))
 }
 
 fn parse_spp(meta: &ExrMetadata) -> Option<f64> {
@@ -110,6 +148,35 @@ fn parse_spp(meta: &ExrMetadata) -> Option<f64> {
         .parse()
         .ok()
 }
+
+/// The `flowlight.*` metadata of an EXR (seeds, parameters, depths, floor), kept when a
+/// reference is read so that writing it again loses nothing; the keys [`write_reference`]
+/// computes itself are left out.
+fn kept_meta(p: &Path) -> Result<Vec<(String, String)>, String> {
+    let meta = read_exr_metadata(p).map_err(|e| e.to_string())?;
+    let mut kept: Vec<(String, String)> = meta
+        .entries
+        .iter()
+        .filter(|(k, _)| {
+            k.starts_with("flowlight.")
+                && ![
+                    "flowlight.reference",
+                    "flowlight.spp",
+                    "flowlight.variance",
+                    FLOOR_KEY,
+                ]
+                .contains(&k.as_str())
+        })
+        .cloned()
+        .collect();
+    if meta.get("flowlight.reference") != Some("true") {
+        kept.push(("flowlight.reference.from".into(), p.display().to_string()));
+    }
+    Ok(kept)
+}
+
+/// Metadata key of the recorded reference floor.
+pub const FLOOR_KEY: &str = "flowlight.reference.floor";
 
 /// Makes a reference from existing renders: one EXR (its variance is unknown unless it is
 /// itself a reference with a `variance` layer), or two independent renders of the same scene
@@ -140,7 +207,7 @@ pub fn reference_from_exrs(paths: &[PathBuf]) -> Result<Reference, String> {
                 variance,
                 layers,
                 spp,
-                meta: vec![("flowlight.reference.from".into(), one.display().to_string())],
+                meta: kept_meta(one)?,
             })
         }
         [p, q] => {
@@ -223,6 +290,15 @@ pub fn write_reference(path: &Path, r: &Reference) -> Result<(), String> {
             },
         ),
     ];
+    if let Some(f) = r.floor() {
+        entries.push((
+            FLOOR_KEY.into(),
+            format!(
+                "{f:.6e} (mean Var/(b^2 + {}) of the main image)",
+                metrics::REL_EPS
+            ),
+        ));
+    }
     for (k, v) in &r.meta {
         if !entries.iter().any(|(e, _)| e == k) {
             entries.push((k.clone(), v.clone()));

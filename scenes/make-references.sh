@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# Renders the committed references scenes/<scene>/reference/<scene>.exr of the benchmark
+# suites (scenes/suite.toml, scenes/suite-erpt.toml): once, long, with the most efficient MCPT
+# configuration per scene (docs/results.md), at the suites' 128x128 and each scene's
+# path_depth, with lighting layers, as two independent halves (seeds 1000000 and 1000001)
+# whose difference gives the variance layer and the floor (docs/bench.md). The EXR metadata
+# records the spp, seeds, parameters, path depths, floor and this command line.
+#
+#   scenes/make-references.sh [SCENE...]        # default: all six; build the dev profile first:
+#   cargo build -p flowlight -p flowlight-mcpt
+#
+# FLOWLIGHT (default target/debug/flowlight) and THREADS (default 2) can be set. BUDGET=spp
+# renders each scene to the table's spp (reproducible); the committed files were made with
+# the default BUDGET=time (each scene's wall-time budget, split over the two halves, on a
+# 2-core machine shared with six other builds: the spp they reached is in the table's
+# comment and in each file's flowlight.spp).
+set -euo pipefail
+root="$(cd "$(dirname "$0")/.." && pwd)"
+bin="${FLOWLIGHT:-$root/target/debug/flowlight}"
+threads="${THREADS:-2}"
+
+# scene | wall seconds (both halves) | spp (both halves) | MCPT parameters
+table=(
+  "glass-caustic|480|8192|variant=untangled termination=equi"
+  "mirror-chain|720|4096|variant=entangled termination=bxdf"
+  "indirect-room|720|2048|variant=entangled termination=expo"
+  "cornell-box|480|8192|variant=entangled termination=bxdf"
+  "narrow-gap|600|8192|variant=entangled termination=equi"
+  "ring-caustic|600|8192|variant=untangled termination=equi"
+)
+budget_kind="${BUDGET:-time}"
+
+want=("$@")
+for row in "${table[@]}"; do
+  IFS='|' read -r scene seconds spp params <<<"$row"
+  if [ ${#want[@]} -gt 0 ] && [[ ! " ${want[*]} " == *" $scene "* ]]; then continue; fi
+  sets=(--set layers=true)
+  for p in $params; do sets+=(--set "$p"); done
+  mkdir -p "$root/scenes/$scene/reference"
+  if [ "$budget_kind" = spp ]; then budget=(--spp "$spp"); else budget=(--time "$seconds"); fi
+  echo "== $scene: ${budget[*]}, $params"
+  (cd "$root/scenes" && "$bin" reference "$scene/$scene.toml" --width 128 --height 128 \
+    "${budget[@]}" --seed 1000000 --threads "$threads" "${sets[@]}" \
+    --out "$scene/reference/$scene.exr")
+done
