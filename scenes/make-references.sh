@@ -24,9 +24,9 @@ table=(
   "glass-caustic|480|8192|variant=untangled termination=equi"
   "mirror-chain|720|4096|variant=entangled termination=bxdf"
   "indirect-room|720|2048|variant=entangled termination=expo"
-  "cornell-box|480|8192|variant=entangled termination=bxdf"
-  "narrow-gap|600|8192|variant=entangled termination=equi"
   "ring-caustic|600|8192|variant=untangled termination=equi"
+  "cornell-box|420|8192|variant=entangled termination=bxdf"
+  "narrow-gap|480|8192|variant=entangled termination=equi"
 )
 budget_kind="${BUDGET:-time}"
 

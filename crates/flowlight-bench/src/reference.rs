@@ -256,10 +256,23 @@ pub fn reference_from_exrs(paths: &[PathBuf]) -> Result<Reference, String> {
 
 /// Writes a reference EXR: main image, `variance` (when known), lighting layers, and metadata
 /// (`flowlight.reference`, `flowlight.spp`, …).
+///
+/// The image and the lighting layers are stored rounded to half-float precision (11
+/// significant bits, relative error ≤ 2⁻¹¹ per value, kept in 32-bit channels so nothing
+/// overflows or goes subnormal): the zeroed low bits let ZIP shrink the file, and the
+/// rounding adds at most (2⁻¹¹)² ≈ 2.4·10⁻⁷ (about 8·10⁻⁸ on average) to any relMSE against
+/// it, far below every floor (≥ 10⁻⁵ here). The
+/// `variance` layer keeps full precision (the floor of dark pixels is made of tiny values).
 pub fn write_reference(path: &Path, r: &Reference) -> Result<(), String> {
+    let image = to_half_precision(&r.image);
+    let lighting: Vec<(String, Vec<Rgb>)> = r
+        .layers
+        .iter()
+        .map(|(n, p)| (n.clone(), to_half_precision(p)))
+        .collect();
     let mut layers = vec![ImageLayer {
         name: String::new(),
-        pixels: &r.image,
+        pixels: &image,
     }];
     if let Some(v) = &r.variance {
         layers.push(ImageLayer {
@@ -267,7 +280,7 @@ pub fn write_reference(path: &Path, r: &Reference) -> Result<(), String> {
             pixels: v,
         });
     }
-    for (n, p) in &r.layers {
+    for (n, p) in &lighting {
         layers.push(ImageLayer {
             name: n.clone(),
             pixels: p,
@@ -307,6 +320,21 @@ pub fn write_reference(path: &Path, r: &Reference) -> Result<(), String> {
     write_exr(path, r.width, r.height, &layers, &ExrMetadata { entries }).map_err(|e| e.to_string())
 }
 
+/// Rounds every channel to the nearest value with 11 significant bits (IEEE half's
+/// precision, f32's range): the low 13 mantissa bits become zero.
+pub fn to_half_precision(pixels: &[Rgb]) -> Vec<Rgb> {
+    let round = |x: f32| {
+        if !x.is_finite() {
+            return x;
+        }
+        f32::from_bits(x.to_bits().wrapping_add(0x1000) & !0x1fff)
+    };
+    pixels
+        .iter()
+        .map(|p| Rgb::new(round(p.r), round(p.g), round(p.b)))
+        .collect()
+}
+
 /// Reads a reference written by [`write_reference`] (or any EXR: then without variance).
 pub fn read_reference(path: &Path) -> Result<Reference, String> {
     reference_from_exrs(&[path.to_path_buf()])
@@ -326,6 +354,21 @@ mod tests {
         assert_eq!(v[0], Rgb::splat(1.0));
         let (m, _) = combine_halves(&a, 30.0, &b, 10.0);
         assert_eq!(m[0], Rgb::splat(1.5));
+    }
+
+    #[test]
+    fn half_precision_rounding_keeps_11_bits() {
+        for x in [1.0f32, 0.1, 3.3e-6, 123.456, 7.0e5, -2.5] {
+            let y = to_half_precision(&[Rgb::splat(x)])[0].r;
+            assert_eq!(y.to_bits() & 0x1fff, 0, "{x}");
+            assert!(((y - x) / x).abs() <= 2f32.powi(-11) * 1.0001, "{x} -> {y}");
+        }
+        // 1 + 2^-11 + 2^-13 is nearer 1 + 2^-10 than 1.
+        let up = 1.0 + 2f32.powi(-11) + 2f32.powi(-13);
+        assert_eq!(
+            to_half_precision(&[Rgb::splat(up)])[0].r,
+            1.0 + 2f32.powi(-10)
+        );
     }
 
     #[test]
