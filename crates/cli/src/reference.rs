@@ -66,6 +66,10 @@ pub fn run(
         (r, out)
     };
     bench::write_reference(&out, &r).map_err(|e| anyhow!(e))?;
+    // An sRGB preview beside it, to look at the reference without an EXR viewer.
+    let png = out.with_extension("png");
+    flowlight_host::output::write_png_preview(&png, r.width, r.height, &r.image, 0.0)
+        .map_err(|e| anyhow!("{e}"))?;
     println!("reference summary");
     println!("  size            {}x{}", r.width, r.height);
     println!("  samples         {} spp", r.spp);
@@ -86,5 +90,6 @@ pub fn run(
     }
     println!("  wall time       {:.3} s", t0.elapsed().as_secs_f64());
     println!("  wrote           {}", out.display());
+    println!("  wrote           {}", png.display());
     Ok(())
 }
