@@ -149,10 +149,14 @@ scenes = ["mirrors"]
     // arithmetic is checked in flowlight-bench's unit tests) the comparison is refused: one
     // line per scene naming floor, smallest relMSE and the spp needed, exit status 1, and the
     // raw rows are still written.
+    // Plus a method that renders another path depth than the reference: refused by itself,
+    // before its other renders, while the bench goes on.
     let strict = dir.join("strict.toml");
+    let shallow =
+        "\n[[method]]\nlabel = \"shallow\"\nparams = { path_depth = 3 }\nscenes = [\"cornell\"]\n";
     std::fs::write(
         &strict,
-        text.replace("floor_ratio = 1e9", "floor_ratio = 1e-6"),
+        text.replace("floor_ratio = 1e9", "floor_ratio = 1e-6") + shallow,
     )
     .unwrap();
     std::fs::remove_file(out.join("results.csv")).unwrap();
@@ -173,6 +177,12 @@ scenes = ["mirrors"]
             "{line}"
         );
     }
+    assert!(
+        stderr.lines().any(|l| l.starts_with(
+            "scene 'cornell', method 'shallow': renders path_depth 3 but the reference"
+        ) && l.contains("has path_depth 8")),
+        "{stderr}"
+    );
     let (_, rows) = csv_rows(&out.join("results.csv"));
     assert_eq!(rows.len(), 3, "{rows:?}");
 }
