@@ -37,7 +37,16 @@ fn committed_references_load_with_their_recorded_floor_and_match_their_scenes() 
             s.name
         );
         assert!(floor > 0.0 && floor < 0.05, "{}: floor {floor}", s.name);
-        assert!(r.spp >= 2048.0, "{}: {} spp", s.name, r.spp);
+        // The total spp is the two halves' (seeds 1000000 and 1000001).
+        let halves = get("flowlight.reference.halves");
+        let parts: Vec<f64> = halves
+            .split('+')
+            .map(|h| h.split_whitespace().next().unwrap().parse().unwrap())
+            .collect();
+        assert_eq!(parts.len(), 2, "{halves}");
+        assert!(parts.iter().all(|&n| n >= 256.0), "{}: {halves}", s.name);
+        assert!((parts[0] + parts[1] - r.spp).abs() < 1e-6, "{}: {halves}", s.name);
+        assert!(halves.contains("(seed 1000000)") && halves.contains("(seed 1000001)"));
         assert!(get("flowlight.seed").contains("1000000 and 1000001"));
         assert!(get("flowlight.reference.command").contains("reference"));
         // Lighting layers: the main image is their sum.
