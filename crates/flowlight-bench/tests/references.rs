@@ -45,7 +45,11 @@ fn committed_references_load_with_their_recorded_floor_and_match_their_scenes() 
             .collect();
         assert_eq!(parts.len(), 2, "{halves}");
         assert!(parts.iter().all(|&n| n >= 256.0), "{}: {halves}", s.name);
-        assert!((parts[0] + parts[1] - r.spp).abs() < 1e-6, "{}: {halves}", s.name);
+        assert!(
+            (parts[0] + parts[1] - r.spp).abs() < 1e-6,
+            "{}: {halves}",
+            s.name
+        );
         assert!(halves.contains("(seed 1000000)") && halves.contains("(seed 1000001)"));
         assert!(get("flowlight.seed").contains("1000000 and 1000001"));
         assert!(get("flowlight.reference.command").contains("reference"));
