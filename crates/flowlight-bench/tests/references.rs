@@ -24,7 +24,11 @@ fn committed_references_load_with_their_recorded_floor_and_match_their_scenes() 
                 .to_string()
         };
         // The floor recomputed from the variance layer is the recorded one (6 digits).
-        let recorded: f64 = get("flowlight.reference.floor")
+        // (Read from the header itself: a loaded reference recomputes its floor.)
+        let header = flowlight_host::output::read_exr_metadata(&path).unwrap();
+        let recorded: f64 = header
+            .get(flowlight_bench::reference::FLOOR_KEY)
+            .unwrap()
             .split_whitespace()
             .next()
             .unwrap()
