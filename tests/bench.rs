@@ -44,10 +44,11 @@ fn mini_suite_writes_csv_plots_and_finite_numbers() {
     let dir = common::scratch("bench-mini");
     let scenes = common::repo().join("scenes");
     let suite = dir.join("mini.toml");
-    std::fs::write(
-        &suite,
-        format!(
-            r#"
+    // The 8-spp references of this 24x24 check are far too noisy to judge anything: the floor
+    // rule is loosened here (floor_ratio), and checked at its default below. The scenes name
+    // their reference files, so the committed 128x128 ones are not used.
+    let text = format!(
+        r#"
 [bench]
 budgets = [0.1, 0.2]
 seeds = [1]
@@ -55,6 +56,7 @@ threads = 2
 width = 24
 height = 24
 out = "out"
+floor_ratio = 1e9
 
 [reference]
 spp = 8
@@ -62,10 +64,12 @@ spp = 8
 [[scene]]
 name = "cornell"
 config = "{cornell}"
+reference = "out/references/cornell.exr"
 
 [[scene]]
 name = "mirrors"
 config = "{mirrors}"
+reference = "out/references/mirrors.exr"
 
 [[method]]
 label = "pt"
@@ -77,11 +81,10 @@ plugin = "mcpt"
 params = {{ variant = "untangled", termination = "equi" }}
 scenes = ["mirrors"]
 "#,
-            cornell = scenes.join("cornell-box/cornell-box.toml").display(),
-            mirrors = scenes.join("mirror-chain/mirror-chain.toml").display(),
-        ),
-    )
-    .unwrap();
+        cornell = scenes.join("cornell-box/cornell-box.toml").display(),
+        mirrors = scenes.join("mirror-chain/mirror-chain.toml").display(),
+    );
+    std::fs::write(&suite, &text).unwrap();
     let o = flowlight(&["bench", suite.to_str().unwrap()]);
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(stdout.contains("bench summary"), "{stdout}");
@@ -141,13 +144,76 @@ scenes = ["mirrors"]
         assert!(e.is_finite() && e > 0.0);
     }
 
-    // Cached references are reused: a second run renders none.
+    // Cached references are reused: a second run renders none. With a strict floor rule
+    // (floor ≤ 10⁻⁶ of the smallest relMSE: refused whatever the machine's speed; the rule's
+    // arithmetic is checked in flowlight-bench's unit tests) the comparison is refused: one
+    // line per scene naming floor, smallest relMSE and the spp needed, exit status 1, and the
+    // raw rows are still written.
+    // Plus a method that renders another path depth than the reference: refused by itself,
+    // before its other renders, while the bench goes on.
+    let strict = dir.join("strict.toml");
+    let shallow =
+        "\n[[method]]\nlabel = \"shallow\"\nparams = { path_depth = 3 }\nscenes = [\"cornell\"]\n";
+    std::fs::write(
+        &strict,
+        text.replace("floor_ratio = 1e9", "floor_ratio = 1e-6") + shallow,
+    )
+    .unwrap();
+    std::fs::remove_file(out.join("results.csv")).unwrap();
     let o = Command::new(env!("CARGO_BIN_EXE_flowlight"))
-        .args(["bench", suite.to_str().unwrap(), "--budgets", "0.05"])
+        .args(["bench", strict.to_str().unwrap(), "--budgets", "0.05"])
         .output()
         .unwrap();
-    assert!(o.status.success());
-    assert!(!String::from_utf8_lossy(&o.stderr).contains("reference for"));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{stderr}");
+    assert!(!stderr.contains("reference for"), "{stderr}");
+    for scene in ["cornell", "mirrors"] {
+        let line = stderr
+            .lines()
+            .find(|l| l.starts_with(&format!("scene '{scene}': reference floor")))
+            .unwrap_or_else(|| panic!("no refusal for {scene}:\n{stderr}"));
+        assert!(
+            line.contains("comparison refused") && line.contains("spp (now 8)"),
+            "{line}"
+        );
+    }
+    assert!(
+        stderr.lines().any(|l| l.starts_with(
+            "scene 'cornell', method 'shallow': renders path_depth 3 but the reference"
+        ) && l.contains("has path_depth 8")),
+        "{stderr}"
+    );
+    let (_, rows) = csv_rows(&out.join("results.csv"));
+    assert_eq!(rows.len(), 3, "{rows:?}");
+}
+
+#[test]
+fn a_committed_reference_of_another_size_is_refused() {
+    // glass-caustic has a committed 128x128 reference (scenes/glass-caustic/reference/): a suite
+    // at 24x24 that does not name its own reference file must refuse it before rendering.
+    let dir = common::scratch("bench-committed");
+    let suite = dir.join("s.toml");
+    std::fs::write(
+        &suite,
+        format!(
+            "[bench]\nbudgets = [0.1]\nwidth = 24\nheight = 24\nout = \"out\"\n\
+             [[scene]]\nname = \"m\"\nconfig = \"{}\"\n[[method]]\nlabel = \"pt\"\n",
+            common::repo()
+                .join("scenes/glass-caustic/glass-caustic.toml")
+                .display()
+        ),
+    )
+    .unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_flowlight"))
+        .args(["bench", suite.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(
+        e.contains("reference") && e.contains("is 128x128") && e.contains("renders at 24x24"),
+        "{e}"
+    );
 }
 
 #[test]

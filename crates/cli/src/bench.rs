@@ -31,5 +31,12 @@ pub fn run(suite: &std::path::Path, ov: flowlight_bench::BenchOverrides) -> Resu
     for f in &report.files {
         println!("  wrote           {}", f.display());
     }
+    if !report.refused.is_empty() {
+        return Err(anyhow!(
+            "{} comparison(s) refused:\n{}",
+            report.refused.len(),
+            report.refused.join("\n")
+        ));
+    }
     Ok(())
 }

@@ -120,6 +120,12 @@ enum Command {
         /// Output EXR (default: `<config stem>.ref.exr` beside the config).
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Image width (default: the config's), e.g. a bench suite's 128.
+        #[arg(long)]
+        width: Option<u32>,
+        /// Image height (default: the config's).
+        #[arg(long)]
+        height: Option<u32>,
         /// Seed of the first half; the second uses seed + 1.
         #[arg(long, default_value_t = 1_000_000)]
         seed: u64,
@@ -131,7 +137,7 @@ enum Command {
         set: Vec<String>,
         /// Use existing renders instead: one EXR, or two independent renders of the same
         /// scene (then the variance is estimated from their difference).
-        #[arg(long, conflicts_with_all = ["spp", "time", "set"])]
+        #[arg(long, conflicts_with_all = ["spp", "time", "set", "width", "height"])]
         from: Vec<PathBuf>,
     },
     /// Run a benchmark suite: error against wall time per scene and method (docs/bench.md).
@@ -227,11 +233,23 @@ pub fn main() {
             spp,
             time,
             out,
+            width,
+            height,
             seed,
             threads,
             set,
             from,
-        } => reference::run(config, spp, time, out, seed, threads, &set, &from),
+        } => reference::run(
+            config,
+            spp,
+            time,
+            out,
+            (width, height),
+            seed,
+            threads,
+            &set,
+            &from,
+        ),
         Command::Bench {
             suite,
             out,

@@ -10,6 +10,7 @@ pub fn run(
     spp: Option<u32>,
     time: Option<f64>,
     out: Option<PathBuf>,
+    (width, height): (Option<u32>, Option<u32>),
     seed: u64,
     threads: usize,
     set: &[String],
@@ -48,20 +49,33 @@ pub fn run(
             config,
             plugin: None,
             params: parse_sets(set)?,
-            width: None,
-            height: None,
+            width,
+            height,
             budget,
             seed,
             threads,
         };
-        let r = bench::render_reference(&req, &|m| eprintln!("flowlight reference: {m}"))
+        let mut r = bench::render_reference(&req, &|m| eprintln!("flowlight reference: {m}"))
             .map_err(|e| anyhow!(e))?;
+        // The command that made it, for whoever has to make it again.
+        let args: Vec<String> = std::env::args().skip(1).collect();
+        r.meta.push((
+            "flowlight.reference.command".into(),
+            format!("flowlight {}", args.join(" ")),
+        ));
         (r, out)
     };
     bench::write_reference(&out, &r).map_err(|e| anyhow!(e))?;
+    // An sRGB preview beside it, to look at the reference without an EXR viewer.
+    let png = out.with_extension("png");
+    flowlight_host::output::write_png_preview(&png, r.width, r.height, &r.image, 0.0)
+        .map_err(|e| anyhow!("{e}"))?;
     println!("reference summary");
     println!("  size            {}x{}", r.width, r.height);
     println!("  samples         {} spp", r.spp);
+    if let Some(f) = r.floor() {
+        println!("  floor           {f:.4e} (relMSE the reference's own noise adds)");
+    }
     if let Some(v) = &r.variance {
         let n = v.len().max(1) as f64;
         let mean_var = v.iter().map(|c| c.luminance() as f64).sum::<f64>() / n;
@@ -76,5 +90,6 @@ pub fn run(
     }
     println!("  wall time       {:.3} s", t0.elapsed().as_secs_f64());
     println!("  wrote           {}", out.display());
+    println!("  wrote           {}", png.display());
     Ok(())
 }

@@ -36,7 +36,7 @@ pub use reference::{
 };
 pub use report::{summarise, BenchReport, SummaryRow};
 pub use run::{
-    ensure_reference, render_request, run_suite, BenchOverrides, Budget, RenderRequest,
-    RenderResult, Run,
+    check_floor, check_reference_matches, ensure_reference, render_request, run_suite,
+    BenchOverrides, Budget, RenderRequest, RenderResult, Run,
 };
 pub use suite::{load_suite, parse_suite, Method, Suite, SuiteScene};

@@ -3,6 +3,7 @@
 
 use crate::run::{render_request, Budget, RenderRequest};
 use flowlight_core::Rgb;
+use flowlight_host::metrics;
 use flowlight_host::output::{read_exr_metadata, read_exr_rgb, write_exr, ExrMetadata, ImageLayer};
 use std::path::{Path, PathBuf};
 
@@ -23,6 +24,28 @@ pub struct Reference {
 }
 
 impl Reference {
+    /// The metadata value of `key` (`flowlight.spp`, `flowlight.path_depth`, …), if recorded.
+    pub fn meta_value(&self, key: &str) -> Option<&str> {
+        self.meta
+            .iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v.as_str())
+    }
+
+    /// The reference floor, mean Var(b) / (b² + ε) over pixels and channels (the relMSE its
+    /// own noise adds to every comparison; `docs/bench.md`), from the `variance` layer.
+    pub fn floor(&self) -> Option<f64> {
+        let v = self.variance.as_deref()?;
+        metrics::compare(&self.image, &self.image, Some(v))
+            .ok()?
+            .reference_floor
+    }
+
+    /// The integrator's `path_depth` it was rendered with (metadata `flowlight.path_depth`).
+    pub fn path_depth(&self) -> Option<u32> {
+        self.meta_value("flowlight.path_depth")?.trim().parse().ok()
+    }
+
     /// Layer `k` (`layerK`), if the reference has it.
     pub fn layer(&self, k: usize) -> Option<&[Rgb]> {
         let name = format!("layer{k}");
@@ -99,8 +122,23 @@ pub fn render_reference(req: &RenderRequest, progress: &dyn Fn(&str)) -> Result<
                 "flowlight.reference.invalid_samples".into(),
                 (a.invalid_samples + b.invalid_samples).to_string(),
             ),
-        ],
+            (
+                "flowlight.reference.halves".into(),
+                format!(
+                    "{} spp (seed {}) + {} spp (seed {})",
+                    a.spp, a_req.seed, b.spp, b_req.seed
+                ),
+            ),
+        ]
+        .into_iter()
+        .chain(depth_meta("flowlight.path_depth", a.path_depth))
+        .chain(depth_meta("flowlight.max_ray_depth", a.max_ray_depth))
+        .collect(),
     })
+}
+
+fn depth_meta(key: &str, v: Option<u32>) -> Option<(String, String)> {
+    v.map(|d| (key.to_string(), d.to_string()))
 }
 
 fn parse_spp(meta: &ExrMetadata) -> Option<f64> {
@@ -110,6 +148,35 @@ fn parse_spp(meta: &ExrMetadata) -> Option<f64> {
         .parse()
         .ok()
 }
+
+/// The `flowlight.*` metadata of an EXR (seeds, parameters, depths, floor), kept when a
+/// reference is read so that writing it again loses nothing; the keys [`write_reference`]
+/// computes itself are left out.
+fn kept_meta(p: &Path) -> Result<Vec<(String, String)>, String> {
+    let meta = read_exr_metadata(p).map_err(|e| e.to_string())?;
+    let mut kept: Vec<(String, String)> = meta
+        .entries
+        .iter()
+        .filter(|(k, _)| {
+            k.starts_with("flowlight.")
+                && ![
+                    "flowlight.reference",
+                    "flowlight.spp",
+                    "flowlight.variance",
+                    FLOOR_KEY,
+                ]
+                .contains(&k.as_str())
+        })
+        .cloned()
+        .collect();
+    if meta.get("flowlight.reference") != Some("true") {
+        kept.push(("flowlight.reference.from".into(), p.display().to_string()));
+    }
+    Ok(kept)
+}
+
+/// Metadata key of the recorded reference floor.
+pub const FLOOR_KEY: &str = "flowlight.reference.floor";
 
 /// Makes a reference from existing renders: one EXR (its variance is unknown unless it is
 /// itself a reference with a `variance` layer), or two independent renders of the same scene
@@ -140,7 +207,7 @@ pub fn reference_from_exrs(paths: &[PathBuf]) -> Result<Reference, String> {
                 variance,
                 layers,
                 spp,
-                meta: vec![("flowlight.reference.from".into(), one.display().to_string())],
+                meta: kept_meta(one)?,
             })
         }
         [p, q] => {
@@ -189,10 +256,23 @@ pub fn reference_from_exrs(paths: &[PathBuf]) -> Result<Reference, String> {
 
 /// Writes a reference EXR: main image, `variance` (when known), lighting layers, and metadata
 /// (`flowlight.reference`, `flowlight.spp`, …).
+///
+/// The image and the lighting layers are stored rounded to half-float precision (11
+/// significant bits, relative error ≤ 2⁻¹¹ per value, kept in 32-bit channels so nothing
+/// overflows or goes subnormal): the zeroed low bits let ZIP shrink the file, and the
+/// rounding adds at most (2⁻¹¹)² ≈ 2.4·10⁻⁷ (about 8·10⁻⁸ on average) to any relMSE against
+/// it, far below every floor (≥ 10⁻⁵ here). The
+/// `variance` layer keeps full precision (the floor of dark pixels is made of tiny values).
 pub fn write_reference(path: &Path, r: &Reference) -> Result<(), String> {
+    let image = to_half_precision(&r.image);
+    let lighting: Vec<(String, Vec<Rgb>)> = r
+        .layers
+        .iter()
+        .map(|(n, p)| (n.clone(), to_half_precision(p)))
+        .collect();
     let mut layers = vec![ImageLayer {
         name: String::new(),
-        pixels: &r.image,
+        pixels: &image,
     }];
     if let Some(v) = &r.variance {
         layers.push(ImageLayer {
@@ -200,7 +280,7 @@ pub fn write_reference(path: &Path, r: &Reference) -> Result<(), String> {
             pixels: v,
         });
     }
-    for (n, p) in &r.layers {
+    for (n, p) in &lighting {
         layers.push(ImageLayer {
             name: n.clone(),
             pixels: p,
@@ -223,12 +303,36 @@ pub fn write_reference(path: &Path, r: &Reference) -> Result<(), String> {
             },
         ),
     ];
+    if let Some(f) = r.floor() {
+        entries.push((
+            FLOOR_KEY.into(),
+            format!(
+                "{f:.6e} (mean Var/(b^2 + {}) of the main image)",
+                metrics::REL_EPS
+            ),
+        ));
+    }
     for (k, v) in &r.meta {
         if !entries.iter().any(|(e, _)| e == k) {
             entries.push((k.clone(), v.clone()));
         }
     }
     write_exr(path, r.width, r.height, &layers, &ExrMetadata { entries }).map_err(|e| e.to_string())
+}
+
+/// Rounds every channel to the nearest value with 11 significant bits (IEEE half's
+/// precision, f32's range): the low 13 mantissa bits become zero.
+pub fn to_half_precision(pixels: &[Rgb]) -> Vec<Rgb> {
+    let round = |x: f32| {
+        if !x.is_finite() {
+            return x;
+        }
+        f32::from_bits(x.to_bits().wrapping_add(0x1000) & !0x1fff)
+    };
+    pixels
+        .iter()
+        .map(|p| Rgb::new(round(p.r), round(p.g), round(p.b)))
+        .collect()
 }
 
 /// Reads a reference written by [`write_reference`] (or any EXR: then without variance).
@@ -250,6 +354,21 @@ mod tests {
         assert_eq!(v[0], Rgb::splat(1.0));
         let (m, _) = combine_halves(&a, 30.0, &b, 10.0);
         assert_eq!(m[0], Rgb::splat(1.5));
+    }
+
+    #[test]
+    fn half_precision_rounding_keeps_11_bits() {
+        for x in [1.0f32, 0.1, 3.3e-6, 123.456, 7.0e5, -2.5] {
+            let y = to_half_precision(&[Rgb::splat(x)])[0].r;
+            assert_eq!(y.to_bits() & 0x1fff, 0, "{x}");
+            assert!(((y - x) / x).abs() <= 2f32.powi(-11) * 1.0001, "{x} -> {y}");
+        }
+        // 1 + 2^-11 + 2^-13 is nearer 1 + 2^-10 than 1.
+        let up = 1.0 + 2f32.powi(-11) + 2f32.powi(-13);
+        assert_eq!(
+            to_half_precision(&[Rgb::splat(up)])[0].r,
+            1.0 + 2f32.powi(-10)
+        );
     }
 
     #[test]

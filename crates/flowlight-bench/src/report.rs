@@ -30,6 +30,8 @@ pub struct BenchReport {
     pub runs: Vec<Run>,
     pub summary: Vec<SummaryRow>,
     pub files: Vec<PathBuf>,
+    /// One line per refused comparison (floor rule, path depth); empty when all passed.
+    pub refused: Vec<String>,
 }
 
 /// Means over seeds, efficiencies, and efficiencies relative to `baseline`.

@@ -3,14 +3,14 @@
 
 use crate::plot::{plot_layers, plot_scene};
 use crate::reference::{read_reference, render_reference, write_reference, Reference};
-use crate::report::{summarise, write_tables, BenchReport};
+use crate::report::{summarise, write_tables, BenchReport, SummaryRow};
 use crate::suite::{Suite, SuiteScene};
 use flowlight_core::Rgb;
 use flowlight_host::accumulation::Frame;
 use flowlight_host::metrics::{self, Errors};
 use flowlight_host::session::{Overrides, Session};
 use flowlight_scene::config::{load_config, RenderConfig};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
 /// How long one render runs.
@@ -55,14 +55,53 @@ pub struct RenderResult {
     pub plugin: String,
     /// The integrator parameters used, `key=value` separated by spaces.
     pub params: String,
+    /// The integrator's `path_depth` (its parameter, else the plugin's declared default;
+    /// `None` when the plugin has no such parameter).
+    pub path_depth: Option<u32>,
+    /// The integrator's `max_ray_depth`, likewise.
+    pub max_ray_depth: Option<u32>,
+}
+
+/// The value of integer parameter `name` for a session: the one given, else the plugin's
+/// declared default.
+fn effective_int(session: &Session, name: &str) -> Option<u32> {
+    let given = session
+        .config
+        .integrator_params
+        .iter()
+        .find(|(k, _)| k == name)
+        .and_then(|(_, v)| v.as_integer());
+    let declared = || {
+        session
+            .instance
+            .plugin()
+            .params()
+            .into_iter()
+            .find(|p| p.name == name)
+            .and_then(|p| p.default.parse::<i64>().ok())
+    };
+    given.or_else(declared).and_then(|v| u32::try_from(v).ok())
 }
 
 pub(crate) fn resolve_config(req: &RenderRequest) -> Result<RenderConfig, String> {
     let mut cfg = load_config(&req.config).map_err(|e| e.to_string())?;
     if let Some(p) = &req.plugin {
         if *p != cfg.integrator_plugin {
+            // Another plugin gets only its own parameters, except the scene's path depth
+            // (when the plugin has one): every method of a suite renders the same layers of
+            // path space as the scene's reference.
+            let depth = cfg
+                .integrator_params
+                .iter()
+                .find(|(k, _)| k == "path_depth")
+                .cloned();
             cfg.integrator_plugin = p.clone();
             cfg.integrator_params.clear();
+            if let Some(d) = depth {
+                if plugin_declares(&cfg, "path_depth") {
+                    cfg.integrator_params.push(d);
+                }
+            }
         }
     }
     if let Some(w) = req.width {
@@ -72,6 +111,22 @@ pub(crate) fn resolve_config(req: &RenderRequest) -> Result<RenderConfig, String
         cfg.height = h;
     }
     Ok(cfg)
+}
+
+/// Whether the config's integrator plugin declares parameter `name` (false when it cannot be
+/// found or loaded: the render itself then reports that).
+fn plugin_declares(cfg: &RenderConfig, name: &str) -> bool {
+    use flowlight_host::plugin::{find_plugin, search_dirs, PluginLibrary};
+    let path = cfg.base_dir.join(&cfg.integrator_plugin);
+    let candidate = if cfg.integrator_plugin.contains('/') {
+        path.to_string_lossy().into_owned()
+    } else {
+        cfg.integrator_plugin.clone()
+    };
+    find_plugin(&candidate, &search_dirs(&cfg.plugin_search_paths))
+        .ok()
+        .and_then(|p| PluginLibrary::load(&p).ok())
+        .is_some_and(|lib| lib.params().iter().any(|p| p.name == name))
 }
 
 /// Renders `req` and returns the normalised image, without writing any file.
@@ -119,6 +174,8 @@ pub fn render_request(req: &RenderRequest) -> Result<RenderResult, String> {
         invalid_samples: out.stats.invalid_deposits,
         plugin: session.instance.plugin().name.clone(),
         params,
+        path_depth: effective_int(&session, "path_depth"),
+        max_ray_depth: effective_int(&session, "max_ray_depth"),
     })
 }
 
@@ -151,6 +208,14 @@ pub struct BenchOverrides {
     pub rebuild_references: bool,
 }
 
+/// The file a scene's reference is read from (the committed one when it exists).
+fn reference_path(s: &SuiteScene, rebuild: bool) -> PathBuf {
+    match &s.committed_reference {
+        Some(p) if p.exists() && !rebuild => p.clone(),
+        _ => s.reference.clone(),
+    }
+}
+
 fn scene_request(s: &SuiteScene, threads: usize) -> RenderRequest {
     RenderRequest {
         config: s.config.clone(),
@@ -164,25 +229,33 @@ fn scene_request(s: &SuiteScene, threads: usize) -> RenderRequest {
     }
 }
 
-/// Loads the scene's reference, rendering (and caching) it when missing or when asked to.
+/// Loads the scene's reference: the committed one (`<config folder>/reference/<config
+/// stem>.exr`) when it exists, else the suite's (or cached) file, rendering and caching it
+/// when missing or when asked to (`rebuild` never overwrites a committed reference: it renders
+/// into the cache). A reference of another resolution or path depth than the scene is refused.
 pub fn ensure_reference(
     suite: &Suite,
     s: &SuiteScene,
     rebuild: bool,
     log: &dyn Fn(&str),
 ) -> Result<Reference, String> {
-    if !rebuild && s.reference.exists() {
-        let r = read_reference(&s.reference)?;
+    let committed = s.committed_reference.as_ref().filter(|p| p.exists());
+    let path = match committed {
+        Some(p) if !rebuild => Some(p.clone()),
+        _ if !rebuild && s.reference.exists() => Some(s.reference.clone()),
+        _ => None,
+    };
+    if let Some(path) = path {
+        let r = read_reference(&path)?;
         let cfg = resolve_config(&scene_request(s, 0))?;
-        if (r.width, r.height) != (cfg.width as usize, cfg.height as usize) {
-            return Err(format!(
-                "reference {} is {}x{} but scene '{}' renders at {}x{}: delete it or run with --rebuild-references",
-                s.reference.display(),
-                r.width,
-                r.height,
+        check_reference_matches(&r, &path, &s.name, &cfg)?;
+        if committed.is_some_and(|c| *c == path) {
+            log(&format!(
+                "reference for '{}': committed {} ({} spp, floor {})",
                 s.name,
-                cfg.width,
-                cfg.height
+                path.display(),
+                r.spp,
+                r.floor().map_or("unknown".into(), |f| format!("{f:.3e}"))
             ));
         }
         return Ok(r);
@@ -201,6 +274,79 @@ pub fn ensure_reference(
     let r = render_reference(&req, &|m| log(&format!("  {m}")))?;
     write_reference(&s.reference, &r)?;
     Ok(r)
+}
+
+/// Refuses a reference whose resolution or recorded `path_depth` differs from the scene's
+/// (`cfg`: the scene config with the suite's resolution). One line naming the file and both
+/// values.
+pub fn check_reference_matches(
+    r: &Reference,
+    path: &Path,
+    scene: &str,
+    cfg: &RenderConfig,
+) -> Result<(), String> {
+    if (r.width, r.height) != (cfg.width as usize, cfg.height as usize) {
+        return Err(format!(
+            "reference {} is {}x{} but scene '{scene}' renders at {}x{}: render a matching one (or delete a cached one, or run with --rebuild-references)",
+            path.display(),
+            r.width,
+            r.height,
+            cfg.width,
+            cfg.height
+        ));
+    }
+    let depth = cfg
+        .integrator_params
+        .iter()
+        .find(|(k, _)| k == "path_depth")
+        .and_then(|(_, v)| v.as_integer());
+    if let (Some(want), Some(got)) = (depth, r.path_depth()) {
+        if want != i64::from(got) {
+            return Err(format!(
+                "reference {} was rendered with path_depth {got} but scene '{scene}' has path_depth {want}: render a matching one",
+                path.display()
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The floor rule: a comparison is meaningful only when the reference's own noise (its floor,
+/// the relMSE it adds to every comparison) is at most `ratio` (the suite's `floor_ratio`,
+/// 1/10 by default) of the smallest relMSE reported against it — the means over seeds of the
+/// summary. `Ok` also when the floor is unknown (a reference without a variance layer cannot
+/// be judged, and says so in `results.csv` by an empty `reference_floor`).
+///
+/// The refusal names the scene, the floor, the smallest relMSE (method, budget) and the samples
+/// per pixel a reference would need: floor ∝ 1/spp, and the expected relMSE is the method's own
+/// error e = relMSE − floor plus the new floor f', so f' ≤ ratio·(e + f') needs
+/// spp' = spp · floor · (1 − ratio) / (ratio · e) (e bounded below by ratio × relMSE when
+/// the measured errors are at the floor already).
+pub fn check_floor(
+    scene: &str,
+    reference: &Reference,
+    summary: &[SummaryRow],
+    ratio: f64,
+) -> Result<(), String> {
+    let Some(floor) = reference.floor() else {
+        return Ok(());
+    };
+    let Some(best) = summary
+        .iter()
+        .filter(|r| r.scene == scene && r.relmse.is_finite())
+        .min_by(|a, b| a.relmse.total_cmp(&b.relmse))
+    else {
+        return Ok(());
+    };
+    if floor <= ratio * best.relmse {
+        return Ok(());
+    }
+    let own = (best.relmse - floor).max(ratio * best.relmse);
+    let needed = (reference.spp * floor * (1.0 - ratio) / (ratio * own)).ceil();
+    Err(format!(
+        "scene '{scene}': reference floor {floor:.3e} is more than {ratio} of the smallest relMSE compared with it ({:.3e}, method '{}' at {} s): comparison refused (results.csv keeps the raw data); a reference of about {needed} spp (now {}) would pass",
+        best.relmse, best.method, best.budget, reference.spp
+    ))
 }
 
 /// Runs a suite: every (scene, method, budget, seed), then writes `results.csv`,
@@ -239,9 +385,11 @@ pub fn run_suite(
         .map_err(|e| format!("cannot create {}: {e}", suite.out.display()))?;
 
     let mut runs = Vec::new();
+    let mut refused = Vec::new();
+    let mut references = Vec::new();
     for s in &suite.scenes {
         let reference = ensure_reference(&suite, s, ov.rebuild_references, log)?;
-        for m in suite.methods.iter().filter(|m| m.runs_on(&s.name)) {
+        'method: for m in suite.methods.iter().filter(|m| m.runs_on(&s.name)) {
             for &budget in &suite.budgets {
                 for &seed in &suite.seeds {
                     let mut req = scene_request(s, suite.threads);
@@ -251,6 +399,19 @@ pub fn run_suite(
                     req.seed = seed;
                     let r = render_request(&req)
                         .map_err(|e| format!("scene '{}', method '{}': {e}", s.name, m.label))?;
+                    if let (Some(want), Some(got)) = (reference.path_depth(), r.path_depth) {
+                        if want != got {
+                            let msg = format!(
+                                "scene '{}', method '{}': renders path_depth {got} but the reference {} has path_depth {want}: comparison refused (set path_depth = {want} in its params)",
+                                s.name,
+                                m.label,
+                                reference_path(s, ov.rebuild_references).display()
+                            );
+                            log(&format!("refused: {msg}"));
+                            refused.push(msg);
+                            continue 'method;
+                        }
+                    }
                     let errors =
                         metrics::compare(&r.image, &reference.image, reference.variance.as_deref())
                             .map_err(|e| {
@@ -285,10 +446,26 @@ pub fn run_suite(
                 }
             }
         }
+        references.push(reference);
     }
-    let summary = summarise(&runs, &suite.baseline);
+    let mut summary = summarise(&runs, &suite.baseline);
+    // The floor rule (check_floor): a refused scene keeps its rows in results.csv and
+    // layers.csv (the raw data) but gets no summary rows and no plots.
+    let mut refused_scenes = Vec::new();
+    for (s, r) in suite.scenes.iter().zip(&references) {
+        if let Err(msg) = check_floor(&s.name, r, &summary, suite.floor_ratio) {
+            log(&format!("refused: {msg}"));
+            refused.push(msg);
+            refused_scenes.push(s.name.clone());
+        }
+    }
+    summary.retain(|r| !refused_scenes.contains(&r.scene));
     let mut files = write_tables(&suite, &runs, &summary)?;
-    for s in &suite.scenes {
+    for s in suite
+        .scenes
+        .iter()
+        .filter(|s| !refused_scenes.contains(&s.name))
+    {
         let p = suite.out.join(format!("{}.svg", s.name));
         plot_scene(&p, &s.name, &summary)?;
         files.push(p);
@@ -305,5 +482,84 @@ pub fn run_suite(
         runs,
         summary,
         files,
+        refused,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A reference of 4 pixels of radiance 1 whose variance layer is `v` everywhere: its floor
+    /// is v / (1 + ε) (docs/bench.md).
+    fn flat_reference(v: f32, spp: f64) -> Reference {
+        Reference {
+            width: 2,
+            height: 2,
+            image: vec![Rgb::splat(1.0); 4],
+            variance: Some(vec![Rgb::splat(v); 4]),
+            layers: Vec::new(),
+            spp,
+            meta: Vec::new(),
+        }
+    }
+
+    fn row(scene: &str, method: &str, budget: f64, relmse: f64) -> SummaryRow {
+        SummaryRow {
+            scene: scene.into(),
+            method: method.into(),
+            budget,
+            wall: budget,
+            spp: 1.0,
+            relmse,
+            rmse: relmse.sqrt(),
+            luminance_ratio: 1.0,
+            efficiency: 1.0 / (relmse * budget),
+            relative_efficiency: 1.0,
+            runs: 2,
+        }
+    }
+
+    #[test]
+    fn floor_rule_refuses_a_noisy_reference_and_accepts_a_clean_one() {
+        let eps = flowlight_host::metrics::REL_EPS;
+        let summary = vec![
+            row("a", "slow", 2.0, 0.05),
+            row("a", "fast", 8.0, 0.012),
+            row("b", "other", 8.0, 1e-6),
+        ];
+        // Floor 1e-3 ≤ 0.1 × 0.012: passes (scene b's smaller errors do not count).
+        let ok = flat_reference((1e-3 * (1.0 + eps)) as f32, 1024.0);
+        assert!((ok.floor().unwrap() - 1e-3).abs() < 1e-9);
+        check_floor("a", &ok, &summary, 0.1).unwrap();
+        // Floor 2e-3 > 0.1 × 0.012: refused, naming the scene, floor, smallest relMSE and its
+        // method and budget, and the spp that would pass:
+        // 1024 · 2e-3 · 0.9 / (0.1 · (0.012 − 0.002)) = 1843.2, so 1844.
+        let noisy = flat_reference((2e-3 * (1.0 + eps)) as f32, 1024.0);
+        let e = check_floor("a", &noisy, &summary, 0.1).unwrap_err();
+        assert!(!e.contains('\n'), "{e}");
+        for part in [
+            "scene 'a'",
+            "2.000e-3",
+            "1.200e-2",
+            "'fast' at 8 s",
+            "about 1844 spp",
+            "now 1024",
+        ] {
+            assert!(e.contains(part), "{part:?} missing in: {e}");
+        }
+        // A looser bound accepts it; a scene without rows or a reference without variance
+        // cannot be judged and passes.
+        check_floor("a", &noisy, &summary, 0.2).unwrap();
+        check_floor("c", &noisy, &summary, 0.1).unwrap();
+        let mut unknown = noisy.clone();
+        unknown.variance = None;
+        check_floor("a", &unknown, &summary, 0.1).unwrap();
+        // Errors at the floor already: the needed spp stays finite (own error bounded below
+        // by ratio × relMSE): 1024 · 0.02 · 0.9 / (0.1 · 0.1 · 0.012) = 153600, so 153600 or
+        // one more from rounding.
+        let at_floor = flat_reference((0.02 * (1.0 + eps)) as f32, 1024.0);
+        let e = check_floor("a", &at_floor, &summary, 0.1).unwrap_err();
+        assert!(e.contains("about 15360"), "{e}");
+    }
 }

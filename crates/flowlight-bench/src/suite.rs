@@ -30,6 +30,7 @@ struct RawBench {
     #[serde(default = "default_out")]
     out: String,
     baseline: Option<String>,
+    floor_ratio: Option<f64>,
 }
 
 fn default_seeds() -> Vec<u64> {
@@ -76,7 +77,12 @@ struct RawMethod {
 pub struct SuiteScene {
     pub name: String,
     pub config: PathBuf,
+    /// The suite's reference file: `reference` when given, else the cache
+    /// `<out>/references/<name>.exr` (rendered when missing).
     pub reference: PathBuf,
+    /// The committed reference `<config folder>/reference/<config stem>.exr`, used instead
+    /// of [`SuiteScene::reference`] when it exists (`None` when the scene names its own).
+    pub committed_reference: Option<PathBuf>,
     pub reference_budget: Budget,
     pub width: Option<u32>,
     pub height: Option<u32>,
@@ -109,6 +115,9 @@ pub struct Suite {
     pub threads: usize,
     pub out: PathBuf,
     pub baseline: String,
+    /// The floor rule's bound: a reference floor above `floor_ratio` × the smallest relMSE
+    /// reported against it refuses the comparison (default 0.1).
+    pub floor_ratio: f64,
     pub reference_seed: u64,
     pub reference_plugin: Option<String>,
     pub reference_params: Vec<(String, toml::Value)>,
@@ -171,9 +180,18 @@ pub fn parse_suite(path: &Path, text: &str) -> Result<Suite, String> {
             Some(r) => base.join(r),
             None => out.join("references").join(format!("{}.exr", s.name)),
         };
+        let config = base.join(&s.config);
+        let committed_reference = match &s.reference {
+            Some(_) => None,
+            None => config.parent().zip(config.file_stem()).map(|(dir, stem)| {
+                dir.join("reference")
+                    .join(format!("{}.exr", stem.to_string_lossy()))
+            }),
+        };
         scenes.push(SuiteScene {
             reference,
-            config: base.join(&s.config),
+            committed_reference,
+            config,
             reference_budget: s.reference_spp.map(Budget::Spp).unwrap_or(ref_budget),
             width: s.width.or(b.width),
             height: s.height.or(b.height),
@@ -214,6 +232,12 @@ pub fn parse_suite(path: &Path, text: &str) -> Result<Suite, String> {
             .label
             .clone(),
     };
+    let floor_ratio = b.floor_ratio.unwrap_or(0.1);
+    if !(floor_ratio > 0.0 && floor_ratio.is_finite()) {
+        return Err(err(format!(
+            "bench.floor_ratio must be a positive number, got {floor_ratio}"
+        )));
+    }
     let mut reference_params = table_pairs(raw.reference.params);
     if !reference_params.iter().any(|(k, _)| k == "layers")
         && raw.reference.plugin.as_deref().unwrap_or("mcpt") == "mcpt"
@@ -227,6 +251,7 @@ pub fn parse_suite(path: &Path, text: &str) -> Result<Suite, String> {
         threads: b.threads,
         out,
         baseline,
+        floor_ratio,
         reference_seed: raw.reference.seed.unwrap_or(1_000_000),
         reference_plugin: raw.reference.plugin,
         reference_params,
@@ -283,6 +308,7 @@ scenes = ["b"]
             text.replace("label = \"erpt\"", "label = \"pt\""),
             text.replace("[bench]", "[bench]\nbaseline = \"nope\""),
             text.replace("seeds = [1, 2]", "seedz = [1]"),
+            text.replace("[bench]", "[bench]\nfloor_ratio = 0.0"),
         ] {
             assert!(parse_suite(p, &bad).is_err(), "accepted:\n{bad}");
         }

@@ -602,6 +602,40 @@ impl SceneBuilder {
         mesh.3.extend(faces.iter().flatten().map(|k| base + k));
     }
 
+    /// An open cylinder (a tube without caps, zero wall thickness) standing on the plane
+    /// y = `base[1]`: axis +Y through `base`, `radius`, `height`, `segments` quads around,
+    /// smooth vertex normals pointing out (a double-sided material shades the inside too).
+    pub fn tube(
+        &mut self,
+        material: &str,
+        base: [f64; 3],
+        radius: f64,
+        height: f64,
+        segments: u32,
+    ) {
+        let i = self.mesh(material, true);
+        let mesh = &mut self.meshes[i];
+        let first = mesh.1.len() as u32;
+        for k in 0..segments {
+            let a = std::f64::consts::TAU * k as f64 / segments as f64;
+            let (s, c) = a.sin_cos();
+            for y in [0.0, height] {
+                mesh.1
+                    .push([base[0] + radius * c, base[1] + y, base[2] + radius * s]);
+                mesh.2.as_mut().expect("a smooth mesh").push([c, 0.0, s]);
+            }
+        }
+        for k in 0..segments {
+            let (lo, hi) = (first + 2 * k, first + 2 * k + 1);
+            let (lo2, hi2) = (
+                first + 2 * ((k + 1) % segments),
+                first + 2 * ((k + 1) % segments) + 1,
+            );
+            // Counter-clockwise seen from outside.
+            mesh.3.extend([lo, hi, lo2, lo2, hi, hi2]);
+        }
+    }
+
     /// The document with a perspective camera at `position` looking at `look_at` (up +Y),
     /// vertical field of view `yfov_degrees`; and its triangle count.
     pub fn gltf(

@@ -310,6 +310,55 @@ wall-floor corners are the thesis' corner traps.",
     )
 }
 
+pub fn ring_caustic() -> SceneFiles {
+    let mut b = SceneBuilder::new(&generator("ring-caustic"));
+    b.material("floor", [0.7, 0.7, 0.7], plain());
+    let metal = MaterialOptions {
+        metallic: 1.0,
+        roughness: Some(0.0),
+        ..MaterialOptions::default()
+    };
+    b.material("ring", [0.95, 0.93, 0.88], metal);
+    b.material("lamp", [0.0; 3], lamp([1.0, 0.95, 0.85], 300.0));
+    b.quad(
+        "floor",
+        [
+            [-3.0, 0.0, -3.0],
+            [3.0, 0.0, -3.0],
+            [3.0, 0.0, 3.0],
+            [-3.0, 0.0, 3.0],
+        ],
+        Some([0.0, 1.0, 0.0]),
+    );
+    b.tube("ring", [0.0, 0.0, 0.0], 0.5, 0.25, 128);
+    // A 0.35 m square lamp 2.75 m away at 22 degrees above the floor, facing the ring.
+    let (d, e, half) = (2.75f64, 22f64.to_radians(), 0.175);
+    let (cx, cy) = (-d * e.cos(), d * e.sin());
+    let (hx, hy) = (half * e.sin(), half * e.cos()); // half extent along the tilted up axis
+    b.quad(
+        "lamp",
+        [
+            [cx - hx, cy - hy, -half],
+            [cx + hx, cy + hy, -half],
+            [cx + hx, cy + hy, half],
+            [cx - hx, cy - hy, half],
+        ],
+        Some([e.cos(), -e.sin(), 0.0]),
+    );
+    finish(
+        "ring-caustic",
+        &b,
+        ([0.5, 2.1, 1.8], [0.05, 0.0, 0.0], 38.0),
+        "
+Ring caustic: a polished metal ring (an open cylinder, radius 0.5, height 0.25, metallic 1,
+roughness 0) on a diffuse floor, lit by a small lamp 22 degrees above the floor. Light reflected
+once off the inside of the ring draws the cardioid (nephroid) caustic on the floor inside it
+(LSDE paths): path tracing finds it only by BSDF-sampled floor rays that hit the ring and then
+the small lamp.",
+        8,
+    )
+}
+
 /// Every scene, in the order `make-scenes` writes them.
 pub fn all() -> Vec<SceneFiles> {
     vec![
@@ -317,5 +366,6 @@ pub fn all() -> Vec<SceneFiles> {
         glass_caustic(),
         mirror_chain(),
         narrow_gap(),
+        ring_caustic(),
     ]
 }

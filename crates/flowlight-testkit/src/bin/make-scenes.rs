@@ -17,6 +17,8 @@
 //!   the diffuse floor or end wall.
 //! * `narrow-gap`: a slab 2 cm above the floor in a corner, lit from above: the floor under
 //!   it is lit only through the 2 cm gaps (the thesis' corner and cavity traps).
+//! * `ring-caustic`: a polished metal ring (open cylinder) on a diffuse floor, lit by a small
+//!   lamp at a low angle: the cardioid caustic inside the ring is made of LSDE paths.
 //!
 //! `tests/scenes.rs` of this crate checks that the committed files are what this writes.
 
