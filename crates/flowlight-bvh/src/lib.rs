@@ -48,7 +48,9 @@ mod build;
 mod instanced;
 mod traverse;
 mod triangle;
+mod wide;
 
-pub use build::{Bvh, MAX_LEAF_SIZE, SAH_BINS};
+pub use build::{BinaryBvh, MAX_LEAF_SIZE, SAH_BINS};
 pub use instanced::{Instance, TwoLevelBvh};
 pub use triangle::{intersect_triangle, is_degenerate, WatertightRay};
+pub use wide::{Bvh, WIDTH};
