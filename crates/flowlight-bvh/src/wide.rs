@@ -750,3 +750,199 @@ impl PackRay {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use flowlight_core::rng::Rng;
+
+    fn random_soup(n: usize, seed: u64) -> Vec<[Vec3; 3]> {
+        let mut rng = Rng::new(seed, 0);
+        let mut v = || Vec3::new(rng.uniform(), rng.uniform(), rng.uniform());
+        (0..n)
+            .map(|_| {
+                let c = v() * 10.0;
+                [c + v() - 0.5, c + v() - 0.5, c + v() - 0.5]
+            })
+            .collect()
+    }
+
+    /// Children inside their parent's slot box, every stored triangle in exactly one valid
+    /// lane, empty slots with empty boxes, the stack bound respected.
+    fn check_structure(bvh: &Bvh, tris: &[[Vec3; 3]]) {
+        let mut seen = vec![0u32; tris.len()];
+        let mut stack = vec![(0u32, Vec3::NEG_INFINITY, Vec3::INFINITY, 1usize)];
+        while let Some((r, lo, hi, depth)) = stack.pop() {
+            assert!(3 * depth <= STACK_SIZE);
+            let inside = |p: Vec3| p.cmpge(lo).all() && p.cmple(hi).all();
+            if r & LEAF_BIT != 0 {
+                let pack = ((r & !LEAF_BIT) >> 2) as usize;
+                let count = (r & 3) as usize + 1;
+                for lane in 0..count {
+                    let prim = bvh.pack_prims[pack][lane] as usize;
+                    seen[prim] += 1;
+                    let t = bvh.packs[pack].triangle(lane);
+                    assert_eq!(t, tris[prim]);
+                    assert!(t.iter().all(|&p| inside(p)));
+                }
+                assert!(bvh.pack_prims[pack][count..].iter().all(|&p| p == u32::MAX));
+                continue;
+            }
+            let n = &bvh.nodes[r as usize];
+            for k in 0..WIDTH {
+                let clo = Vec3::new(n.bounds[0][k], n.bounds[2][k], n.bounds[4][k]);
+                let chi = Vec3::new(n.bounds[1][k], n.bounds[3][k], n.bounds[5][k]);
+                if n.child[k] == EMPTY_CHILD {
+                    assert_eq!((clo, chi), (Vec3::INFINITY, Vec3::NEG_INFINITY));
+                    continue;
+                }
+                assert!(inside(clo) && inside(chi), "child box outside its parent's");
+                if n.child[k] & LEAF_BIT == 0 {
+                    assert!(n.child[k] > r, "depth-first order");
+                }
+                stack.push((n.child[k], clo, chi, depth + 1));
+            }
+        }
+        for (i, t) in tris.iter().enumerate() {
+            assert_eq!(seen[i], u32::from(!is_degenerate(t)), "triangle {i}");
+        }
+    }
+
+    #[test]
+    fn structure_is_valid_and_deterministic() {
+        for n in [1, 4, 5, 17, 3000, 40_000] {
+            let tris = random_soup(n, n as u64);
+            let bvh = Bvh::build(&tris);
+            check_structure(&bvh, &tris);
+            let one = rayon::ThreadPoolBuilder::new()
+                .num_threads(1)
+                .build()
+                .unwrap();
+            assert!(
+                one.install(|| Bvh::build(&tris)) == bvh,
+                "{n}: thread count matters"
+            );
+        }
+        // Pathological centroids (2^-k): the SAH depth cap keeps the stack in bounds.
+        let tris: Vec<[Vec3; 3]> = (0..3000)
+            .map(|k| {
+                let x = 0.5f32.powi(k % 140) * 1e6;
+                let o = Vec3::new(x, (k / 140) as f32, 0.0);
+                [
+                    o,
+                    o + Vec3::new(x * 1e-3, 0.0, 0.0),
+                    o + Vec3::new(0.0, 0.5, 0.5),
+                ]
+            })
+            .collect();
+        check_structure(&Bvh::build(&tris), &tris);
+    }
+
+    /// Every lane of the pack test is bit for bit the scalar watertight test, on random rays
+    /// and on axis-aligned rays through vertices (edge functions exactly 0: the scalar path).
+    #[test]
+    fn pack_test_is_the_scalar_test_lane_for_lane() {
+        let mut rng = Rng::new(5, 5);
+        let grid = |rng: &mut Rng| Vec3::new(rng.uniform(), rng.uniform(), rng.uniform());
+        let (mut fast, mut slow, mut hits) = (0, 0, 0);
+        for k in 0..20_000 {
+            let count = 1 + k % 4;
+            let tris: Vec<[Vec3; 3]> = (0..count)
+                .map(|_| {
+                    if k % 3 == 0 {
+                        // Quarter-integer lattice triangles: exact zeros are common.
+                        [0; 3].map(|_| (grid(&mut rng) * 8.0).floor() * 0.25)
+                    } else {
+                        [0; 3].map(|_| grid(&mut rng) * 2.0 - 1.0)
+                    }
+                })
+                .filter(|t| !is_degenerate(t))
+                .collect();
+            if tris.is_empty() {
+                continue;
+            }
+            let pack = TriPack::new(&tris);
+            let valid = (1u32 << tris.len()) - 1;
+            let (origin, dir) = if k % 3 == 0 {
+                let v = tris[0][k % 3];
+                let axis = k % 3;
+                let mut o = v;
+                o[axis] -= 3.0;
+                let mut d = Vec3::ZERO;
+                d[axis] = 1.0;
+                (o, d)
+            } else {
+                let o = grid(&mut rng) * 6.0 - 3.0;
+                (o, grid(&mut rng) * 2.0 - o)
+            };
+            let t_max = if k % 5 == 0 { 2.5 } else { f32::INFINITY };
+            let ray = Ray::new(origin, dir, t_max);
+            let w = WatertightRay::new(&ray).unwrap();
+            let lanes = match PackRay::new(&ray, &w).test(&pack, valid, t_max) {
+                Some(l) => {
+                    fast += 1;
+                    l
+                }
+                None => {
+                    slow += 1;
+                    scalar_pack_test(&w, &pack, valid, t_max)
+                }
+            };
+            for (lane, tri) in tris.iter().enumerate() {
+                let want = w.intersect(tri, t_max);
+                let got = (lanes.mask & (1 << lane) != 0)
+                    .then(|| (lanes.t[lane], lanes.b1[lane], lanes.b2[lane]));
+                assert_eq!(
+                    got.map(|(t, b1, b2)| [t, b1, b2].map(f32::to_bits)),
+                    want.map(|(t, b1, b2)| [t, b1, b2].map(f32::to_bits)),
+                    "lane {lane} of {tris:?} for {ray:?}"
+                );
+                hits += want.is_some() as usize;
+            }
+            assert_eq!(lanes.mask & !valid, 0, "an unused lane reported a hit");
+        }
+        assert!(
+            fast > 10_000 && slow > 1000 && hits > 3000,
+            "{fast} {slow} {hits}"
+        );
+    }
+
+    #[test]
+    fn box_test_is_the_binary_slab_test() {
+        use crate::build::Node;
+        use crate::traverse::SlabRay;
+        let mut rng = Rng::new(9, 9);
+        let mut u = || rng.uniform();
+        for k in 0..20_000 {
+            let mut node = WideNode::EMPTY;
+            let mut boxes = Vec::new();
+            for slot in 0..(1 + k % 4) {
+                let a = Vec3::new(u(), u(), u()) * 4.0 - 2.0;
+                let b = a + Vec3::new(u(), u(), u()) * if k % 7 == 0 { 0.0 } else { 1.0 };
+                let b = Aabb { min: a, max: b };
+                node.set(slot, &b, slot as u32 + 1);
+                boxes.push(b);
+            }
+            // Origins on box planes with zero direction components now and then.
+            let mut o = Vec3::new(u(), u(), u()) * 6.0 - 3.0;
+            let mut d = Vec3::new(u(), u(), u()) * 2.0 - 1.0;
+            if k % 5 == 0 {
+                let axis = k % 3;
+                o[axis] = boxes[0].min[axis];
+                d[axis] = if k % 2 == 0 { 0.0 } else { -0.0 };
+            }
+            let t_max = if k % 3 == 0 { u() * 4.0 } else { f32::INFINITY };
+            let ray = Ray::new(o, d, t_max);
+            let (mask, t0) = BoxRay::new(&ray).test(&node, t_max);
+            let slab = SlabRay::new(&ray);
+            for (slot, b) in boxes.iter().enumerate() {
+                let want = slab.entry(&Node::interior(b, 0), t_max);
+                assert_eq!(mask & (1 << slot) != 0, want.is_some(), "{b:?} {ray:?}");
+                if let Some(e) = want {
+                    assert_eq!(t0[slot].max(0.0), e);
+                }
+            }
+            assert_eq!(mask >> boxes.len(), 0, "an empty slot was entered");
+        }
+    }
+}
