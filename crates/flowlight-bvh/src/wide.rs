@@ -58,6 +58,8 @@ const MAX_PACKS: usize = (1 << 29) - 1;
 /// Traversal stack: at most `WIDTH − 1` entries per level, and a path has at most
 /// `MAX_SAH_DEPTH + 32` binary splits (see the binary build), so fewer levels than that.
 const STACK_SIZE: usize = 3 * 128;
+/// The stack of trees whose bound (see [`stack_bound`]) is at most this.
+const SMALL_STACK: usize = 64;
 
 /// One node: the boxes of its four children, SoA, and the child references.
 #[repr(C, align(64))]
@@ -144,6 +146,20 @@ pub struct Bvh {
     bounds: (Vec3, Vec3),
     stored: usize,
     input_count: usize,
+    /// Most traversal stack entries a ray can need (see [`stack_bound`]).
+    stack_bound: usize,
+}
+
+/// Most entries the traversal stack can hold below node `r`: a node stacks all entered
+/// children but the one it descends into, and an entry is only popped to descend into it,
+/// so along any path the stack holds at most `Σ (children − 1)` of the nodes passed.
+fn stack_bound(nodes: &[WideNode], r: u32) -> usize {
+    if r & LEAF_BIT != 0 {
+        return 0;
+    }
+    let n = &nodes[r as usize];
+    let children = n.child.iter().filter(|&&c| c != EMPTY_CHILD);
+    children.clone().count() - 1 + children.map(|&c| stack_bound(nodes, c)).max().unwrap_or(0)
 }
 
 /// A child during widening: `refs[start .. start + len]`, its boxes and binary depth.
@@ -323,6 +339,7 @@ impl Bvh {
             bounds: (Vec3::INFINITY, Vec3::NEG_INFINITY),
             stored: 0,
             input_count: triangles.len(),
+            stack_bound: 0,
         };
         if refs.is_empty() {
             return empty;
@@ -340,6 +357,9 @@ impl Bvh {
             tree.leaves.len() <= MAX_PACKS,
             "too many triangles for a Bvh"
         );
+        let bound = stack_bound(&tree.nodes, 0);
+        // The SAH depth cap keeps trees far below this (`MAX_SAH_DEPTH + 32` binary levels).
+        assert!(bound <= STACK_SIZE, "BVH too deep for the traversal stack");
         let (packs, pack_prims) = tree
             .leaves
             .par_iter()
@@ -360,6 +380,7 @@ impl Bvh {
             pack_prims,
             bounds: (bounds.min, bounds.max),
             stored: refs.len(),
+            stack_bound: bound,
             ..empty
         }
     }
@@ -434,6 +455,8 @@ impl Bvh {
         self.traverse::<true, true, _>(ray, &accept).is_some()
     }
 
+    /// Picks the traversal stack: a small one when the tree's bound allows (clearing a
+    /// 3 KiB stack for every ray is measurable), else the largest one a tree can need.
     #[inline(always)]
     fn traverse<const ANY_HIT: bool, const FILTER: bool, F: Fn(u32, f32, f32) -> bool>(
         &self,
@@ -443,12 +466,32 @@ impl Bvh {
         if self.nodes.is_empty() {
             return None;
         }
+        if self.stack_bound <= SMALL_STACK {
+            self.traverse_with::<ANY_HIT, FILTER, F, SMALL_STACK>(ray, accept)
+        } else {
+            self.traverse_with::<ANY_HIT, FILTER, F, STACK_SIZE>(ray, accept)
+        }
+    }
+
+    #[inline(always)]
+    fn traverse_with<
+        const ANY_HIT: bool,
+        const FILTER: bool,
+        F: Fn(u32, f32, f32) -> bool,
+        const STACK: usize,
+    >(
+        &self,
+        ray: &Ray,
+        accept: &F,
+    ) -> Option<TriangleHit> {
         let wray = WatertightRay::new(ray)?;
         let pray = PackRay::new(ray, &wray);
         let bray = BoxRay::new(ray);
         let mut t_max = ray.t_max;
-        let mut hit: Option<TriangleHit> = None;
-        let mut stack = [(0u32, 0f32); STACK_SIZE];
+        // The closest hit so far: pack, lane, t, b1, b2 (its triangle id is looked up once,
+        // at the end, instead of at every closer hit).
+        let mut hit: Option<(usize, usize, f32, f32, f32)> = None;
+        let mut stack = [(0u32, 0f32); STACK];
         let mut sp = 0usize;
         let mut cur = 0u32;
         loop {
@@ -500,11 +543,12 @@ impl Bvh {
                 };
                 if lanes.mask != 0 {
                     let prims = &self.pack_prims[pack];
-                    if let Some(h) = lanes.pick::<ANY_HIT, FILTER, F>(prims, accept) {
+                    if let Some(k) = lanes.pick::<ANY_HIT, FILTER, F>(prims, accept) {
+                        let h = (pack, k, lanes.t[k], lanes.b1[k], lanes.b2[k]);
                         if ANY_HIT {
-                            return Some(h);
+                            return Some(self.hit(h));
                         }
-                        t_max = h.t;
+                        t_max = h.2;
                         hit = Some(h);
                     }
                 }
@@ -512,7 +556,7 @@ impl Bvh {
             // Pop the next entry that can still hold a closer hit.
             loop {
                 if sp == 0 {
-                    return hit;
+                    return hit.map(|h| self.hit(h));
                 }
                 sp -= 1;
                 let (r, t) = stack[sp];
@@ -525,25 +569,34 @@ impl Bvh {
     }
 }
 
+impl Bvh {
+    #[inline(always)]
+    fn hit(&self, (pack, lane, t, b1, b2): (usize, usize, f32, f32, f32)) -> TriangleHit {
+        TriangleHit {
+            t,
+            prim: self.pack_prims[pack][lane],
+            b1,
+            b2,
+        }
+    }
+}
+
 /// Per-ray constants of the 4-wide slab test.
 struct BoxRay {
     org: [Vec4; 3],
     inv: [Vec4; 3],
-    /// Index into `WideNode::bounds` of the near and far plane along each axis.
-    near: [usize; 3],
-    far: [usize; 3],
+    /// 1 where the direction component is negative (the near plane is the max plane).
+    neg: [usize; 3],
 }
 
 impl BoxRay {
     #[inline(always)]
     fn new(ray: &Ray) -> BoxRay {
         let inv = [1.0 / ray.dir.x, 1.0 / ray.dir.y, 1.0 / ray.dir.z];
-        let neg = inv.map(|i| usize::from(i < 0.0));
         BoxRay {
             org: ray.origin.to_array().map(Vec4::splat),
             inv: inv.map(Vec4::splat),
-            near: [neg[0], 2 + neg[1], 4 + neg[2]],
-            far: [1 - neg[0], 3 - neg[1], 5 - neg[2]],
+            neg: inv.map(|i| usize::from(i < 0.0)),
         }
     }
 
@@ -551,12 +604,14 @@ impl BoxRay {
     #[inline(always)]
     fn test(&self, node: &WideNode, t_max: f32) -> (u32, Vec4) {
         let b = &node.bounds;
-        let n0 = (b[self.near[0]] - self.org[0]) * self.inv[0];
-        let n1 = (b[self.near[1]] - self.org[1]) * self.inv[1];
-        let n2 = (b[self.near[2]] - self.org[2]) * self.inv[2];
-        let f0 = (b[self.far[0]] - self.org[0]) * self.inv[0];
-        let f1 = (b[self.far[1]] - self.org[1]) * self.inv[1];
-        let f2 = (b[self.far[2]] - self.org[2]) * self.inv[2];
+        // `& 1` lets the compiler drop the bounds checks.
+        let [x, y, z] = self.neg.map(|n| n & 1);
+        let n0 = (b[x] - self.org[0]) * self.inv[0];
+        let n1 = (b[2 + y] - self.org[1]) * self.inv[1];
+        let n2 = (b[4 + z] - self.org[2]) * self.inv[2];
+        let f0 = (b[1 - x] - self.org[0]) * self.inv[0];
+        let f1 = (b[3 - y] - self.org[1]) * self.inv[1];
+        let f2 = (b[5 - z] - self.org[2]) * self.inv[2];
         // The slab distance first: a NaN one yields the (never NaN) accumulator.
         let t0 = n0.max(n1.max(n2.max(Vec4::NEG_INFINITY)));
         let t1 = f0.min(f1.min(f2.min(Vec4::INFINITY))) * Vec4::splat(1.0 + 2.0 * gamma(3));
@@ -587,24 +642,19 @@ impl Lanes {
     /// The hit a pack reports: any accepted lane for any hit, else the nearest accepted lane
     /// (ties: the lowest lane, as a sequential loop with a shrinking `t_max` would).
     #[inline(always)]
+    /// `prims` is read only when `FILTER` is set.
     fn pick<const ANY_HIT: bool, const FILTER: bool, F: Fn(u32, f32, f32) -> bool>(
         &self,
         prims: &[u32; WIDTH],
         accept: &F,
-    ) -> Option<TriangleHit> {
-        let lane_hit = |k: usize| TriangleHit {
-            t: self.t[k],
-            prim: prims[k],
-            b1: self.b1[k],
-            b2: self.b2[k],
-        };
+    ) -> Option<usize> {
         let mut mask = self.mask;
         if ANY_HIT {
             while mask != 0 {
                 let k = mask.trailing_zeros() as usize;
                 mask &= mask - 1;
                 if !FILTER || accept(prims[k], self.b1[k], self.b2[k]) {
-                    return Some(lane_hit(k));
+                    return Some(k);
                 }
             }
             return None;
@@ -620,7 +670,7 @@ impl Lanes {
                 }
             }
             if !FILTER || accept(prims[best], self.b1[best], self.b2[best]) {
-                return Some(lane_hit(best));
+                return Some(best);
             }
             mask &= !(1 << best);
         }
@@ -772,8 +822,9 @@ mod tests {
     fn check_structure(bvh: &Bvh, tris: &[[Vec3; 3]]) {
         let mut seen = vec![0u32; tris.len()];
         let mut stack = vec![(0u32, Vec3::NEG_INFINITY, Vec3::INFINITY, 1usize)];
+        assert!(bvh.stack_bound <= 3 * bvh.depth());
         while let Some((r, lo, hi, depth)) = stack.pop() {
-            assert!(3 * depth <= STACK_SIZE);
+            assert!(depth <= bvh.depth());
             let inside = |p: Vec3| p.cmpge(lo).all() && p.cmple(hi).all();
             if r & LEAF_BIT != 0 {
                 let pack = ((r & !LEAF_BIT) >> 2) as usize;
@@ -905,6 +956,30 @@ mod tests {
             fast > 10_000 && slow > 1000 && hits > 3000,
             "{fast} {slow} {hits}"
         );
+    }
+
+    /// The small-stack and the large-stack traversal give the same hits.
+    #[test]
+    fn both_stack_sizes_agree() {
+        let tris = random_soup(5000, 77);
+        let small = Bvh::build(&tris);
+        assert!(small.stack_bound <= SMALL_STACK, "{}", small.stack_bound);
+        let large = Bvh {
+            stack_bound: STACK_SIZE,
+            ..small.clone()
+        };
+        let mut rng = Rng::new(3, 3);
+        let mut u = || rng.uniform();
+        let mut hits = 0;
+        for _ in 0..5000 {
+            let o = Vec3::new(u(), u(), u()) * 14.0 - 2.0;
+            let ray = Ray::new(o, Vec3::new(u(), u(), u()) * 10.0 - o, f32::INFINITY);
+            let h = small.intersect(&ray);
+            assert_eq!(h, large.intersect(&ray));
+            assert_eq!(small.occluded(&ray), large.occluded(&ray));
+            hits += h.is_some() as usize;
+        }
+        assert!(hits > 1000, "{hits}");
     }
 
     #[test]
