@@ -88,7 +88,7 @@ fn check(tris: &[Tri], rays: &[Ray], brute_every: usize) -> usize {
     let binary = BinaryBvh::build(tris);
     assert_eq!(wide.stored_triangle_count(), binary.stored_triangle_count());
     assert_eq!(wide.bounds(), binary.bounds());
-    let accept = |prim: u32, b1: f32, _b2: f32| prim % 3 != 0 && b1 < 0.5;
+    let accept = |prim: u32, b1: f32, _b2: f32| !prim.is_multiple_of(3) && b1 < 0.5;
     rays.par_iter()
         .enumerate()
         .map(|(k, ray)| {
