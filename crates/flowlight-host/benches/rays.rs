@@ -8,7 +8,9 @@
 //!
 //! `cargo bench -p flowlight-host --bench rays` (`FLOWLIGHT_BENCH_RAYS=N` rays per run,
 //! default 1M; `FLOWLIGHT_BENCH_SIZES=10000,100000` to pick meshes;
-//! `FLOWLIGHT_BENCH_REPEAT=R` rounds).
+//! `FLOWLIGHT_BENCH_REPEAT=R` rounds). `cargo build --release -p flowlight-host --bench rays`
+//! builds the same binary (under `target/release/deps/rays-*`) from the release artifacts,
+//! without rebuilding every dependency under the `bench` profile.
 
 use flowlight_bvh::BinaryBvh;
 use flowlight_core::geometry::Ray;
