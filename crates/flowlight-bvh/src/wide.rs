@@ -20,9 +20,11 @@
 //!   `t_far = (1 + 2γ₃)·min_a (far_a − o_a)·(1/d_a)`, where `near_a` is the min plane for
 //!   `d_a ≥ +0` and the max plane otherwise; a child is entered when `t_near ≤ t_far`,
 //!   `t_near < t_max` and `t_far > 0`. This is exactly the binary BVH's robust slab test
-//!   (pbrt-v4 §6.8.2): the operand order of the SSE `max`/`min` (`_mm_max_ps(a, b)` returns
-//!   `b` when either is NaN) makes a NaN slab distance (origin on the plane, `d_a = ±0`)
-//!   leave the interval unconstrained, as `f32::max` does.
+//!   (pbrt-v4 §6.8.2): the slab distance is the first operand of glam's `max`/`min` and the
+//!   (never NaN) accumulator the second, and these return the second operand when the first
+//!   is NaN (SSE2 `_mm_max_ps`, NEON's compare-and-select, the scalar `f32::max`), so a NaN
+//!   slab distance (origin on the plane, `d_a = ±0`) leaves the interval unconstrained, as in
+//!   the binary test.
 //! * **Traversal** — iterative with a stack of (node, entry distance). Closest hit visits the
 //!   entered children nearest first (entry distances sorted) and skips popped entries whose
 //!   entry distance is no longer below `t_max`; any hit returns at the first accepted hit.
@@ -36,8 +38,8 @@
 //!   first accepted one is the pack's closest accepted hit, rejected ones leave `t_max` as
 //!   it is.
 //!
-//! Only SSE2 (the x86-64 baseline) is used, through glam's `Vec4`; other targets get glam's
-//! portable fallback, with the same results.
+//! Only SSE2 (the x86-64 baseline) is used, through glam's `Vec4`; on other targets glam's
+//! NEON or scalar `Vec4` gives the same results (same IEEE operations, same NaN rule).
 
 use crate::build::{
     decide, scan, Aabb, Decision, PrimRef, MAX_LEAF_SIZE, PARALLEL_BUILD_THRESHOLD,
