@@ -1,11 +1,12 @@
-//! Builds a BVH over 1M random triangles and traces random rays; prints timings.
+//! Builds a BVH over 1M random triangles and traces random rays; prints timings, then the
+//! same for the binary `BinaryBvh` in alternating rounds (one thread) as ratios.
 //!
-//! `cargo run --release -p flowlight-bvh --example build_1m [triangles] [rays]`
+//! `cargo run --release -p flowlight-bvh --example build_1m [triangles] [rays] [rounds]`
 //! Not a pass/fail benchmark: numbers depend on the machine.
 
 use std::time::Instant;
 
-use flowlight_bvh::Bvh;
+use flowlight_bvh::{BinaryBvh, Bvh};
 use flowlight_core::geometry::Ray;
 use flowlight_core::rng::Rng;
 use glam::Vec3;
@@ -86,4 +87,35 @@ fn main() {
         n_rays as f64 / s / 1e6
     );
     assert_eq!(hits, occluded);
+
+    let rounds: usize = args.next().map_or(3, |s| s.parse().expect("rounds")).max(1);
+    let mut ratios = [Vec::new(), Vec::new(), Vec::new()];
+    for _ in 0..rounds {
+        let time = |f: &dyn Fn() -> usize| {
+            let t = Instant::now();
+            std::hint::black_box(f());
+            t.elapsed().as_secs_f64()
+        };
+        let (wb, bb) = (
+            time(&|| Bvh::build(&tris).node_count()),
+            time(&|| BinaryBvh::build(&tris).node_count()),
+        );
+        let bin = BinaryBvh::build(&tris);
+        let wc = time(&|| rays.iter().filter(|r| bvh.intersect(r).is_some()).count());
+        let bc = time(&|| rays.iter().filter(|r| bin.intersect(r).is_some()).count());
+        let wa = time(&|| rays.iter().filter(|r| bvh.occluded(r)).count());
+        let ba = time(&|| rays.iter().filter(|r| bin.occluded(r)).count());
+        ratios[0].push(bb / wb);
+        ratios[1].push(bc / wc);
+        ratios[2].push(ba / wa);
+    }
+    for (name, r) in ["build", "closest", "any hit"].iter().zip(&mut ratios) {
+        r.sort_by(f64::total_cmp);
+        println!(
+            "wide speed-up over binary, {name}: median {:.2} (range {:.2}–{:.2})",
+            r[r.len() / 2],
+            r[0],
+            r[r.len() - 1]
+        );
+    }
 }

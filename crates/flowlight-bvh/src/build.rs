@@ -13,9 +13,9 @@ pub const SAH_BINS: usize = 16;
 /// the triangle count, so the depth stays below `MAX_SAH_DEPTH + 32 < STACK_SIZE`.
 const MAX_SAH_DEPTH: u32 = 64;
 /// Subtrees with fewer triangles than this are built sequentially.
-const PARALLEL_BUILD_THRESHOLD: usize = 4096;
+pub(crate) const PARALLEL_BUILD_THRESHOLD: usize = 4096;
 /// Nodes with at least this many triangles compute bounds and bins in parallel.
-const PARALLEL_SCAN_THRESHOLD: usize = 1 << 16;
+pub(crate) const PARALLEL_SCAN_THRESHOLD: usize = 1 << 16;
 const PARALLEL_SCAN_CHUNK: usize = 1 << 14;
 /// SAH cost of traversing a node relative to intersecting one triangle. pbrt-v4 uses 1/2; a
 /// node visit is mostly a cache miss while a leaf's triangles are contiguous. 2 gave 3×
@@ -61,9 +61,11 @@ impl Node {
     }
 }
 
-/// A bounding volume hierarchy over a triangle soup, with closest-hit and any-hit queries.
+/// The binary BVH over a triangle soup, with closest-hit and any-hit queries: the reference
+/// the wide [`crate::Bvh`] is tested and benchmarked against (its build is also the top level
+/// of [`crate::TwoLevelBvh`]).
 #[derive(Clone, Debug, PartialEq)]
-pub struct Bvh {
+pub struct BinaryBvh {
     pub(crate) nodes: Vec<Node>,
     /// Non-degenerate triangles in leaf order.
     pub(crate) tris: Vec<[Vec3; 3]>,
@@ -72,11 +74,11 @@ pub struct Bvh {
     input_count: usize,
 }
 
-impl Bvh {
+impl BinaryBvh {
     /// Builds the hierarchy. `prim` in hits is the index into `triangles`. Degenerate
     /// triangles (see [`is_degenerate`]) are skipped. Panics if there are more than `u32::MAX`
     /// triangles.
-    pub fn build(triangles: &[[Vec3; 3]]) -> Bvh {
+    pub fn build(triangles: &[[Vec3; 3]]) -> BinaryBvh {
         assert!(
             triangles.len() <= u32::MAX as usize,
             "too many triangles for a Bvh"
@@ -97,7 +99,7 @@ impl Bvh {
             .map(|r| triangles[r.index as usize])
             .collect();
         let prim_ids = refs.par_iter().map(|r| r.index).collect();
-        Bvh {
+        BinaryBvh {
             nodes,
             tris,
             prim_ids,
@@ -105,7 +107,7 @@ impl Bvh {
         }
     }
 
-    /// Number of triangles given to [`Bvh::build`], degenerate ones included.
+    /// Number of triangles given to [`BinaryBvh::build`], degenerate ones included.
     pub fn triangle_count(&self) -> usize {
         self.input_count
     }
@@ -159,7 +161,7 @@ impl Aabb {
     };
 
     #[inline]
-    fn union(self, o: Aabb) -> Aabb {
+    pub(crate) fn union(self, o: Aabb) -> Aabb {
         Aabb {
             min: self.min.min(o.min),
             max: self.max.max(o.max),
@@ -174,7 +176,7 @@ impl Aabb {
 
     /// Surface area; 0 for an empty box.
     #[inline]
-    fn area(&self) -> f32 {
+    pub(crate) fn area(&self) -> f32 {
         let d = self.max - self.min;
         if d.x < 0.0 || d.y < 0.0 || d.z < 0.0 {
             0.0
@@ -193,7 +195,7 @@ pub(crate) struct PrimRef {
 }
 
 impl PrimRef {
-    fn new(t: &[Vec3; 3], index: u32) -> PrimRef {
+    pub(crate) fn new(t: &[Vec3; 3], index: u32) -> PrimRef {
         let min = t[0].min(t[1]).min(t[2]);
         let max = t[0].max(t[1]).max(t[2]);
         // Halve first: `min + max` can overflow for coordinates near f32::MAX.
@@ -206,7 +208,7 @@ impl PrimRef {
 }
 
 /// Node bounds and centroid bounds.
-fn scan_seq(refs: &[PrimRef]) -> (Aabb, Aabb) {
+pub(crate) fn scan_seq(refs: &[PrimRef]) -> (Aabb, Aabb) {
     let mut b = Aabb::EMPTY;
     let mut c = Aabb::EMPTY;
     for r in refs {
@@ -217,7 +219,7 @@ fn scan_seq(refs: &[PrimRef]) -> (Aabb, Aabb) {
 }
 
 /// Same as [`scan_seq`]; min/max are exact, so the parallel reduction is deterministic.
-fn scan(refs: &[PrimRef]) -> (Aabb, Aabb) {
+pub(crate) fn scan(refs: &[PrimRef]) -> (Aabb, Aabb) {
     if refs.len() < PARALLEL_SCAN_THRESHOLD {
         return scan_seq(refs);
     }
@@ -342,7 +344,7 @@ fn best_split(bins: &Bins, active: [bool; 3]) -> Option<(f32, usize, usize)> {
     best
 }
 
-enum Decision {
+pub(crate) enum Decision {
     Leaf,
     /// `refs[..mid]` and `refs[mid..]` are the children; `axis` orders traversal.
     Split {
@@ -376,7 +378,7 @@ fn median_split(refs: &mut [PrimRef], axis: usize) -> Decision {
 
 /// Chooses between a leaf and a split, and partitions `refs` for a split.
 #[allow(clippy::neg_cmp_op_on_partial_ord)] // NaN extents and costs must take the fallbacks
-fn decide(
+pub(crate) fn decide(
     refs: &mut [PrimRef],
     bounds: &Aabb,
     cbounds: &Aabb,
@@ -508,7 +510,7 @@ mod tests {
 
     /// Checks structure: children inside parents, leaves inside their bounds, each stored
     /// triangle in exactly one leaf, depth within the stack.
-    fn check_structure(bvh: &Bvh) {
+    fn check_structure(bvh: &BinaryBvh) {
         let mut seen = vec![0u32; bvh.tris.len()];
         let mut stack = vec![(0usize, 1usize)];
         while let Some((i, depth)) = stack.pop() {
@@ -548,7 +550,7 @@ mod tests {
     fn structure_is_valid() {
         for n in [1, 2, 5, 100, 3000, 20_000] {
             let tris = random_soup(n, n as u64);
-            let bvh = Bvh::build(&tris);
+            let bvh = BinaryBvh::build(&tris);
             assert_eq!(bvh.triangle_count(), n);
             assert_eq!(bvh.stored_triangle_count(), n);
             check_structure(&bvh);
@@ -564,7 +566,7 @@ mod tests {
     #[test]
     fn sah_tree_is_reasonable() {
         let tris = random_soup(20_000, 3);
-        let bvh = Bvh::build(&tris);
+        let bvh = BinaryBvh::build(&tris);
         // Balanced-ish: far from a degenerate list.
         assert!(bvh.depth() < 40, "depth {}", bvh.depth());
         assert!(
@@ -579,7 +581,7 @@ mod tests {
         // 1000 copies of the same triangle: SAH cannot split, the median split must.
         let t = [Vec3::ZERO, Vec3::X, Vec3::Y];
         let tris = vec![t; 1000];
-        let bvh = Bvh::build(&tris);
+        let bvh = BinaryBvh::build(&tris);
         check_structure(&bvh);
         assert!(bvh.depth() <= 12, "depth {}", bvh.depth());
         let hit = bvh
@@ -602,7 +604,7 @@ mod tests {
                 ]
             })
             .collect();
-        let bvh = Bvh::build(&tris);
+        let bvh = BinaryBvh::build(&tris);
         check_structure(&bvh);
         assert!(bvh.depth() < STACK_SIZE);
     }
@@ -610,17 +612,17 @@ mod tests {
     #[test]
     fn build_is_deterministic_across_thread_counts() {
         let tris = random_soup(60_000, 9);
-        let a = Bvh::build(&tris);
+        let a = BinaryBvh::build(&tris);
         let one = rayon::ThreadPoolBuilder::new()
             .num_threads(1)
             .build()
             .unwrap();
-        let b = one.install(|| Bvh::build(&tris));
+        let b = one.install(|| BinaryBvh::build(&tris));
         let four = rayon::ThreadPoolBuilder::new()
             .num_threads(4)
             .build()
             .unwrap();
-        let c = four.install(|| Bvh::build(&tris));
+        let c = four.install(|| BinaryBvh::build(&tris));
         assert!(a == b && b == c);
         check_structure(&a);
     }
@@ -635,13 +637,13 @@ mod tests {
             [Vec3::ZERO, Vec3::X, Vec3::new(0.0, f32::INFINITY, 0.0)], // Inf
             [Vec3::ZERO, Vec3::X, Vec3::Y],                  // fine
         ];
-        let bvh = Bvh::build(&tris);
+        let bvh = BinaryBvh::build(&tris);
         assert_eq!(bvh.triangle_count(), 5);
         assert_eq!(bvh.stored_triangle_count(), 1);
         assert_eq!(bvh.prim_ids, vec![4]);
         let (lo, hi) = bvh.bounds();
         assert_eq!((lo, hi), (Vec3::ZERO, Vec3::new(1.0, 1.0, 0.0)));
-        let nan_only = Bvh::build(&tris[2..3]);
+        let nan_only = BinaryBvh::build(&tris[2..3]);
         assert_eq!(nan_only.node_count(), 0);
         assert!(nan_only
             .intersect(&Ray::new(Vec3::Z, -Vec3::Z, f32::INFINITY))

@@ -22,8 +22,9 @@
 //! world space therefore agree on every hit up to that tolerance (the agreement test in
 //! `tests/instanced.rs`).
 
-use crate::build::{build_parallel, Aabb, Bvh, Node, PrimRef};
+use crate::build::{build_parallel, Aabb, Node, PrimRef};
 use crate::traverse::{SlabRay, STACK_SIZE};
+use crate::Bvh;
 use flowlight_core::geometry::{InstanceHit, InstanceHitFilter, Ray};
 use glam::{Affine3A, Mat4, Vec3};
 

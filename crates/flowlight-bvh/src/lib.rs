@@ -7,12 +7,19 @@
 //!   median split when the SAH cannot separate the triangles (all centroids equal, non-finite
 //!   costs). The upper levels of the tree are built in parallel with `rayon::join`; the result
 //!   does not depend on the thread schedule (same input, same tree).
-//! * **Layout**: the tree is flattened depth-first into 32-byte nodes (pbrt-v4's
-//!   `LinearBVHNode`): the first child of an interior node directly follows it, the node stores
-//!   the index of its second child. Triangles are copied in leaf order into one array so that
-//!   a leaf's triangles are contiguous in memory.
-//! * **Traversal**: iterative with a fixed-size stack, nearer child first according to the
-//!   sign of the ray direction on the node's split axis. The ray/box slab test uses the
+//! * **Layout**: [`Bvh`] is 4-wide (module `wide`): each node is widened to up to four
+//!   children by repeatedly splitting its largest child with the same SAH (Wald, Benthin &
+//!   Boulos 2008; Embree's BVH4), stored as 128-byte nodes with the children's boxes in SoA
+//!   order, and each leaf is a pack of up to four triangles stored SoA. [`BinaryBvh`], the
+//!   binary tree of the same splits flattened depth-first into 32-byte nodes (pbrt-v4's
+//!   `LinearBVHNode`), is kept as the reference the wide tree is tested and benchmarked
+//!   against, and as the top level of [`TwoLevelBvh`].
+//! * **Traversal**: iterative with a fixed-size stack. [`Bvh`] tests the four child boxes of
+//!   a node at once with SSE (glam's `Vec4`), visits entered children nearest first for the
+//!   closest hit, and tests a leaf's four triangles at once with a 4-lane version of the
+//!   watertight test that gives each lane bit for bit the scalar result; [`BinaryBvh`] visits
+//!   the nearer child first according to the sign of the ray direction on the node's split
+//!   axis. The ray/box slab test uses the
 //!   precomputed reciprocal direction (±∞ for zero components, the sign of `-0.0` respected)
 //!   and pbrt-v4's robust `tMax *= 1 + 2γ₃` scaling (§6.8.2, `Bounds3::IntersectP`), so
 //!   rounding never culls a box the ray touches.
@@ -27,9 +34,10 @@
 //!   it, like Embree's filter callbacks; a rejected candidate leaves `t_max` unchanged, so
 //!   the closest accepted hit is found. The unfiltered queries compile the filter away.
 //!
-//! Module map: `build` (the binned-SAH build, the node layout and [`Bvh`] itself), `traverse`
-//! (slab test and the closest/any-hit queries), `triangle` (the watertight ray/triangle test)
-//! and `instanced` ([`TwoLevelBvh`]). The hits and filters ([`TriangleHit`], [`InstanceHit`],
+//! Module map: `build` (the binned-SAH build and [`BinaryBvh`]), `traverse` (its slab test
+//! and queries), `wide` ([`Bvh`]: widening, node and pack layout, SIMD box and triangle
+//! tests, traversal), `triangle` (the watertight ray/triangle test) and `instanced`
+//! ([`TwoLevelBvh`]). The hits and filters ([`TriangleHit`], [`InstanceHit`],
 //! [`HitFilter`], [`InstanceHitFilter`]) live in `flowlight_core::geometry`, shared with the
 //! Embree intersector.
 //!
@@ -48,7 +56,9 @@ mod build;
 mod instanced;
 mod traverse;
 mod triangle;
+mod wide;
 
-pub use build::{Bvh, MAX_LEAF_SIZE, SAH_BINS};
+pub use build::{BinaryBvh, MAX_LEAF_SIZE, SAH_BINS};
 pub use instanced::{Instance, TwoLevelBvh};
 pub use triangle::{intersect_triangle, is_degenerate, WatertightRay};
+pub use wide::{Bvh, WIDTH};

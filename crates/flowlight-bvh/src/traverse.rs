@@ -1,15 +1,15 @@
-//! Ray queries on a [`Bvh`]: the robust slab test (pbrt-v4 §6.8.2) and the iterative,
+//! Ray queries on a [`BinaryBvh`]: the robust slab test (pbrt-v4 §6.8.2) and the iterative,
 //! nearer-child-first traversal behind the closest-hit, any-hit and filtered queries; see the
 //! crate documentation.
 
-use crate::build::{Bvh, Node};
+use crate::build::{BinaryBvh, Node};
 use crate::triangle::{gamma, WatertightRay};
 use flowlight_core::geometry::{HitFilter, Ray, TriangleHit};
 
 /// Traversal stack size. The build caps the depth well below this (see [`MAX_SAH_DEPTH`]).
 pub(crate) const STACK_SIZE: usize = 128;
 
-impl Bvh {
+impl BinaryBvh {
     /// Closest hit with `t ∈ (0, ray.t_max)`, or `None`.
     pub fn intersect(&self, ray: &Ray) -> Option<TriangleHit> {
         self.traverse::<false, _>(ray, &mut 0, &|_, _, _| true)
@@ -21,13 +21,13 @@ impl Bvh {
             .is_some()
     }
 
-    /// [`Bvh::intersect`] counting only the hits `accept` keeps (alpha testing): a rejected
+    /// [`BinaryBvh::intersect`] counting only the hits `accept` keeps (alpha testing): a rejected
     /// candidate does not shorten the ray, so traversal finds the closest accepted hit.
     pub fn intersect_filtered(&self, ray: &Ray, accept: HitFilter) -> Option<TriangleHit> {
         self.traverse::<false, _>(ray, &mut 0, &accept)
     }
 
-    /// [`Bvh::occluded`] counting only the hits `accept` keeps.
+    /// [`BinaryBvh::occluded`] counting only the hits `accept` keeps.
     pub fn occluded_filtered(&self, ray: &Ray, accept: HitFilter) -> bool {
         self.traverse::<true, _>(ray, &mut 0, &accept).is_some()
     }
@@ -220,7 +220,7 @@ mod tests {
             tris.push([a, b, c]);
             tris.push([a, c, d]);
         }
-        let bvh = Bvh::build(&tris);
+        let bvh = BinaryBvh::build(&tris);
         // From the far end towards the near end: the closest hit is the last layer reached.
         let ray = Ray::new(Vec3::new(0.3, 0.2, 100.0), -Vec3::Z, f32::INFINITY);
         let mut any_tests = 0;

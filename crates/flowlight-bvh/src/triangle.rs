@@ -81,6 +81,12 @@ impl WatertightRay {
         })
     }
 
+    /// The dominant axis `kz` of the direction and the shear `(s_x, s_y, s_z)`.
+    #[inline]
+    pub(crate) fn shear(&self) -> (usize, f32, f32, f32) {
+        (self.kz as usize, self.sx, self.sy, self.sz)
+    }
+
     /// Returns `(t, b1, b2)` for a hit with `t ∈ (0, t_max)`.
     ///
     /// The degeneracy test of [`is_degenerate`] is *not* repeated here: filter degenerate

@@ -1,10 +1,18 @@
 //! Ray benchmark (not a test): incoherent closest-hit and any-hit throughput and build time
-//! of the Embree and BVH intersectors on closed meshes of ~10k, ~100k and ~1M triangles, with
-//! 1 and 2 threads. Prints a Markdown table (docs/performance.md holds the last one).
+//! of the Embree intersector, the host's BVH intersector (the 4-wide `flowlight_bvh::Bvh`)
+//! and the binary `flowlight_bvh::BinaryBvh` on closed meshes of ~10k, ~100k and ~1M
+//! triangles, with 1 and 2 threads. Prints a Markdown table (docs/performance.md holds the
+//! last one): medians over `FLOWLIGHT_BENCH_REPEAT` rounds (default 5) with the range, and
+//! each backend's ratio to Embree. Within a round the backends run one after the other on
+//! the same rays, so a ratio compares runs made seconds apart (the machine may be shared).
 //!
 //! `cargo bench -p flowlight-host --bench rays` (`FLOWLIGHT_BENCH_RAYS=N` rays per run,
-//! default 1M; `FLOWLIGHT_BENCH_SIZES=10000,100000` to pick meshes).
+//! default 1M; `FLOWLIGHT_BENCH_SIZES=10000,100000` to pick meshes;
+//! `FLOWLIGHT_BENCH_REPEAT=R` rounds). `cargo build --release -p flowlight-host --bench rays`
+//! builds the same binary (under `target/release/deps/rays-*`) from the release artifacts,
+//! without rebuilding every dependency under the `bench` profile.
 
+use flowlight_bvh::BinaryBvh;
 use flowlight_core::geometry::Ray;
 use flowlight_core::rng::Rng;
 use flowlight_host::intersector::{BvhIntersector, EmbreeIntersector, Intersector};
@@ -82,13 +90,87 @@ fn throughput(rays: &[Ray], threads: usize, f: &(dyn Fn(&Ray) -> bool + Sync)) -
     rays.len() as f64 / start.elapsed().as_secs_f64() / 1e6
 }
 
+/// A backend under test: its name and its two queries.
+struct Backend {
+    name: &'static str,
+    closest: Box<dyn Fn(&Ray) -> bool + Sync>,
+    any: Box<dyn Fn(&Ray) -> bool + Sync>,
+}
+
+/// Builds every backend once; the build times of this round.
+fn build_all(scene: &Scene, tris: &[[Vec3; 3]]) -> (Vec<Backend>, Vec<f64>) {
+    let mut out = Vec::new();
+    let mut times = Vec::new();
+    match EmbreeIntersector::build(scene) {
+        Ok((e, t)) => {
+            let e = std::sync::Arc::new(e);
+            let e2 = e.clone();
+            out.push(Backend {
+                name: "embree",
+                closest: Box::new(move |r| e.intersect(r).is_some()),
+                any: Box::new(move |r| e2.occluded(r)),
+            });
+            times.push(t.as_secs_f64());
+        }
+        Err(e) => eprintln!("Embree: {e}"),
+    }
+    let (b, t) = BvhIntersector::build(scene);
+    let b = std::sync::Arc::new(b);
+    let b2 = b.clone();
+    out.push(Backend {
+        name: "bvh (4-wide)",
+        closest: Box::new(move |r| b.intersect(r).is_some()),
+        any: Box::new(move |r| b2.occluded(r)),
+    });
+    times.push(t.as_secs_f64());
+    let start = Instant::now();
+    let bin = std::sync::Arc::new(BinaryBvh::build(tris));
+    times.push(start.elapsed().as_secs_f64());
+    let bin2 = bin.clone();
+    out.push(Backend {
+        name: "bvh-binary",
+        closest: Box::new(move |r| bin.intersect(r).is_some()),
+        any: Box::new(move |r| bin2.occluded(r)),
+    });
+    (out, times)
+}
+
+fn median(v: &[f64]) -> f64 {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// `median (min–max)` with `digits` decimals.
+fn cell(v: &[f64], digits: usize) -> String {
+    let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    format!(
+        "{:.*} ({:.*}–{:.*})",
+        digits,
+        median(v),
+        digits,
+        lo,
+        digits,
+        hi
+    )
+}
+
 fn main() {
-    let nrays: usize = std::env::var("FLOWLIGHT_BENCH_RAYS")
-        .ok()
+    let env = |k: &str| std::env::var(k).ok();
+    let nrays: usize = env("FLOWLIGHT_BENCH_RAYS")
         .and_then(|s| s.parse().ok())
         .unwrap_or(1_000_000);
-    let sizes: Vec<usize> = std::env::var("FLOWLIGHT_BENCH_SIZES")
-        .ok()
+    let repeat: usize = env("FLOWLIGHT_BENCH_REPEAT")
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(5)
+        .max(1);
+    let sizes: Vec<usize> = env("FLOWLIGHT_BENCH_SIZES")
         .map(|s| s.split(',').map(|x| x.trim().parse().unwrap()).collect())
         .unwrap_or(vec![10_000, 100_000, 1_000_000]);
     let rays = rays(nrays);
@@ -97,50 +179,56 @@ fn main() {
         Err(e) => eprintln!("no Embree: {e}"),
     }
     println!(
-        "| triangles | backend | build (s) | threads | closest (Mrays/s) | any hit (Mrays/s) |"
+        "| triangles | backend | build (s) | build / Embree | threads | closest (Mrays/s) | \
+         closest / Embree | any hit (Mrays/s) | any hit / Embree |"
     );
-    println!("|---:|---|---:|---:|---:|---:|");
-    let mut closest1 = Vec::new();
+    println!("|---:|---|---:|---:|---:|---:|---:|---:|---:|");
     for &n in &sizes {
         let scene = lumpy_sphere(n);
-        let mut backends: Vec<(Box<dyn Intersector>, f64)> = Vec::new();
-        match EmbreeIntersector::build(&scene) {
-            Ok((e, t)) => backends.push((Box::new(e), t.as_secs_f64())),
-            Err(e) => eprintln!("Embree: {e}"),
-        }
-        let (b, t) = BvhIntersector::build(&scene);
-        backends.push((Box::new(b), t.as_secs_f64()));
-        for (isect, build) in &backends {
-            for threads in [1, 2] {
-                let c = throughput(&rays, threads, &|r| isect.intersect(r).is_some());
-                let a = throughput(&rays, threads, &|r| isect.occluded(r));
-                if threads == 1 {
-                    closest1.push((n, isect.name(), c));
+        let tris = scene.triangle_vertices();
+        // [backend] -> build times; [backend][threads] -> closest, any per round.
+        let mut names = Vec::new();
+        let mut builds: Vec<Vec<f64>> = Vec::new();
+        let mut closest: Vec<[Vec<f64>; 2]> = Vec::new();
+        let mut any: Vec<[Vec<f64>; 2]> = Vec::new();
+        for round in 0..repeat {
+            let (backends, times) = build_all(&scene, &tris);
+            if round == 0 {
+                names = backends.iter().map(|b| b.name).collect();
+                builds = vec![Vec::new(); names.len()];
+                closest = vec![[Vec::new(), Vec::new()]; names.len()];
+                any = vec![[Vec::new(), Vec::new()]; names.len()];
+            }
+            for (k, b) in backends.iter().enumerate() {
+                builds[k].push(times[k]);
+                for (ti, threads) in [1, 2].into_iter().enumerate() {
+                    closest[k][ti].push(throughput(&rays, threads, &*b.closest));
+                    any[k][ti].push(throughput(&rays, threads, &*b.any));
                 }
-                println!(
-                    "| {} | {} | {:.3} | {} | {:.2} | {:.2} |",
-                    scene.triangles.len(),
-                    isect.name(),
-                    build,
-                    threads,
-                    c,
-                    a
-                );
             }
         }
-    }
-    for &n in &sizes {
-        let get = |name| {
-            closest1
-                .iter()
-                .find(|x| x.0 == n && x.1 == name)
-                .map(|x| x.2)
+        let embree = names.iter().position(|&x| x == "embree");
+        // Ratio of medians to Embree's (throughput: ours / Embree; build: ours / Embree).
+        let ratio = |v: &[f64], e: Option<&Vec<f64>>| {
+            e.map_or("–".to_string(), |e| {
+                format!("{:.2}", median(v) / median(e))
+            })
         };
-        if let (Some(e), Some(b)) = (get("embree"), get("bvh")) {
-            eprintln!(
-                "{n} triangles: BVH closest hit is {:.2}x slower than Embree (1 thread)",
-                e / b
-            );
+        for k in 0..names.len() {
+            for ti in 0..2 {
+                println!(
+                    "| {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                    tris.len(),
+                    names[k],
+                    cell(&builds[k], 4),
+                    ratio(&builds[k], embree.map(|e| &builds[e])),
+                    ti + 1,
+                    cell(&closest[k][ti], 2),
+                    ratio(&closest[k][ti], embree.map(|e| &closest[e][ti])),
+                    cell(&any[k][ti], 2),
+                    ratio(&any[k][ti], embree.map(|e| &any[e][ti])),
+                );
+            }
         }
     }
 }

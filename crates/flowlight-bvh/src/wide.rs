@@ -1,0 +1,1025 @@
+//! The 4-wide BVH behind [`Bvh`]: build, node and triangle layout, SIMD traversal.
+//!
+//! * **Build** — the binned-SAH splits of the binary build ([`crate::BinaryBvh`], Wald 2007,
+//!   pbrt-v4 §7.3), applied top-down to widen each node to up to [`WIDTH`] children: starting
+//!   from the node's triangles as one child, the child with the largest surface area that
+//!   holds more than [`MAX_LEAF_SIZE`] triangles is split by the SAH until there are four
+//!   children (the "wide BVH by repeated splitting of the largest child" of Wald, Benthin &
+//!   Boulos, "Getting Rid of Packets", IRT 2008, and Embree's BVH4 builder). Children of at
+//!   most [`MAX_LEAF_SIZE`] triangles become leaves. No binary tree is materialised; the
+//!   upper levels are built in parallel (rayon) and the result does not depend on the thread
+//!   schedule.
+//! * **Nodes** — 128 bytes, one cache-line pair: the four children's boxes in SoA order
+//!   (`min x` of the 4 children, `max x`, `min y`, …, each one SSE register) and four child
+//!   references (interior node index, or leaf: pack index and triangle count, or empty).
+//!   Empty slots have the box `(+∞, −∞)`, which no ray hits.
+//! * **Triangles** — each leaf is one *pack* of up to four triangles stored SoA
+//!   (`v[vertex][axis]` holds that coordinate of the four triangles), so one leaf is one pass
+//!   of the watertight test over four lanes.
+//! * **Box test** — the four slabs at once: `t_near = max_a (near_a − o_a)·(1/d_a)`,
+//!   `t_far = (1 + 2γ₃)·min_a (far_a − o_a)·(1/d_a)`, where `near_a` is the min plane for
+//!   `d_a ≥ +0` and the max plane otherwise; a child is entered when `t_near ≤ t_far`,
+//!   `t_near < t_max` and `t_far > 0`. This is exactly the binary BVH's robust slab test
+//!   (pbrt-v4 §6.8.2): the slab distance is the first operand of glam's `max`/`min` and the
+//!   (never NaN) accumulator the second, and these return the second operand when the first
+//!   is NaN (SSE2 `_mm_max_ps`, NEON's compare-and-select, the scalar `f32::max`), so a NaN
+//!   slab distance (origin on the plane, `d_a = ±0`) leaves the interval unconstrained, as in
+//!   the binary test.
+//! * **Traversal** — iterative with a stack of (node, entry distance). Closest hit visits the
+//!   entered children nearest first (entry distances sorted) and skips popped entries whose
+//!   entry distance is no longer below `t_max`; any hit returns at the first accepted hit.
+//! * **Triangle test** — the watertight test of [`crate::WatertightRay`] (Woop, Benthin &
+//!   Wald, JCGT 2013, with pbrt-v4's conservative `t` bound), evaluated on four lanes with the
+//!   same IEEE operations in the same order, no FMA, so each lane gives bit-for-bit the
+//!   scalar result. Packs where a lane's edge function is exactly 0 (ray through an edge or
+//!   vertex) take the scalar test, whose double-precision recomputation keeps the test
+//!   watertight.
+//! * **Hit filters** — candidates of a pack are offered to the filter nearest first; the
+//!   first accepted one is the pack's closest accepted hit, rejected ones leave `t_max` as
+//!   it is.
+//!
+//! Only SSE2 (the x86-64 baseline) is used, through glam's `Vec4`; on other targets glam's
+//! NEON or scalar `Vec4` gives the same results (same IEEE operations, same NaN rule).
+
+use crate::build::{
+    decide, scan, Aabb, Decision, PrimRef, MAX_LEAF_SIZE, PARALLEL_BUILD_THRESHOLD,
+};
+use crate::triangle::{gamma, is_degenerate, WatertightRay};
+use flowlight_core::geometry::{HitFilter, Ray, TriangleHit};
+use glam::{Vec3, Vec4};
+use rayon::prelude::*;
+
+/// Children per node.
+pub const WIDTH: usize = 4;
+/// A child reference with this bit set is a leaf: `pack << 2 | (count − 1)` below it.
+const LEAF_BIT: u32 = 1 << 31;
+/// An unused child slot (its box is empty, so it is never entered).
+const EMPTY_CHILD: u32 = u32::MAX;
+/// Largest number of packs (leaves) a tree can address.
+const MAX_PACKS: usize = (1 << 29) - 1;
+/// Traversal stack: at most `WIDTH − 1` entries per level, and a path has at most
+/// `MAX_SAH_DEPTH + 32` binary splits (see the binary build), so fewer levels than that.
+const STACK_SIZE: usize = 3 * 128;
+/// The stack of trees whose bound (see [`stack_bound`]) is at most this.
+const SMALL_STACK: usize = 64;
+
+/// One node: the boxes of its four children, SoA, and the child references.
+#[repr(C, align(64))]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct WideNode {
+    /// `bounds[2a]`: the children's minimum along axis `a`; `bounds[2a + 1]`: the maximum.
+    bounds: [Vec4; 6],
+    child: [u32; WIDTH],
+}
+
+const _: () = assert!(std::mem::size_of::<WideNode>() == 128);
+
+impl WideNode {
+    const EMPTY: WideNode = WideNode {
+        bounds: [
+            Vec4::INFINITY,
+            Vec4::NEG_INFINITY,
+            Vec4::INFINITY,
+            Vec4::NEG_INFINITY,
+            Vec4::INFINITY,
+            Vec4::NEG_INFINITY,
+        ],
+        child: [EMPTY_CHILD; WIDTH],
+    };
+
+    fn set(&mut self, k: usize, b: &Aabb, child: u32) {
+        for a in 0..3 {
+            self.bounds[2 * a][k] = b.min[a];
+            self.bounds[2 * a + 1][k] = b.max[a];
+        }
+        self.child[k] = child;
+    }
+}
+
+/// Up to four triangles, SoA: `v[vertex][axis]` holds that coordinate of each lane's triangle.
+/// Unused lanes repeat lane 0 (they are masked out by the leaf's count).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct TriPack {
+    v: [[Vec4; 3]; 3],
+}
+
+impl TriPack {
+    fn new(tris: &[[Vec3; 3]]) -> TriPack {
+        debug_assert!(!tris.is_empty() && tris.len() <= WIDTH);
+        let mut v = [[Vec4::ZERO; 3]; 3];
+        for lane in 0..WIDTH {
+            let t = &tris[if lane < tris.len() { lane } else { 0 }];
+            for (vi, p) in t.iter().enumerate() {
+                for a in 0..3 {
+                    v[vi][a][lane] = p[a];
+                }
+            }
+        }
+        TriPack { v }
+    }
+
+    fn triangle(&self, lane: usize) -> [Vec3; 3] {
+        let p = |vi: usize| {
+            Vec3::new(
+                self.v[vi][0][lane],
+                self.v[vi][1][lane],
+                self.v[vi][2][lane],
+            )
+        };
+        [p(0), p(1), p(2)]
+    }
+}
+
+#[inline]
+fn leaf_ref(pack: usize, count: usize) -> u32 {
+    LEAF_BIT | ((pack as u32) << 2) | (count as u32 - 1)
+}
+
+/// A 4-wide bounding volume hierarchy over a triangle soup, with closest-hit and any-hit
+/// queries (optionally filtered); see the crate documentation and the `wide` module.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Bvh {
+    /// Depth first, root at 0; empty when there is nothing to intersect.
+    nodes: Vec<WideNode>,
+    packs: Vec<TriPack>,
+    /// Original triangle index of each lane of each pack.
+    pack_prims: Vec<[u32; WIDTH]>,
+    bounds: (Vec3, Vec3),
+    stored: usize,
+    input_count: usize,
+    /// Most traversal stack entries a ray can need (see [`stack_bound`]).
+    stack_bound: usize,
+}
+
+/// Most entries the traversal stack can hold below node `r`: a node stacks all entered
+/// children but the one it descends into, and an entry is only popped to descend into it,
+/// so along any path the stack holds at most `Σ (children − 1)` of the nodes passed.
+fn stack_bound(nodes: &[WideNode], r: u32) -> usize {
+    if r & LEAF_BIT != 0 {
+        return 0;
+    }
+    let n = &nodes[r as usize];
+    let children = n.child.iter().filter(|&&c| c != EMPTY_CHILD);
+    children.clone().count() - 1 + children.map(|&c| stack_bound(nodes, c)).max().unwrap_or(0)
+}
+
+/// A child during widening: `refs[start .. start + len]`, its boxes and binary depth.
+#[derive(Clone, Copy, Debug)]
+struct Child {
+    start: usize,
+    len: usize,
+    bounds: Aabb,
+    cbounds: Aabb,
+    depth: u32,
+}
+
+/// Nodes and leaves of a subtree; child references are relative to the subtree (its root
+/// node is 0, its first leaf is pack 0). `leaves` are `(first ref, count)`, absolute.
+#[derive(Default)]
+struct Subtree {
+    nodes: Vec<WideNode>,
+    leaves: Vec<(u32, u8)>,
+}
+
+/// Splits the child with the largest area (among those with more than `MAX_LEAF_SIZE`
+/// triangles) until there are `WIDTH` children or none can be split; the children are
+/// returned in the order of their triangle ranges.
+fn widen(refs: &mut [PrimRef], root: Child) -> ([Child; WIDTH], usize) {
+    let mut ch = [root; WIDTH];
+    let mut n = 1;
+    while n < WIDTH {
+        let Some(i) = (0..n)
+            .filter(|&i| ch[i].len > MAX_LEAF_SIZE)
+            .max_by(|&a, &b| {
+                ch[a]
+                    .bounds
+                    .area()
+                    .total_cmp(&ch[b].bounds.area())
+                    .then(b.cmp(&a))
+            })
+        else {
+            break;
+        };
+        let c = ch[i];
+        let slice = &mut refs[c.start..c.start + c.len];
+        let mid = match decide(slice, &c.bounds, &c.cbounds, c.depth, true) {
+            Decision::Split { mid, .. } => mid,
+            // `decide` only returns a leaf for at most MAX_LEAF_SIZE triangles.
+            Decision::Leaf => c.len / 2,
+        };
+        let (l, r) = slice.split_at(mid);
+        let ((lb, lc), (rb, rc)) = if c.len >= PARALLEL_BUILD_THRESHOLD {
+            rayon::join(|| scan(l), || scan(r))
+        } else {
+            (scan(l), scan(r))
+        };
+        ch[i] = Child {
+            start: c.start,
+            len: mid,
+            bounds: lb,
+            cbounds: lc,
+            depth: c.depth + 1,
+        };
+        ch[n] = Child {
+            start: c.start + mid,
+            len: c.len - mid,
+            bounds: rb,
+            cbounds: rc,
+            depth: c.depth + 1,
+        };
+        n += 1;
+    }
+    ch[..n].sort_unstable_by_key(|c| c.start);
+    (ch, n)
+}
+
+/// Builds the subtree of `root` (whose range is all of `refs`, at `base` in the final order)
+/// into `out`, sequentially; returns its node index.
+fn build_sequential(refs: &mut [PrimRef], base: usize, root: Child, out: &mut Subtree) -> u32 {
+    let (ch, n) = widen(refs, root);
+    let idx = out.nodes.len();
+    out.nodes.push(WideNode::EMPTY);
+    for (k, c) in ch[..n].iter().enumerate() {
+        let child = if c.len <= MAX_LEAF_SIZE {
+            out.leaves.push(((base + c.start) as u32, c.len as u8));
+            leaf_ref(out.leaves.len() - 1, c.len)
+        } else {
+            let sub = Child { start: 0, ..*c };
+            build_sequential(
+                &mut refs[c.start..c.start + c.len],
+                base + c.start,
+                sub,
+                out,
+            )
+        };
+        out.nodes[idx].set(k, &c.bounds, child);
+    }
+    idx as u32
+}
+
+/// Builds the subtree of `root` (range: all of `refs`), its children in parallel when large.
+fn build_parallel(refs: &mut [PrimRef], base: usize, root: Child) -> Subtree {
+    if refs.len() < PARALLEL_BUILD_THRESHOLD {
+        let mut out = Subtree {
+            nodes: Vec::with_capacity(refs.len() / 2),
+            leaves: Vec::with_capacity(refs.len() / 2),
+        };
+        build_sequential(refs, base, root, &mut out);
+        return out;
+    }
+    let (ch, n) = widen(refs, root);
+    let mut slices = Vec::with_capacity(n);
+    let mut rest = refs;
+    for c in &ch[..n] {
+        let (s, r) = rest.split_at_mut(c.len);
+        slices.push((s, *c));
+        rest = r;
+    }
+    let subs: Vec<Option<Subtree>> = slices
+        .into_par_iter()
+        .map(|(s, c)| {
+            (c.len > MAX_LEAF_SIZE)
+                .then(|| build_parallel(s, base + c.start, Child { start: 0, ..c }))
+        })
+        .collect();
+    let total: usize = subs.iter().flatten().map(|s| s.nodes.len()).sum();
+    let mut out = Subtree {
+        nodes: Vec::with_capacity(1 + total),
+        leaves: Vec::new(),
+    };
+    out.nodes.push(WideNode::EMPTY);
+    for (k, (c, sub)) in ch[..n].iter().zip(subs).enumerate() {
+        let child = match sub {
+            None => {
+                out.leaves.push(((base + c.start) as u32, c.len as u8));
+                leaf_ref(out.leaves.len() - 1, c.len)
+            }
+            Some(sub) => {
+                let node_shift = out.nodes.len() as u32;
+                let leaf_shift = (out.leaves.len() as u32) << 2;
+                out.nodes.extend(sub.nodes.iter().map(|node| {
+                    let mut node = *node;
+                    for r in &mut node.child {
+                        if *r == EMPTY_CHILD {
+                        } else if *r & LEAF_BIT != 0 {
+                            *r += leaf_shift;
+                        } else {
+                            *r += node_shift;
+                        }
+                    }
+                    node
+                }));
+                out.leaves.extend_from_slice(&sub.leaves);
+                node_shift
+            }
+        };
+        out.nodes[0].set(k, &c.bounds, child);
+    }
+    out
+}
+
+impl Bvh {
+    /// Builds the hierarchy. `prim` in hits is the index into `triangles`. Degenerate
+    /// triangles (see [`is_degenerate`]) are skipped. Panics if there are more than `u32::MAX`
+    /// triangles.
+    pub fn build(triangles: &[[Vec3; 3]]) -> Bvh {
+        assert!(
+            triangles.len() <= u32::MAX as usize,
+            "too many triangles for a Bvh"
+        );
+        let mut refs: Vec<PrimRef> = triangles
+            .par_iter()
+            .enumerate()
+            .filter(|(_, t)| !is_degenerate(t))
+            .map(|(i, t)| PrimRef::new(t, i as u32))
+            .collect();
+        let empty = Bvh {
+            nodes: Vec::new(),
+            packs: Vec::new(),
+            pack_prims: Vec::new(),
+            bounds: (Vec3::INFINITY, Vec3::NEG_INFINITY),
+            stored: 0,
+            input_count: triangles.len(),
+            stack_bound: 0,
+        };
+        if refs.is_empty() {
+            return empty;
+        }
+        let (bounds, cbounds) = scan(&refs);
+        let root = Child {
+            start: 0,
+            len: refs.len(),
+            bounds,
+            cbounds,
+            depth: 0,
+        };
+        let tree = build_parallel(&mut refs, 0, root);
+        assert!(
+            tree.leaves.len() <= MAX_PACKS,
+            "too many triangles for a Bvh"
+        );
+        let bound = stack_bound(&tree.nodes, 0);
+        // The SAH depth cap keeps trees far below this (`MAX_SAH_DEPTH + 32` binary levels).
+        assert!(bound <= STACK_SIZE, "BVH too deep for the traversal stack");
+        let (packs, pack_prims) = tree
+            .leaves
+            .par_iter()
+            .map(|&(first, count)| {
+                let r = &refs[first as usize..first as usize + count as usize];
+                let mut tris = [[Vec3::ZERO; 3]; WIDTH];
+                let mut prims = [u32::MAX; WIDTH];
+                for (k, p) in r.iter().enumerate() {
+                    tris[k] = triangles[p.index as usize];
+                    prims[k] = p.index;
+                }
+                (TriPack::new(&tris[..r.len()]), prims)
+            })
+            .unzip();
+        Bvh {
+            nodes: tree.nodes,
+            packs,
+            pack_prims,
+            bounds: (bounds.min, bounds.max),
+            stored: refs.len(),
+            stack_bound: bound,
+            ..empty
+        }
+    }
+
+    /// Number of triangles given to [`Bvh::build`], degenerate ones included.
+    pub fn triangle_count(&self) -> usize {
+        self.input_count
+    }
+
+    /// Number of (non-degenerate) triangles stored in the tree.
+    pub fn stored_triangle_count(&self) -> usize {
+        self.stored
+    }
+
+    /// Number of (4-wide) nodes; 0 when there is nothing to intersect.
+    pub fn node_count(&self) -> usize {
+        self.nodes.len()
+    }
+
+    /// Number of leaves (packs of up to four triangles).
+    pub fn leaf_count(&self) -> usize {
+        self.packs.len()
+    }
+
+    /// Bounds `(min, max)` of all non-degenerate triangles; `(+∞, -∞)` when there are none.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        self.bounds
+    }
+
+    /// Depth of the tree in wide nodes, leaves included (a root holding one leaf has depth 2,
+    /// an empty tree 0).
+    pub fn depth(&self) -> usize {
+        fn rec(nodes: &[WideNode], r: u32) -> usize {
+            if r & LEAF_BIT != 0 {
+                return 1;
+            }
+            let n = &nodes[r as usize];
+            1 + n
+                .child
+                .iter()
+                .filter(|&&c| c != EMPTY_CHILD)
+                .map(|&c| rec(nodes, c))
+                .max()
+                .unwrap_or(0)
+        }
+        if self.nodes.is_empty() {
+            0
+        } else {
+            rec(&self.nodes, 0)
+        }
+    }
+
+    /// Closest hit with `t ∈ (0, ray.t_max)`, or `None`.
+    pub fn intersect(&self, ray: &Ray) -> Option<TriangleHit> {
+        self.traverse::<false, false, _>(ray, &|_, _, _| true)
+    }
+
+    /// Whether any triangle is hit with `t ∈ (0, ray.t_max)`. Returns at the first hit found.
+    pub fn occluded(&self, ray: &Ray) -> bool {
+        self.traverse::<true, false, _>(ray, &|_, _, _| true)
+            .is_some()
+    }
+
+    /// [`Bvh::intersect`] counting only the hits `accept` keeps (alpha testing): a rejected
+    /// candidate does not shorten the ray, so traversal finds the closest accepted hit.
+    pub fn intersect_filtered(&self, ray: &Ray, accept: HitFilter) -> Option<TriangleHit> {
+        self.traverse::<false, true, _>(ray, &accept)
+    }
+
+    /// [`Bvh::occluded`] counting only the hits `accept` keeps.
+    pub fn occluded_filtered(&self, ray: &Ray, accept: HitFilter) -> bool {
+        self.traverse::<true, true, _>(ray, &accept).is_some()
+    }
+
+    /// Picks the traversal stack: a small one when the tree's bound allows (clearing a
+    /// 3 KiB stack for every ray is measurable), else the largest one a tree can need.
+    #[inline(always)]
+    fn traverse<const ANY_HIT: bool, const FILTER: bool, F: Fn(u32, f32, f32) -> bool>(
+        &self,
+        ray: &Ray,
+        accept: &F,
+    ) -> Option<TriangleHit> {
+        if self.nodes.is_empty() {
+            return None;
+        }
+        if self.stack_bound <= SMALL_STACK {
+            self.traverse_with::<ANY_HIT, FILTER, F, SMALL_STACK>(ray, accept)
+        } else {
+            self.traverse_with::<ANY_HIT, FILTER, F, STACK_SIZE>(ray, accept)
+        }
+    }
+
+    #[inline(always)]
+    fn traverse_with<
+        const ANY_HIT: bool,
+        const FILTER: bool,
+        F: Fn(u32, f32, f32) -> bool,
+        const STACK: usize,
+    >(
+        &self,
+        ray: &Ray,
+        accept: &F,
+    ) -> Option<TriangleHit> {
+        let wray = WatertightRay::new(ray)?;
+        let pray = PackRay::new(ray, &wray);
+        let bray = BoxRay::new(ray);
+        let mut t_max = ray.t_max;
+        // The closest hit so far: pack, lane, t, b1, b2 (its triangle id is looked up once,
+        // at the end, instead of at every closer hit).
+        let mut hit: Option<(usize, usize, f32, f32, f32)> = None;
+        let mut stack = [(0u32, 0f32); STACK];
+        let mut sp = 0usize;
+        let mut cur = 0u32;
+        loop {
+            if cur & LEAF_BIT == 0 {
+                let node = &self.nodes[cur as usize];
+                let (mut mask, t_near) = bray.test(node, t_max);
+                if mask != 0 {
+                    let t_near = t_near.to_array();
+                    if ANY_HIT || mask & (mask - 1) == 0 {
+                        // One child, or any order: go down the first, stack the others.
+                        let k = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        while mask != 0 {
+                            let j = mask.trailing_zeros() as usize;
+                            mask &= mask - 1;
+                            stack[sp] = (node.child[j], t_near[j]);
+                            sp += 1;
+                        }
+                        cur = node.child[k];
+                        continue;
+                    }
+                    // Nearest first: sort the entered children by decreasing entry distance,
+                    // stack all but the nearest.
+                    let mut order = [(0u32, 0f32); WIDTH];
+                    let mut n = 0;
+                    while mask != 0 {
+                        let j = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        let e = (node.child[j], t_near[j]);
+                        let mut i = n;
+                        while i > 0 && order[i - 1].1 < e.1 {
+                            order[i] = order[i - 1];
+                            i -= 1;
+                        }
+                        order[i] = e;
+                        n += 1;
+                    }
+                    stack[sp..sp + n - 1].copy_from_slice(&order[..n - 1]);
+                    sp += n - 1;
+                    cur = order[n - 1].0;
+                    continue;
+                }
+            } else {
+                let pack = ((cur & !LEAF_BIT) >> 2) as usize;
+                let valid = (1u32 << ((cur & 3) + 1)) - 1;
+                let lanes = match pray.test(&self.packs[pack], valid, t_max) {
+                    Some(l) => l,
+                    None => scalar_pack_test(&wray, &self.packs[pack], valid, t_max),
+                };
+                if lanes.mask != 0 {
+                    let prims = &self.pack_prims[pack];
+                    if let Some(k) = lanes.pick::<ANY_HIT, FILTER, F>(prims, accept) {
+                        let h = (pack, k, lanes.t[k], lanes.b1[k], lanes.b2[k]);
+                        if ANY_HIT {
+                            return Some(self.hit(h));
+                        }
+                        t_max = h.2;
+                        hit = Some(h);
+                    }
+                }
+            }
+            // Pop the next entry that can still hold a closer hit.
+            loop {
+                if sp == 0 {
+                    return hit.map(|h| self.hit(h));
+                }
+                sp -= 1;
+                let (r, t) = stack[sp];
+                if ANY_HIT || t < t_max {
+                    cur = r;
+                    break;
+                }
+            }
+        }
+    }
+}
+
+impl Bvh {
+    #[inline(always)]
+    fn hit(&self, (pack, lane, t, b1, b2): (usize, usize, f32, f32, f32)) -> TriangleHit {
+        TriangleHit {
+            t,
+            prim: self.pack_prims[pack][lane],
+            b1,
+            b2,
+        }
+    }
+}
+
+/// Per-ray constants of the 4-wide slab test.
+struct BoxRay {
+    org: [Vec4; 3],
+    inv: [Vec4; 3],
+    /// 1 where the direction component is negative (the near plane is the max plane).
+    neg: [usize; 3],
+}
+
+impl BoxRay {
+    #[inline(always)]
+    fn new(ray: &Ray) -> BoxRay {
+        let inv = [1.0 / ray.dir.x, 1.0 / ray.dir.y, 1.0 / ray.dir.z];
+        BoxRay {
+            org: ray.origin.to_array().map(Vec4::splat),
+            inv: inv.map(Vec4::splat),
+            neg: inv.map(|i| usize::from(i < 0.0)),
+        }
+    }
+
+    /// Bit `k` set when child `k` is entered before `t_max`; the entry distances.
+    #[inline(always)]
+    fn test(&self, node: &WideNode, t_max: f32) -> (u32, Vec4) {
+        let b = &node.bounds;
+        // `& 1` lets the compiler drop the bounds checks.
+        let [x, y, z] = self.neg.map(|n| n & 1);
+        let n0 = (b[x] - self.org[0]) * self.inv[0];
+        let n1 = (b[2 + y] - self.org[1]) * self.inv[1];
+        let n2 = (b[4 + z] - self.org[2]) * self.inv[2];
+        let f0 = (b[1 - x] - self.org[0]) * self.inv[0];
+        let f1 = (b[3 - y] - self.org[1]) * self.inv[1];
+        let f2 = (b[5 - z] - self.org[2]) * self.inv[2];
+        // The slab distance first: a NaN one yields the (never NaN) accumulator.
+        let t0 = n0.max(n1.max(n2.max(Vec4::NEG_INFINITY)));
+        let t1 = f0.min(f1.min(f2.min(Vec4::INFINITY))) * Vec4::splat(1.0 + 2.0 * gamma(3));
+        let m = t0.cmple(t1) & t0.cmplt(Vec4::splat(t_max)) & t1.cmpgt(Vec4::ZERO);
+        (m.bitmask(), t0)
+    }
+}
+
+/// Per-ray constants of the 4-lane watertight test: the origin and the shear in the
+/// permuted axis order of [`WatertightRay`].
+struct PackRay {
+    k: [usize; 3],
+    org: [Vec4; 3],
+    sx: Vec4,
+    sy: Vec4,
+    sz: Vec4,
+}
+
+/// Lane results of a pack test.
+struct Lanes {
+    mask: u32,
+    t: [f32; WIDTH],
+    b1: [f32; WIDTH],
+    b2: [f32; WIDTH],
+}
+
+impl Lanes {
+    /// The hit a pack reports: any accepted lane for any hit, else the nearest accepted lane
+    /// (ties: the lowest lane, as a sequential loop with a shrinking `t_max` would).
+    #[inline(always)]
+    /// `prims` is read only when `FILTER` is set.
+    fn pick<const ANY_HIT: bool, const FILTER: bool, F: Fn(u32, f32, f32) -> bool>(
+        &self,
+        prims: &[u32; WIDTH],
+        accept: &F,
+    ) -> Option<usize> {
+        let mut mask = self.mask;
+        if ANY_HIT {
+            while mask != 0 {
+                let k = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                if !FILTER || accept(prims[k], self.b1[k], self.b2[k]) {
+                    return Some(k);
+                }
+            }
+            return None;
+        }
+        while mask != 0 {
+            let mut best = mask.trailing_zeros() as usize;
+            let mut rest = mask & (mask - 1);
+            while rest != 0 {
+                let k = rest.trailing_zeros() as usize;
+                rest &= rest - 1;
+                if self.t[k] < self.t[best] {
+                    best = k;
+                }
+            }
+            if !FILTER || accept(prims[best], self.b1[best], self.b2[best]) {
+                return Some(best);
+            }
+            mask &= !(1 << best);
+        }
+        None
+    }
+}
+
+/// The scalar watertight test on each valid lane (same `t_max` for all lanes).
+#[cold]
+fn scalar_pack_test(wray: &WatertightRay, pack: &TriPack, valid: u32, t_max: f32) -> Lanes {
+    let mut l = Lanes {
+        mask: 0,
+        t: [0.0; WIDTH],
+        b1: [0.0; WIDTH],
+        b2: [0.0; WIDTH],
+    };
+    for k in 0..WIDTH {
+        if valid & (1 << k) != 0 {
+            if let Some((t, b1, b2)) = wray.intersect(&pack.triangle(k), t_max) {
+                l.mask |= 1 << k;
+                (l.t[k], l.b1[k], l.b2[k]) = (t, b1, b2);
+            }
+        }
+    }
+    l
+}
+
+impl PackRay {
+    #[inline(always)]
+    fn new(ray: &Ray, w: &WatertightRay) -> PackRay {
+        let (kz, sx, sy, sz) = w.shear();
+        let kx = if kz == 2 { 0 } else { kz + 1 };
+        let ky = if kx == 2 { 0 } else { kx + 1 };
+        let o = ray.origin;
+        PackRay {
+            k: [kx, ky, kz],
+            org: [o[kx], o[ky], o[kz]].map(Vec4::splat),
+            sx: Vec4::splat(sx),
+            sy: Vec4::splat(sy),
+            sz: Vec4::splat(sz),
+        }
+    }
+
+    /// The watertight test on the `valid` lanes of `pack`, lane for lane the operations of
+    /// [`WatertightRay::intersect`]; `None` when a valid lane has an edge function that is
+    /// exactly 0 (the scalar test must resolve it in double precision).
+    #[inline(always)]
+    fn test(&self, pack: &TriPack, valid: u32, t_max: f32) -> Option<Lanes> {
+        let [kx, ky, kz] = self.k;
+        let zero = Vec4::ZERO;
+        let v = &pack.v;
+        let (q0x, q0y, p0z) = (
+            v[0][kx] - self.org[0],
+            v[0][ky] - self.org[1],
+            v[0][kz] - self.org[2],
+        );
+        let (q1x, q1y, p1z) = (
+            v[1][kx] - self.org[0],
+            v[1][ky] - self.org[1],
+            v[1][kz] - self.org[2],
+        );
+        let (q2x, q2y, p2z) = (
+            v[2][kx] - self.org[0],
+            v[2][ky] - self.org[1],
+            v[2][kz] - self.org[2],
+        );
+        let p0x = q0x + self.sx * p0z;
+        let p0y = q0y + self.sy * p0z;
+        let p1x = q1x + self.sx * p1z;
+        let p1y = q1y + self.sy * p1z;
+        let p2x = q2x + self.sx * p2z;
+        let p2y = q2y + self.sy * p2z;
+        let e0 = p1x * p2y - p1y * p2x;
+        let e1 = p2x * p0y - p2y * p0x;
+        let e2 = p0x * p1y - p0y * p1x;
+        if (e0.cmpeq(zero) | e1.cmpeq(zero) | e2.cmpeq(zero)).bitmask() & valid != 0 {
+            return None;
+        }
+        let neg = e0.cmplt(zero) | e1.cmplt(zero) | e2.cmplt(zero);
+        let pos = e0.cmpgt(zero) | e1.cmpgt(zero) | e2.cmpgt(zero);
+        let det = e0 + e1 + e2;
+        let t_scaled = e0 * (p0z * self.sz) + e1 * (p1z * self.sz) + e2 * (p2z * self.sz);
+        let tmd = Vec4::splat(t_max) * det;
+        let det_neg = det.cmplt(zero);
+        let det_pos = det.cmpgt(zero);
+        let bad_neg = det_neg & (t_scaled.cmpge(zero) | t_scaled.cmplt(tmd));
+        let bad_pos = det_pos & (t_scaled.cmple(zero) | t_scaled.cmpgt(tmd));
+        // det ≠ 0 and finite; the sign and range tests.
+        let ok = !(neg & pos)
+            & (det_neg | det_pos)
+            & det.abs().cmplt(Vec4::INFINITY)
+            & !(bad_neg | bad_pos);
+        let mut mask = ok.bitmask() & valid;
+        if mask == 0 {
+            return Some(Lanes {
+                mask,
+                t: [0.0; WIDTH],
+                b1: [0.0; WIDTH],
+                b2: [0.0; WIDTH],
+            });
+        }
+        let inv_det = Vec4::ONE / det;
+        let t = t_scaled * inv_det;
+        // The conservative bound on t (see `WatertightRay::intersect`).
+        let max_z = p0z.abs().max(p1z.abs()).max(p2z.abs());
+        let max_zt = max_z * self.sz.abs();
+        let delta_z = Vec4::splat(gamma(3)) * max_zt;
+        let max_xt = p0x.abs().max(p1x.abs()).max(p2x.abs());
+        let max_yt = p0y.abs().max(p1y.abs()).max(p2y.abs());
+        let max_qx = q0x.abs().max(q1x.abs()).max(q2x.abs());
+        let max_qy = q0y.abs().max(q1y.abs()).max(q2y.abs());
+        let g5 = Vec4::splat(gamma(5));
+        let delta_x = g5 * (max_qx + self.sx.abs() * max_z);
+        let delta_y = g5 * (max_qy + self.sy.abs() * max_z);
+        let delta_e = Vec4::splat(2.0)
+            * (Vec4::splat(gamma(2)) * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt);
+        let max_e = e0.abs().max(e1.abs()).max(e2.abs());
+        let delta_t = Vec4::splat(3.0)
+            * (Vec4::splat(gamma(3)) * max_e * max_zt + delta_e * max_zt + delta_z * max_e)
+            * inv_det.abs();
+        mask &= (t.cmplt(Vec4::splat(t_max)) & t.cmpgt(delta_t)).bitmask();
+        Some(Lanes {
+            mask,
+            t: t.to_array(),
+            b1: (e1 * inv_det).to_array(),
+            b2: (e2 * inv_det).to_array(),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use flowlight_core::rng::Rng;
+
+    fn random_soup(n: usize, seed: u64) -> Vec<[Vec3; 3]> {
+        let mut rng = Rng::new(seed, 0);
+        let mut v = || Vec3::new(rng.uniform(), rng.uniform(), rng.uniform());
+        (0..n)
+            .map(|_| {
+                let c = v() * 10.0;
+                [c + v() - 0.5, c + v() - 0.5, c + v() - 0.5]
+            })
+            .collect()
+    }
+
+    /// Children inside their parent's slot box, every stored triangle in exactly one valid
+    /// lane, empty slots with empty boxes, the stack bound respected.
+    fn check_structure(bvh: &Bvh, tris: &[[Vec3; 3]]) {
+        let mut seen = vec![0u32; tris.len()];
+        let mut stack = vec![(0u32, Vec3::NEG_INFINITY, Vec3::INFINITY, 1usize)];
+        assert!(bvh.stack_bound <= 3 * bvh.depth());
+        while let Some((r, lo, hi, depth)) = stack.pop() {
+            assert!(depth <= bvh.depth());
+            let inside = |p: Vec3| p.cmpge(lo).all() && p.cmple(hi).all();
+            if r & LEAF_BIT != 0 {
+                let pack = ((r & !LEAF_BIT) >> 2) as usize;
+                let count = (r & 3) as usize + 1;
+                for lane in 0..count {
+                    let prim = bvh.pack_prims[pack][lane] as usize;
+                    seen[prim] += 1;
+                    let t = bvh.packs[pack].triangle(lane);
+                    assert_eq!(t, tris[prim]);
+                    assert!(t.iter().all(|&p| inside(p)));
+                }
+                assert!(bvh.pack_prims[pack][count..].iter().all(|&p| p == u32::MAX));
+                continue;
+            }
+            let n = &bvh.nodes[r as usize];
+            for k in 0..WIDTH {
+                let clo = Vec3::new(n.bounds[0][k], n.bounds[2][k], n.bounds[4][k]);
+                let chi = Vec3::new(n.bounds[1][k], n.bounds[3][k], n.bounds[5][k]);
+                if n.child[k] == EMPTY_CHILD {
+                    assert_eq!((clo, chi), (Vec3::INFINITY, Vec3::NEG_INFINITY));
+                    continue;
+                }
+                assert!(inside(clo) && inside(chi), "child box outside its parent's");
+                if n.child[k] & LEAF_BIT == 0 {
+                    assert!(n.child[k] > r, "depth-first order");
+                }
+                stack.push((n.child[k], clo, chi, depth + 1));
+            }
+        }
+        for (i, t) in tris.iter().enumerate() {
+            assert_eq!(seen[i], u32::from(!is_degenerate(t)), "triangle {i}");
+        }
+    }
+
+    #[test]
+    fn structure_is_valid_and_deterministic() {
+        for n in [1, 4, 5, 17, 3000, 40_000] {
+            let tris = random_soup(n, n as u64);
+            let bvh = Bvh::build(&tris);
+            check_structure(&bvh, &tris);
+            let one = rayon::ThreadPoolBuilder::new()
+                .num_threads(1)
+                .build()
+                .unwrap();
+            assert!(
+                one.install(|| Bvh::build(&tris)) == bvh,
+                "{n}: thread count matters"
+            );
+        }
+        // Pathological centroids (2^-k): the SAH depth cap keeps the stack in bounds.
+        let tris: Vec<[Vec3; 3]> = (0..3000)
+            .map(|k| {
+                let x = 0.5f32.powi(k % 140) * 1e6;
+                let o = Vec3::new(x, (k / 140) as f32, 0.0);
+                [
+                    o,
+                    o + Vec3::new(x * 1e-3, 0.0, 0.0),
+                    o + Vec3::new(0.0, 0.5, 0.5),
+                ]
+            })
+            .collect();
+        check_structure(&Bvh::build(&tris), &tris);
+    }
+
+    /// Every lane of the pack test is bit for bit the scalar watertight test, on random rays
+    /// and on axis-aligned rays through vertices (edge functions exactly 0: the scalar path).
+    #[test]
+    fn pack_test_is_the_scalar_test_lane_for_lane() {
+        let mut rng = Rng::new(5, 5);
+        let grid = |rng: &mut Rng| Vec3::new(rng.uniform(), rng.uniform(), rng.uniform());
+        let (mut fast, mut slow, mut hits) = (0, 0, 0);
+        for k in 0..20_000 {
+            let count = 1 + k % 4;
+            let tris: Vec<[Vec3; 3]> = (0..count)
+                .map(|_| {
+                    if k % 3 == 0 {
+                        // Quarter-integer lattice triangles: exact zeros are common.
+                        [0; 3].map(|_| (grid(&mut rng) * 8.0).floor() * 0.25)
+                    } else {
+                        [0; 3].map(|_| grid(&mut rng) * 2.0 - 1.0)
+                    }
+                })
+                .filter(|t| !is_degenerate(t))
+                .collect();
+            if tris.is_empty() {
+                continue;
+            }
+            let pack = TriPack::new(&tris);
+            let valid = (1u32 << tris.len()) - 1;
+            let (origin, dir) = if k % 3 == 0 {
+                let v = tris[0][k % 3];
+                let axis = k % 3;
+                let mut o = v;
+                o[axis] -= 3.0;
+                let mut d = Vec3::ZERO;
+                d[axis] = 1.0;
+                (o, d)
+            } else {
+                let o = grid(&mut rng) * 6.0 - 3.0;
+                (o, grid(&mut rng) * 2.0 - o)
+            };
+            let t_max = if k % 5 == 0 { 2.5 } else { f32::INFINITY };
+            let ray = Ray::new(origin, dir, t_max);
+            let w = WatertightRay::new(&ray).unwrap();
+            let lanes = match PackRay::new(&ray, &w).test(&pack, valid, t_max) {
+                Some(l) => {
+                    fast += 1;
+                    l
+                }
+                None => {
+                    slow += 1;
+                    scalar_pack_test(&w, &pack, valid, t_max)
+                }
+            };
+            for (lane, tri) in tris.iter().enumerate() {
+                let want = w.intersect(tri, t_max);
+                let got = (lanes.mask & (1 << lane) != 0)
+                    .then(|| (lanes.t[lane], lanes.b1[lane], lanes.b2[lane]));
+                assert_eq!(
+                    got.map(|(t, b1, b2)| [t, b1, b2].map(f32::to_bits)),
+                    want.map(|(t, b1, b2)| [t, b1, b2].map(f32::to_bits)),
+                    "lane {lane} of {tris:?} for {ray:?}"
+                );
+                hits += want.is_some() as usize;
+            }
+            assert_eq!(lanes.mask & !valid, 0, "an unused lane reported a hit");
+        }
+        assert!(
+            fast > 10_000 && slow > 1000 && hits > 3000,
+            "{fast} {slow} {hits}"
+        );
+    }
+
+    /// The small-stack and the large-stack traversal give the same hits.
+    #[test]
+    fn both_stack_sizes_agree() {
+        let tris = random_soup(5000, 77);
+        let small = Bvh::build(&tris);
+        assert!(small.stack_bound <= SMALL_STACK, "{}", small.stack_bound);
+        let large = Bvh {
+            stack_bound: STACK_SIZE,
+            ..small.clone()
+        };
+        let mut rng = Rng::new(3, 3);
+        let mut u = || rng.uniform();
+        let mut hits = 0;
+        for _ in 0..5000 {
+            let o = Vec3::new(u(), u(), u()) * 14.0 - 2.0;
+            let ray = Ray::new(o, Vec3::new(u(), u(), u()) * 10.0 - o, f32::INFINITY);
+            let h = small.intersect(&ray);
+            assert_eq!(h, large.intersect(&ray));
+            assert_eq!(small.occluded(&ray), large.occluded(&ray));
+            hits += h.is_some() as usize;
+        }
+        assert!(hits > 1000, "{hits}");
+    }
+
+    #[test]
+    fn box_test_is_the_binary_slab_test() {
+        use crate::build::Node;
+        use crate::traverse::SlabRay;
+        let mut rng = Rng::new(9, 9);
+        let mut u = || rng.uniform();
+        for k in 0..20_000 {
+            let mut node = WideNode::EMPTY;
+            let mut boxes = Vec::new();
+            for slot in 0..(1 + k % 4) {
+                let a = Vec3::new(u(), u(), u()) * 4.0 - 2.0;
+                let b = a + Vec3::new(u(), u(), u()) * if k % 7 == 0 { 0.0 } else { 1.0 };
+                let b = Aabb { min: a, max: b };
+                node.set(slot, &b, slot as u32 + 1);
+                boxes.push(b);
+            }
+            // Origins on box planes with zero direction components now and then.
+            let mut o = Vec3::new(u(), u(), u()) * 6.0 - 3.0;
+            let mut d = Vec3::new(u(), u(), u()) * 2.0 - 1.0;
+            if k % 5 == 0 {
+                let axis = k % 3;
+                o[axis] = boxes[0].min[axis];
+                d[axis] = if k % 2 == 0 { 0.0 } else { -0.0 };
+            }
+            let t_max = if k % 3 == 0 { u() * 4.0 } else { f32::INFINITY };
+            let ray = Ray::new(o, d, t_max);
+            let (mask, t0) = BoxRay::new(&ray).test(&node, t_max);
+            let slab = SlabRay::new(&ray);
+            for (slot, b) in boxes.iter().enumerate() {
+                let want = slab.entry(&Node::interior(b, 0), t_max);
+                assert_eq!(mask & (1 << slot) != 0, want.is_some(), "{b:?} {ray:?}");
+                if let Some(e) = want {
+                    assert_eq!(t0[slot].max(0.0), e);
+                }
+            }
+            assert_eq!(mask >> boxes.len(), 0, "an empty slot was entered");
+        }
+    }
+}
