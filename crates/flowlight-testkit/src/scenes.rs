@@ -24,7 +24,7 @@ fn config(name: &str, comment: &str, triangles: usize, path_depth: u32, size: u3
         "scene = \"{name}.gltf\"\n\n[render]\nwidth = {size}\nheight = {size}\nspp = 64\nseed = 1\n\n"
     ));
     s.push_str(&format!(
-        "[integrator]\nplugin = \"mcpt\"\nvariant = \"entangled\"\ntermination = \"bxdf\"\npath_depth = {path_depth}\n\n[output]\nexr = \"{name}.exr\"\npng = \"{name}.png\"\n"
+        "[integrator]\nplugin = \"mcpt\"\nvariant = \"entangled\"\ntermination = \"throughput\"\npath_depth = {path_depth}\n\n[output]\nexr = \"{name}.exr\"\npng = \"{name}.png\"\n"
     ));
     s
 }
