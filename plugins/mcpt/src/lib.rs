@@ -92,49 +92,99 @@ impl Integrator for Mcpt {
         film: &mut Film,
         _stats: &mut Stats,
     ) -> Result<(), String> {
+        if self.settings.variant == Variant::Entangled {
+            return self.render_wavefront(unit, tracer, film);
+        }
         let mut contributions = SampleContributions::default();
         for y in unit.y0..unit.y1 {
             for x in unit.x0..unit.x1 {
                 for s in unit.sample_begin..unit.sample_begin + unit.sample_count {
-                    let mut rng =
-                        Rng::new(Rng::hash(&[unit.seed, x as u64, y as u64, s as u64]), 0);
-                    let raster = Vec2::new(x as f32, y as f32) + rng.uniform2();
+                    let (mut rng, raster) = sample_start(unit, x, y, s);
                     contributions.clear();
-                    match self.settings.variant {
-                        Variant::Entangled => entangled::trace(
-                            &self.scene,
-                            tracer,
-                            &self.settings,
-                            &mut rng,
-                            raster,
-                            &mut contributions,
-                        ),
-                        Variant::Untangled => {
-                            let sample = untangled::trace(
-                                &self.scene,
-                                tracer,
-                                &self.settings,
-                                &mut rng,
-                                raster,
-                                None,
-                            );
-                            contributions.add(sample.layer, sample.value);
-                        }
-                    }
-                    // Box filter: the sample belongs to the pixel it was drawn in (depositing at
-                    // the jittered position could round into the next pixel).
-                    let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
-                    if contributions.is_valid() {
-                        for &(layer, value) in &contributions.entries {
-                            film.deposit(cx, cy, layer, value);
-                        }
-                    } else {
-                        film.deposit(cx, cy, 0, Rgb::splat(f32::NAN));
-                    }
+                    let sample = untangled::trace(
+                        &self.scene,
+                        tracer,
+                        &self.settings,
+                        &mut rng,
+                        raster,
+                        None,
+                    );
+                    contributions.add(sample.layer, sample.value);
+                    deposit(film, x, y, &contributions);
                 }
             }
         }
         Ok(())
+    }
+}
+
+/// Paths traced together as one wavefront: large enough that a batch amortises the host
+/// call, small enough that the batch's rays and states stay in cache.
+const WAVEFRONT: usize = 256;
+
+impl Mcpt {
+    /// Entangled MCPT over a unit as wavefronts of [`WAVEFRONT`] paths, in the unit's
+    /// (row, pixel, sample) order; each wave's contributions are deposited in that order
+    /// afterwards, so the film sees exactly the deposits of a path-at-a-time loop.
+    fn render_wavefront(
+        &self,
+        unit: &WorkUnit,
+        tracer: &Tracer,
+        film: &mut Film,
+    ) -> Result<(), String> {
+        let mut wf = entangled::Wavefront::default();
+        let mut starts = Vec::with_capacity(WAVEFRONT);
+        let mut pixels = Vec::with_capacity(WAVEFRONT);
+        let mut out = vec![SampleContributions::default(); WAVEFRONT];
+        let mut flush = |starts: &mut Vec<(Rng, Vec2)>, pixels: &mut Vec<(u32, u32)>| {
+            let out = &mut out[..starts.len()];
+            entangled::trace_wavefront(&self.scene, tracer, &self.settings, starts, &mut wf, out);
+            for (&(x, y), c) in pixels.iter().zip(out.iter()) {
+                deposit(film, x, y, c);
+            }
+            starts.clear();
+            pixels.clear();
+        };
+        for y in unit.y0..unit.y1 {
+            for x in unit.x0..unit.x1 {
+                for s in unit.sample_begin..unit.sample_begin + unit.sample_count {
+                    starts.push(sample_start(unit, x, y, s));
+                    pixels.push((x, y));
+                    if starts.len() == WAVEFRONT {
+                        flush(&mut starts, &mut pixels);
+                    }
+                }
+            }
+        }
+        if !starts.is_empty() {
+            flush(&mut starts, &mut pixels);
+        }
+        Ok(())
+    }
+}
+
+/// The generator of sample `s` of pixel (`x`, `y`), seeded from (seed, pixel, sample), and the
+/// sample's jittered raster position (its first two numbers).
+#[inline]
+fn sample_start(unit: &WorkUnit, x: u32, y: u32, s: u32) -> (Rng, Vec2) {
+    let mut rng = Rng::new(Rng::hash(&[unit.seed, x as u64, y as u64, s as u64]), 0);
+    let raster = Vec2::new(x as f32, y as f32) + rng.uniform2();
+    (rng, raster)
+}
+
+/// Deposits one sample's contributions in pixel (`x`, `y`), or one invalid deposit when any
+/// is not finite and non-negative.
+#[inline]
+fn deposit(film: &mut Film, x: u32, y: u32, contributions: &SampleContributions) {
+    // Box filter: the sample belongs to the pixel it was drawn in (depositing at the
+    // jittered position could round into the next pixel).
+    let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
+    if contributions.is_valid() {
+        for &(layer, value) in &contributions.entries {
+            film.deposit(cx, cy, layer, value);
+        }
+    } else {
+        film.deposit(cx, cy, 0, Rgb::splat(f32::NAN));
     }
 }
 
