@@ -237,6 +237,30 @@ impl Intersector for EmbreeIntersector {
     fn name(&self) -> &'static str {
         "embree"
     }
+    /// `rtcIntersect8` packets for a flat scene when `FLOWLIGHT_EMBREE_PACKETS=1` (measured
+    /// not to pay on this machine's camera rays: docs/performance.md), else single rays.
+    fn intersect_coherent(&self, rays: &[Ray], hits: &mut [CompactHit]) -> bool {
+        let EmbreeIntersector::Flat(s) = self else {
+            return false;
+        };
+        if !packets_enabled() {
+            return false;
+        }
+        let mut out = [None; 8];
+        for (rays, hits) in rays.chunks(8).zip(hits.chunks_mut(8)) {
+            s.intersect_packets(rays, &mut out[..rays.len()]);
+            for (h, o) in hits.iter_mut().zip(&out) {
+                *h = o.map_or(CompactHit::MISS, |o| CompactHit {
+                    t: o.t,
+                    prim: o.prim,
+                    b1: o.b1,
+                    b2: o.b2,
+                    instance: u32::MAX,
+                });
+            }
+        }
+        true
+    }
     #[inline]
     fn intersect(&self, ray: &Ray) -> Option<TriangleHit> {
         match self {
@@ -280,6 +304,12 @@ impl Intersector for EmbreeIntersector {
             }),
         }
     }
+}
+
+/// Whether coherent batches go to Embree's packet traversal (`FLOWLIGHT_EMBREE_PACKETS=1`).
+fn packets_enabled() -> bool {
+    static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *ON.get_or_init(|| std::env::var("FLOWLIGHT_EMBREE_PACKETS").is_ok_and(|v| v == "1"))
 }
 
 /// Builds the intersector the config asks for, and reports its build time. `auto` takes

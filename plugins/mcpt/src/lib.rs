@@ -18,6 +18,7 @@
 //! | `path_depth` | int | 8 | path-space depth N: deepest lighting layer; a chain of mirrors seen from the eye does not use it up (virtual depth, §2) |
 //! | `max_ray_depth` | int | 64 | physical ray depth cap, every bounce counted |
 //! | `narrow_glossy_alpha` | float | 0.05 | untangled only: a glossy lobe with GGX α below it is Λα — no light connection there, light is found only by hitting it. A small lamp seen in a surface of roughness 0.2 (α = 0.04) is then nearly black; set 0 to connect at every non-Dirac vertex. Entangled MCPT connects at every non-Dirac vertex regardless |
+//! | `wavefront` | int | 256 | entangled only: paths traced together, as batches of camera, extension and shadow rays handed to the host in one call each (ABI 4); 0 traces one path at a time with one host call per ray. The image is the same bit for bit either way; only the speed differs |
 //! | `layers` | bool | false | also write lighting layers 0..=N (layer k = paths of virtual length k+1) as EXR layers `layer0`…; they sum to the image |
 //!
 //! Each pixel sample uses its own PCG32 stream seeded from (seed, pixel, sample index), so an
@@ -41,9 +42,11 @@ use glam::Vec2;
 pub struct Mcpt {
     scene: Scene<'static>,
     settings: PathSettings,
+    /// Paths per wavefront; 0 = path at a time.
+    wavefront: usize,
 }
 
-const PARAMS: [ParamSpec; 6] = {
+const PARAMS: [ParamSpec; 7] = {
     let p = flowlight_pathtrace::settings::PATH_PARAMS;
     [
         p[0],
@@ -62,6 +65,12 @@ const PARAMS: [ParamSpec; 6] = {
             "0.05",
             "untangled only: GGX alpha below which a glossy vertex gets no light connection (0 = connect at every non-Dirac vertex)",
         ),
+        param(
+            "wavefront",
+            ParamKind::Int,
+            "256",
+            "entangled only: paths traced together as ray batches (0 = one path at a time, one host call per ray)",
+        ),
     ]
 };
 
@@ -78,11 +87,24 @@ impl Integrator for Mcpt {
     ) -> Result<(Self, IntegratorInfo), String> {
         let settings = PathSettings::from_params(params)?;
         let layers = params.boolean("layers", false)?;
+        let wavefront = params.int("wavefront", WAVEFRONT as i64)?;
+        if !(0..=65536).contains(&wavefront) {
+            return Err(format!(
+                "parameter 'wavefront' must be in 0..=65536, got {wavefront}"
+            ));
+        }
         let info = IntegratorInfo {
             layer_count: if layers { settings.path_depth + 1 } else { 0 },
             ..IntegratorInfo::simple()
         };
-        Ok((Mcpt { scene, settings }, info))
+        Ok((
+            Mcpt {
+                scene,
+                settings,
+                wavefront: wavefront as usize,
+            },
+            info,
+        ))
     }
 
     fn render(
@@ -92,7 +114,7 @@ impl Integrator for Mcpt {
         film: &mut Film,
         _stats: &mut Stats,
     ) -> Result<(), String> {
-        if self.settings.variant == Variant::Entangled {
+        if self.settings.variant == Variant::Entangled && self.wavefront > 0 {
             return self.render_wavefront(unit, tracer, film);
         }
         let mut contributions = SampleContributions::default();
@@ -101,15 +123,27 @@ impl Integrator for Mcpt {
                 for s in unit.sample_begin..unit.sample_begin + unit.sample_count {
                     let (mut rng, raster) = sample_start(unit, x, y, s);
                     contributions.clear();
-                    let sample = untangled::trace(
-                        &self.scene,
-                        tracer,
-                        &self.settings,
-                        &mut rng,
-                        raster,
-                        None,
-                    );
-                    contributions.add(sample.layer, sample.value);
+                    match self.settings.variant {
+                        Variant::Entangled => entangled::trace(
+                            &self.scene,
+                            tracer,
+                            &self.settings,
+                            &mut rng,
+                            raster,
+                            &mut contributions,
+                        ),
+                        Variant::Untangled => {
+                            let sample = untangled::trace(
+                                &self.scene,
+                                tracer,
+                                &self.settings,
+                                &mut rng,
+                                raster,
+                                None,
+                            );
+                            contributions.add(sample.layer, sample.value);
+                        }
+                    }
                     deposit(film, x, y, &contributions);
                 }
             }
@@ -118,12 +152,12 @@ impl Integrator for Mcpt {
     }
 }
 
-/// Paths traced together as one wavefront: large enough that a batch amortises the host
-/// call, small enough that the batch's rays and states stay in cache.
+/// Paths traced together as one wavefront by default: large enough that a batch amortises
+/// the host call, small enough that the batch's rays and states stay in cache.
 const WAVEFRONT: usize = 256;
 
 impl Mcpt {
-    /// Entangled MCPT over a unit as wavefronts of [`WAVEFRONT`] paths, in the unit's
+    /// Entangled MCPT over a unit as wavefronts of `wavefront` paths, in the unit's
     /// (row, pixel, sample) order; each wave's contributions are deposited in that order
     /// afterwards, so the film sees exactly the deposits of a path-at-a-time loop.
     fn render_wavefront(
@@ -133,9 +167,10 @@ impl Mcpt {
         film: &mut Film,
     ) -> Result<(), String> {
         let mut wf = entangled::Wavefront::default();
-        let mut starts = Vec::with_capacity(WAVEFRONT);
-        let mut pixels = Vec::with_capacity(WAVEFRONT);
-        let mut out = vec![SampleContributions::default(); WAVEFRONT];
+        let n = self.wavefront;
+        let mut starts = Vec::with_capacity(n);
+        let mut pixels = Vec::with_capacity(n);
+        let mut out = vec![SampleContributions::default(); n];
         let mut flush = |starts: &mut Vec<(Rng, Vec2)>, pixels: &mut Vec<(u32, u32)>| {
             let out = &mut out[..starts.len()];
             entangled::trace_wavefront(&self.scene, tracer, &self.settings, starts, &mut wf, out);
@@ -150,7 +185,7 @@ impl Mcpt {
                 for s in unit.sample_begin..unit.sample_begin + unit.sample_count {
                     starts.push(sample_start(unit, x, y, s));
                     pixels.push((x, y));
-                    if starts.len() == WAVEFRONT {
+                    if starts.len() == n {
                         flush(&mut starts, &mut pixels);
                     }
                 }
