@@ -24,7 +24,8 @@ impl Ray {
 }
 
 /// Everything an integrator needs to know about a ray's closest hit. Filled in by the host
-/// (which owns the meshes); plugins never see vertex buffers.
+/// for single-ray queries, or by the plugin from a batch's [`crate::mesh::CompactHit`] over
+/// the scene view's vertex buffers ([`crate::mesh::MeshView::surface_hit`], the same code).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SurfaceHit {

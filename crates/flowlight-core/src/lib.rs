@@ -8,6 +8,7 @@ pub mod camera;
 pub mod geometry;
 pub mod light;
 pub mod material;
+pub mod mesh;
 pub mod path;
 pub mod rng;
 pub mod sampling;

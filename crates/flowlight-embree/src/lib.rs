@@ -48,6 +48,40 @@ pub mod abi {
         pub inst_prim_id: [u32; 1],
     }
 
+    /// `RTCRayHit8` of the 4.4 library (structure of arrays, 8 lanes; the hit with
+    /// `instPrimID` as in [`RTCHit`]), for `rtcIntersect8`.
+    #[repr(C, align(32))]
+    #[derive(Clone, Copy, Debug)]
+    pub struct RTCRayHit8 {
+        pub org_x: [f32; 8],
+        pub org_y: [f32; 8],
+        pub org_z: [f32; 8],
+        pub tnear: [f32; 8],
+        pub dir_x: [f32; 8],
+        pub dir_y: [f32; 8],
+        pub dir_z: [f32; 8],
+        pub time: [f32; 8],
+        pub tfar: [f32; 8],
+        pub mask: [u32; 8],
+        pub id: [u32; 8],
+        pub flags: [u32; 8],
+        pub ng_x: [f32; 8],
+        pub ng_y: [f32; 8],
+        pub ng_z: [f32; 8],
+        pub u: [f32; 8],
+        pub v: [f32; 8],
+        pub prim_id: [u32; 8],
+        pub geom_id: [u32; 8],
+        pub inst_id: [[u32; 8]; 1],
+        pub inst_prim_id: [[u32; 8]; 1],
+    }
+
+    /// The `valid` mask of a packet call (−1 = active lane), 32-byte aligned as Embree
+    /// requires.
+    #[repr(C, align(32))]
+    #[derive(Clone, Copy, Debug)]
+    pub struct Valid8(pub [i32; 8]);
+
     /// `RTCRayHit` with the 4.4 hit.
     #[repr(C, align(16))]
     #[derive(Clone, Copy, Debug)]
@@ -63,6 +97,9 @@ pub mod abi {
     const _: () = assert!(std::mem::size_of::<embree4_sys::RTCRayHit>() == 80);
     const _: () = assert!(std::mem::size_of::<RTCHit>() == 48);
     const _: () = assert!(std::mem::size_of::<RTCRayHit>() == 96);
+    // RTCRay8 (12 arrays of 8) then RTCHit8 (9 arrays of 8, instID and instPrimID one level).
+    const _: () = assert!(std::mem::size_of::<RTCRayHit8>() == 21 * 32);
+    const _: () = assert!(std::mem::offset_of!(RTCRayHit8, ng_x) == 12 * 32);
     const _: () = assert!(std::mem::offset_of!(RTCRayHit, hit) == 48);
     const _: () = assert!(std::mem::size_of::<embree4_sys::RTCIntersectArguments>() == 32);
     const _: () = assert!(embree4_sys::RTC_MAX_INSTANCE_LEVEL_COUNT == 1);
@@ -101,6 +138,9 @@ struct Api {
     /// The third argument is `RTCIntersectArguments*` (NULL for the defaults).
     intersect1: Fn<unsafe extern "C" fn(RTCScene, *mut abi::RTCRayHit, *mut c_void)>,
     occluded1: Fn<unsafe extern "C" fn(RTCScene, *mut RTCRay, *mut c_void)>,
+    /// `rtcIntersect8(valid, scene, rayhit, args)`.
+    intersect8:
+        Fn<unsafe extern "C" fn(*const abi::Valid8, RTCScene, *mut abi::RTCRayHit8, *mut c_void)>,
 }
 
 /// The process's one Embree device and the library it came from.
@@ -193,6 +233,7 @@ fn open_device() -> Result<Device, String> {
         set_geometry_transform: sym!("rtcSetGeometryTransform"),
         intersect1: sym!("rtcIntersect1"),
         occluded1: sym!("rtcOccluded1"),
+        intersect8: sym!("rtcIntersect8"),
     };
     // SAFETY: a NUL-terminated config string.
     let handle = unsafe { (api.new_device)(c"verbose=0".as_ptr()) };
@@ -554,6 +595,61 @@ impl EmbreeScene {
         self.dev.any_hit(self.scene, ray, Some(&mut args))
     }
 
+    /// Closest hits of up to 8 rays per `rtcIntersect8` packet call (Embree's packet
+    /// traversal, which pays for coherent rays: camera rays of a tile). `out[i]` is
+    /// `rays[i]`'s hit; `rays.len() == out.len()`.
+    pub fn intersect_packets(&self, rays: &[Ray], out: &mut [Option<TriangleHit>]) {
+        for (rays, out) in rays.chunks(8).zip(out.chunks_mut(8)) {
+            let mut valid = abi::Valid8([0; 8]);
+            let mut p = abi::RTCRayHit8 {
+                org_x: [0.0; 8],
+                org_y: [0.0; 8],
+                org_z: [0.0; 8],
+                tnear: [0.0; 8],
+                dir_x: [0.0; 8],
+                dir_y: [0.0; 8],
+                dir_z: [1.0; 8],
+                time: [0.0; 8],
+                tfar: [-0.0; 8],
+                mask: [u32::MAX; 8],
+                id: [0; 8],
+                flags: [0; 8],
+                ng_x: [0.0; 8],
+                ng_y: [0.0; 8],
+                ng_z: [0.0; 8],
+                u: [0.0; 8],
+                v: [0.0; 8],
+                prim_id: [u32::MAX; 8],
+                geom_id: [u32::MAX; 8],
+                inst_id: [[u32::MAX; 8]],
+                inst_prim_id: [[u32::MAX; 8]],
+            };
+            for (k, ray) in rays.iter().enumerate() {
+                let r = Self::rtc_ray(ray);
+                valid.0[k] = -1;
+                p.org_x[k] = r.org_x;
+                p.org_y[k] = r.org_y;
+                p.org_z[k] = r.org_z;
+                p.tnear[k] = r.tnear;
+                p.dir_x[k] = r.dir_x;
+                p.dir_y[k] = r.dir_y;
+                p.dir_z[k] = r.dir_z;
+                p.tfar[k] = r.tfar;
+            }
+            // SAFETY: a committed scene, a 32-byte aligned 4.4-layout packet and valid mask,
+            // NULL arguments (the defaults, as for the single-ray call).
+            unsafe { (self.dev.api.intersect8)(&valid, self.scene, &mut p, std::ptr::null_mut()) };
+            for (k, o) in out.iter_mut().enumerate() {
+                *o = (p.geom_id[k] != u32::MAX).then_some(TriangleHit {
+                    t: p.tfar[k],
+                    prim: p.prim_id[k],
+                    b1: p.u[k],
+                    b2: p.v[k],
+                });
+            }
+        }
+    }
+
     /// Raw `rtcIntersect1` into caller memory, for the ABI test: `buf` must be at least
     /// 96 bytes, 16-aligned, and start with an `RTCRay`.
     ///
@@ -908,5 +1004,75 @@ mod tests {
             vec![80, 81, 82, 83],
             "bytes written past the 4.2 RTCRayHit"
         );
+    }
+
+    /// A bumpy sphere of 2·n·(n−1) triangles.
+    fn bumpy_sphere(n: usize) -> Vec<[Vec3; 3]> {
+        let at = |i: usize, j: usize| {
+            let (th, ph) = (
+                std::f32::consts::PI * i as f32 / n as f32,
+                std::f32::consts::TAU * j as f32 / n as f32,
+            );
+            let r = 1.0 + 0.1 * (5.0 * th).sin() * (3.0 * ph).cos();
+            Vec3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()) * r
+        };
+        let mut tris = Vec::new();
+        for i in 0..n {
+            for j in 0..n {
+                let (a, b, c, d) = (at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
+                if i > 0 {
+                    tris.push([a, b, d]);
+                }
+                if i + 1 < n {
+                    tris.push([b, c, d]);
+                }
+            }
+        }
+        tris
+    }
+
+    #[test]
+    fn packets_return_exactly_the_single_ray_hits() {
+        let s = EmbreeScene::build_soup(&bumpy_sphere(40), SceneOptions::default()).unwrap();
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut u = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        // Camera rays through a 61 × 61 grid (not a multiple of 8: partial packets), and
+        // incoherent rays with random t_max.
+        let mut rays: Vec<Ray> = (0..61 * 61)
+            .map(|i| {
+                let (x, y) = ((i % 61) as f32 / 60.0 - 0.5, (i / 61) as f32 / 60.0 - 0.5);
+                Ray::new(
+                    Vec3::new(0.0, 0.0, 4.0),
+                    Vec3::new(x, y, -1.5).normalize(),
+                    f32::INFINITY,
+                )
+            })
+            .collect();
+        for _ in 0..3000 {
+            let o = Vec3::new(u() - 0.5, u() - 0.5, u() - 0.5) * 6.0;
+            let d = (Vec3::new(u(), u(), u()) - 0.5 - o * 0.1).normalize();
+            rays.push(Ray::new(
+                o,
+                d,
+                if u() < 0.5 { f32::INFINITY } else { 4.0 * u() },
+            ));
+        }
+        let mut out = vec![None; rays.len()];
+        s.intersect_packets(&rays, &mut out);
+        let mut hits = 0;
+        for (i, (ray, got)) in rays.iter().zip(&out).enumerate() {
+            let want = s.intersect(ray);
+            let bits = |h: Option<TriangleHit>| {
+                h.map(|h| (h.t.to_bits(), h.prim, h.b1.to_bits(), h.b2.to_bits()))
+            };
+            assert_eq!(bits(*got), bits(want), "ray {i}: {ray:?}");
+            hits += want.is_some() as usize;
+        }
+        assert!(hits > 1500, "{hits} hits");
     }
 }

@@ -2,9 +2,10 @@
 
 use flowlight_bvh::{Bvh, Instance, TwoLevelBvh};
 use flowlight_core::geometry::{HitFilter, InstanceHit, Ray, TriangleHit};
+use flowlight_core::mesh::CompactHit;
 use flowlight_scene::config::Intersector as IntersectorChoice;
 use flowlight_scene::Scene;
-use flowlight_sdk::abi::{HitRecord, TracerTable};
+use flowlight_sdk::abi::{batch, HitRecord, TracerTable};
 use std::ffi::c_void;
 use std::time::{Duration, Instant};
 
@@ -18,6 +19,12 @@ pub trait Intersector: Send + Sync {
     fn intersect_filtered(&self, ray: &Ray, accept: HitFilter) -> Option<TriangleHit>;
     /// Whether a hit that `accept` keeps lies on the ray.
     fn occluded_filtered(&self, ray: &Ray, accept: HitFilter) -> bool;
+    /// Closest hits of a batch of coherent rays by packet traversal, where the backend has
+    /// one that pays; `false` (nothing written) when the caller should loop over
+    /// [`Intersector::intersect`]. The hits must be exactly the single-ray ones.
+    fn intersect_coherent(&self, _rays: &[Ray], _hits: &mut [CompactHit]) -> bool {
+        false
+    }
 }
 
 /// The meshes and instances of an instanced scene, as the two-level builds take them: per
@@ -230,6 +237,30 @@ impl Intersector for EmbreeIntersector {
     fn name(&self) -> &'static str {
         "embree"
     }
+    /// `rtcIntersect8` packets for a flat scene when `FLOWLIGHT_EMBREE_PACKETS=1` (measured
+    /// not to pay on this machine's camera rays: docs/performance.md), else single rays.
+    fn intersect_coherent(&self, rays: &[Ray], hits: &mut [CompactHit]) -> bool {
+        let EmbreeIntersector::Flat(s) = self else {
+            return false;
+        };
+        if !packets_enabled() {
+            return false;
+        }
+        let mut out = [None; 8];
+        for (rays, hits) in rays.chunks(8).zip(hits.chunks_mut(8)) {
+            s.intersect_packets(rays, &mut out[..rays.len()]);
+            for (h, o) in hits.iter_mut().zip(&out) {
+                *h = o.map_or(CompactHit::MISS, |o| CompactHit {
+                    t: o.t,
+                    prim: o.prim,
+                    b1: o.b1,
+                    b2: o.b2,
+                    instance: u32::MAX,
+                });
+            }
+        }
+        true
+    }
     #[inline]
     fn intersect(&self, ray: &Ray) -> Option<TriangleHit> {
         match self {
@@ -273,6 +304,12 @@ impl Intersector for EmbreeIntersector {
             }),
         }
     }
+}
+
+/// Whether coherent batches go to Embree's packet traversal (`FLOWLIGHT_EMBREE_PACKETS=1`).
+fn packets_enabled() -> bool {
+    static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *ON.get_or_init(|| std::env::var("FLOWLIGHT_EMBREE_PACKETS").is_ok_and(|v| v == "1"))
 }
 
 /// Builds the intersector the config asks for, and reports its build time. `auto` takes
@@ -376,6 +413,38 @@ impl<'a> UnitTracer<'a> {
             ctx: self as *mut Self as *mut c_void,
             intersect: intersect_cb,
             occluded: occluded_cb,
+            intersect_batch: intersect_batch_cb,
+            occluded_batch: occluded_batch_cb,
+        }
+    }
+
+    /// Closest hits of a batch of rays as compact hits (ABI 4): `hits[i]` is `rays[i]`'s hit
+    /// exactly as [`UnitTracer::closest`] finds it. `coherent` batches may go to the
+    /// intersector's packet traversal ([`Intersector::intersect_coherent`]).
+    pub fn intersect_batch(&mut self, rays: &[Ray], coherent: bool, hits: &mut [CompactHit]) {
+        self.counts.closest += rays.len() as u64;
+        if coherent && !self.alpha && self.intersector.intersect_coherent(rays, hits) {
+            return;
+        }
+        for (ray, out) in rays.iter().zip(hits.iter_mut()) {
+            *out = match self.closest(ray) {
+                Some(h) => CompactHit {
+                    t: h.t,
+                    prim: h.prim,
+                    b1: h.b1,
+                    b2: h.b2,
+                    instance: u32::MAX,
+                },
+                None => CompactHit::MISS,
+            };
+        }
+    }
+
+    /// Shadow rays of a batch: `blocked[i]` = [`UnitTracer::blocked`] of `rays[i]`.
+    pub fn occluded_batch(&mut self, rays: &[Ray], blocked: &mut [u8]) {
+        self.counts.shadow += rays.len() as u64;
+        for (ray, out) in rays.iter().zip(blocked.iter_mut()) {
+            *out = self.blocked(ray) as u8;
         }
     }
 
@@ -415,6 +484,33 @@ unsafe extern "C" fn intersect_cb(ctx: *mut c_void, ray: *const Ray, hit: *mut H
     unsafe {
         let tracer = &mut *(ctx as *mut UnitTracer);
         hit.write(tracer.intersect(&*ray));
+    }
+}
+
+unsafe extern "C" fn intersect_batch_cb(
+    ctx: *mut c_void,
+    rays: *const Ray,
+    n: usize,
+    flags: u32,
+    hits: *mut CompactHit,
+) {
+    // SAFETY: `ctx` is the UnitTracer whose table this is, and the SDK passes `n` valid rays
+    // and `n` writable results (`TracerTable::intersect_batch`).
+    unsafe {
+        let tracer = &mut *(ctx as *mut UnitTracer);
+        let rays = std::slice::from_raw_parts(rays, n);
+        let hits = std::slice::from_raw_parts_mut(hits, n);
+        tracer.intersect_batch(rays, flags & batch::COHERENT != 0, hits);
+    }
+}
+
+unsafe extern "C" fn occluded_batch_cb(ctx: *mut c_void, rays: *const Ray, n: usize, out: *mut u8) {
+    // SAFETY: as for `intersect_batch_cb`.
+    unsafe {
+        let tracer = &mut *(ctx as *mut UnitTracer);
+        let rays = std::slice::from_raw_parts(rays, n);
+        let out = std::slice::from_raw_parts_mut(out, n);
+        tracer.occluded_batch(rays, out);
     }
 }
 

@@ -189,6 +189,7 @@ impl Session {
             light_power_cdf: light_cdf.as_ptr(),
             bounds_min,
             bounds_max,
+            mesh: flowlight_sdk::scene::mesh_tables(&scene.mesh()),
         };
         let mut mutations = Vec::new();
         let mut plugin_files = vec![plugin_path.clone()];

@@ -11,15 +11,17 @@
 //! (in the white furnace of albedo ½ at N = 1: 1.245 instead of 1.5).
 
 use crate::settings::PathSettings;
-use crate::shading::{connect_light, side_consistent, Shading};
+use crate::shading::{connect_light, light_connection, side_consistent, Shading};
 use crate::SampleContributions;
 use flowlight_core::bsdf::volume;
+use flowlight_core::geometry::{Ray, SurfaceHit};
 use flowlight_core::light::area_to_solid_angle;
+use flowlight_core::mesh::CompactHit;
 use flowlight_core::rng::Rng;
 use flowlight_core::sampling::power_heuristic;
 use flowlight_core::Rgb;
 use flowlight_sdk::{Scene, Tracer};
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 
 /// Traces one entangled path tree through raster position `raster`, adding each contribution
 /// to `out` with its lighting layer.
@@ -156,4 +158,236 @@ pub fn trace(
         inside = volume::entered(scene.material(&hit), hit.ng, wi_world);
         ray = hit.spawn_ray(wi_world);
     }
+}
+
+/// The state of one path of a [`Wavefront`] between two bounces: exactly the locals of
+/// [`trace`]'s loop.
+#[derive(Clone, Debug)]
+struct PathState {
+    rng: Rng,
+    ray: Ray,
+    beta: Rgb,
+    inside: Option<Rgb>,
+    depth: u32,
+    physical: u32,
+    prev_delta: bool,
+    prev_pdf: f32,
+    prev_p: Vec3,
+    last: bool,
+}
+
+/// Reusable buffers of [`trace_wavefront`] (one per work unit, so no allocation per path).
+#[derive(Default)]
+pub struct Wavefront {
+    paths: Vec<PathState>,
+    /// Indices of the paths still going, in their original order.
+    active: Vec<u32>,
+    rays: Vec<Ray>,
+    hits: Vec<CompactHit>,
+    shadow_rays: Vec<Ray>,
+    /// Per shadow ray: its path and the contribution it carries when unblocked.
+    shadow_owner: Vec<(u32, u32, Rgb)>,
+    blocked: Vec<u8>,
+}
+
+/// Traces `starts.len()` entangled paths as a wavefront: the camera rays as one batch (marked
+/// coherent), then per bounce one batch of extension rays and one of shadow rays, so the host
+/// is called twice per bounce instead of twice per vertex. Path `i` starts from
+/// `starts[i]` = (its generator, its raster position) and adds its contributions to `out[i]`
+/// (cleared first).
+///
+/// Each path draws the same random numbers in the same order and makes the same float
+/// operations as [`trace`] (its shadow ray is traced before its next extension ray, as there;
+/// shading uses [`Scene::surface`] on the compact hit, the host's own surface code), so
+/// `out[i]` equals what [`trace`] gives for the same start, bit for bit, and so does the
+/// image whatever the batch size. One difference that changes no pixel: a light connection
+/// whose contribution is black is not traced.
+pub fn trace_wavefront(
+    scene: &Scene,
+    tracer: &Tracer,
+    settings: &PathSettings,
+    starts: &[(Rng, Vec2)],
+    wf: &mut Wavefront,
+    out: &mut [SampleContributions],
+) {
+    debug_assert_eq!(starts.len(), out.len());
+    wf.paths.clear();
+    wf.active.clear();
+    for (i, (rng, raster)) in starts.iter().enumerate() {
+        let ray = scene.camera.generate_ray(*raster);
+        wf.paths.push(PathState {
+            rng: rng.clone(),
+            ray,
+            beta: Rgb::ONE,
+            inside: None,
+            depth: 0,
+            physical: 0,
+            prev_delta: true,
+            prev_pdf: 0.0,
+            prev_p: ray.origin,
+            last: false,
+        });
+        wf.active.push(i as u32);
+        out[i].clear();
+    }
+    let mut coherent = true;
+    while !wf.active.is_empty() {
+        wf.rays.clear();
+        wf.rays
+            .extend(wf.active.iter().map(|&i| wf.paths[i as usize].ray));
+        tracer.intersect_batch(&wf.rays, coherent, &mut wf.hits);
+        coherent = false;
+        wf.shadow_rays.clear();
+        wf.shadow_owner.clear();
+        let mut kept = 0;
+        for k in 0..wf.active.len() {
+            let i = wf.active[k];
+            let path = &mut wf.paths[i as usize];
+            let compact = wf.hits[k];
+            let o = &mut out[i as usize];
+            let going = if compact.is_hit() {
+                let hit = scene.surface(&path.ray, &compact);
+                let (going, shadow) = vertex(scene, settings, path, &hit, o, &mut wf.shadow_rays);
+                if let Some((layer, value)) = shadow {
+                    wf.shadow_owner.push((i, layer, value));
+                }
+                going
+            } else {
+                escape(scene, path, o);
+                false
+            };
+            if going {
+                wf.active[kept] = i;
+                kept += 1;
+            }
+        }
+        wf.active.truncate(kept);
+        if !wf.shadow_rays.is_empty() {
+            tracer.occluded_batch(&wf.shadow_rays, &mut wf.blocked);
+            for (&(i, layer, value), &b) in wf.shadow_owner.iter().zip(&wf.blocked) {
+                if b == 0 {
+                    out[i as usize].add(layer, value);
+                }
+            }
+        }
+    }
+}
+
+/// [`trace`]'s escape branch: the environment, MIS-weighted against its light sample.
+#[inline]
+fn escape(scene: &Scene, path: &PathState, out: &mut SampleContributions) {
+    let le = scene.lights.environment_radiance(path.ray.dir);
+    if !le.is_black() {
+        let w = if path.prev_delta {
+            1.0
+        } else {
+            power_heuristic(path.prev_pdf, scene.lights.pdf_environment(path.ray.dir))
+        };
+        out.add(path.depth, path.beta * le * w);
+    }
+}
+
+/// [`trace`]'s loop body at a hit, with the light connection's shadow ray pushed onto
+/// `shadow_rays` instead of traced. Returns whether the path goes on (with `path.ray`) and
+/// the (layer, contribution) of the shadow ray pushed, if one was.
+#[inline]
+fn vertex(
+    scene: &Scene,
+    settings: &PathSettings,
+    path: &mut PathState,
+    hit: &SurfaceHit,
+    out: &mut SampleContributions,
+    shadow_rays: &mut Vec<Ray>,
+) -> (bool, Option<(u32, Rgb)>) {
+    if let Some(sigma) = path.inside.take() {
+        path.beta *= volume::transmittance(sigma, hit.t);
+    }
+    let wo_world = -path.ray.dir;
+    if hit.emitter >= 0 {
+        let le = scene.lights.emitted(hit.emitter as usize, hit.p, wo_world);
+        if !le.is_black() {
+            let w = if path.prev_delta {
+                1.0
+            } else {
+                let pdf_light = area_to_solid_angle(
+                    scene.lights.pdf_area(hit.emitter as usize),
+                    path.prev_p,
+                    hit.p,
+                    hit.ng,
+                );
+                power_heuristic(path.prev_pdf, pdf_light)
+            };
+            out.add(path.depth, path.beta * le * w);
+        }
+    }
+    if path.last {
+        return (false, None);
+    }
+    let bsdf = scene.bsdf(hit);
+    let next_depth = if path.depth == 0 && bsdf.is_delta() {
+        0
+    } else {
+        path.depth + 1
+    };
+    if next_depth > settings.path_depth {
+        return (false, None);
+    }
+    path.depth = next_depth;
+    path.physical += 1;
+    let depth = path.depth;
+    let shading = Shading::new(hit, wo_world);
+    let rng = &mut path.rng;
+
+    let mut shadow = None;
+    if bsdf.has_non_delta() {
+        if let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) {
+            if let Some((conn, ray)) = light_connection(scene, hit, &shading, &ls) {
+                let f = bsdf.eval(shading.wo, conn.wi_local);
+                if !f.is_black() {
+                    let w = if conn.delta {
+                        1.0
+                    } else {
+                        power_heuristic(conn.pdf, bsdf.pdf(shading.wo, conn.wi_local))
+                    };
+                    let value =
+                        path.beta * f * conn.radiance * (conn.wi_local.z.abs() * w / conn.pdf);
+                    if !value.is_black() {
+                        shadow_rays.push(ray);
+                        shadow = Some((depth, value));
+                    }
+                }
+            }
+        }
+    }
+
+    // From here on the path may end; its shadow ray (already pushed) counts either way.
+    let t = if depth > 0 {
+        settings.termination.probability(depth, bsdf.albedo())
+    } else {
+        0.0
+    };
+    path.last = t >= 1.0 || path.physical >= settings.max_ray_depth;
+    if !path.last && t > 0.0 {
+        if rng.uniform() < t {
+            return (false, shadow);
+        }
+        path.beta /= 1.0 - t;
+    }
+    let Some(s) = bsdf.sample(shading.wo, rng.uniform(), rng.uniform2()) else {
+        return (false, shadow);
+    };
+    let wi_world = shading.frame.to_world(s.wi);
+    if !side_consistent(hit, wi_world, s.wi) {
+        return (false, shadow);
+    }
+    path.beta *= s.f * (s.wi.z.abs() / s.pdf);
+    if path.beta.is_black() {
+        return (false, shadow);
+    }
+    path.prev_delta = s.delta;
+    path.prev_pdf = s.pdf;
+    path.prev_p = hit.p;
+    path.inside = volume::entered(scene.material(hit), hit.ng, wi_world);
+    path.ray = hit.spawn_ray(wi_world);
+    (true, shadow)
 }

@@ -1,6 +1,6 @@
 //! Per-vertex shading helpers shared by both samplers.
 
-use flowlight_core::geometry::{Frame, SurfaceHit};
+use flowlight_core::geometry::{Frame, Ray, SurfaceHit};
 use flowlight_core::light::{LightSample, ShadowTarget};
 use flowlight_core::Rgb;
 use flowlight_sdk::{Scene, Tracer};
@@ -52,6 +52,19 @@ pub(crate) fn connect_light(
     shading: &Shading,
     ls: &LightSample,
 ) -> Option<Connection> {
+    let (conn, ray) = light_connection(scene, hit, shading, ls)?;
+    (!tracer.occluded(&ray)).then_some(conn)
+}
+
+/// [`connect_light`] without the visibility test: the connection and the shadow ray that
+/// decides it (traced later, in a batch, by the wavefront sampler).
+#[inline]
+pub(crate) fn light_connection(
+    scene: &Scene,
+    hit: &SurfaceHit,
+    shading: &Shading,
+    ls: &LightSample,
+) -> Option<(Connection, Ray)> {
     let inc = scene.lights.incident(ls, hit.p)?;
     if inc.radiance.is_black() || !(inc.pdf > 0.0 && inc.pdf.is_finite()) {
         return None;
@@ -64,13 +77,11 @@ pub(crate) fn connect_light(
         ShadowTarget::Point { p, p_error, n } => hit.spawn_ray_to(p, p_error, n),
         ShadowTarget::Infinity => hit.spawn_ray(inc.wi),
     };
-    if tracer.occluded(&ray) {
-        return None;
-    }
-    Some(Connection {
+    let conn = Connection {
         wi_local,
         radiance: inc.radiance,
         pdf: inc.pdf,
         delta: inc.delta,
-    })
+    };
+    Some((conn, ray))
 }

@@ -11,6 +11,7 @@ use flowlight_core::camera::Camera;
 use flowlight_core::geometry::{Ray, SurfaceHit};
 use flowlight_core::light::{Emitter, Environment, PunctualLight};
 use flowlight_core::material::{Material, Texture, TextureRef};
+use flowlight_core::mesh::{CompactHit, MeshInstance};
 use flowlight_core::path::{Path, PathVertex};
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
@@ -19,7 +20,7 @@ use std::ffi::c_void;
 
 /// Bumped whenever any type or function table in this module changes incompatibly; every
 /// version and what changed is listed in the repository's `CHANGELOG.md`.
-pub const ABI_VERSION: u32 = 3;
+pub const ABI_VERSION: u32 = 4;
 /// Version of the SDK crate compiled into this binary.
 pub const SDK_VERSION: &str = env!("CARGO_PKG_VERSION");
 /// `rustc --version` of the compiler that built this binary.
@@ -162,6 +163,65 @@ pub struct SceneView {
     pub light_power_cdf: *const f32,
     pub bounds_min: Vec3,
     pub bounds_max: Vec3,
+    /// The vertex and triangle buffers (ABI 4), for surface data built plugin-side from
+    /// [`CompactHit`]s.
+    pub mesh: MeshTables,
+}
+
+/// The scene's vertex and triangle buffers as the host stores them
+/// (`flowlight_core::mesh::MeshView` is the plugin's safe view). Per-vertex arrays have
+/// `vertex_count` entries or, for the optional ones (`uvs1`, `colors`, `tangents`), 0 when
+/// no primitive has the attribute (their pointer may then be dangling or null); the three
+/// per-triangle arrays have `triangle_count` entries each.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct MeshTables {
+    pub positions: *const Vec3,
+    pub normals: *const Vec3,
+    pub uvs: *const glam::Vec2,
+    pub vertex_count: usize,
+    pub uvs1: *const glam::Vec2,
+    pub uvs1_count: usize,
+    pub colors: *const [f32; 4],
+    pub colors_count: usize,
+    pub tangents: *const [f32; 4],
+    pub tangents_count: usize,
+    pub triangles: *const [u32; 3],
+    pub triangle_material: *const u32,
+    pub triangle_emitter: *const i32,
+    pub triangle_count: usize,
+    /// Sorted by `first_virtual`; 0 entries: one identity instance of all triangles.
+    pub instances: *const MeshInstance,
+    pub instance_count: usize,
+}
+
+impl MeshTables {
+    /// No geometry (a scene view built by hand for tests of the shading code).
+    pub const EMPTY: MeshTables = MeshTables {
+        positions: std::ptr::null(),
+        normals: std::ptr::null(),
+        uvs: std::ptr::null(),
+        vertex_count: 0,
+        uvs1: std::ptr::null(),
+        uvs1_count: 0,
+        colors: std::ptr::null(),
+        colors_count: 0,
+        tangents: std::ptr::null(),
+        tangents_count: 0,
+        triangles: std::ptr::null(),
+        triangle_material: std::ptr::null(),
+        triangle_emitter: std::ptr::null(),
+        triangle_count: 0,
+        instances: std::ptr::null(),
+        instance_count: 0,
+    };
+}
+
+/// Flags of a batched closest-hit query.
+pub mod batch {
+    /// The rays are coherent (camera rays of a tile, in raster order): the host may answer
+    /// them with packet traversal (Embree's `rtcIntersect4/8/16`).
+    pub const COHERENT: u32 = 1;
 }
 
 /// Result of one closest-hit query.
@@ -173,7 +233,13 @@ pub struct HitRecord {
     pub surface: SurfaceHit,
 }
 
-/// Ray queries the host answers, one ray per call. `ctx` is the host's per-work-unit context.
+/// Ray queries the host answers. `ctx` is the host's per-work-unit context.
+///
+/// Single-ray calls return the full [`SurfaceHit`] (what ERPT and the mutations use); the
+/// batch calls (ABI 4) take `n` rays and return one [`CompactHit`] or flag per ray, so one
+/// indirect call is paid per batch and the plugin builds only the surface data it shades
+/// (`flowlight_core::mesh::MeshView::surface_hit` over [`SceneView::mesh`]). A batch's
+/// answers are exactly the single-ray answers of its rays.
 #[repr(C)]
 #[derive(Clone, Copy)]
 pub struct TracerTable {
@@ -182,6 +248,18 @@ pub struct TracerTable {
     pub intersect: unsafe extern "C" fn(ctx: *mut c_void, ray: *const Ray, hit: *mut HitRecord),
     /// 1 when `ray` is blocked before its `t_max`, else 0.
     pub occluded: unsafe extern "C" fn(ctx: *mut c_void, ray: *const Ray) -> u8,
+    /// Closest hits of `rays[0..n]` into `hits[0..n]` ([`CompactHit::MISS`] for an escape);
+    /// `flags` is a set of [`batch`] bits.
+    pub intersect_batch: unsafe extern "C" fn(
+        ctx: *mut c_void,
+        rays: *const Ray,
+        n: usize,
+        flags: u32,
+        hits: *mut CompactHit,
+    ),
+    /// `blocked[i]` = 1 when `rays[i]` is blocked before its `t_max`, else 0.
+    pub occluded_batch:
+        unsafe extern "C" fn(ctx: *mut c_void, rays: *const Ray, n: usize, blocked: *mut u8),
 }
 
 /// One contribution to the image: radiance `value` (already divided by its sample density)
@@ -433,6 +511,9 @@ pub const fn layout_hash() -> u64 {
         size_of::<Ray>(),
         size_of::<SurfaceHit>(),
         size_of::<HitRecord>(),
+        size_of::<CompactHit>(),
+        size_of::<MeshTables>(),
+        size_of::<MeshInstance>(),
         size_of::<TracerTable>(),
         size_of::<Deposit>(),
         size_of::<FilmTable>(),
@@ -452,6 +533,7 @@ pub const fn layout_hash() -> u64 {
         align_of::<Environment>(),
         align_of::<Path>(),
         align_of::<ErrorBuf>(),
+        align_of::<MeshInstance>(),
         align_of::<WorkUnit>(),
     ];
     // FNV-1a over the sizes, seeded with the ABI version.

@@ -19,6 +19,7 @@
 //! | `path_depth` | int | 8 | path-space depth N: deepest lighting layer; a chain of mirrors seen from the eye does not use it up (virtual depth, §2) |
 //! | `max_ray_depth` | int | 64 | physical ray depth cap, every bounce counted |
 //! | `narrow_glossy_alpha` | float | 0.05 | untangled only: a glossy lobe with GGX α below it is Λα — no light connection there, light is found only by hitting it. A small lamp seen in a surface of roughness 0.2 (α = 0.04) is then nearly black; set 0 to connect at every non-Dirac vertex. Entangled MCPT connects at every non-Dirac vertex regardless |
+//! | `wavefront` | int | 256 | entangled only: paths traced together, as batches of camera, extension and shadow rays handed to the host in one call each (ABI 4); 0 traces one path at a time with one host call per ray. The image is the same bit for bit either way; only the speed differs |
 //! | `layers` | bool | false | also write lighting layers 0..=N (layer k = paths of virtual length k+1) as EXR layers `layer0`…; they sum to the image |
 //!
 //! Each pixel sample uses its own PCG32 stream seeded from (seed, pixel, sample index), so an
@@ -42,9 +43,11 @@ use glam::Vec2;
 pub struct Mcpt {
     scene: Scene<'static>,
     settings: PathSettings,
+    /// Paths per wavefront; 0 = path at a time.
+    wavefront: usize,
 }
 
-const PARAMS: [ParamSpec; 8] = {
+const PARAMS: [ParamSpec; 9] = {
     let p = flowlight_pathtrace::settings::PATH_PARAMS;
     [
         p[0],
@@ -65,6 +68,12 @@ const PARAMS: [ParamSpec; 8] = {
             "0.05",
             "untangled only: GGX alpha below which a glossy vertex gets no light connection (0 = connect at every non-Dirac vertex)",
         ),
+        param(
+            "wavefront",
+            ParamKind::Int,
+            "256",
+            "entangled only: paths traced together as ray batches (0 = one path at a time, one host call per ray)",
+        ),
     ]
 };
 
@@ -81,11 +90,24 @@ impl Integrator for Mcpt {
     ) -> Result<(Self, IntegratorInfo), String> {
         let settings = PathSettings::from_params(params)?;
         let layers = params.boolean("layers", false)?;
+        let wavefront = params.int("wavefront", WAVEFRONT as i64)?;
+        if !(0..=65536).contains(&wavefront) {
+            return Err(format!(
+                "parameter 'wavefront' must be in 0..=65536, got {wavefront}"
+            ));
+        }
         let info = IntegratorInfo {
             layer_count: if layers { settings.path_depth + 1 } else { 0 },
             ..IntegratorInfo::simple()
         };
-        Ok((Mcpt { scene, settings }, info))
+        Ok((
+            Mcpt {
+                scene,
+                settings,
+                wavefront: wavefront as usize,
+            },
+            info,
+        ))
     }
 
     fn render(
@@ -95,13 +117,14 @@ impl Integrator for Mcpt {
         film: &mut Film,
         _stats: &mut Stats,
     ) -> Result<(), String> {
+        if self.settings.variant == Variant::Entangled && self.wavefront > 0 {
+            return self.render_wavefront(unit, tracer, film);
+        }
         let mut contributions = SampleContributions::default();
         for y in unit.y0..unit.y1 {
             for x in unit.x0..unit.x1 {
                 for s in unit.sample_begin..unit.sample_begin + unit.sample_count {
-                    let mut rng =
-                        Rng::new(Rng::hash(&[unit.seed, x as u64, y as u64, s as u64]), 0);
-                    let raster = Vec2::new(x as f32, y as f32) + rng.uniform2();
+                    let (mut rng, raster) = sample_start(unit, x, y, s);
                     contributions.clear();
                     match self.settings.variant {
                         Variant::Entangled => entangled::trace(
@@ -124,20 +147,82 @@ impl Integrator for Mcpt {
                             contributions.add(sample.layer, sample.value);
                         }
                     }
-                    // Box filter: the sample belongs to the pixel it was drawn in (depositing at
-                    // the jittered position could round into the next pixel).
-                    let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
-                    if contributions.is_valid() {
-                        for &(layer, value) in &contributions.entries {
-                            film.deposit(cx, cy, layer, value);
-                        }
-                    } else {
-                        film.deposit(cx, cy, 0, Rgb::splat(f32::NAN));
-                    }
+                    deposit(film, x, y, &contributions);
                 }
             }
         }
         Ok(())
+    }
+}
+
+/// Paths traced together as one wavefront by default: large enough that a batch amortises
+/// the host call, small enough that the batch's rays and states stay in cache.
+const WAVEFRONT: usize = 256;
+
+impl Mcpt {
+    /// Entangled MCPT over a unit as wavefronts of `wavefront` paths, in the unit's
+    /// (row, pixel, sample) order; each wave's contributions are deposited in that order
+    /// afterwards, so the film sees exactly the deposits of a path-at-a-time loop.
+    fn render_wavefront(
+        &self,
+        unit: &WorkUnit,
+        tracer: &Tracer,
+        film: &mut Film,
+    ) -> Result<(), String> {
+        let mut wf = entangled::Wavefront::default();
+        let n = self.wavefront;
+        let mut starts = Vec::with_capacity(n);
+        let mut pixels = Vec::with_capacity(n);
+        let mut out = vec![SampleContributions::default(); n];
+        let mut flush = |starts: &mut Vec<(Rng, Vec2)>, pixels: &mut Vec<(u32, u32)>| {
+            let out = &mut out[..starts.len()];
+            entangled::trace_wavefront(&self.scene, tracer, &self.settings, starts, &mut wf, out);
+            for (&(x, y), c) in pixels.iter().zip(out.iter()) {
+                deposit(film, x, y, c);
+            }
+            starts.clear();
+            pixels.clear();
+        };
+        for y in unit.y0..unit.y1 {
+            for x in unit.x0..unit.x1 {
+                for s in unit.sample_begin..unit.sample_begin + unit.sample_count {
+                    starts.push(sample_start(unit, x, y, s));
+                    pixels.push((x, y));
+                    if starts.len() == n {
+                        flush(&mut starts, &mut pixels);
+                    }
+                }
+            }
+        }
+        if !starts.is_empty() {
+            flush(&mut starts, &mut pixels);
+        }
+        Ok(())
+    }
+}
+
+/// The generator of sample `s` of pixel (`x`, `y`), seeded from (seed, pixel, sample), and the
+/// sample's jittered raster position (its first two numbers).
+#[inline]
+fn sample_start(unit: &WorkUnit, x: u32, y: u32, s: u32) -> (Rng, Vec2) {
+    let mut rng = Rng::new(Rng::hash(&[unit.seed, x as u64, y as u64, s as u64]), 0);
+    let raster = Vec2::new(x as f32, y as f32) + rng.uniform2();
+    (rng, raster)
+}
+
+/// Deposits one sample's contributions in pixel (`x`, `y`), or one invalid deposit when any
+/// is not finite and non-negative.
+#[inline]
+fn deposit(film: &mut Film, x: u32, y: u32, contributions: &SampleContributions) {
+    // Box filter: the sample belongs to the pixel it was drawn in (depositing at the
+    // jittered position could round into the next pixel).
+    let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
+    if contributions.is_valid() {
+        for &(layer, value) in &contributions.entries {
+            film.deposit(cx, cy, layer, value);
+        }
+    } else {
+        film.deposit(cx, cy, 0, Rgb::splat(f32::NAN));
     }
 }
 

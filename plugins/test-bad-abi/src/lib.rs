@@ -1,5 +1,6 @@
-//! Test fixture: declares ABI version `ABI_VERSION + 100`. The host must refuse to load it
-//! with an error that names this file and both versions, before calling anything in it.
+//! Test fixture: declares the previous ABI version, `ABI_VERSION - 1` (3, what a plugin built
+//! against the SDK before the batched ray interface declares). The host must refuse to load
+//! it with an error that names this file and both versions, before calling anything in it.
 
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![deny(unsafe_code)]
@@ -48,7 +49,7 @@ static DECLARATION: PluginDeclaration = {
         &TABLE,
         std::ptr::null(),
     );
-    d.abi_version = ABI_VERSION + 100;
+    d.abi_version = ABI_VERSION - 1;
     d
 };
 

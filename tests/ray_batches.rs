@@ -1,0 +1,258 @@
+//! The batched ray interface (ABI 4): batches answer exactly what single-ray queries answer,
+//! the plugin-side surface data built from compact hits equals the host's `SurfaceHit`, and
+//! the wavefront path tracer gives every sample bit for bit the contributions of the
+//! path-at-a-time one.
+
+mod common;
+
+use common::{scene_config, scratch, session, session_from};
+use flowlight_core::geometry::Ray;
+use flowlight_core::mesh::CompactHit;
+use flowlight_core::rng::Rng;
+use flowlight_host::intersector::UnitTracer;
+use flowlight_host::session::{Overrides, Session};
+use flowlight_pathtrace::{entangled, PathSettings, SampleContributions};
+use flowlight_sdk::{Params, Scene, Tracer};
+use flowlight_testkit::gltf::{octahedra_gltf, octahedra_placements, png8, Quad};
+use glam::{Vec2, Vec3};
+
+/// Rays from a sphere around the scene towards random points inside its box, and the
+/// camera's rays through a jittered grid (the coherent kind).
+fn probe_rays(s: &Session, n: usize, seed: u64) -> (Vec<Ray>, Vec<Ray>) {
+    let (lo, hi) = s.scene.bounds().unwrap();
+    let (c, r) = ((lo + hi) * 0.5, (hi - lo).length());
+    let mut rng = Rng::new(seed, 1);
+    let incoherent = (0..n)
+        .map(|_| {
+            let o = c
+                + (Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) - 0.5)
+                    .normalize_or_zero()
+                    * r;
+            let t = lo + (hi - lo) * Vec3::new(rng.uniform(), rng.uniform(), rng.uniform());
+            // Half of them stop short, so any-hit answers both ways.
+            let t_max = if rng.uniform() < 0.5 {
+                f32::INFINITY
+            } else {
+                (t - o).length() * rng.uniform()
+            };
+            Ray::new(o, (t - o).normalize(), t_max)
+        })
+        .collect();
+    let cam = s.camera;
+    let camera = (0..n)
+        .map(|i| {
+            // Raster order, as a tile's camera rays come.
+            let (x, y) = (i as u32 % cam.width, i as u32 / cam.width % cam.height);
+            cam.generate_ray(Vec2::new(x as f32, y as f32) + rng.uniform2())
+        })
+        .collect();
+    (incoherent, camera)
+}
+
+/// Checks batches against single rays and the lazy surface data against the host's, on
+/// `rays`; returns the number of hits seen.
+fn check_batches(s: &Session, rays: &[Ray], coherent: bool, what: &str) -> usize {
+    // SAFETY: the session keeps the view's data alive while `scene` is used.
+    let scene = unsafe { Scene::from_view(s.instance.view()) };
+    let mut single = UnitTracer::new(&s.scene, s.intersector.as_ref());
+    let mut batched = UnitTracer::new(&s.scene, s.intersector.as_ref());
+    let table = batched.table();
+    let tracer = Tracer::new(&table);
+    let (mut hits, mut blocked) = (Vec::new(), Vec::new());
+    tracer.intersect_batch(rays, coherent, &mut hits);
+    tracer.occluded_batch(rays, &mut blocked);
+    assert_eq!((hits.len(), blocked.len()), (rays.len(), rays.len()));
+    let mut n_hits = 0;
+    for (i, ray) in rays.iter().enumerate() {
+        let want = single.closest(ray);
+        let got = hits[i];
+        match want {
+            None => assert_eq!(got, CompactHit::MISS, "{what} ray {i}"),
+            Some(w) => {
+                n_hits += 1;
+                assert_eq!(
+                    (
+                        got.t.to_bits(),
+                        got.prim,
+                        got.b1.to_bits(),
+                        got.b2.to_bits()
+                    ),
+                    (w.t.to_bits(), w.prim, w.b1.to_bits(), w.b2.to_bits()),
+                    "{what} ray {i}"
+                );
+                // The plugin's surface data is the host's record, every field bit for bit.
+                let host = single.intersect(ray);
+                assert_eq!(host.hit, 1);
+                let lazy = scene.surface(ray, &got);
+                assert_eq!(
+                    format!("{lazy:?}"),
+                    format!("{:?}", host.surface),
+                    "{what} ray {i}"
+                );
+            }
+        }
+        assert_eq!(blocked[i] != 0, single.blocked(ray), "{what} ray {i}");
+    }
+    n_hits
+}
+
+fn check_session(s: &Session, what: &str) {
+    let (incoherent, camera) = probe_rays(s, 3000, 0x5eed);
+    let a = check_batches(s, &incoherent, false, &format!("{what} incoherent"));
+    let b = check_batches(s, &camera, true, &format!("{what} camera"));
+    assert!(a > 100 && b > 50, "{what}: too few hits ({a}, {b})");
+}
+
+fn with_intersector(config: &str, isect: &str) -> Session {
+    let mut cfg = flowlight_scene::config::load_config(&scene_config(config))
+        .unwrap_or_else(|e| panic!("{e}"));
+    cfg.intersector = match isect {
+        "bvh" => flowlight_scene::config::Intersector::Bvh,
+        _ => flowlight_scene::config::Intersector::Embree,
+    };
+    cfg.width = 32;
+    cfg.height = 32;
+    let ov = Overrides {
+        spp: Some(1),
+        threads: Some(1),
+        ..Default::default()
+    };
+    Session::from_config(cfg, &ov).unwrap_or_else(|e| panic!("{e}"))
+}
+
+const BODY: &str = r#"
+[render]
+width = 32
+height = 32
+spp = 1
+intersector = "ISECT"
+[camera]
+position = [12.0, 2.0, 6.0]
+look_at = [12.0, 1.0, -2.0]
+fov_y = 100.0
+[integrator]
+plugin = "mcpt"
+"#;
+
+#[test]
+fn batches_equal_single_rays_and_lazy_surfaces_equal_host_hits() {
+    for isect in ["bvh", "embree"] {
+        // A flat scene (the Cornell box) and one with mirrored, non-uniformly scaled
+        // instances of a mesh stored once.
+        let s = with_intersector("cornell-box/cornell-box.toml", isect);
+        assert_eq!(s.intersector.name(), isect);
+        check_session(&s, &format!("{isect} cornell"));
+        let placements = octahedra_placements(9);
+        let s = session_from(
+            &format!("batch-inst-{isect}"),
+            &octahedra_gltf(&placements, false, "{}"),
+            &BODY.replace("ISECT", isect),
+            1,
+        );
+        assert!(s.scene.is_instanced());
+        check_session(&s, &format!("{isect} instances"));
+    }
+}
+
+/// A quad whose right half is cut away by alpha MASK, normal-mapped (a tilted normal in the
+/// texture) and instanced once more at z = −1: filtered queries, normal mapping and an
+/// instance in one scene.
+#[test]
+fn batches_see_alpha_cut_outs_and_normal_maps_like_single_rays() {
+    for isect in ["bvh", "embree"] {
+        let dir = scratch(&format!("batch-alpha-{isect}"));
+        let q = Quad {
+            images: vec![
+                png8(2, 1, 4, &[255, 255, 255, 255, 255, 255, 255, 0]),
+                png8(2, 1, 3, &[200, 128, 230, 90, 160, 240]),
+            ],
+            textures: r#"{"source": 0, "sampler": 0}, {"source": 1, "sampler": 0}"#.into(),
+            samplers: r#"{"magFilter": 9728}"#.into(),
+            material: r#"{"alphaMode": "MASK", "normalTexture": {"index": 1, "scale": 0.8},
+                "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}"#
+                .into(),
+            second_node: Some([0.5, 0.0, -1.0]),
+            ..Quad::default()
+        };
+        q.write(&dir, "cut.gltf");
+        let toml = format!(
+            r#"scene = "cut.gltf"
+[render]
+width = 32
+height = 32
+spp = 1
+intersector = "{isect}"
+[environment]
+color = [1, 1, 1]
+[camera]
+position = [0.7, 0.5, 3.0]
+look_at = [0.7, 0.5, 0.0]
+fov_y = 30.0
+[integrator]
+plugin = "mcpt"
+"#
+        );
+        let cfg = dir.join("cut.toml");
+        std::fs::write(&cfg, toml).unwrap();
+        let ov = Overrides {
+            threads: Some(1),
+            ..Default::default()
+        };
+        let s = Session::prepare(&cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
+        assert!(s.scene.has_alpha() && s.scene.is_instanced());
+        check_session(&s, &format!("{isect} alpha"));
+    }
+}
+
+/// The wavefront sampler against the path-at-a-time one, sample by sample, bit for bit.
+fn wavefront_matches(s: &Session, what: &str) {
+    // SAFETY: the session keeps the view's data alive while `scene` is used.
+    let scene = unsafe { Scene::from_view(s.instance.view()) };
+    let mut ut = UnitTracer::new(&s.scene, s.intersector.as_ref());
+    let table = ut.table();
+    let tracer = Tracer::new(&table);
+    let settings = PathSettings::from_params(&Params::from_slice(&[])).unwrap();
+    let n = 1500;
+    let mut starts = Vec::new();
+    for i in 0..n {
+        let mut rng = Rng::new(Rng::hash(&[7, i as u64]), 0);
+        let raster = rng.uniform2() * Vec2::new(s.camera.width as f32, s.camera.height as f32);
+        starts.push((rng, raster));
+    }
+    let mut wf = entangled::Wavefront::default();
+    let mut out = vec![SampleContributions::default(); n as usize];
+    // Two batch sizes: the answer must not depend on the split.
+    for chunk in [n as usize, 97] {
+        for (c, o) in starts.chunks(chunk).zip(out.chunks_mut(chunk)) {
+            entangled::trace_wavefront(&scene, &tracer, &settings, c, &mut wf, o);
+        }
+        let mut nonzero = 0;
+        for (i, (rng, raster)) in starts.iter().enumerate() {
+            let mut rng = rng.clone();
+            let mut want = SampleContributions::default();
+            entangled::trace(&scene, &tracer, &settings, &mut rng, *raster, &mut want);
+            let bits = |c: &SampleContributions| {
+                c.entries
+                    .iter()
+                    .map(|(l, v)| (*l, v.r.to_bits(), v.g.to_bits(), v.b.to_bits()))
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(
+                bits(&out[i]),
+                bits(&want),
+                "{what} sample {i} (batch {chunk})"
+            );
+            nonzero += !want.entries.is_empty() as usize;
+        }
+        assert!(nonzero > n as usize / 4, "{what}: {nonzero} lit samples");
+    }
+}
+
+#[test]
+fn wavefront_gives_each_sample_the_path_at_a_time_contributions() {
+    wavefront_matches(&session("cornell-box/cornell-box.toml", 1, &[]), "cornell");
+    wavefront_matches(
+        &session("glass-caustic/glass-caustic.toml", 1, &[]),
+        "glass",
+    );
+}
