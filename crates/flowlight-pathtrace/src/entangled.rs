@@ -363,9 +363,11 @@ fn vertex(
     // From here on the path may end; its shadow ray (already pushed) counts either way.
     let t = if depth > 0 {
         // The same decision as the path-at-a-time `trace` (same stream, same throughput).
-        settings
-            .termination
-            .probability_with_throughput(depth, bsdf.albedo(), path.beta.max_component())
+        settings.termination.probability_with_throughput(
+            depth,
+            bsdf.albedo(),
+            path.beta.max_component(),
+        )
     } else {
         0.0
     };
