@@ -4,36 +4,15 @@
 
 mod common;
 
-use common::{mean_and_stderr, render, session_at, FLOOR, LAMBERT};
+use common::{
+    chromaticity, mean_and_stderr, mutations, regions, render, session_at, sun_node, FLOOR, LAMBERT,
+};
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
 use flowlight_host::intersector::UnitTracer;
 use flowlight_pathtrace::{untangled, PathSettings, Variant};
 use flowlight_sdk::{Scene, Tracer};
-
-fn table(pairs: &[(&str, toml::Value)]) -> toml::Value {
-    toml::Value::Table(
-        pairs
-            .iter()
-            .map(|(k, v)| (k.to_string(), v.clone()))
-            .collect(),
-    )
-}
-
-/// `[[integrator.mutations]]` with one entry per (plugin, extra params).
-fn mutations(entries: &[(&str, &[(&str, toml::Value)])]) -> toml::Value {
-    toml::Value::Array(
-        entries
-            .iter()
-            .map(|(plugin, extra)| {
-                let mut pairs = vec![("plugin", toml::Value::String(plugin.to_string()))];
-                pairs.extend(extra.iter().cloned());
-                table(&pairs)
-            })
-            .collect(),
-    )
-}
 
 /// Every strategy, as the tests use them.
 fn strategies() -> Vec<(&'static str, Vec<(&'static str, toml::Value)>)> {
@@ -114,16 +93,6 @@ fn every_strategy_satisfies_detailed_balance() {
             set.name(i)
         );
     }
-}
-
-/// Region means of `img` (8×8 blocks of a 32×32 image).
-fn regions(img: &[Rgb]) -> Vec<f64> {
-    let mut out = vec![0.0; 16];
-    for (i, c) in img.iter().enumerate() {
-        let (x, y) = (i % 32, i / 32);
-        out[(y / 8) * 4 + x / 8] += c.luminance() as f64 / 64.0;
-    }
-    out
 }
 
 /// ERPT with `mutation_list` agrees with a path-traced reference per region (z-test over
@@ -251,15 +220,6 @@ fn erpt_is_unbiased_in_the_white_furnace() {
     );
 }
 
-/// Chromaticity (r, b over r + g + b) of an image's mean.
-fn chromaticity(img: &[Rgb]) -> (f64, f64) {
-    let sum = img.iter().fold([0.0f64; 3], |a, c| {
-        [a[0] + c.r as f64, a[1] + c.g as f64, a[2] + c.b as f64]
-    });
-    let t = sum[0] + sum[1] + sum[2];
-    (sum[0] / t, sum[2] / t)
-}
-
 #[test]
 fn erpt_does_not_shift_hue_between_red_and_blue_walls() {
     let config = "cornell-box/red-blue.toml";
@@ -352,16 +312,6 @@ const SHORT_WALL: [[f32; 3]; 4] = [
     [10.0, 1.0, -1.0],
     [-10.0, 1.0, -1.0],
 ];
-
-/// A directional light node travelling down and tilted by `tilt` degrees towards +Z (it comes
-/// from behind the wall): a rotation about +X by −(90° + tilt) of the node's −Z.
-fn sun_node(tilt: f32) -> String {
-    let a = -(90.0 + tilt).to_radians();
-    let q = [(a / 2.0).sin(), 0.0, 0.0, (a / 2.0).cos()];
-    format!(
-        r#"{{"translation": [0.0, 5.0, 0.0], "rotation": {q:?}, "extensions": {{"KHR_lights_punctual": {{"light": 0}}}}}}"#
-    )
-}
 
 /// The Lambert base under a Dirac dielectric coat (roughness 0, ior 1.5): every vertex has a
 /// Dirac reflection and a smooth component, so paths mix them (E S L, E D S L, E S D L).

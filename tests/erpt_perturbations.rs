@@ -10,7 +10,7 @@
 
 mod common;
 
-use common::{mean_and_stderr, render, scratch, session_at};
+use common::{mean_and_stderr, regions, render, scratch, session_at, table};
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
@@ -134,15 +134,6 @@ fn mirror_caustic_scene() -> String {
         Some([-1.0, 0.0, 0.0]),
     );
     b.gltf([-0.4, 2.2, -2.2], [-0.1, 0.0, 0.0], 50.0, 1.0).0
-}
-
-fn table(pairs: &[(&str, toml::Value)]) -> toml::Value {
-    toml::Value::Table(
-        pairs
-            .iter()
-            .map(|(k, v)| (k.to_string(), v.clone()))
-            .collect(),
-    )
 }
 
 /// `[[integrator.mutations]]` of (plugin, weight).
@@ -343,16 +334,6 @@ fn perturbations_satisfy_detailed_balance_through_chains_of_1_2_and_4_dirac_vert
             );
         }
     }
-}
-
-/// Region means of `img` (8×8 blocks of a 32×32 image).
-fn regions(img: &[Rgb]) -> Vec<f64> {
-    let mut out = vec![0.0; 16];
-    for (i, c) in img.iter().enumerate() {
-        let (x, y) = (i % 32, i / 32);
-        out[(y / 8) * 4 + x / 8] += c.luminance() as f64 / 64.0;
-    }
-    out
 }
 
 /// ERPT parameters of the unbiasedness runs (as in `tests/erpt.rs`).

@@ -6,7 +6,9 @@
 
 mod common;
 
-use common::{mean_and_stderr, render, session_at, FLOOR};
+use common::{
+    chromaticity, mean_and_stderr, mutations, regions, render, session_at, sun_node, FLOOR,
+};
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
@@ -15,29 +17,6 @@ use flowlight_mcmc::measurement;
 use flowlight_pathtrace::seeds::{self, SeedStore, Technique};
 use flowlight_pathtrace::{entangled, PathSettings, SampleContributions};
 use flowlight_sdk::{Scene, Tracer};
-
-fn table(pairs: &[(&str, toml::Value)]) -> toml::Value {
-    toml::Value::Table(
-        pairs
-            .iter()
-            .map(|(k, v)| (k.to_string(), v.clone()))
-            .collect(),
-    )
-}
-
-/// `[[integrator.mutations]]` entries: (plugin, extra parameters).
-fn mutations(entries: &[(&str, &[(&str, toml::Value)])]) -> toml::Value {
-    toml::Value::Array(
-        entries
-            .iter()
-            .map(|(plugin, extra)| {
-                let mut pairs = vec![("plugin", toml::Value::String(plugin.to_string()))];
-                pairs.extend(extra.iter().cloned());
-                table(&pairs)
-            })
-            .collect(),
-    )
-}
 
 fn mix() -> toml::Value {
     mutations(&[
@@ -173,15 +152,6 @@ const SHORT_WALL: [[f32; 3]; 4] = [
     [-10.0, 1.0, -1.0],
 ];
 
-/// A directional light node travelling down, tilted by `tilt` degrees towards +Z.
-fn sun_node(tilt: f32) -> String {
-    let a = -(90.0 + tilt).to_radians();
-    let q = [(a / 2.0).sin(), 0.0, 0.0, (a / 2.0).cos()];
-    format!(
-        r#"{{"translation": [0.0, 5.0, 0.0], "rotation": {q:?}, "extensions": {{"KHR_lights_punctual": {{"light": 0}}}}}}"#
-    )
-}
-
 /// A Lambert base under a Dirac dielectric coat: Dirac and smooth components at every vertex.
 const VARNISH: &str = r#"{"name": "varnish", "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.0}}"#;
 
@@ -229,16 +199,6 @@ fn entangled_seeds_are_mis_weighted_measurements_that_sum_to_the_path_tracer() {
         sun_and_sky("seeds-sun-sky", "plugin = \"mcpt\"", 1),
     );
     assert!(c[0] > 1000 && c[2] > 100, "sun and sky: {c:?}");
-}
-
-/// Region means of `img` (8×8 blocks of a 32×32 image).
-fn regions(img: &[Rgb]) -> Vec<f64> {
-    let mut out = vec![0.0; 16];
-    for (i, c) in img.iter().enumerate() {
-        let (x, y) = (i % 32, i / 32);
-        out[(y / 8) * 4 + x / 8] += c.luminance() as f64 / 64.0;
-    }
-    out
 }
 
 /// ERPT of `config` with `params` (besides M = 32, N = 32, K = `film_window`) agrees with
@@ -518,15 +478,6 @@ fn the_mcpt_and_erpt_parts_sum_to_the_image_through_the_glass_caustic() {
         &mcpt_reference(config, 4096),
         &[DIRECT, caustics, untangled],
     );
-}
-
-/// Chromaticity (r, b over r + g + b) of an image's mean.
-fn chromaticity(img: &[Rgb]) -> (f64, f64) {
-    let sum = img.iter().fold([0.0f64; 3], |a, c| {
-        [a[0] + c.r as f64, a[1] + c.g as f64, a[2] + c.b as f64]
-    });
-    let t = sum[0] + sum[1] + sum[2];
-    (sum[0] / t, sum[2] / t)
 }
 
 #[test]

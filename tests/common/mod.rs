@@ -124,3 +124,56 @@ pub const FLOOR: [[f32; 3]; 4] = [
     [10.0, 0.0, 10.0],
     [10.0, 0.0, -10.0],
 ];
+
+/// A TOML table of `pairs`.
+pub fn table(pairs: &[(&str, toml::Value)]) -> toml::Value {
+    toml::Value::Table(
+        pairs
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.clone()))
+            .collect(),
+    )
+}
+
+/// `[[integrator.mutations]]` with one entry per (plugin, extra params).
+pub fn mutations(entries: &[(&str, &[(&str, toml::Value)])]) -> toml::Value {
+    toml::Value::Array(
+        entries
+            .iter()
+            .map(|(plugin, extra)| {
+                let mut pairs = vec![("plugin", toml::Value::String(plugin.to_string()))];
+                pairs.extend(extra.iter().cloned());
+                table(&pairs)
+            })
+            .collect(),
+    )
+}
+
+/// Region means of `img` (8×8 blocks of a 32×32 image).
+pub fn regions(img: &[Rgb]) -> Vec<f64> {
+    let mut out = vec![0.0; 16];
+    for (i, c) in img.iter().enumerate() {
+        let (x, y) = (i % 32, i / 32);
+        out[(y / 8) * 4 + x / 8] += c.luminance() as f64 / 64.0;
+    }
+    out
+}
+
+/// Chromaticity (r, b over r + g + b) of an image's mean.
+pub fn chromaticity(img: &[Rgb]) -> (f64, f64) {
+    let sum = img.iter().fold([0.0f64; 3], |a, c| {
+        [a[0] + c.r as f64, a[1] + c.g as f64, a[2] + c.b as f64]
+    });
+    let t = sum[0] + sum[1] + sum[2];
+    (sum[0] / t, sum[2] / t)
+}
+
+/// A directional light node travelling down and tilted by `tilt` degrees towards +Z (it comes
+/// from behind the wall): a rotation about +X by −(90° + tilt) of the node's −Z.
+pub fn sun_node(tilt: f32) -> String {
+    let a = -(90.0 + tilt).to_radians();
+    let q = [(a / 2.0).sin(), 0.0, 0.0, (a / 2.0).cos()];
+    format!(
+        r#"{{"translation": [0.0, 5.0, 0.0], "rotation": {q:?}, "extensions": {{"KHR_lights_punctual": {{"light": 0}}}}}}"#
+    )
+}
