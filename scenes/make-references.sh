@@ -10,7 +10,7 @@
 #   cargo build -p flowlight -p flowlight-mcpt
 #
 # FLOWLIGHT (default target/debug/flowlight) and THREADS (default 2) can be set. The
-# committed files were made with the default BUDGET=time (each scene's wall-time budget of the
+# committed files were made with the default BUDGET=time (cornell-box since with BUDGET=spp, release build: 20480 spp, floor 1.93e-5) (each scene's wall-time budget of the
 # table, split over the two halves, on a 2-core machine shared with six other helpers' builds:
 # the spp they reached are in docs/results.md and in each file's flowlight.spp), and are too
 # short for the floor rule against ERPT. BUDGET=spp renders the table's spp instead: what each
