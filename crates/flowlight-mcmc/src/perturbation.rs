@@ -65,6 +65,32 @@ impl LensJump {
         }
     }
 
+    /// Veach's sizes with the plugin parameters `r1` (default 0.1) and `r2` (default 0:
+    /// Veach's r₂) applied, as the lens and multi-chain perturbations declare them; a bad
+    /// value is a one-line error naming the parameter.
+    pub fn from_params(
+        params: &flowlight_sdk::Params,
+        width: u32,
+        height: u32,
+    ) -> Result<LensJump, String> {
+        let mut jump = LensJump::veach(width, height);
+        let r1 = params.float("r1", 0.1)?;
+        let r2 = params.float("r2", 0.0)?;
+        if !(r1 > 0.0 && r1.is_finite()) {
+            return Err(format!("parameter 'r1' must be > 0 pixels, got {r1}"));
+        }
+        if !(r2 == 0.0 || (r2 > r1 && r2.is_finite())) {
+            return Err(format!(
+                "parameter 'r2' must be 0 (Veach's default) or greater than r1 = {r1}, got {r2}"
+            ));
+        }
+        jump.r1 = r1 as f32;
+        if r2 > 0.0 {
+            jump.r2 = r2 as f32;
+        }
+        Ok(jump)
+    }
+
     /// The outer radius inside the film window K: min(r₂, K/2).
     pub fn outer(&self, k: u32) -> f32 {
         self.r2.min(k as f32 * 0.5)

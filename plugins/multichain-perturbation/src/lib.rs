@@ -86,21 +86,7 @@ impl Mutation for MultichainPerturbation {
     ];
 
     fn create(params: &Params, scene: Scene<'static>) -> Result<Self, String> {
-        let mut jump = LensJump::veach(scene.camera.width, scene.camera.height);
-        let r1 = params.float("r1", 0.1)?;
-        let r2 = params.float("r2", 0.0)?;
-        if !(r1 > 0.0 && r1.is_finite()) {
-            return Err(format!("parameter 'r1' must be > 0 pixels, got {r1}"));
-        }
-        if !(r2 == 0.0 || (r2 > r1 && r2.is_finite())) {
-            return Err(format!(
-                "parameter 'r2' must be 0 (Veach's default) or greater than r1 = {r1}, got {r2}"
-            ));
-        }
-        jump.r1 = r1 as f32;
-        if r2 > 0.0 {
-            jump.r2 = r2 as f32;
-        }
+        let jump = LensJump::from_params(params, scene.camera.width, scene.camera.height)?;
         let cone = ExpCone::new(params.float("theta1", 1e-4)?, params.float("theta2", 0.1)?)?;
         let policy = Policy {
             min_extensions: 0,
