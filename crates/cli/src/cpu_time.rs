@@ -71,3 +71,12 @@ mod tests {
         );
     }
 }
+
+/// Peak resident memory of this process so far (`VmHWM` of `/proc/self/status`, bytes), for
+/// the summary's `peak memory` line; `None` where there is no such file.
+pub fn peak_resident_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}

@@ -108,9 +108,11 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
 
     let s = &outcome.stats;
     let secs = s.wall.as_secs_f64().max(1e-9);
+    let peak_render = crate::cpu_time::peak_resident_bytes();
     let written = session
         .write_outputs(&outcome.frame, s)
         .map_err(|e| anyhow!(e))?;
+    let peak_written = crate::cpu_time::peak_resident_bytes();
     println!("render summary");
     println!("  integrator      {}", session.instance.plugin().name);
     println!(
@@ -146,6 +148,26 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
         s.shadow_rays,
         s.rays() as f64 / secs / 1e6
     );
+    if let Some(a) = &s.accumulation {
+        let mib = |b: u64| b as f64 / 1048576.0;
+        println!(
+            "  accumulation    {}, {} sums: frame {:.1} MiB, private buffers {:.1} MiB; {} flushes, {} framebuffer locks ({} found held)",
+            a.style.name(),
+            a.precision.name(),
+            mib(a.frame_bytes),
+            mib(a.private_bytes),
+            a.counts.flushes,
+            a.counts.locks,
+            a.counts.contended
+        );
+        if let (Some(r), Some(w)) = (peak_render, peak_written) {
+            println!(
+                "  peak memory     {:.1} MiB resident by the end of the render, {:.1} MiB after writing",
+                mib(r),
+                mib(w)
+            );
+        }
+    }
     println!("  NaN/Inf samples {} discarded", s.invalid_deposits);
     if s.stray_deposits > 0 {
         println!(

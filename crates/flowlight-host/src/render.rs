@@ -42,10 +42,21 @@
 //!
 //! * Threads: at most [`MAX_THREADS_PER_CORE`] × the cores; more are clamped with a
 //!   warning (they only add scheduling and contention).
-//! * Memory: [`frame_bytes`] estimates the frame, pass and output buffers; a render that
-//!   would need more than `MemAvailable` (`/proc/meminfo`) is refused before allocating.
+//! * Memory: [`frame_bytes_with`] estimates the frame and output buffers, [`check_memory`]
+//!   adds the accumulation style's private buffers; a render that would need more than
+//!   `MemAvailable` (`/proc/meminfo`) is refused before allocating.
+//!
+//! # Accumulation
+//!
+//! Units feed the frame in one of three styles ([`crate::accumulation`]): Blasting (a buffer
+//! per unit), Buffering (a whole-image buffer per thread) or Caching (capped micro-tile
+//! caches per thread). Every pass, whole or cut, adds to the same frame: in exact precision
+//! the sums are integers, so no pass needs a buffer of its own.
 
-use crate::accumulation::{Frame, TileAccumulator};
+use crate::accumulation::{
+    FlushCounts, Frame, MicroTileCache, Precision, SharedFrame, Style, ThreadBuffer,
+    TileAccumulator,
+};
 use crate::intersector::{Intersector, UnitTracer};
 use crate::plugin::{IntegratorInstance, PluginError};
 use flowlight_scene::Scene;
@@ -72,6 +83,64 @@ pub struct RenderOptions {
     pub threads: usize,
     pub tile_size: u32,
     pub seed: u64,
+    /// Accumulation style; `None` lets the host choose from the integrator's request
+    /// ([`choose_style`]).
+    pub accumulation: Option<Style>,
+    /// The frame's number format.
+    pub precision: Precision,
+    /// Caching: bytes of all threads' micro-tile caches together.
+    pub cache_bytes: u64,
+    /// Blasting: the flange of each unit's buffer in pixels; `None` the integrator's
+    /// (`u32::MAX` covers the screen).
+    pub flange: Option<u32>,
+}
+
+impl RenderOptions {
+    /// Options for `spp` samples of a `width` × `height` image with the defaults for
+    /// everything else (32-pixel tiles, seed 0, all cores, the host's choice of style, exact
+    /// precision, a [`DEFAULT_CACHE_MIB`] MiB cache).
+    pub fn new(width: u32, height: u32, spp: u32) -> RenderOptions {
+        RenderOptions {
+            width,
+            height,
+            spp,
+            sample_begin: 0,
+            time: None,
+            threads: 0,
+            tile_size: 32,
+            seed: 0,
+            accumulation: None,
+            precision: Precision::Exact,
+            cache_bytes: DEFAULT_CACHE_MIB << 20,
+            flange: None,
+        }
+    }
+}
+
+/// Default of `render.accumulation_cache_mib`.
+pub const DEFAULT_CACHE_MIB: u64 = 16;
+
+/// The style the host uses when the config does not force one: Blasting for integrators
+/// whose deposits stay in their tile, Caching for flanged ones (Markov chains), whose
+/// deposits wander and whose memory must not grow with threads and layers.
+pub fn choose_style(requested: AccumulationStyle) -> Style {
+    match requested {
+        AccumulationStyle::Tile => Style::Blasting,
+        AccumulationStyle::FlangedTile => Style::Caching,
+    }
+}
+
+/// What a render's accumulation did and cost.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct AccumulationReport {
+    pub style: Style,
+    pub precision: Precision,
+    /// Bytes of the frame (framebuffers and sample counts).
+    pub frame_bytes: u64,
+    /// Most bytes of private buffers held at once: for Caching and Buffering what the
+    /// threads allocated, for Blasting the largest unit buffer times the threads.
+    pub private_bytes: u64,
+    pub counts: FlushCounts,
 }
 
 /// Counters of a finished (or stopped) render.
@@ -100,6 +169,8 @@ pub struct RenderStats {
     /// The integrator's own counters (declared on its `StatsBuilder`), merged over units,
     /// ratios resolved, in declaration order.
     pub integrator: Vec<(String, f64)>,
+    /// The accumulation style, its memory and its flushes (`None` before any render).
+    pub accumulation: Option<AccumulationReport>,
 }
 
 /// The finished part of a cut pass: the first `finished` of its `tiles` tiles in their
@@ -162,14 +233,23 @@ pub fn effective_threads(requested: usize) -> usize {
     }
 }
 
-/// Bytes a `width` × `height` render with `layers` lighting layers needs for its image
-/// buffers, or `None` beyond 2⁶⁴: per pixel, the frame (fixed-point u128 RGB sums for the
-/// image and each layer, 48 B each, plus a u32 sample count), the same again for the pass
-/// buffer, and at write time the resolved f32 images, the EXR channel copies and encoded
-/// data (12 B each per layer and image) and 3 B of PNG: 2·(52 + 48L) + 36·(1 + L) + 3 =
-/// 143 + 132L bytes.
+/// Bytes an exact-precision `width` × `height` render with `layers` lighting layers needs
+/// for its image buffers ([`frame_bytes_with`]).
 pub fn frame_bytes(width: u32, height: u32, layers: u32) -> Option<u64> {
-    let per_pixel = 143u64.checked_add(132u64.checked_mul(layers as u64)?)?;
+    frame_bytes_with(width, height, layers, Precision::Exact)
+}
+
+/// Bytes a `width` × `height` render with `layers` lighting layers needs for its image
+/// buffers, or `None` beyond 2⁶⁴: per pixel, the frame (per framebuffer 48 B of fixed-point
+/// RGB sums, or 12 B of f32, plus a u32 sample count) and at write time the resolved f32
+/// images, the EXR channel copies and encoded data (12 B each per framebuffer) and 3 B of
+/// PNG: (c + 36)·(1 + L) + 7 bytes for c bytes per frame cell. Private buffers (Buffering's
+/// thread buffers, Caching's cap) come on top ([`check_memory`]).
+pub fn frame_bytes_with(width: u32, height: u32, layers: u32, precision: Precision) -> Option<u64> {
+    let planes = (layers as u64).checked_add(1)?;
+    let per_pixel = (precision.frame_cell_bytes() + 36)
+        .checked_mul(planes)?
+        .checked_add(7)?;
     (width as u64)
         .checked_mul(height as u64)?
         .checked_mul(per_pixel)
@@ -194,11 +274,26 @@ fn human_bytes(b: u64) -> String {
     format!("{v:.1} {}", units[i])
 }
 
-/// Refuses a render whose image buffers ([`frame_bytes`]) exceed the available memory (or
-/// the address space), before anything is allocated.
+/// Refuses an exact-precision render whose image buffers ([`frame_bytes`]) exceed the
+/// available memory (or the address space), before anything is allocated.
 pub fn check_frame_memory(width: u32, height: u32, layers: u32) -> Result<(), String> {
+    check_memory(width, height, layers, Precision::Exact, 0)
+}
+
+/// Refuses a render whose image buffers ([`frame_bytes_with`]) and `private` bytes of
+/// accumulation buffers exceed the available memory (or the address space).
+pub fn check_memory(
+    width: u32,
+    height: u32,
+    layers: u32,
+    precision: Precision,
+    private: u64,
+) -> Result<(), String> {
     let what = format!("a {width}x{height} image with {layers} lighting layers");
-    let Some(need) = frame_bytes(width, height, layers).filter(|&b| b <= isize::MAX as u64) else {
+    let Some(need) = frame_bytes_with(width, height, layers, precision)
+        .and_then(|b| b.checked_add(private))
+        .filter(|&b| b <= isize::MAX as u64)
+    else {
         return Err(format!(
             "{what} needs more than {} bytes of buffers, beyond this machine's address space; lower render.width/render.height",
             isize::MAX
@@ -206,8 +301,15 @@ pub fn check_frame_memory(width: u32, height: u32, layers: u32) -> Result<(), St
     };
     if let Some(avail) = available_memory() {
         if need > avail {
+            let hint = if private > need / 2 {
+                "; use render.accumulation = \"caching\" or fewer threads"
+            } else if precision == Precision::Exact {
+                "; lower render.width/render.height, or set render.precision = \"f32\" (a quarter of the frame)"
+            } else {
+                "; lower render.width/render.height"
+            };
             return Err(format!(
-                "{what} needs about {} ({need} bytes) of buffers but {} is available; lower render.width/render.height",
+                "{what} needs about {} ({need} bytes) of buffers but {} is available{hint}",
                 human_bytes(need),
                 human_bytes(avail)
             ));
@@ -253,6 +355,12 @@ fn tiles(width: u32, height: u32, size: u32) -> Vec<(u32, u32, u32, u32)> {
     out
 }
 
+/// A worker thread's private accumulator for Buffering or Caching, made at its first unit.
+enum ThreadAccumulator<'a> {
+    Buffer(ThreadBuffer),
+    Cache(MicroTileCache<'a>),
+}
+
 /// Renders with `instance` until the budget is spent or `stop` is set.
 pub fn render(
     instance: &IntegratorInstance,
@@ -264,21 +372,47 @@ pub fn render(
 ) -> Result<RenderOutcome, String> {
     let (width, height) = (opts.width, opts.height);
     let layer_count = instance.info.layer_count;
-    check_frame_memory(width, height, layer_count)?;
+    let precision = opts.precision;
+    let style = opts
+        .accumulation
+        .unwrap_or_else(|| choose_style(instance.info.accumulation));
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(effective_threads(opts.threads))
         .thread_name(|i| format!("flowlight-worker-{i}"))
         .build()
         .map_err(|e| format!("cannot start the thread pool: {e}"))?;
     let threads = pool.current_num_threads();
+    let planes = layer_count as u64 + 1;
+    let private_plan = match style {
+        Style::Blasting => 0,
+        Style::Buffering => (width as u64 * height as u64)
+            .saturating_mul(planes * precision.partial_cell_bytes())
+            .saturating_mul(threads as u64),
+        Style::Caching => opts.cache_bytes,
+    };
+    check_memory(width, height, layer_count, precision, private_plan)?;
     let tiled = instance.info.accumulation == AccumulationStyle::Tile;
-    let frame = Mutex::new(Frame::new(width, height, layer_count));
-    // Flanged units deposit into a pass buffer that joins the frame when the pass is whole.
-    let pass_frame = (!tiled).then(|| Mutex::new(Frame::new(width, height, layer_count)));
+    let shared = SharedFrame::new(width, height, layer_count, precision);
+    let cache_slots = MicroTileCache::slots_for(opts.cache_bytes / threads as u64, &shared);
+    if style == Style::Caching && cache_slots == 0 {
+        let need = MicroTileCache::slot_bytes(shared.plane_count(), precision) * threads as u64;
+        return Err(format!(
+            "render.accumulation_cache_mib = {:.3} MiB holds no micro-tile for {threads} threads ({} framebuffers): give it at least {:.3} MiB",
+            opts.cache_bytes as f64 / 1048576.0,
+            shared.plane_count(),
+            need as f64 / 1048576.0
+        ));
+    }
+    let private: Vec<Mutex<Option<ThreadAccumulator>>> =
+        (0..threads).map(|_| Mutex::new(None)).collect();
     let mut tile_size = opts.tile_size.max(1);
     if opts.time.is_some() && instance.info.accumulation == AccumulationStyle::FlangedTile {
         tile_size = tile_size.min(FLANGED_TIME_TILE);
     }
+    let flange = opts.flange.unwrap_or(match instance.info.accumulation {
+        AccumulationStyle::Tile => 0,
+        AccumulationStyle::FlangedTile => instance.info.flange,
+    });
     let tiles = tiles(width, height, tile_size);
     let start = Instant::now();
     let specs = instance.stat_specs();
@@ -288,7 +422,7 @@ pub fn render(
         let mut tracer = UnitTracer::new(scene, intersector);
         if let Err(e) = instance.prepare_once(&tracer.table()) {
             return Ok(RenderOutcome {
-                frame: Frame::new(width, height, instance.info.layer_count),
+                frame: Frame::with_precision(width, height, layer_count, precision),
                 stats: RenderStats {
                     interrupted: true,
                     ..Default::default()
@@ -312,6 +446,7 @@ pub fn render(
     let invalid = AtomicU64::new(0);
     let stray = AtomicU64::new(0);
     let units = AtomicU64::new(0);
+    let blast_bytes = AtomicU64::new(0);
     let error: Mutex<Option<PluginError>> = Mutex::new(None);
     let halted = AtomicBool::new(false);
     let out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
@@ -378,27 +513,63 @@ pub fn render(
                 sample_count: count,
                 seed: opts.seed,
             };
-            let flange = match instance.info.accumulation {
-                AccumulationStyle::Tile => 0,
-                AccumulationStyle::FlangedTile => instance.info.flange,
-            };
-            let mut tile = TileAccumulator::new(x0, y0, x1, y1, flange, width, height, layer_count);
             let mut tracer = UnitTracer::new(scene, intersector);
             let mut unit_stats = vec![0.0f64; specs.len()];
-            let result = instance.render(&unit, &tracer.table(), &tile.table(), &mut unit_stats);
+            let (result, counts) = if style == Style::Blasting {
+                let mut tile = TileAccumulator::with_precision(
+                    (x0, y0, x1, y1),
+                    flange,
+                    (width, height),
+                    layer_count,
+                    precision,
+                );
+                blast_bytes.fetch_max(tile.bytes(), Ordering::Relaxed);
+                let result =
+                    instance.render(&unit, &tracer.table(), &tile.table(), &mut unit_stats);
+                if result.is_ok() {
+                    shared.merge_tile(&tile, count);
+                }
+                (result, tile.counts)
+            } else {
+                // The pool's threads are 0..threads; each owns its slot, so the lock is
+                // never contended.
+                let me = rayon::current_thread_index().unwrap_or(0) % threads;
+                let mut slot = private[me].lock().unwrap_or_else(|e| e.into_inner());
+                let acc = slot.get_or_insert_with(|| match style {
+                    Style::Buffering => ThreadAccumulator::Buffer(ThreadBuffer::new(
+                        width,
+                        height,
+                        layer_count,
+                        precision,
+                    )),
+                    _ => ThreadAccumulator::Cache(MicroTileCache::new(&shared, cache_slots)),
+                });
+                let (result, counts) = match acc {
+                    ThreadAccumulator::Buffer(b) => {
+                        let r =
+                            instance.render(&unit, &tracer.table(), &b.table(), &mut unit_stats);
+                        (r, std::mem::take(&mut b.counts))
+                    }
+                    ThreadAccumulator::Cache(c) => {
+                        let r =
+                            instance.render(&unit, &tracer.table(), &c.table(), &mut unit_stats);
+                        (r, std::mem::take(&mut c.counts))
+                    }
+                };
+                if result.is_ok() {
+                    shared.add_samples((x0, y0, x1, y1), count);
+                }
+                (result, counts)
+            };
             closest.fetch_add(tracer.counts.closest, Ordering::Relaxed);
             shadow.fetch_add(tracer.counts.shadow, Ordering::Relaxed);
+            invalid.fetch_add(counts.invalid, Ordering::Relaxed);
+            stray.fetch_add(counts.stray, Ordering::Relaxed);
             if let Err(e) = result {
                 halted.store(true, Ordering::Relaxed);
                 skipped.store(true, Ordering::Relaxed);
                 error.lock().unwrap().get_or_insert(e);
                 return;
-            }
-            invalid.fetch_add(tile.counts.invalid, Ordering::Relaxed);
-            stray.fetch_add(tile.counts.stray, Ordering::Relaxed);
-            match &pass_frame {
-                Some(p) => p.lock().unwrap().merge(&tile, count),
-                None => frame.lock().unwrap().merge(&tile, count),
             }
             if !specs.is_empty() {
                 flowlight_sdk::stats::merge(specs, &mut merged_stats.lock().unwrap(), &unit_stats);
@@ -417,11 +588,8 @@ pub fn render(
         });
         let pass_samples = pass_done.load(Ordering::Relaxed);
         let whole = !skipped.load(Ordering::Relaxed);
-        if let Some(p) = &pass_frame {
-            // Whole or cut, the pass joins the image; a cut one with weight m/n.
-            let mut p = p.lock().unwrap();
-            frame.lock().unwrap().add_frame(&p);
-            p.clear();
+        if !tiled {
+            // Whole or cut, the pass is in the image; a cut one counts m/n of its samples.
             if whole {
                 uniform_spp += count as f64;
             } else {
@@ -447,12 +615,29 @@ pub fn render(
         }
     });
 
+    // Buffering and Caching flush what the threads still hold (a failed unit's partial
+    // deposits too: a render a plugin failed is reported, never written).
+    let mut private_bytes = blast_bytes.load(Ordering::Relaxed) * threads as u64;
+    for slot in private {
+        match slot.into_inner().unwrap_or_else(|e| e.into_inner()) {
+            Some(ThreadAccumulator::Buffer(b)) => {
+                private_bytes += b.bytes();
+                b.flush_into(&shared);
+            }
+            Some(ThreadAccumulator::Cache(mut c)) => {
+                private_bytes += c.bytes();
+                c.flush();
+            }
+            None => {}
+        }
+    }
     let error = error.into_inner().unwrap();
     let pixel_samples = done.load(Ordering::Relaxed);
     let interrupted = error.is_some()
         || (opts.time.is_none() && pixel_samples < planned)
         || (opts.time.is_some() && stop.load(Ordering::Relaxed));
-    let mut frame = frame.into_inner().unwrap();
+    let flush_counts = shared.counts();
+    let mut frame = shared.into_frame();
     if !tiled {
         frame.set_uniform_spp(uniform_spp);
     }
@@ -479,6 +664,13 @@ pub fn render(
         integrator: unsafe {
             flowlight_sdk::stats::resolve(specs, &merged_stats.into_inner().unwrap())
         },
+        accumulation: Some(AccumulationReport {
+            style,
+            precision,
+            frame_bytes: frame.bytes(),
+            private_bytes,
+            counts: flush_counts,
+        }),
     };
     Ok(RenderOutcome {
         frame,
@@ -492,17 +684,21 @@ mod tests {
     use super::*;
 
     #[test]
-    fn frame_bytes_counts_frame_pass_and_output_buffers_without_overflow() {
-        // Per pixel: 2·(48 + 4 + 48L) + 12·(1 + L)·3 + 3 = 143 + 132L.
-        assert_eq!(frame_bytes(1, 1, 0), Some(143));
-        assert_eq!(frame_bytes(512, 512, 9), Some(512 * 512 * (143 + 132 * 9)));
-        assert_eq!(frame_bytes(100_000, 100_000, 0), Some(1_430_000_000_000));
+    fn frame_bytes_counts_frame_and_output_buffers_without_overflow() {
+        // Per pixel: (48 + 36)·(1 + L) + 4 + 3 = 91 + 84L (exact), (12 + 36)·(1 + L) + 7 (f32).
+        assert_eq!(frame_bytes(1, 1, 0), Some(91));
+        assert_eq!(frame_bytes(512, 512, 9), Some(512 * 512 * (91 + 84 * 9)));
+        assert_eq!(
+            frame_bytes_with(512, 512, 9, Precision::F32),
+            Some(512 * 512 * (55 + 48 * 9))
+        );
+        assert_eq!(frame_bytes(100_000, 100_000, 0), Some(910_000_000_000));
         assert_eq!(frame_bytes(u32::MAX, u32::MAX, 0), None);
-        // 4294967295 · (143 + 132·4294967295) > 2⁶⁴.
+        // 4294967295 · (91 + 84·4294967295) > 2⁶⁴.
         assert_eq!(frame_bytes(u32::MAX, 1, u32::MAX), None);
         assert_eq!(
             frame_bytes(u32::MAX, 1, 1000),
-            Some(4_294_967_295 * 132_143)
+            Some(4_294_967_295 * (84 * 1001 + 7))
         );
         let e = check_frame_memory(u32::MAX, u32::MAX, 3).unwrap_err();
         assert!(

@@ -1,7 +1,7 @@
 //! One render from a config file: load the scene, build the intersector, load and create the
 //! integrator plugin, render, write the outputs.
 
-use crate::accumulation::Frame;
+use crate::accumulation::{Frame, Precision, Style};
 use crate::intersector::{build_intersector_with, Intersector};
 use crate::output::{write_exr, write_png_preview, ExrMetadata};
 use crate::plugin::{
@@ -11,7 +11,9 @@ use crate::plugin::{
 use crate::render::{render, Progress, RenderOptions, RenderOutcome};
 use flowlight_core::camera::Camera;
 use flowlight_core::material::Texture;
-use flowlight_scene::config::{load_config, RenderConfig, SampleBudget};
+use flowlight_scene::config::{
+    load_config, Accumulation, FramePrecision, RenderConfig, SampleBudget,
+};
 use flowlight_scene::lights::{light_power_cdf, load_environment, EnvironmentData};
 use flowlight_scene::{load_gltf, Scene};
 use flowlight_sdk::abi::SceneView;
@@ -101,6 +103,16 @@ impl Session {
 
     pub fn from_config(mut config: RenderConfig, ov: &Overrides) -> Result<Session, String> {
         for (k, v) in &ov.params {
+            // `--set render.accumulation=caching` and its siblings set the render's keys.
+            if let Some(key) = k.strip_prefix("render.") {
+                if config.set_render_key(key, v).map_err(|e| e.to_string())? {
+                    continue;
+                }
+                return Err(format!(
+                    "{}: --set {k}: only render.accumulation, render.precision, render.accumulation_cache_mib and render.flange can be set from the command line",
+                    config.path.display()
+                ));
+            }
             match config
                 .integrator_params
                 .iter_mut()
@@ -234,6 +246,18 @@ impl Session {
             threads: ov.threads.unwrap_or(config.threads),
             tile_size: config.tile_size,
             seed: ov.seed.unwrap_or(config.seed),
+            accumulation: match config.accumulation {
+                Accumulation::Auto => None,
+                Accumulation::Blasting => Some(Style::Blasting),
+                Accumulation::Buffering => Some(Style::Buffering),
+                Accumulation::Caching => Some(Style::Caching),
+            },
+            precision: match config.precision {
+                FramePrecision::Exact => Precision::Exact,
+                FramePrecision::F32 => Precision::F32,
+            },
+            cache_bytes: (config.accumulation_cache_mib * 1048576.0) as u64,
+            flange: config.flange,
         };
         let session = Session {
             instance,
@@ -264,6 +288,12 @@ impl Session {
         if self.options.time.is_some() {
             return Err(format!(
                 "{}: --part/--samples need a sample budget (render.spp or --spp), not a time budget",
+                self.config.path.display()
+            ));
+        }
+        if self.options.precision != Precision::Exact {
+            return Err(format!(
+                "{}: --part/--samples need render.precision = \"exact\": parts merge exact sums, and f32 sums would not add up to the full render",
                 self.config.path.display()
             ));
         }

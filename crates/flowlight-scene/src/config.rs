@@ -17,6 +17,10 @@
 //! intersector = "bvh" # "bvh" | "embree" | "auto" (default "auto")
 //! build_quality = "medium"  # Embree BVH quality: "low" | "medium" | "high" (large scenes)
 //! robust = true       # Embree robust mode (rays on shared edges do not slip through)
+//! accumulation = "auto"   # "blasting" | "buffering" | "caching" | "auto" (docs/config.md)
+//! precision = "exact"     # frame sums: "exact" (fixed point) | "f32" (a quarter the memory)
+//! accumulation_cache_mib = 16.0   # Caching: all threads' micro-tile caches together
+//! flange = 16         # Blasting: pixels around a unit's tile, or "screen" (default: the integrator's)
 //! [camera]            # optional (see "Cameras" below)
 //! name = "Camera"     # or index = 0: which glTF camera (default: the first camera node)
 //! position = [0.278, 0.273, -0.8]
@@ -85,6 +89,28 @@ pub enum Intersector {
     Embree,
     Auto,
 }
+
+/// `render.accumulation`: how work units feed the frame (the host's `accumulation` module).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Accumulation {
+    /// The host chooses from what the integrator asks for.
+    Auto,
+    Blasting,
+    Buffering,
+    Caching,
+}
+
+/// `render.precision`: the frame's number format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FramePrecision {
+    /// Fixed-point sums, bitwise reproducible.
+    Exact,
+    /// f32 frame fed by f64 partial sums.
+    F32,
+}
+
+/// Default of `render.accumulation_cache_mib`.
+pub const DEFAULT_CACHE_MIB: f64 = 16.0;
 
 /// How long to render.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -162,6 +188,13 @@ pub struct RenderConfig {
     pub build_quality: String,
     /// Embree robust mode (default on).
     pub robust: bool,
+    pub accumulation: Accumulation,
+    pub precision: FramePrecision,
+    /// Caching: MiB of all threads' micro-tile caches together.
+    pub accumulation_cache_mib: f64,
+    /// Blasting: flange of each unit's buffer in pixels (`u32::MAX` for `"screen"`); `None`
+    /// the integrator's.
+    pub flange: Option<u32>,
     pub camera_override: Option<CameraOverride>,
     pub integrator_plugin: String,
     /// The integrator's parameters (every key of `[integrator]` but `plugin`), in file order.
@@ -221,6 +254,86 @@ fn default_robust() -> bool {
 fn default_intersector() -> String {
     "auto".into()
 }
+fn default_auto() -> String {
+    "auto".into()
+}
+fn default_precision() -> String {
+    "exact".into()
+}
+fn default_cache_mib() -> f64 {
+    DEFAULT_CACHE_MIB
+}
+
+/// Parses `render.accumulation`.
+pub fn parse_accumulation(s: &str) -> Result<Accumulation, String> {
+    Ok(match s {
+        "auto" => Accumulation::Auto,
+        "blasting" => Accumulation::Blasting,
+        "buffering" => Accumulation::Buffering,
+        "caching" => Accumulation::Caching,
+        other => {
+            return Err(format!(
+                "\"{other}\" is not one of \"auto\", \"blasting\", \"buffering\", \"caching\""
+            ))
+        }
+    })
+}
+
+/// Parses `render.precision`.
+pub fn parse_precision(s: &str) -> Result<FramePrecision, String> {
+    match s {
+        "exact" => Ok(FramePrecision::Exact),
+        "f32" => Ok(FramePrecision::F32),
+        other => Err(format!("\"{other}\" is not one of \"exact\", \"f32\"")),
+    }
+}
+
+/// Parses `render.accumulation_cache_mib`: a positive, finite number of MiB.
+pub fn parse_cache_mib(v: f64) -> Result<f64, String> {
+    if v > 0.0 && v.is_finite() && v <= 1.0e9 {
+        Ok(v)
+    } else {
+        Err(format!("must be a positive number of MiB, got {v}"))
+    }
+}
+
+/// Parses `render.flange`: a number of pixels, or `"screen"` (the whole film).
+pub fn parse_flange(v: &toml::Value) -> Result<u32, String> {
+    match v {
+        toml::Value::String(s) if s == "screen" => Ok(u32::MAX),
+        toml::Value::Integer(n) if (0..=u32::MAX as i64).contains(n) => Ok(*n as u32),
+        other => Err(format!(
+            "must be a number of pixels (≥ 0) or \"screen\", got {other}"
+        )),
+    }
+}
+
+impl RenderConfig {
+    /// Applies `--set render.KEY=VALUE` for the accumulation keys (`accumulation`,
+    /// `precision`, `accumulation_cache_mib`, `flange`); `Ok(false)` for any other key.
+    pub fn set_render_key(&mut self, key: &str, value: &toml::Value) -> Result<bool, ConfigError> {
+        let invalid = |reason: String| ConfigError::Invalid {
+            file: self.path.clone(),
+            key: format!("render.{key}"),
+            reason,
+        };
+        let text = || value.as_str().map(str::to_owned).unwrap_or_else(|| value.to_string());
+        match key {
+            "accumulation" => self.accumulation = parse_accumulation(&text()).map_err(invalid)?,
+            "precision" => self.precision = parse_precision(&text()).map_err(invalid)?,
+            "accumulation_cache_mib" => {
+                let v = value
+                    .as_float()
+                    .or_else(|| value.as_integer().map(|i| i as f64))
+                    .ok_or_else(|| invalid(format!("must be a number, got {value}")))?;
+                self.accumulation_cache_mib = parse_cache_mib(v).map_err(invalid)?;
+            }
+            "flange" => self.flange = Some(parse_flange(value).map_err(invalid)?),
+            _ => return Ok(false),
+        }
+        Ok(true)
+    }
+}
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -243,6 +356,13 @@ struct RawRender {
     build_quality: String,
     #[serde(default = "default_robust")]
     robust: bool,
+    #[serde(default = "default_auto")]
+    accumulation: String,
+    #[serde(default = "default_precision")]
+    precision: String,
+    #[serde(default = "default_cache_mib")]
+    accumulation_cache_mib: f64,
+    flange: Option<toml::Value>,
 }
 
 impl Default for RawRender {
@@ -258,6 +378,10 @@ impl Default for RawRender {
             intersector: default_intersector(),
             build_quality: default_quality(),
             robust: default_robust(),
+            accumulation: default_auto(),
+            precision: default_precision(),
+            accumulation_cache_mib: default_cache_mib(),
+            flange: None,
         }
     }
 }
@@ -453,6 +577,17 @@ pub fn parse_config(path: &Path, text: &str) -> Result<RenderConfig, ConfigError
             ),
         ));
     }
+    let accumulation =
+        parse_accumulation(&r.accumulation).map_err(|e| invalid("render.accumulation", e))?;
+    let precision = parse_precision(&r.precision).map_err(|e| invalid("render.precision", e))?;
+    let accumulation_cache_mib = parse_cache_mib(r.accumulation_cache_mib)
+        .map_err(|e| invalid("render.accumulation_cache_mib", e))?;
+    let flange = r
+        .flange
+        .as_ref()
+        .map(parse_flange)
+        .transpose()
+        .map_err(|e| invalid("render.flange", e))?;
     let camera_override = match &raw.camera {
         None => None,
         Some(c) => {
@@ -622,6 +757,10 @@ pub fn parse_config(path: &Path, text: &str) -> Result<RenderConfig, ConfigError
         intersector,
         build_quality: r.build_quality.clone(),
         robust: r.robust,
+        accumulation,
+        precision,
+        accumulation_cache_mib,
+        flange,
         camera_override,
         integrator_plugin: raw.integrator.plugin,
         integrator_params: raw.integrator.params,

@@ -1,0 +1,494 @@
+//! The image being rendered: the frame's framebuffers (main image and lighting layers) in
+//! the render's precision, and the per-pixel sample counts.
+
+use super::cells::Cells;
+use super::{add_sums, from_fixed, is_large, to_fixed, PixelDeposit, Precision};
+use flowlight_core::Rgb;
+
+/// One framebuffer's RGB sums: fixed point (exact precision) or f32.
+pub enum Plane {
+    Exact(Vec<[u128; 3]>),
+    F32(Vec<[f32; 3]>),
+}
+
+impl Plane {
+    pub fn new(precision: Precision, n: usize) -> Plane {
+        match precision {
+            Precision::Exact => Plane::Exact(vec![[0; 3]; n]),
+            Precision::F32 => Plane::F32(vec![[0.0; 3]; n]),
+        }
+    }
+
+    /// Adds `n` partial sums `cells[src..src + n]` to pixels `dst..dst + n` (a row).
+    #[inline]
+    pub fn add_cells(&mut self, dst: usize, cells: &Cells, src: usize, n: usize) {
+        match (self, cells) {
+            (Plane::Exact(p), Cells::Exact(c)) => {
+                for (a, b) in p[dst..dst + n].iter_mut().zip(&c[src..src + n]) {
+                    add_sums(a, b);
+                }
+            }
+            (Plane::F32(p), Cells::Wide(c)) => {
+                for (a, b) in p[dst..dst + n].iter_mut().zip(&c[src..src + n]) {
+                    // One rounding per flush of a pixel (module documentation).
+                    for k in 0..3 {
+                        a[k] = (a[k] as f64 + b[k]) as f32;
+                    }
+                }
+            }
+            _ => unreachable!("private buffers share the frame's precision"),
+        }
+    }
+
+    /// Adds one deposit value (below the fixed-point limit for an exact plane).
+    #[inline]
+    pub fn add_value(&mut self, i: usize, v: Rgb) {
+        match self {
+            Plane::Exact(p) => add_sums(&mut p[i], &[to_fixed(v.r), to_fixed(v.g), to_fixed(v.b)]),
+            Plane::F32(p) => {
+                p[i][0] += v.r;
+                p[i][1] += v.g;
+                p[i][2] += v.b;
+            }
+        }
+    }
+
+    /// Adds another plane of the same size and precision.
+    pub fn add_plane(&mut self, other: &Plane) {
+        match (self, other) {
+            (Plane::Exact(a), Plane::Exact(b)) => {
+                for (x, y) in a.iter_mut().zip(b) {
+                    add_sums(x, y);
+                }
+            }
+            (Plane::F32(a), Plane::F32(b)) => {
+                for (x, y) in a.iter_mut().zip(b) {
+                    for k in 0..3 {
+                        x[k] += y[k];
+                    }
+                }
+            }
+            _ => unreachable!("frames of one render share a precision"),
+        }
+    }
+
+    /// Pixel `i`'s sum as f64.
+    #[inline]
+    pub fn get(&self, i: usize) -> [f64; 3] {
+        match self {
+            Plane::Exact(p) => p[i].map(from_fixed),
+            Plane::F32(p) => p[i].map(|x| x as f64),
+        }
+    }
+
+    pub fn fill_zero(&mut self) {
+        match self {
+            Plane::Exact(p) => p.fill([0; 3]),
+            Plane::F32(p) => p.fill([0.0; 3]),
+        }
+    }
+
+    /// Bytes of the sums.
+    pub fn bytes(&self) -> u64 {
+        match self {
+            Plane::Exact(p) => (p.len() * 48) as u64,
+            Plane::F32(p) => (p.len() * 12) as u64,
+        }
+    }
+}
+
+/// The image being rendered: sums of deposits (main image and lighting layers) and, per
+/// pixel, how many camera samples have been completed. In exact precision the sums are
+/// fixed point and independent of the order of additions (module documentation).
+pub struct Frame {
+    pub width: u32,
+    pub height: u32,
+    pub layer_count: u32,
+    /// Framebuffers: 0 the main image, k + 1 layer k.
+    planes: Vec<Plane>,
+    samples: Vec<u32>,
+    /// When set, every pixel is divided by this many samples instead of its own count
+    /// (flanged integrators, whose pixels also receive their neighbours' deposits).
+    uniform_spp: Option<f64>,
+    /// Channel values ≥ [`super::FIXED_LIMIT`] of an exact frame, summed in f64 per pixel:
+    /// index 0 the main image, k + 1 layer k (sparse: empty in ordinary renders).
+    large: Vec<LargeSums>,
+}
+
+/// Per-pixel f64 sums of large channel values (pixel index → RGB).
+pub type LargeSums = std::collections::BTreeMap<usize, [f64; 3]>;
+
+impl Frame {
+    /// An exact-precision frame.
+    pub fn new(width: u32, height: u32, layer_count: u32) -> Frame {
+        Frame::with_precision(width, height, layer_count, Precision::Exact)
+    }
+
+    pub fn with_precision(
+        width: u32,
+        height: u32,
+        layer_count: u32,
+        precision: Precision,
+    ) -> Frame {
+        let n = width as usize * height as usize;
+        Frame {
+            width,
+            height,
+            layer_count,
+            planes: (0..=layer_count)
+                .map(|_| Plane::new(precision, n))
+                .collect(),
+            samples: vec![0; n],
+            uniform_spp: None,
+            large: vec![LargeSums::new(); layer_count as usize + 1],
+        }
+    }
+
+    /// A frame from its parts (the shared frame of a finished render).
+    pub(crate) fn from_planes(
+        width: u32,
+        height: u32,
+        planes: Vec<Plane>,
+        samples: Vec<u32>,
+        large: Vec<LargeSums>,
+    ) -> Frame {
+        Frame {
+            width,
+            height,
+            layer_count: planes.len() as u32 - 1,
+            planes,
+            samples,
+            uniform_spp: None,
+            large,
+        }
+    }
+
+    /// An exact frame from stored sums (a part of a distributed render read back): `main`
+    /// and each of `layers` hold `width · height` fixed-point RGB sums, `samples` the
+    /// per-pixel counts.
+    pub fn from_sums(
+        width: u32,
+        height: u32,
+        main: Vec<[u128; 3]>,
+        layers: Vec<Vec<[u128; 3]>>,
+        samples: Vec<u32>,
+        uniform_spp: Option<f64>,
+        large: Vec<LargeSums>,
+    ) -> Frame {
+        let n = width as usize * height as usize;
+        debug_assert!(main.len() == n && samples.len() == n && layers.iter().all(|l| l.len() == n));
+        debug_assert_eq!(large.len(), layers.len() + 1);
+        Frame {
+            width,
+            height,
+            layer_count: layers.len() as u32,
+            planes: std::iter::once(main)
+                .chain(layers)
+                .map(Plane::Exact)
+                .collect(),
+            samples,
+            uniform_spp,
+            large,
+        }
+    }
+
+    /// The frame's precision.
+    pub fn precision(&self) -> Precision {
+        match self.planes[0] {
+            Plane::Exact(_) => Precision::Exact,
+            Plane::F32(_) => Precision::F32,
+        }
+    }
+
+    /// Bytes of the framebuffers and sample counts.
+    pub fn bytes(&self) -> u64 {
+        self.planes.iter().map(Plane::bytes).sum::<u64>() + 4 * self.samples.len() as u64
+    }
+
+    /// The f64 sums of large channel values: `k` = 0 the main image, k + 1 layer k.
+    pub fn large_sums(&self, k: usize) -> &LargeSums {
+        &self.large[k]
+    }
+
+    fn exact(&self, k: usize) -> &[[u128; 3]] {
+        match &self.planes[k] {
+            Plane::Exact(p) => p,
+            Plane::F32(_) => panic!(
+                "exact sums of an f32 frame (distributed parts refuse render.precision = \"f32\")"
+            ),
+        }
+    }
+
+    /// The fixed-point sums of the main image. Panics for an f32 frame.
+    pub fn main_sums(&self) -> &[[u128; 3]] {
+        self.exact(0)
+    }
+
+    /// The fixed-point sums of lighting layer `k`. Panics for an f32 frame.
+    pub fn layer_sums(&self, k: usize) -> &[[u128; 3]] {
+        self.exact(k + 1)
+    }
+
+    /// Framebuffer `k`'s (0 the main image, k + 1 layer k) unnormalised sum at pixel index
+    /// `i`, large values included.
+    pub fn sum(&self, k: usize, i: usize) -> [f64; 3] {
+        let s = self.planes[k].get(i);
+        let l = self.large[k].get(&i).copied().unwrap_or([0.0; 3]);
+        [s[0] + l[0], s[1] + l[1], s[2] + l[2]]
+    }
+
+    /// The uniform sample count set by [`Frame::set_uniform_spp`], if any.
+    pub fn uniform_spp(&self) -> Option<f64> {
+        self.uniform_spp
+    }
+
+    /// Normalises every pixel by `spp` samples, which may be fractional (a pass cut after
+    /// m of its n tiles counts m/n: see the scheduler's documentation), instead of by the
+    /// pixel's own sample count. With `spp` = 0 the image is black.
+    pub fn set_uniform_spp(&mut self, spp: f64) {
+        self.uniform_spp = Some(spp);
+    }
+
+    /// Adds a finished Blasting unit: its buffer (tile and flange), its overflow deposits,
+    /// and `samples` more samples for each pixel of its tile.
+    pub fn merge(&mut self, tile: &super::TileAccumulator, samples: u32) {
+        for (k, plane) in self.planes.iter_mut().enumerate() {
+            tile.flush_plane(k, plane, self.width);
+        }
+        for d in tile.overflow() {
+            let f = d.y as usize * self.width as usize + d.x as usize;
+            add_deposit_to(&mut self.planes, &mut self.large, f, d);
+        }
+        let (x0, y0, x1, y1) = tile.tile();
+        for y in y0..y1 {
+            for x in x0..x1 {
+                self.samples[y as usize * self.width as usize + x as usize] += samples;
+            }
+        }
+    }
+
+    /// Adds another frame of the same size and precision: its sums and sample counts.
+    pub fn add_frame(&mut self, other: &Frame) {
+        debug_assert_eq!((self.width, self.height), (other.width, other.height));
+        for (a, b) in self.planes.iter_mut().zip(&other.planes) {
+            a.add_plane(b);
+        }
+        for (a, b) in self.samples.iter_mut().zip(&other.samples) {
+            *a += b;
+        }
+        for (la, lb) in self.large.iter_mut().zip(&other.large) {
+            add_large(la, lb);
+        }
+    }
+
+    /// Zeroes every sum and count, keeping the buffers.
+    pub fn clear(&mut self) {
+        for p in &mut self.planes {
+            p.fill_zero();
+        }
+        self.samples.fill(0);
+        for l in &mut self.large {
+            l.clear();
+        }
+    }
+
+    pub fn samples(&self) -> &[u32] {
+        &self.samples
+    }
+
+    fn resolve(&self, k: usize) -> Vec<Rgb> {
+        let (plane, large) = (&self.planes[k], &self.large[k]);
+        let scaled = |i: usize, k: f64| {
+            let s = plane.get(i);
+            let l = large.get(&i).copied().unwrap_or([0.0; 3]);
+            Rgb::new(
+                ((s[0] + l[0]) * k) as f32,
+                ((s[1] + l[1]) * k) as f32,
+                ((s[2] + l[2]) * k) as f32,
+            )
+        };
+        let n = self.samples.len();
+        if let Some(spp) = self.uniform_spp {
+            let k = if spp > 0.0 { 1.0 / spp } else { 0.0 };
+            return (0..n).map(|i| scaled(i, k)).collect();
+        }
+        (0..n)
+            .map(|i| match self.samples[i] {
+                0 => Rgb::ZERO,
+                s => scaled(i, 1.0 / s as f64),
+            })
+            .collect()
+    }
+
+    /// The main image: each pixel's sum over its sample count (black where none finished),
+    /// or over the uniform count when one is set.
+    pub fn image(&self) -> Vec<Rgb> {
+        self.resolve(0)
+    }
+
+    /// Lighting layer `k`, normalised like the main image.
+    pub fn layer(&self, k: usize) -> Vec<Rgb> {
+        self.resolve(k + 1)
+    }
+}
+
+/// Adds one deposit at pixel index `f` to the main plane and its layer's, the f64 large-value
+/// sums taking channels an exact plane cannot hold.
+pub(crate) fn add_deposit_to(
+    planes: &mut [Plane],
+    large: &mut [LargeSums],
+    f: usize,
+    d: &PixelDeposit,
+) {
+    let layer = (d.layer as usize + 1 < planes.len()).then_some(d.layer as usize + 1);
+    add_deposit_to_plane(&mut planes[0], &mut large[0], f, d.value);
+    if let Some(k) = layer {
+        add_deposit_to_plane(&mut planes[k], &mut large[k], f, d.value);
+    }
+}
+
+/// One deposit into one plane (and its large-value sums).
+pub(crate) fn add_deposit_to_plane(plane: &mut Plane, large: &mut LargeSums, f: usize, v: Rgb) {
+    if matches!(plane, Plane::Exact(_)) && is_large(v) {
+        let mut small = [0.0f32; 3];
+        let e = large.entry(f).or_insert([0.0; 3]);
+        for (c, x) in v.to_array().into_iter().enumerate() {
+            if x >= super::FIXED_LIMIT {
+                e[c] += x as f64;
+            } else {
+                small[c] = x;
+            }
+        }
+        plane.add_value(f, Rgb::from_array(small));
+    } else {
+        plane.add_value(f, v);
+    }
+}
+
+pub(crate) fn add_large(a: &mut LargeSums, b: &LargeSums) {
+    for (f, v) in b {
+        let e = a.entry(*f).or_insert([0.0; 3]);
+        for c in 0..3 {
+            e[c] += v[c];
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{from_fixed, to_fixed, TileAccumulator};
+    use super::*;
+    use flowlight_sdk::abi::Deposit;
+    use flowlight_sdk::Accumulator;
+
+    fn d(x: f32, y: f32, layer: u32, v: f32) -> Deposit {
+        Deposit {
+            x,
+            y,
+            layer,
+            value: Rgb::splat(v),
+        }
+    }
+
+    #[test]
+    fn tile_discards_and_counts_invalid_deposits() {
+        let mut t = TileAccumulator::new(2, 2, 4, 4, 0, 4, 4, 2);
+        t.deposit(&[
+            d(2.5, 2.5, 0, 1.0),
+            d(3.5, 2.5, 1, 2.0),
+            d(2.5, 2.5, 0, f32::NAN),
+            d(2.5, 2.5, 0, f32::INFINITY),
+            d(2.5, 2.5, 0, -1.0),
+            d(-0.5, 0.5, 0, 1.0),
+        ]);
+        assert_eq!(t.counts.invalid, 3);
+        assert_eq!(t.counts.stray, 1);
+        let mut f = Frame::new(4, 4, 2);
+        f.merge(&t, 2);
+        let img = f.image();
+        assert_eq!(img[2 * 4 + 2], Rgb::splat(0.5));
+        assert_eq!(img[2 * 4 + 3], Rgb::splat(1.0));
+        assert_eq!(img[0], Rgb::ZERO);
+        assert_eq!(f.layer(1)[2 * 4 + 3], Rgb::splat(1.0));
+        assert_eq!(f.layer(0)[2 * 4 + 3], Rgb::ZERO);
+        assert_eq!(f.samples()[0], 0);
+    }
+
+    #[test]
+    fn flange_and_overflow_deposits_are_merged_not_lost() {
+        // Tile (4..6)², flange 1 → buffer (3..7)² of an 8×8 film.
+        let mut t = TileAccumulator::new(4, 4, 6, 6, 1, 8, 8, 0);
+        t.deposit(&[
+            d(4.5, 4.5, 0, 1.0),
+            d(3.5, 6.5, 0, 2.0),
+            d(0.5, 7.5, 0, 3.0),
+        ]);
+        assert_eq!(t.counts.overflow, 1);
+        let mut f = Frame::new(8, 8, 0);
+        f.merge(&t, 1);
+        // Other units sample the flange and overflow pixels.
+        let other = TileAccumulator::new(0, 0, 8, 8, 0, 8, 8, 0);
+        f.merge(&other, 1);
+        let img = f.image();
+        assert_eq!(img[4 * 8 + 4], Rgb::splat(0.5));
+        assert_eq!(img[6 * 8 + 3], Rgb::splat(2.0));
+        assert_eq!(img[7 * 8], Rgb::splat(3.0));
+        assert_eq!(f.samples()[4 * 8 + 4], 2);
+        assert_eq!(f.samples()[0], 1);
+    }
+
+    #[test]
+    fn uniform_normalisation_divides_every_pixel_alike() {
+        // Pixel 0 got a neighbour's deposit but no sample of its own: per-pixel
+        // normalisation leaves it black, a uniform 1.5 samples does not.
+        let mut t = TileAccumulator::new(1, 0, 2, 1, 1, 2, 1, 1);
+        t.deposit(&[d(0.5, 0.5, 0, 3.0), d(1.5, 0.5, 0, 6.0)]);
+        let mut f = Frame::new(2, 1, 1);
+        f.merge(&t, 1);
+        assert_eq!(f.image(), vec![Rgb::ZERO, Rgb::splat(6.0)]);
+        f.set_uniform_spp(1.5);
+        assert_eq!(f.image(), vec![Rgb::splat(2.0), Rgb::splat(4.0)]);
+        assert_eq!(f.layer(0), vec![Rgb::splat(2.0), Rgb::splat(4.0)]);
+        f.set_uniform_spp(0.0);
+        assert_eq!(f.image(), vec![Rgb::ZERO; 2]);
+    }
+
+    #[test]
+    fn sums_do_not_depend_on_the_grouping_of_deposits() {
+        // Values whose f32/f64 sums depend on the order: 1e8 + 1 − … in floating point.
+        let values = [1.0e8f32, 1.0, 3.0e-7, 2.5, 7.0e-12, 1.0e8, 0.1];
+        let mut one = TileAccumulator::new(0, 0, 1, 1, 0, 1, 1, 0);
+        for &v in &values {
+            one.deposit(&[d(0.5, 0.5, 0, v)]);
+        }
+        let mut a = Frame::new(1, 1, 0);
+        a.merge(&one, 7);
+        // The same deposits split over three units merged in another order.
+        let mut b = Frame::new(1, 1, 0);
+        for chunk in [&values[4..], &values[..2], &values[2..4]] {
+            let mut t = TileAccumulator::new(0, 0, 1, 1, 0, 1, 1, 0);
+            for &v in chunk.iter().rev() {
+                t.deposit(&[d(0.5, 0.5, 0, v)]);
+            }
+            let mut pass = Frame::new(1, 1, 0);
+            pass.merge(&t, chunk.len() as u32);
+            b.add_frame(&pass);
+        }
+        assert_eq!(a.main_sums(), b.main_sums());
+        assert_eq!(a.image()[0].r.to_bits(), b.image()[0].r.to_bits());
+        // And the sum is the exact one, to 2⁻⁶⁴ per deposit.
+        let exact: f64 = values.iter().map(|&v| v as f64).sum();
+        assert!((from_fixed(a.main_sums()[0][0]) - exact).abs() <= 1e-9 * exact);
+        assert_eq!(to_fixed(1.0), 1u128 << 64);
+        // A 10³⁰ deposit keeps its energy (f64 side sum), beside a small one in fixed point.
+        let mut t = TileAccumulator::new(0, 0, 1, 1, 0, 1, 1, 1);
+        t.deposit(&[d(0.5, 0.5, 0, 1.0e30), d(0.5, 0.5, 0, 0.5)]);
+        let mut f = Frame::new(1, 1, 1);
+        f.merge(&t, 2);
+        let r = f.image()[0].r as f64;
+        assert!((r / 5.0e29 - 1.0).abs() < 1e-6, "{r}");
+        assert_eq!(f.layer(0)[0], f.image()[0]);
+        assert_eq!(f.large_sums(0).len(), 1);
+        assert_eq!(to_fixed(0.5) + to_fixed(0.25), to_fixed(0.75));
+    }
+}
