@@ -317,7 +317,12 @@ impl RenderConfig {
             key: format!("render.{key}"),
             reason,
         };
-        let text = || value.as_str().map(str::to_owned).unwrap_or_else(|| value.to_string());
+        let text = || {
+            value
+                .as_str()
+                .map(str::to_owned)
+                .unwrap_or_else(|| value.to_string())
+        };
         match key {
             "accumulation" => self.accumulation = parse_accumulation(&text()).map_err(invalid)?,
             "precision" => self.precision = parse_precision(&text()).map_err(invalid)?,

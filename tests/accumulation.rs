@@ -1,0 +1,211 @@
+//! The accumulation styles on real renders (issue 13): every style, thread count and cache
+//! size gives the same bits in exact precision, for ERPT (flanged, with and without lighting
+//! layers) and MCPT; f32 precision agrees to rounding; the host's choice and the config's
+//! errors.
+
+mod common;
+
+use flowlight_host::accumulation::{Frame, MicroTileCache, Precision, Style};
+use flowlight_host::session::{Overrides, Session};
+use std::sync::atomic::AtomicBool;
+
+fn erpt(size: u32, layers: bool) -> Session {
+    common::session_at(
+        "cornell-box/erpt.toml",
+        size,
+        size,
+        2,
+        &[
+            ("layers", toml::Value::Boolean(layers)),
+            ("mutations_per_sample", toml::Value::Integer(8)),
+        ],
+    )
+}
+
+fn exact_sums(f: &Frame) -> Vec<Vec<[u128; 3]>> {
+    std::iter::once(f.main_sums().to_vec())
+        .chain((0..f.layer_count as usize).map(|k| f.layer_sums(k).to_vec()))
+        .collect()
+}
+
+fn render_with(s: &mut Session, style: Option<Style>, threads: usize, cache: u64) -> Frame {
+    s.options.accumulation = style;
+    s.options.threads = threads;
+    s.options.cache_bytes = cache;
+    let out = common::render(s);
+    let a = out
+        .stats
+        .accumulation
+        .expect("a render reports its accumulation");
+    if let Some(style) = style {
+        assert_eq!(a.style, style);
+    }
+    out.frame
+}
+
+#[test]
+fn erpt_gives_the_same_bits_in_every_style_thread_count_and_cache_size() {
+    for layers in [false, true] {
+        let mut s = erpt(40, layers);
+        s.options.tile_size = 8;
+        let planes = if layers {
+            s.instance.info.layer_count as usize + 1
+        } else {
+            1
+        };
+        let reference = render_with(&mut s, Some(Style::Blasting), 1, 0);
+        assert!(reference.image().iter().any(|p| p.r > 0.0));
+        let want = exact_sums(&reference);
+        let one_slot = MicroTileCache::slot_bytes(planes, Precision::Exact);
+        for (style, threads, cache) in [
+            (Some(Style::Blasting), 2, 0),
+            (Some(Style::Buffering), 2, 0),
+            (Some(Style::Caching), 1, 16 << 20),
+            // One micro-tile per thread: a flush at nearly every chain step.
+            (Some(Style::Caching), 2, 2 * one_slot),
+            (None, 2, 3 * one_slot),
+        ] {
+            let frame = render_with(&mut s, style, threads, cache);
+            assert!(
+                exact_sums(&frame) == want,
+                "{style:?}, {threads} threads, cache {cache} B, layers {layers}"
+            );
+            assert_eq!(frame.uniform_spp(), reference.uniform_spp());
+        }
+    }
+}
+
+#[test]
+fn mcpt_gives_the_same_bits_in_every_style() {
+    let mut s = common::session_at("cornell-box/cornell-box.toml", 40, 40, 3, &[]);
+    s.options.tile_size = 16;
+    let reference = render_with(&mut s, None, 2, 0);
+    let want = exact_sums(&reference);
+    for style in [Style::Buffering, Style::Caching] {
+        let frame = render_with(&mut s, Some(style), 2, 1 << 20);
+        assert!(exact_sums(&frame) == want, "{style:?}");
+        assert_eq!(frame.samples(), reference.samples());
+    }
+}
+
+#[test]
+fn the_host_chooses_blasting_for_path_tracing_and_caching_for_chains() {
+    let mut s = common::session_at("cornell-box/cornell-box.toml", 16, 16, 1, &[]);
+    let out = common::render(&s);
+    assert_eq!(out.stats.accumulation.unwrap().style, Style::Blasting);
+    s = erpt(16, false);
+    let out = common::render(&s);
+    let a = out.stats.accumulation.unwrap();
+    assert_eq!(a.style, Style::Caching);
+    assert!(a.private_bytes <= s.options.cache_bytes);
+    assert!(a.counts.flushes > 0);
+}
+
+#[test]
+fn f32_precision_agrees_with_the_exact_sums_to_rounding() {
+    let mut s = erpt(32, true);
+    s.options.tile_size = 8;
+    let exact = render_with(&mut s, Some(Style::Caching), 2, 1 << 20);
+    s.options.precision = Precision::F32;
+    for (style, cache) in [
+        (Style::Caching, 4096 * 10),
+        (Style::Blasting, 0),
+        (Style::Buffering, 0),
+    ] {
+        let f = render_with(
+            &mut s,
+            Some(style),
+            2,
+            cache.max(2 * MicroTileCache::slot_bytes(11, Precision::F32)),
+        );
+        assert_eq!(f.precision(), Precision::F32);
+        for k in 0..=f.layer_count as usize {
+            for i in 0..(32 * 32) {
+                let (a, b) = (f.sum(k, i), exact.sum(k, i));
+                for c in 0..3 {
+                    assert!(
+                        // Exact sums truncate each deposit at 2⁻⁶⁴: absolute slack for tiny pixels.
+                        (a[c] - b[c]).abs() <= 1e-5 * b[c].abs() + 1e-16,
+                        "{style:?} framebuffer {k} pixel {i}: {} vs {}",
+                        a[c],
+                        b[c]
+                    );
+                }
+            }
+        }
+        // A quarter of the exact frame's framebuffers (12 of 48 bytes a pixel), plus counts.
+        assert_eq!(f.bytes(), exact.bytes() / 4 + 3 * 32 * 32);
+    }
+}
+
+#[test]
+fn bad_accumulation_settings_are_one_line_errors_naming_the_key() {
+    let dir = common::scratch("accumulation-config");
+    let cfg = dir.join("bad.toml");
+    let base = common::scene_config("cornell-box/cornell-box.gltf");
+    let write = |render: &str| {
+        std::fs::write(
+            &cfg,
+            format!(
+                "scene = {:?}\n[render]\nwidth = 16\nheight = 16\n{render}\n[integrator]\nplugin = \"mcpt\"\n",
+                base.display().to_string()
+            ),
+        )
+        .unwrap();
+    };
+    for (render, key, says) in [
+        (
+            "accumulation = \"pane\"",
+            "render.accumulation",
+            "\"caching\"",
+        ),
+        ("precision = \"f16\"", "render.precision", "\"exact\""),
+        (
+            "accumulation_cache_mib = -1.0",
+            "render.accumulation_cache_mib",
+            "positive",
+        ),
+        ("flange = \"all\"", "render.flange", "\"screen\""),
+    ] {
+        write(render);
+        let e = Session::prepare(&cfg, &Overrides::default())
+            .err()
+            .expect(render);
+        assert!(
+            e.contains(key) && e.contains(says) && !e.contains('\n'),
+            "{e}"
+        );
+    }
+    // A cache too small for one micro-tile per thread says how much it needs.
+    write("accumulation = \"caching\"\naccumulation_cache_mib = 0.0001");
+    let mut s = Session::prepare(&cfg, &Overrides::default()).unwrap();
+    s.exr_path = None;
+    s.png_path = None;
+    let e = s
+        .render(&AtomicBool::new(false), &|_| {})
+        .err()
+        .expect("cache too small");
+    assert!(
+        e.contains("render.accumulation_cache_mib") && e.contains("at least"),
+        "{e}"
+    );
+    // `--set render.KEY=VALUE` sets the render's accumulation keys, and only those.
+    write("");
+    let set = |k: &str, v: toml::Value| Overrides {
+        params: vec![(k.to_string(), v)],
+        ..Default::default()
+    };
+    let s = Session::prepare(&cfg, &set("render.precision", "f32".into())).unwrap();
+    assert_eq!(s.options.precision, Precision::F32);
+    let s = Session::prepare(&cfg, &set("render.flange", "screen".into())).unwrap();
+    assert_eq!(s.options.flange, Some(u32::MAX));
+    let e = Session::prepare(&cfg, &set("render.width", 8.into()))
+        .err()
+        .unwrap();
+    assert!(e.contains("render.width"), "{e}");
+    // Distributed parts need exact sums.
+    let mut s = Session::prepare(&cfg, &set("render.precision", "f32".into())).unwrap();
+    let spec = flowlight_host::parts::PartSpec::part(0, 2, 4).unwrap();
+    let e = s.set_part(spec).unwrap_err();
+    assert!(e.contains("render.precision") && e.contains("exact"), "{e}");
+}
