@@ -7,6 +7,7 @@
 //! flowlight merge <out.exr> <part.exr>... [--allow-missing]
 //! flowlight plugins [--path DIR]...
 //! flowlight compare <a.exr> <reference.exr> [--out error.png]
+//! flowlight seams <image.exr> --tile N [--layer NAME]
 //! flowlight reference <config.toml> [--spp N | --time SECONDS] [--out FILE] | --from A.exr [--from B.exr]
 //! flowlight bench <suite.toml> [--out DIR] [--budgets 0.5,1] [--seeds 1,2] [--threads N]
 //! flowlight new-plugin --kind integrator|mutation NAME DIR [--sdk-path DIR | --sdk-version V]
@@ -21,6 +22,7 @@ mod part_args;
 mod plugins;
 mod reference;
 mod render;
+mod seams;
 
 use anyhow::{anyhow, Result};
 use clap::{Parser, Subcommand};
@@ -104,6 +106,18 @@ enum Command {
         /// The ε of relMSE = mean (a−b)²/(b²+ε).
         #[arg(long, default_value_t = flowlight_host::metrics::REL_EPS)]
         epsilon: f64,
+    },
+    /// Tile-edge artefacts (thesis §5.9): mean luminance gradient across tile borders over
+    /// the mean inside tiles; 1.0 means no visible seams, larger means seams.
+    Seams {
+        /// The image (linear RGB EXR).
+        image: PathBuf,
+        /// Tile size in pixels (square tiles anchored at the top-left corner).
+        #[arg(long)]
+        tile: usize,
+        /// The RGB layer to measure (e.g. `layer1`); default the main layer.
+        #[arg(long)]
+        layer: Option<String>,
     },
     /// Render a long reference (two independent halves, for a per-pixel variance estimate),
     /// or make one from existing EXRs.
@@ -228,6 +242,7 @@ pub fn main() {
         } => merge::run(&out, &parts, allow_missing),
         Command::Plugins { path } => plugins::run(&path),
         Command::Compare { a, b, out, epsilon } => compare::run(&a, &b, out.as_deref(), epsilon),
+        Command::Seams { image, tile, layer } => seams::run(&image, tile, layer.as_deref()),
         Command::Reference {
             config,
             spp,

@@ -21,12 +21,14 @@
 //! - [`suite`]: the suite TOML (`docs/bench.md`), parsed and validated;
 //! - [`run`]: one render through the host API, and a whole suite's runs;
 //! - [`report`]: means over seeds, efficiencies, the CSV and Markdown tables;
-//! - [`plot`]: the SVG plots (the only user of `plotters`).
+//! - [`plot`]: the SVG plots (the only user of `plotters`);
+//! - [`seams`]: the seam metric of tile-edge artefacts (`flowlight seams`, thesis §5.9).
 
 pub mod plot;
 pub mod reference;
 pub mod report;
 pub mod run;
+pub mod seams;
 pub mod suite;
 
 pub use plot::{plot_layers, plot_scene};
@@ -39,4 +41,5 @@ pub use run::{
     check_floor, check_reference_matches, ensure_reference, render_request, run_suite,
     BenchOverrides, Budget, RenderRequest, RenderResult, Run,
 };
+pub use seams::{seam_metric, SeamMetric};
 pub use suite::{load_suite, parse_suite, Method, Suite, SuiteScene};
