@@ -37,6 +37,15 @@ pub fn process_cpu_time() -> Option<Duration> {
     }
 }
 
+/// Peak resident memory of this process so far (`VmHWM` of `/proc/self/status`, bytes), for
+/// the summary's `peak memory` line; `None` where there is no such file.
+pub fn peak_resident_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -70,13 +79,4 @@ mod tests {
             wall.as_secs_f64()
         );
     }
-}
-
-/// Peak resident memory of this process so far (`VmHWM` of `/proc/self/status`, bytes), for
-/// the summary's `peak memory` line; `None` where there is no such file.
-pub fn peak_resident_bytes() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024)
 }

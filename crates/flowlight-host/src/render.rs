@@ -220,9 +220,16 @@ pub const FLANGED_TIME_TILE: u32 = 4;
 
 /// The pool size for `requested` threads (0: one per core), clamped to
 /// [`MAX_THREADS_PER_CORE`] × the cores with a warning.
+///
+/// `FLOWLIGHT_OVERSUBSCRIBE=1` in the environment lifts the clamp, for benchmarks that
+/// measure what many threads cost (memory per accumulation style) on a smaller machine.
 pub fn effective_threads(requested: usize) -> usize {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let max = MAX_THREADS_PER_CORE * cores;
+    if requested > max && std::env::var_os("FLOWLIGHT_OVERSUBSCRIBE").is_some_and(|v| v == "1") {
+        tracing::warn!("{requested} threads on {cores} cores (FLOWLIGHT_OVERSUBSCRIBE=1)");
+        return requested;
+    }
     if requested > max {
         tracing::warn!(
             "{requested} threads requested on {cores} cores: clamped to {max} ({MAX_THREADS_PER_CORE} per core); more only add overhead"

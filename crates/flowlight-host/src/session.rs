@@ -93,6 +93,14 @@ fn comparable_path(p: &Path) -> PathBuf {
     std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf())
 }
 
+/// The host's precision for the config's `render.precision`.
+fn frame_precision(config: &RenderConfig) -> Precision {
+    match config.precision {
+        FramePrecision::Exact => Precision::Exact,
+        FramePrecision::F32 => Precision::F32,
+    }
+}
+
 impl Session {
     /// Loads `config_path` and everything it names. Errors are one line naming the file,
     /// field or plugin at fault.
@@ -125,7 +133,8 @@ impl Session {
         let (exr_path, png_path) = output_paths(&config, ov.out.as_deref())?;
         // Refuse an image that cannot fit before anything big is loaded (layers are known
         // once the integrator exists; checked again then).
-        crate::render::check_frame_memory(config.width, config.height, 0)
+        let precision = frame_precision(&config);
+        crate::render::check_memory(config.width, config.height, 0, precision, 0)
             .map_err(|e| format!("{}: {e}", config.path.display()))?;
         let t0 = Instant::now();
         let scene =
@@ -227,8 +236,15 @@ impl Session {
             IntegratorInstance::create(plugin, &config.integrator_params, mutations, view)
         }
         .map_err(|e| format!("{}: {e}", config.path.display()))?;
-        crate::render::check_frame_memory(config.width, config.height, instance.info.layer_count)
-            .map_err(|e| format!("{}: {e}", config.path.display()))?;
+        let precision = frame_precision(&config);
+        crate::render::check_memory(
+            config.width,
+            config.height,
+            instance.info.layer_count,
+            precision,
+            0,
+        )
+        .map_err(|e| format!("{}: {e}", config.path.display()))?;
 
         // The command line replaces the config's budget: --time, else --spp, else the file's.
         let (spp, time) = match (ov.time, ov.spp, config.budget) {
@@ -252,10 +268,7 @@ impl Session {
                 Accumulation::Buffering => Some(Style::Buffering),
                 Accumulation::Caching => Some(Style::Caching),
             },
-            precision: match config.precision {
-                FramePrecision::Exact => Precision::Exact,
-                FramePrecision::F32 => Precision::F32,
-            },
+            precision,
             cache_bytes: (config.accumulation_cache_mib * 1048576.0) as u64,
             flange: config.flange,
         };
