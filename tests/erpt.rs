@@ -698,7 +698,7 @@ fn erpt_time_budget_starts_no_unit_after_the_deadline_and_marks_the_fraction() {
         st.pixel_samples,
         st.full_passes as u64 * 64 * 64 + cut * side * side
     );
-    s.write_outputs(&out.frame, st).unwrap();
+    s.write_outputs(out.frame, st).unwrap();
     let meta = flowlight_host::output::read_exr_metadata(&exr).unwrap();
     let get = |k: &str| meta.get(k).unwrap().to_string();
     let fraction: f64 = get("flowlight.partial_pass").parse().unwrap();

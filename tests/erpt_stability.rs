@@ -208,7 +208,7 @@ fn the_biased_filter_is_marked_in_the_output() {
     assert_eq!(s.instance.info.biased, 1);
     s.exr_path = Some(dir.join("f.exr"));
     let out = render(&s);
-    s.write_outputs(&out.frame, &out.stats).unwrap();
+    s.write_outputs(out.frame, &out.stats).unwrap();
     let meta = flowlight_host::output::read_exr_metadata(&dir.join("f.exr")).unwrap();
     assert!(
         meta.entries

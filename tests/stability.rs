@@ -872,7 +872,7 @@ fn degenerate_geometry_extreme_albedo_and_lights_give_finite_counted_output() {
             // The outputs can be written (the EXR writer refuses non-finite pixels).
             let mut s = s;
             s.exr_path = Some(dir.join(format!("{variant}-{termination}.exr")));
-            s.write_outputs(&out.frame, &out.stats).unwrap();
+            s.write_outputs(out.frame, &out.stats).unwrap();
             let mean = img.iter().map(|c| c.luminance() as f64).sum::<f64>() / img.len() as f64;
             assert!(mean.is_finite() && mean > 0.0, "{what}: mean {mean}");
         }

@@ -110,7 +110,7 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
     let secs = s.wall.as_secs_f64().max(1e-9);
     let peak_render = crate::cpu_time::peak_resident_bytes();
     let written = session
-        .write_outputs(&outcome.frame, s)
+        .write_outputs(outcome.frame, s)
         .map_err(|e| anyhow!(e))?;
     let peak_written = crate::cpu_time::peak_resident_bytes();
     println!("render summary");

@@ -9,7 +9,8 @@
 # memory:  peak resident memory of ERPT on the Cornell box at 1920×1080 with 8 lighting
 #          layers (path_depth 7: layers 0..7, 9 framebuffers with the main image), 1 spp,
 #          for each style and precision and thread count; the ratio is to one f32 framebuffer
-#          set (9 × 1920 × 1080 × 12 B = 224 MB). Threads beyond 4 per core are allowed here
+#          set (9 × 1920 × 1080 × 12 B = 224 MB), by the end of the render and after the EXR
+#          and PNG are written (the process's peak). Threads beyond 4 per core are allowed here
 #          (FLOWLIGHT_OVERSUBSCRIBE=1): memory does not need the cores.
 # scaling: wall and CPU time of MCPT (Blasting) and ERPT (Caching) on the Cornell box at
 #          512², parallel efficiency T(1) / (n · T(n)), and the framebuffer locks found held
@@ -56,8 +57,8 @@ memory)
     cfg=$(config mem 1920 1080 1)
     params=(--set path_depth=7 --set layers=true --set mutations_per_sample=1 --set chain_length=4)
     set_bytes=$((9 * 1920 * 1080 * 12))
-    echo "| style | precision | threads | peak RSS by the end of the render (MiB) | / f32 set | frame (MiB) | private (MiB) | allocated / f32 set | flushes | locks (held) | wall (s) |"
-    echo "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+    echo "| style | precision | threads | peak RSS by the end of the render (MiB) | / f32 set | peak RSS after writing (MiB) | / f32 set | frame (MiB) | private (MiB) | allocated / f32 set | flushes | locks (held) | wall (s) |"
+    echo "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
     for precision in exact f32; do
         for style in blasting buffering caching; do
             for n in $threads; do
@@ -66,6 +67,7 @@ memory)
                     --set render.accumulation=$style --set render.precision=$precision \
                     --out "$out/mem.exr" >"$log" 2>&1 || { echo "| $style | $precision | $n | failed: $(tail -1 "$log") |"; continue; }
                 peak=$(field "$log" "peak memory" '{print $3}')
+                after=$(grep -m1 "peak memory" "$log" | sed -E 's/.*, ([0-9.]+) MiB after writing.*/\1/')
                 wall=$(field "$log" "wall time" '{print $3}')
                 acc=$(grep -m1 "accumulation " "$log")
                 frame=$(echo "$acc" | sed -E 's/.*frame ([0-9.]+) MiB.*/\1/')
@@ -74,7 +76,8 @@ memory)
                 locks=$(echo "$acc" | sed -E 's/.* ([0-9]+) framebuffer locks \(([0-9]+) found held\).*/\1 (\2)/')
                 ratio=$(awk -v p="$peak" -v s="$set_bytes" 'BEGIN { printf "%.2f", p * 1048576 / s }')
                 alloc=$(awk -v f="$frame" -v p="$private" -v s="$set_bytes" 'BEGIN { printf "%.2f", (f + p) * 1048576 / s }')
-                echo "| $style | $precision | $n | $peak | $ratio | $frame | $private | $alloc | $flushes | $locks | $wall |"
+                aratio=$(awk -v p="$after" -v s="$set_bytes" 'BEGIN { printf "%.2f", p * 1048576 / s }')
+                echo "| $style | $precision | $n | $peak | $ratio | $after | $aratio | $frame | $private | $alloc | $flushes | $locks | $wall |"
             done
         done
     done

@@ -49,6 +49,14 @@ pub struct ImageLayer<'a> {
     pub pixels: &'a [Rgb],
 }
 
+/// One RGB layer of an EXR file as owned planar channels (`r`, `g`, `b`, each `width *
+/// height` samples, row-major, top row first): handed to the encoder without a copy.
+#[derive(Clone, Debug)]
+pub struct PlanarLayer {
+    pub name: String,
+    pub channels: [Vec<f32>; 3],
+}
+
 /// The EXR layers of a frame: the main image (unnamed) then `layer0`, `layer1`, … over
 /// `layers` (the frame's per-depth lighting layers, already resolved to pixels).
 pub fn frame_layers<'a>(image: &'a [Rgb], layers: &'a [Vec<Rgb>]) -> Vec<ImageLayer<'a>> {
@@ -313,6 +321,34 @@ pub fn write_exr_with_raw(
     raw: &[RawChannel],
     meta: &ExrMetadata,
 ) -> Result<(), OutputError> {
+    // Checked here with the pixel's position, before the channels are split.
+    for layer in layers {
+        check_pixels(path, &layer.name, width, height, layer.pixels)?;
+    }
+    let planar = layers
+        .iter()
+        .map(|l| PlanarLayer {
+            name: l.name.clone(),
+            channels: std::array::from_fn(|c| l.pixels.iter().map(|p| p.to_array()[c]).collect()),
+        })
+        .collect();
+    write_exr_planar(path, width, height, planar, raw, meta)
+}
+
+/// Writes `layers` (owned planar channels) and `raw` as one multi-layer EXR, atomically,
+/// encoding straight into the temporary file: besides the channels themselves, writing
+/// needs only the encoder's chunk buffers (a 1080p image with 8 layers would otherwise hold
+/// a second copy of its 224 MB).
+///
+/// Fails without touching the file system like [`write_exr`].
+pub fn write_exr_planar(
+    path: &Path,
+    width: usize,
+    height: usize,
+    layers: Vec<PlanarLayer>,
+    raw: &[RawChannel],
+    meta: &ExrMetadata,
+) -> Result<(), OutputError> {
     let count = pixel_count(path, width, height)?;
     for r in raw {
         let suffix = r.name.rsplit('.').next().unwrap_or("");
@@ -342,7 +378,7 @@ pub fn write_exr_with_raw(
         });
     }
     let mut names = HashSet::new();
-    for layer in layers {
+    for layer in &layers {
         check_layer_name(path, &layer.name)?;
         if !names.insert(layer.name.as_str()) {
             return Err(OutputError::InvalidLayer {
@@ -351,7 +387,27 @@ pub fn write_exr_with_raw(
                 reason: "duplicate layer name".to_owned(),
             });
         }
-        check_pixels(path, &layer.name, width, height, layer.pixels)?;
+        for ch in &layer.channels {
+            if ch.len() != count {
+                return Err(OutputError::PixelCount {
+                    path: path.to_owned(),
+                    layer: layer.name.clone(),
+                    width,
+                    height,
+                    expected: count,
+                    actual: ch.len(),
+                });
+            }
+        }
+        let bad = (0..count).find(|&i| !layer.channels.iter().all(|ch| ch[i].is_finite()));
+        if let Some(i) = bad {
+            return Err(OutputError::NonFinite {
+                path: path.to_owned(),
+                layer: layer.name.clone(),
+                x: i % width,
+                y: i / width,
+            });
+        }
     }
 
     let mut attributes = LayerAttributes::default();
@@ -393,13 +449,12 @@ pub fn write_exr_with_raw(
 
     let mut channels = smallvec_of_channels(layers.len() * 3);
     for layer in layers {
-        for (c, suffix) in ["R", "G", "B"].into_iter().enumerate() {
+        for (samples, suffix) in layer.channels.into_iter().zip(["R", "G", "B"]) {
             let name = if layer.name.is_empty() {
                 suffix.to_owned()
             } else {
                 format!("{}.{suffix}", layer.name)
             };
-            let samples: Vec<f32> = layer.pixels.iter().map(|p| p.to_array()[c]).collect();
             channels.push(AnyChannel::new(text(&name), FlatSamples::F32(samples)));
         }
     }
@@ -423,27 +478,51 @@ pub fn write_exr_with_raw(
     );
     let image = Image::from_layer(layer);
 
-    // Encode in memory, then put the header's attributes in name order: the exr crate keeps
-    // them in a HashMap, whose order changes from run to run.
-    let mut bytes = io::Cursor::new(Vec::new());
-    image
-        .write()
-        .to_buffered(&mut bytes)
-        .map_err(|source| OutputError::ExrEncode {
-            path: path.to_owned(),
-            source,
-        })?;
-    let mut bytes = bytes.into_inner();
-    sort_header_attributes(&mut bytes).map_err(|reason| OutputError::Unsupported {
+    let io_err = |source| OutputError::Io {
         path: path.to_owned(),
-        reason,
-    })?;
+        source,
+    };
     write_atomically(path, |tmp| {
-        fs::write(tmp, &bytes).map_err(|source| OutputError::Io {
-            path: path.to_owned(),
-            source,
+        let file = fs::File::create(tmp).map_err(io_err)?;
+        let mut out = BufWriter::new(file);
+        image
+            .write()
+            .to_buffered(&mut out)
+            .map_err(|source| OutputError::ExrEncode {
+                path: path.to_owned(),
+                source,
+            })?;
+        out.flush().map_err(io_err)?;
+        drop(out);
+        // Put the header's attributes in name order (the exr crate keeps them in a HashMap,
+        // whose order changes from run to run): in place, the header keeps its length.
+        sort_header_in_file(tmp).map_err(|reason| match reason {
+            Ok(source) => io_err(source),
+            Err(reason) => OutputError::Unsupported {
+                path: path.to_owned(),
+                reason,
+            },
         })
     })
+}
+
+/// [`sort_header_attributes`] on the header at the start of file `path`, rewritten in place.
+/// `Err(Ok(_))` for an I/O error, `Err(Err(reason))` for a file it cannot parse.
+fn sort_header_in_file(path: &Path) -> Result<(), Result<io::Error, String>> {
+    use std::io::{Read, Seek, SeekFrom};
+    let mut f = fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(path)
+        .map_err(Ok)?;
+    let len = f.metadata().map_err(Ok)?.len();
+    // The header (magic, version, attributes) is small; the metadata strings are its bulk.
+    let mut head = vec![0u8; len.min(16 << 20) as usize];
+    f.read_exact(&mut head).map_err(Ok)?;
+    sort_header_attributes(&mut head).map_err(Err)?;
+    f.seek(SeekFrom::Start(0)).map_err(Ok)?;
+    f.write_all(&head).map_err(Ok)?;
+    Ok(())
 }
 
 /// Rewrites the header of a single-part EXR file so that its attributes follow in byte order
@@ -696,55 +775,85 @@ pub fn write_png_preview(
     pixels: &[Rgb],
     exposure: f32,
 ) -> Result<(), OutputError> {
-    check_pixels(path, "", width, height, pixels)?;
-    let (w, h) = match (u32::try_from(width), u32::try_from(height)) {
-        (Ok(w), Ok(h)) => (w, h),
-        _ => {
-            return Err(OutputError::InvalidSize {
+    PngPreview::new(path, width, height, pixels, exposure)?.write(path)
+}
+
+/// An encoded-to-sRGB 8-bit preview held until it is written (3 bytes a pixel): the EXR
+/// writer can then take the frame apart without a float copy of the image kept aside.
+pub struct PngPreview {
+    width: u32,
+    height: u32,
+    bytes: Vec<u8>,
+}
+
+impl PngPreview {
+    /// The preview of `pixels` (checked as [`write_png_preview`] checks them; `path` only
+    /// names the file in errors).
+    pub fn new(
+        path: &Path,
+        width: usize,
+        height: usize,
+        pixels: &[Rgb],
+        exposure: f32,
+    ) -> Result<PngPreview, OutputError> {
+        check_pixels(path, "", width, height, pixels)?;
+        let (w, h) = match (u32::try_from(width), u32::try_from(height)) {
+            (Ok(w), Ok(h)) => (w, h),
+            _ => {
+                return Err(OutputError::InvalidSize {
+                    path: path.to_owned(),
+                    width,
+                    height,
+                })
+            }
+        };
+        let scale = exposure.exp2();
+        if !scale.is_finite() {
+            return Err(OutputError::NonFinite {
                 path: path.to_owned(),
-                width,
-                height,
-            })
+                layer: format!("exposure {exposure}"),
+                x: 0,
+                y: 0,
+            });
         }
-    };
-    let scale = exposure.exp2();
-    if !scale.is_finite() {
-        return Err(OutputError::NonFinite {
-            path: path.to_owned(),
-            layer: format!("exposure {exposure}"),
-            x: 0,
-            y: 0,
-        });
-    }
-    let mut bytes = Vec::with_capacity(pixels.len() * 3);
-    for p in pixels {
-        bytes.extend([
-            to_srgb8(p.r, scale),
-            to_srgb8(p.g, scale),
-            to_srgb8(p.b, scale),
-        ]);
+        let mut bytes = Vec::with_capacity(pixels.len() * 3);
+        for p in pixels {
+            bytes.extend([
+                to_srgb8(p.r, scale),
+                to_srgb8(p.g, scale),
+                to_srgb8(p.b, scale),
+            ]);
+        }
+        Ok(PngPreview {
+            width: w,
+            height: h,
+            bytes,
+        })
     }
 
-    write_atomically(path, |tmp| {
-        let io_err = |source| OutputError::Io {
-            path: path.to_owned(),
-            source,
-        };
-        let png_err = |source| OutputError::PngEncode {
-            path: path.to_owned(),
-            source,
-        };
-        let file = fs::File::create(tmp).map_err(io_err)?;
-        let mut out = BufWriter::new(file);
-        let mut encoder = png::Encoder::new(&mut out, w, h);
-        encoder.set_color(png::ColorType::Rgb);
-        encoder.set_depth(png::BitDepth::Eight);
-        encoder.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
-        let mut writer = encoder.write_header().map_err(png_err)?;
-        writer.write_image_data(&bytes).map_err(png_err)?;
-        writer.finish().map_err(png_err)?;
-        out.flush().map_err(io_err)
-    })
+    /// Writes the preview to `path`, atomically.
+    pub fn write(&self, path: &Path) -> Result<(), OutputError> {
+        write_atomically(path, |tmp| {
+            let io_err = |source| OutputError::Io {
+                path: path.to_owned(),
+                source,
+            };
+            let png_err = |source| OutputError::PngEncode {
+                path: path.to_owned(),
+                source,
+            };
+            let file = fs::File::create(tmp).map_err(io_err)?;
+            let mut out = BufWriter::new(file);
+            let mut encoder = png::Encoder::new(&mut out, self.width, self.height);
+            encoder.set_color(png::ColorType::Rgb);
+            encoder.set_depth(png::BitDepth::Eight);
+            encoder.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+            let mut writer = encoder.write_header().map_err(png_err)?;
+            writer.write_image_data(&self.bytes).map_err(png_err)?;
+            writer.finish().map_err(png_err)?;
+            out.flush().map_err(io_err)
+        })
+    }
 }
 
 /// The temporary-file prefix of `path`'s writes: `.{file name}.tmp-`.

@@ -713,6 +713,11 @@ mod tests {
             "{e}"
         );
         assert!(check_frame_memory(64, 64, 2).is_ok());
+        // Private buffers count: a Buffering plan beyond the machine names the way out.
+        let e = check_memory(64, 64, 2, Precision::F32, u64::MAX / 4).unwrap_err();
+        assert!(e.contains("render.accumulation = \"caching\""), "{e}");
+        let e = check_memory(64, 64, 2, Precision::F32, u64::MAX).unwrap_err();
+        assert!(e.contains("address space"), "{e}");
     }
 
     #[test]

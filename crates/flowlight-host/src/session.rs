@@ -3,7 +3,7 @@
 
 use crate::accumulation::{Frame, Precision, Style};
 use crate::intersector::{build_intersector_with, Intersector};
-use crate::output::{write_exr, write_png_preview, ExrMetadata};
+use crate::output::{ExrMetadata, PngPreview};
 use crate::plugin::{
     find_plugin, normalised_weights, search_dirs, IntegratorInstance, MutationInstance,
     PluginLibrary,
@@ -379,27 +379,46 @@ impl Session {
 
     /// Writes the EXR (main image plus lighting layers) and the PNG preview, each atomically.
     /// Callers write only a render that succeeded or was interrupted (then
-    /// `flowlight.interrupted = true` marks the EXR), never one a plugin failed.
+    /// `flowlight.interrupted = true` marks the EXR), never one a plugin failed. The frame is
+    /// taken apart as its framebuffers are encoded, so writing a 1080p image with 8 layers
+    /// needs one framebuffer's channels beyond the frame, not a second image.
     pub fn write_outputs(
         &self,
-        frame: &Frame,
+        mut frame: Frame,
         outcome_stats: &crate::RenderStats,
     ) -> Result<Vec<PathBuf>, String> {
         let mut written = Vec::new();
         let (w, h) = (frame.width as usize, frame.height as usize);
-        let image = frame.image();
+        // The preview's 8-bit pixels, made before the frame is taken apart (3 bytes a pixel
+        // kept, not the float image).
+        let preview = match &self.png_path {
+            Some(path) => {
+                Some(PngPreview::new(path, w, h, &frame.image(), 0.0).map_err(|e| e.to_string())?)
+            }
+            None => None,
+        };
         if let Some(path) = &self.exr_path {
-            let layers: Vec<Vec<flowlight_core::Rgb>> = (0..frame.layer_count as usize)
-                .map(|k| frame.layer(k))
-                .collect();
-            let exr_layers = crate::output::frame_layers(&image, &layers);
             let mut meta = self.metadata(outcome_stats);
             if let Some((spec, hash)) = &self.part {
                 meta.entries
-                    .extend(crate::parts::part_entries(spec, *hash, frame));
-                crate::parts::write_part_exr(path, frame, &meta)?;
+                    .extend(crate::parts::part_entries(spec, *hash, &frame));
+                crate::parts::write_part_exr(path, &frame, &meta)?;
             } else {
-                write_exr(path, w, h, &exr_layers, &meta).map_err(|e| e.to_string())?;
+                let layers = (0..=frame.layer_count as usize)
+                    .map(|k| crate::output::PlanarLayer {
+                        name: if k == 0 {
+                            String::new()
+                        } else {
+                            format!("layer{}", k - 1)
+                        },
+                        channels: frame.take_channels(k),
+                    })
+                    .collect();
+                // Only the channels now: the frame's sample counts go before the encoder's
+                // buffers come.
+                drop(frame);
+                crate::output::write_exr_planar(path, w, h, layers, &[], &meta)
+                    .map_err(|e| e.to_string())?;
             }
             written.push(path.clone());
             if !outcome_stats.integrator.is_empty() {
@@ -419,8 +438,8 @@ impl Session {
                 written.push(json_path);
             }
         }
-        if let Some(path) = &self.png_path {
-            write_png_preview(path, w, h, &image, 0.0).map_err(|e| e.to_string())?;
+        if let (Some(path), Some(preview)) = (&self.png_path, &preview) {
+            preview.write(path).map_err(|e| e.to_string())?;
             written.push(path.clone());
         }
         Ok(written)

@@ -3,7 +3,7 @@
 //! rendering; memory grows with threads × framebuffers (thesis §5.9's trap: 12 threads ×
 //! 1080p × 8 layers ≈ 2.2 GB of f32).
 
-use super::cells::Cells;
+use super::cells::{add_to_planes, Cells};
 use super::{classify, is_large, DepositCounts, PixelDeposit, Precision, SharedFrame};
 use flowlight_sdk::abi::Deposit;
 use flowlight_sdk::Accumulator;
@@ -68,10 +68,7 @@ impl Accumulator for ThreadBuffer {
                 continue;
             }
             let i = py as usize * self.width as usize + px as usize;
-            self.planes[0].add(i, d.value);
-            if let Some(layer) = self.planes.get_mut(d.layer as usize + 1) {
-                layer.add(i, d.value);
-            }
+            add_to_planes(&mut self.planes, i, d.layer, d.value);
         }
     }
 }

@@ -10,7 +10,7 @@
 //! the micro-tiles of a thread's current unit and its flange stay cached across its chains,
 //! and consecutive deposits usually hit the micro-tile of the one before (checked first).
 
-use super::cells::Cells;
+use super::cells::{add_to_planes, Cells};
 use super::{classify, is_large, DepositCounts, PixelDeposit, Precision, SharedFrame};
 use flowlight_sdk::abi::Deposit;
 use flowlight_sdk::Accumulator;
@@ -202,10 +202,7 @@ impl Accumulator for MicroTileCache<'_> {
             };
             let i =
                 slot as usize * CELLS + ((py % MICRO_TILE) * MICRO_TILE + px % MICRO_TILE) as usize;
-            self.planes[0].add(i, d.value);
-            if let Some(layer) = self.planes.get_mut(d.layer as usize + 1) {
-                layer.add(i, d.value);
-            }
+            add_to_planes(&mut self.planes, i, d.layer, d.value);
         }
     }
 }

@@ -56,3 +56,13 @@ impl Cells {
         }
     }
 }
+
+/// Adds a deposit value to the main image's cells (`planes[0]`) and to its lighting layer's
+/// (`planes[layer + 1]`, when the render has that layer), at cell `i`.
+#[inline]
+pub(crate) fn add_to_planes(planes: &mut [Cells], i: usize, layer: u32, v: Rgb) {
+    planes[0].add(i, v);
+    if let Some(l) = planes.get_mut(layer as usize + 1) {
+        l.add(i, v);
+    }
+}

@@ -320,6 +320,35 @@ impl Frame {
             .collect()
     }
 
+    /// Framebuffer `k` (0 the main image, k + 1 layer k) resolved like [`Frame::image`] into
+    /// planar R, G, B channels, and its sums freed: the EXR writer takes the frame apart one
+    /// framebuffer at a time, so writing needs one framebuffer more than the frame, not a
+    /// second image. The frame's other framebuffers stay valid; this one is empty (reading it
+    /// again panics).
+    pub fn take_channels(&mut self, k: usize) -> [Vec<f32>; 3] {
+        let n = self.samples.len();
+        let scale = |i: usize| match self.uniform_spp {
+            Some(spp) if spp > 0.0 => 1.0 / spp,
+            Some(_) => 0.0,
+            None => match self.samples[i] {
+                0 => 0.0,
+                s => 1.0 / s as f64,
+            },
+        };
+        let mut out: [Vec<f32>; 3] = std::array::from_fn(|_| Vec::with_capacity(n));
+        for i in 0..n {
+            let s = self.sum(k, i);
+            let f = scale(i);
+            for c in 0..3 {
+                out[c].push((s[c] * f) as f32);
+            }
+        }
+        let precision = self.precision();
+        self.planes[k] = Plane::new(precision, 0);
+        self.large[k].clear();
+        out
+    }
+
     /// The main image: each pixel's sum over its sample count (black where none finished),
     /// or over the uniform count when one is set.
     pub fn image(&self) -> Vec<Rgb> {

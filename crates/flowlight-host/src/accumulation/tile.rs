@@ -2,7 +2,7 @@
 //! merged into the frame when the unit ends. Deposits beyond the buffer are not lost: they
 //! wait in the unit's overflow list and are merged with it.
 
-use super::cells::Cells;
+use super::cells::{add_to_planes, Cells};
 use super::frame::Plane;
 use super::{classify, is_large, DepositCounts, PixelDeposit, Precision};
 use flowlight_sdk::abi::Deposit;
@@ -137,10 +137,7 @@ impl Accumulator for TileAccumulator {
             }
             let i = (py - self.by0) as usize * (self.bx1 - self.bx0) as usize
                 + (px - self.bx0) as usize;
-            self.planes[0].add(i, d.value);
-            if let Some(layer) = self.planes.get_mut(d.layer as usize + 1) {
-                layer.add(i, d.value);
-            }
+            add_to_planes(&mut self.planes, i, d.layer, d.value);
         }
     }
 }
