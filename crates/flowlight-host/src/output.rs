@@ -797,6 +797,48 @@ impl PngPreview {
         exposure: f32,
     ) -> Result<PngPreview, OutputError> {
         check_pixels(path, "", width, height, pixels)?;
+        Self::from_fn(path, width, height, |i| pixels[i], exposure)
+    }
+
+    /// The preview of planar `channels` (R, G, B of `width * height` each), checked like
+    /// [`PngPreview::new`].
+    pub fn from_planar(
+        path: &Path,
+        width: usize,
+        height: usize,
+        channels: &[Vec<f32>; 3],
+        exposure: f32,
+    ) -> Result<PngPreview, OutputError> {
+        let count = pixel_count(path, width, height)?;
+        if let Some(ch) = channels.iter().find(|c| c.len() != count) {
+            return Err(OutputError::PixelCount {
+                path: path.to_owned(),
+                layer: String::new(),
+                width,
+                height,
+                expected: count,
+                actual: ch.len(),
+            });
+        }
+        let at = |i: usize| Rgb::new(channels[0][i], channels[1][i], channels[2][i]);
+        if let Some(i) = (0..count).find(|&i| !at(i).is_finite()) {
+            return Err(OutputError::NonFinite {
+                path: path.to_owned(),
+                layer: String::new(),
+                x: i % width,
+                y: i / width,
+            });
+        }
+        Self::from_fn(path, width, height, at, exposure)
+    }
+
+    fn from_fn(
+        path: &Path,
+        width: usize,
+        height: usize,
+        pixel: impl Fn(usize) -> Rgb,
+        exposure: f32,
+    ) -> Result<PngPreview, OutputError> {
         let (w, h) = match (u32::try_from(width), u32::try_from(height)) {
             (Ok(w), Ok(h)) => (w, h),
             _ => {
@@ -816,8 +858,10 @@ impl PngPreview {
                 y: 0,
             });
         }
-        let mut bytes = Vec::with_capacity(pixels.len() * 3);
-        for p in pixels {
+        let n = width * height;
+        let mut bytes = Vec::with_capacity(n * 3);
+        for i in 0..n {
+            let p = pixel(i);
             bytes.extend([
                 to_srgb8(p.r, scale),
                 to_srgb8(p.g, scale),

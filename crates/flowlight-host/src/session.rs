@@ -389,14 +389,9 @@ impl Session {
     ) -> Result<Vec<PathBuf>, String> {
         let mut written = Vec::new();
         let (w, h) = (frame.width as usize, frame.height as usize);
-        // The preview's 8-bit pixels, made before the frame is taken apart (3 bytes a pixel
-        // kept, not the float image).
-        let preview = match &self.png_path {
-            Some(path) => {
-                Some(PngPreview::new(path, w, h, &frame.image(), 0.0).map_err(|e| e.to_string())?)
-            }
-            None => None,
-        };
+        // The preview keeps 8-bit pixels (3 bytes a pixel), made from the EXR's main channels
+        // when the frame is taken apart for the EXR, so no float copy of the image is made.
+        let mut preview = None;
         if let Some(path) = &self.exr_path {
             let mut meta = self.metadata(outcome_stats);
             if let Some((spec, hash)) = &self.part {
@@ -404,7 +399,7 @@ impl Session {
                     .extend(crate::parts::part_entries(spec, *hash, &frame));
                 crate::parts::write_part_exr(path, &frame, &meta)?;
             } else {
-                let layers = (0..=frame.layer_count as usize)
+                let layers: Vec<_> = (0..=frame.layer_count as usize)
                     .map(|k| crate::output::PlanarLayer {
                         name: if k == 0 {
                             String::new()
@@ -414,9 +409,12 @@ impl Session {
                         channels: frame.take_channels(k),
                     })
                     .collect();
-                // Only the channels now: the frame's sample counts go before the encoder's
-                // buffers come.
-                drop(frame);
+                if let Some(png) = &self.png_path {
+                    preview = Some(
+                        PngPreview::from_planar(png, w, h, &layers[0].channels, 0.0)
+                            .map_err(|e| e.to_string())?,
+                    );
+                }
                 crate::output::write_exr_planar(path, w, h, layers, &[], &meta)
                     .map_err(|e| e.to_string())?;
             }
@@ -438,7 +436,14 @@ impl Session {
                 written.push(json_path);
             }
         }
-        if let (Some(path), Some(preview)) = (&self.png_path, &preview) {
+        if let Some(path) = &self.png_path {
+            let preview = match preview {
+                Some(p) => p,
+                // No EXR, or a part's (which keeps the frame): from the resolved image.
+                None => {
+                    PngPreview::new(path, w, h, &frame.image(), 0.0).map_err(|e| e.to_string())?
+                }
+            };
             preview.write(path).map_err(|e| e.to_string())?;
             written.push(path.clone());
         }

@@ -5,17 +5,18 @@ use super::cells::Cells;
 use super::{add_sums, from_fixed, is_large, to_fixed, PixelDeposit, Precision};
 use flowlight_core::Rgb;
 
-/// One framebuffer's RGB sums: fixed point (exact precision) or f32.
+/// One framebuffer's RGB sums: fixed point (exact precision), or f32 stored as planar R, G,
+/// B channels (the EXR's layout, so a resolved f32 framebuffer is its sums scaled in place).
 pub enum Plane {
     Exact(Vec<[u128; 3]>),
-    F32(Vec<[f32; 3]>),
+    F32([Vec<f32>; 3]),
 }
 
 impl Plane {
     pub fn new(precision: Precision, n: usize) -> Plane {
         match precision {
             Precision::Exact => Plane::Exact(vec![[0; 3]; n]),
-            Precision::F32 => Plane::F32(vec![[0.0; 3]; n]),
+            Precision::F32 => Plane::F32(std::array::from_fn(|_| vec![0.0; n])),
         }
     }
 
@@ -29,10 +30,10 @@ impl Plane {
                 }
             }
             (Plane::F32(p), Cells::Wide(c)) => {
-                for (a, b) in p[dst..dst + n].iter_mut().zip(&c[src..src + n]) {
-                    // One rounding per flush of a pixel (module documentation).
-                    for k in 0..3 {
-                        a[k] = (a[k] as f64 + b[k]) as f32;
+                for (k, channel) in p.iter_mut().enumerate() {
+                    for (a, b) in channel[dst..dst + n].iter_mut().zip(&c[src..src + n]) {
+                        // One rounding per flush of a pixel (module documentation).
+                        *a = (*a as f64 + b[k]) as f32;
                     }
                 }
             }
@@ -46,9 +47,9 @@ impl Plane {
         match self {
             Plane::Exact(p) => add_sums(&mut p[i], &[to_fixed(v.r), to_fixed(v.g), to_fixed(v.b)]),
             Plane::F32(p) => {
-                p[i][0] += v.r;
-                p[i][1] += v.g;
-                p[i][2] += v.b;
+                p[0][i] += v.r;
+                p[1][i] += v.g;
+                p[2][i] += v.b;
             }
         }
     }
@@ -62,9 +63,9 @@ impl Plane {
                 }
             }
             (Plane::F32(a), Plane::F32(b)) => {
-                for (x, y) in a.iter_mut().zip(b) {
-                    for k in 0..3 {
-                        x[k] += y[k];
+                for (ca, cb) in a.iter_mut().zip(b) {
+                    for (x, y) in ca.iter_mut().zip(cb) {
+                        *x += y;
                     }
                 }
             }
@@ -77,14 +78,14 @@ impl Plane {
     pub fn get(&self, i: usize) -> [f64; 3] {
         match self {
             Plane::Exact(p) => p[i].map(from_fixed),
-            Plane::F32(p) => p[i].map(|x| x as f64),
+            Plane::F32(p) => [p[0][i] as f64, p[1][i] as f64, p[2][i] as f64],
         }
     }
 
     pub fn fill_zero(&mut self) {
         match self {
             Plane::Exact(p) => p.fill([0; 3]),
-            Plane::F32(p) => p.fill([0.0; 3]),
+            Plane::F32(p) => p.iter_mut().for_each(|c| c.fill(0.0)),
         }
     }
 
@@ -92,7 +93,7 @@ impl Plane {
     pub fn bytes(&self) -> u64 {
         match self {
             Plane::Exact(p) => (p.len() * 48) as u64,
-            Plane::F32(p) => (p.len() * 12) as u64,
+            Plane::F32(p) => (p[0].len() * 12) as u64,
         }
     }
 }
@@ -327,26 +328,46 @@ impl Frame {
     /// again panics).
     pub fn take_channels(&mut self, k: usize) -> [Vec<f32>; 3] {
         let n = self.samples.len();
-        let scale = |i: usize| match self.uniform_spp {
-            Some(spp) if spp > 0.0 => 1.0 / spp,
-            Some(_) => 0.0,
-            None => match self.samples[i] {
+        let uniform = self
+            .uniform_spp
+            .map(|spp| if spp > 0.0 { 1.0 / spp } else { 0.0 });
+        let samples = &self.samples;
+        let scale = |i: usize| match uniform {
+            Some(k) => k,
+            None => match samples[i] {
                 0 => 0.0,
                 s => 1.0 / s as f64,
             },
         };
-        let mut out: [Vec<f32>; 3] = std::array::from_fn(|_| Vec::with_capacity(n));
-        for i in 0..n {
-            let s = self.sum(k, i);
-            let f = scale(i);
-            for c in 0..3 {
-                out[c].push((s[c] * f) as f32);
+        let precision = self.precision();
+        match std::mem::replace(&mut self.planes[k], Plane::new(precision, 0)) {
+            // Scaled in place: the f32 sums become the channels.
+            Plane::F32(mut p) => {
+                for channel in &mut p {
+                    for (i, v) in channel.iter_mut().enumerate() {
+                        // Zero stays zero, and pages no deposit reached stay unwritten
+                        // (not resident).
+                        if *v != 0.0 {
+                            *v = (*v as f64 * scale(i)) as f32;
+                        }
+                    }
+                }
+                p
+            }
+            plane @ Plane::Exact(_) => {
+                let large = std::mem::take(&mut self.large[k]);
+                let mut out: [Vec<f32>; 3] = std::array::from_fn(|_| Vec::with_capacity(n));
+                for i in 0..n {
+                    let s = plane.get(i);
+                    let l = large.get(&i).copied().unwrap_or([0.0; 3]);
+                    let f = scale(i);
+                    for c in 0..3 {
+                        out[c].push(((s[c] + l[c]) * f) as f32);
+                    }
+                }
+                out
             }
         }
-        let precision = self.precision();
-        self.planes[k] = Plane::new(precision, 0);
-        self.large[k].clear();
-        out
     }
 
     /// The main image: each pixel's sum over its sample count (black where none finished),
@@ -519,5 +540,38 @@ mod tests {
         assert_eq!(f.layer(0)[0], f.image()[0]);
         assert_eq!(f.large_sums(0).len(), 1);
         assert_eq!(to_fixed(0.5) + to_fixed(0.25), to_fixed(0.75));
+    }
+
+    #[test]
+    fn taken_channels_are_the_resolved_image_bit_for_bit() {
+        for precision in [Precision::Exact, Precision::F32] {
+            for uniform in [None, Some(1.5)] {
+                let mut f = Frame::with_precision(3, 2, 1, precision);
+                let mut t = TileAccumulator::with_precision((0, 0, 2, 2), 1, (3, 2), 1, precision);
+                t.deposit(&[
+                    d(0.5, 0.5, 0, 0.3),
+                    d(1.5, 1.5, 1, 7.0e-3),
+                    d(2.5, 0.5, 0, 1.0e31),
+                    d(2.5, 1.5, 0, 2.0),
+                ]);
+                f.merge(&t, 3);
+                if let Some(spp) = uniform {
+                    f.set_uniform_spp(spp);
+                }
+                let want = [f.image(), f.layer(0)];
+                for (k, w) in want.iter().enumerate() {
+                    let got = f.take_channels(k);
+                    for (i, p) in w.iter().enumerate() {
+                        for c in 0..3 {
+                            assert_eq!(
+                                got[c][i].to_bits(),
+                                p.to_array()[c].to_bits(),
+                                "{precision:?} {uniform:?} framebuffer {k} pixel {i}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
     }
 }
