@@ -10,12 +10,11 @@
 #   cargo build -p flowlight -p flowlight-mcpt
 #
 # FLOWLIGHT (default target/debug/flowlight) and THREADS (default 2) can be set. The
-# committed files were made with the default BUDGET=time (cornell-box since with BUDGET=spp, release build: 20480 spp, floor 1.93e-5) (each scene's wall-time budget of the
-# table, split over the two halves, on a 2-core machine shared with six other helpers' builds:
-# the spp they reached are in docs/results.md and in each file's flowlight.spp), and are too
-# short for the floor rule against ERPT. BUDGET=spp renders the table's spp instead: what each
-# scene needs for a floor of 1/30 of today's best MCPT relMSE at 8 s (docs/results.md, setup
-# section; about 50 minutes in all on an idle 2-core machine). Then commit the new files.
+# committed files were made with BUDGET=spp (the table's spp: a floor of about 1/30 of the
+# best MCPT relMSE at 8 s; release build, 2 threads; docs/results.md lists spp, wall time and
+# floor per scene). The default BUDGET=time renders each scene's wall-time budget instead
+# (split over the two halves), for a quick look; such references are too short for the floor
+# rule against ERPT. Then commit the new files.
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 bin="${FLOWLIGHT:-$root/target/debug/flowlight}"
@@ -26,7 +25,7 @@ table=(
   "glass-caustic|480|46080|variant=untangled termination=equi"
   "mirror-chain|720|11264|variant=entangled termination=bxdf"
   "indirect-room|720|8192|variant=entangled termination=expo"
-  "ring-caustic|600|22528|variant=untangled termination=equi"
+  "ring-caustic|600|40960|variant=untangled termination=equi"
   "cornell-box|420|20480|variant=entangled termination=bxdf"
   "narrow-gap|480|23552|variant=entangled termination=equi"
 )
