@@ -562,10 +562,10 @@ mod tests {
                 for (k, w) in want.iter().enumerate() {
                     let got = f.take_channels(k);
                     for (i, p) in w.iter().enumerate() {
-                        for c in 0..3 {
+                        for (channel, v) in got.iter().zip(p.to_array()) {
                             assert_eq!(
-                                got[c][i].to_bits(),
-                                p.to_array()[c].to_bits(),
+                                channel[i].to_bits(),
+                                v.to_bits(),
                                 "{precision:?} {uniform:?} framebuffer {k} pixel {i}"
                             );
                         }
