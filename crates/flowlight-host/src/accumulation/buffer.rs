@@ -27,9 +27,7 @@ impl ThreadBuffer {
             width,
             height,
             precision,
-            planes: (0..=layer_count)
-                .map(|_| Cells::new(precision, n))
-                .collect(),
+            planes: Cells::planes(precision, layer_count, n),
             large: Vec::new(),
             counts: DepositCounts::default(),
         }

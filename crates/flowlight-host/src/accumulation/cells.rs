@@ -20,6 +20,14 @@ impl Cells {
         }
     }
 
+    /// Zeroed cells of `len` pixels for every framebuffer: the main image and `layer_count`
+    /// lighting layers.
+    pub fn planes(precision: Precision, layer_count: u32, len: usize) -> Vec<Cells> {
+        (0..=layer_count)
+            .map(|_| Cells::new(precision, len))
+            .collect()
+    }
+
     pub fn len(&self) -> usize {
         match self {
             Cells::Exact(c) => c.len(),

@@ -44,8 +44,10 @@
 //!   n·2⁻²⁴ of it, and every term below 2⁻²⁵ of the sum outright (stagnation). The frame
 //!   takes one addition per flush of a pixel, a partial sum of many deposits, so k flushes
 //!   cost at most k·2⁻²⁴ relative (round-to-nearest errors are unbiased: about √k·2⁻²⁴ in
-//!   practice, 2·10⁻⁶ at a million flushes), far below Monte Carlo noise; no compensation
-//!   term is stored, which would double the frame. The image no longer depends on the thread
+//!   practice, 6·10⁻⁶ after 10⁴ flushes of one pixel, which the 1080p renders of
+//!   docs/performance.md stay far below), under Monte Carlo noise. The f64 partial sums do
+//!   the compensating: no separate compensation term is stored in the frame, which would
+//!   double it (the memory bound of the Caching style is one f32 framebuffer set). The image no longer depends on the thread
 //!   count beyond that rounding, but is not bitwise reproducible across styles or threads
 //!   (flush order varies), and distributed parts (`--part`), which merge exact sums, refuse
 //!   it.

@@ -80,9 +80,7 @@ impl TileAccumulator {
             width,
             height,
             precision,
-            planes: (0..=layer_count)
-                .map(|_| Cells::new(precision, n))
-                .collect(),
+            planes: Cells::planes(precision, layer_count, n),
             overflow: Vec::new(),
             counts: DepositCounts::default(),
         }
