@@ -5,7 +5,8 @@
 mod common;
 
 use common::{
-    chromaticity, mean_and_stderr, mutations, regions, render, session_at, sun_node, FLOOR, LAMBERT,
+    assert_image_mean, assert_regions_unbiased, chromaticity, independent_runs, mutations, render,
+    session_at, sun_node, MeanRule, FLOOR, LAMBERT,
 };
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
@@ -113,10 +114,8 @@ fn check_unbiased_window(
 ) {
     // Wider windows spread each run's noise over the image: more runs keep the test sharp.
     let runs = if film_window > 8 { 10 } else { 6 };
-    let mut per_run: Vec<Vec<f64>> = Vec::new();
-    let mut means = Vec::new();
-    for r in 0..runs {
-        let mut s = session_at(
+    let make = || {
+        session_at(
             config,
             32,
             32,
@@ -127,57 +126,11 @@ fn check_unbiased_window(
                 ("chain_length", toml::Value::Integer(32)),
                 ("film_window", toml::Value::Integer(film_window)),
             ],
-        );
-        s.options.seed = 1000 + r;
-        s.options.tile_size = 16;
-        let out = render(&s);
-        assert_eq!(out.stats.invalid_deposits, 0, "{label}: invalid deposits");
-        let img = out.frame.image();
-        assert!(
-            img.iter().all(|c| c.is_valid_radiance()),
-            "{label}: NaN/Inf in the image"
-        );
-        means.push(img.iter().map(|c| c.luminance() as f64).sum::<f64>() / img.len() as f64);
-        per_run.push(regions(&img));
-    }
-    let refs = regions(reference);
-    // Reference noise per region from its pixel variance.
-    let ref_se: Vec<f64> = (0..16)
-        .map(|k| {
-            let px: Vec<Rgb> = reference
-                .iter()
-                .enumerate()
-                .filter(|(i, _)| ((i / 32) / 8) * 4 + (i % 32) / 8 == k)
-                .map(|(_, c)| *c)
-                .collect();
-            mean_and_stderr(&px, |c| c.luminance()).1
-        })
-        .collect();
-    for k in 0..16 {
-        let vals: Vec<f64> = per_run.iter().map(|r| r[k]).collect();
-        let m = vals.iter().sum::<f64>() / runs as f64;
-        let var = vals.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (runs as f64 - 1.0);
-        let se = (var / runs as f64 + ref_se[k].powi(2))
-            .sqrt()
-            .max(1e-4 * refs[k].abs())
-            .max(1e-12); // a region that sees only a black sky
-        let z = (m - refs[k]) / se;
-        if std::env::var("ERPT_DEBUG").is_ok() {
-            eprintln!("{label}: region {k}: {m:.5} vs {:.5}, z = {z:.2}", refs[k]);
-        }
-        assert!(
-            z.abs() < 5.0,
-            "{label}: region {k}: ERPT {m:.5} vs reference {:.5} (z = {z:.2})",
-            refs[k]
-        );
-    }
-    let ref_mean =
-        reference.iter().map(|c| c.luminance() as f64).sum::<f64>() / reference.len() as f64;
-    let m = means.iter().sum::<f64>() / runs as f64;
-    assert!(
-        (m / ref_mean - 1.0).abs() < 0.03,
-        "{label}: image mean {m:.5} vs reference {ref_mean:.5}"
-    );
+        )
+    };
+    let (images, _) = independent_runs(label, runs, 1000, &make);
+    assert_regions_unbiased(label, &images, reference);
+    assert_image_mean(label, &images, reference, MeanRule::Within(0.03));
 }
 
 fn reference(config: &str, spp: u32) -> Vec<Rgb> {

@@ -10,7 +10,10 @@
 
 mod common;
 
-use common::{mean_and_stderr, regions, render, scratch, session_at, table};
+use common::{
+    assert_image_mean, assert_regions_unbiased, independent_runs, render, scratch, session_at,
+    table, MeanRule,
+};
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
@@ -349,67 +352,12 @@ fn erpt_params(list: toml::Value) -> Vec<(&'static str, toml::Value)> {
 /// ERPT sessions from `make` (32×32, 4 spp) agree with `reference` per 8×8 region (z-test
 /// over 6 independent runs, the reference's own noise included) and in the image mean.
 fn check_unbiased(label: &str, make: &dyn Fn() -> Session, reference: &[Rgb]) {
-    let runs = 6;
-    let mut per_run: Vec<Vec<f64>> = Vec::new();
-    let mut means = Vec::new();
-    for r in 0..runs {
-        let mut s = make();
-        s.options.seed = 3000 + r;
-        s.options.tile_size = 16;
-        let out = render(&s);
-        assert_eq!(out.stats.invalid_deposits, 0, "{label}: invalid deposits");
-        let img = out.frame.image();
-        assert!(
-            img.iter().all(|c| c.is_valid_radiance()),
-            "{label}: NaN/Inf in the image"
-        );
-        means.push(img.iter().map(|c| c.luminance() as f64).sum::<f64>() / img.len() as f64);
-        per_run.push(regions(&img));
-    }
-    let refs = regions(reference);
-    let ref_se: Vec<f64> = (0..16)
-        .map(|k| {
-            let px: Vec<Rgb> = reference
-                .iter()
-                .enumerate()
-                .filter(|(i, _)| ((i / 32) / 8) * 4 + (i % 32) / 8 == k)
-                .map(|(_, c)| *c)
-                .collect();
-            mean_and_stderr(&px, |c| c.luminance()).1
-        })
-        .collect();
-    for k in 0..16 {
-        let vals: Vec<f64> = per_run.iter().map(|r| r[k]).collect();
-        let m = vals.iter().sum::<f64>() / runs as f64;
-        let var = vals.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (runs as f64 - 1.0);
-        let se = (var / runs as f64 + ref_se[k].powi(2))
-            .sqrt()
-            .max(1e-4 * refs[k].abs())
-            .max(1e-12);
-        let z = (m - refs[k]) / se;
-        if std::env::var("ERPT_DEBUG").is_ok() {
-            eprintln!("{label}: region {k}: {m:.5} vs {:.5}, z = {z:.2}", refs[k]);
-        }
-        assert!(
-            z.abs() < 5.0,
-            "{label}: region {k}: ERPT {m:.5} vs reference {:.5} (z = {z:.2})",
-            refs[k]
-        );
-    }
+    let (images, _) = independent_runs(label, 6, 3000, make);
+    assert_regions_unbiased(label, &images, reference);
     // The image mean, by a z-test too: on the caustic scenes the seeds (untangled path
     // tracing, 4 spp) carry the caustic's heavy tail, so a fixed tolerance would judge the
     // seeds' noise rather than the chains.
-    let (ref_mean, ref_mean_se) = mean_and_stderr(reference, |c| c.luminance());
-    let m = means.iter().sum::<f64>() / runs as f64;
-    let var = means.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (runs as f64 - 1.0);
-    let se = (var / runs as f64 + ref_mean_se.powi(2))
-        .sqrt()
-        .max(1e-4 * ref_mean);
-    let z = (m - ref_mean) / se;
-    assert!(
-        z.abs() < 5.0,
-        "{label}: image mean {m:.5} vs reference {ref_mean:.5} (z = {z:.2})"
-    );
+    assert_image_mean(label, &images, reference, MeanRule::Z(5.0));
 }
 
 /// Each new strategy alone, then all of them mixed with the engine's.

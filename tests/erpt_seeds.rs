@@ -7,7 +7,8 @@
 mod common;
 
 use common::{
-    chromaticity, mean_and_stderr, mutations, regions, render, session_at, sun_node, FLOOR,
+    assert_image_mean, assert_regions_unbiased, chromaticity, independent_runs, mutations, render,
+    session_at, sun_node, MeanRule, FLOOR,
 };
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
@@ -212,8 +213,6 @@ fn check_unbiased(
     film_window: i64,
 ) -> flowlight_host::render::RenderOutcome {
     let runs = if film_window > 8 { 10 } else { 6 };
-    let mut per_run: Vec<Vec<f64>> = Vec::new();
-    let mut means = Vec::new();
     let mut all: Vec<(&str, toml::Value)> = vec![
         ("mutations_per_sample", 32.0.into()),
         ("chain_length", toml::Value::Integer(32)),
@@ -226,81 +225,12 @@ fn check_unbiased(
             all.push((key, s(value)));
         }
     }
-    let mut last = None;
-    for r in 0..runs {
-        let mut s = session_at(config, 32, 32, 4, &all);
-        s.options.seed = 2000 + r;
-        s.options.tile_size = 16;
-        let out = render(&s);
-        assert_eq!(out.stats.invalid_deposits, 0, "{label}: invalid deposits");
-        let img = out.frame.image();
-        assert!(
-            img.iter().all(|c| c.is_valid_radiance()),
-            "{label}: NaN/Inf in the image"
-        );
-        means.push(img.iter().map(|c| c.luminance() as f64).sum::<f64>() / img.len() as f64);
-        per_run.push(regions(&img));
-        last = Some(out);
-    }
-    let refs = regions(reference);
-    let ref_se: Vec<f64> = (0..16)
-        .map(|k| {
-            let px: Vec<Rgb> = reference
-                .iter()
-                .enumerate()
-                .filter(|(i, _)| ((i / 32) / 8) * 4 + (i % 32) / 8 == k)
-                .map(|(_, c)| *c)
-                .collect();
-            mean_and_stderr(&px, |c| c.luminance()).1
-        })
-        .collect();
-    // A region's variance from `runs` renders has only runs − 1 degrees of freedom and is
-    // often several times too small by chance (with 6 runs, |t| > 5 has probability 0.4% per
-    // region, about 6% per check of 16 regions): floor it at a quarter of the relative
-    // variance pooled over all regions (16·(runs − 1) degrees of freedom), so that one
-    // region's lucky spread cannot fail the test. A bias shifts the image mean, which is
-    // checked below against its own error.
-    let region_var = |k: usize| {
-        let vals: Vec<f64> = per_run.iter().map(|r| r[k]).collect();
-        let m = vals.iter().sum::<f64>() / runs as f64;
-        vals.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (runs as f64 - 1.0)
-    };
-    let pooled_rel_var = (0..16)
-        .filter(|&k| refs[k].abs() > 1e-12)
-        .map(|k| region_var(k) / refs[k].powi(2))
-        .sum::<f64>()
-        / 16.0;
-    for k in 0..16 {
-        let vals: Vec<f64> = per_run.iter().map(|r| r[k]).collect();
-        let m = vals.iter().sum::<f64>() / runs as f64;
-        let var = region_var(k).max(0.25 * pooled_rel_var * refs[k].powi(2));
-        let se = (var / runs as f64 + ref_se[k].powi(2))
-            .sqrt()
-            .max(1e-4 * refs[k].abs())
-            .max(1e-12);
-        let z = (m - refs[k]) / se;
-        if std::env::var("ERPT_DEBUG").is_ok() {
-            eprintln!("{label}: region {k}: {m:.5} vs {:.5}, z = {z:.2}", refs[k]);
-        }
-        assert!(
-            z.abs() < 5.0,
-            "{label}: region {k}: ERPT {m:.5} vs reference {:.5} (z = {z:.2})",
-            refs[k]
-        );
-    }
-    let ref_mean =
-        reference.iter().map(|c| c.luminance() as f64).sum::<f64>() / reference.len() as f64;
-    let m = means.iter().sum::<f64>() / runs as f64;
-    // Within 3 %, or within 4 standard errors where caustics make both sides heavy-tailed
-    // (the runs' spread and the reference's own pixel noise).
-    let var = means.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (runs as f64 - 1.0);
-    let se = (var / runs as f64 + mean_and_stderr(reference, |c| c.luminance()).1.powi(2)).sqrt();
-    let z = (m - ref_mean) / se.max(1e-12);
-    assert!(
-        (m / ref_mean - 1.0).abs() < 0.03 || z.abs() < 4.0,
-        "{label}: image mean {m:.5} vs reference {ref_mean:.5} (z = {z:.2})"
-    );
-    last.expect("at least one run")
+    let (images, last) =
+        independent_runs(label, runs, 2000, &|| session_at(config, 32, 32, 4, &all));
+    assert_regions_unbiased(label, &images, reference);
+    // Within 3 %, or within 4 standard errors where caustics make both sides heavy-tailed.
+    assert_image_mean(label, &images, reference, MeanRule::WithinOrZ(0.03, 4.0));
+    last
 }
 
 /// Entangled MCPT of `config` at 32², `spp` samples per pixel.

@@ -177,3 +177,125 @@ pub fn sun_node(tilt: f32) -> String {
         r#"{{"translation": [0.0, 5.0, 0.0], "rotation": {q:?}, "extensions": {{"KHR_lights_punctual": {{"light": 0}}}}}}"#
     )
 }
+
+/// Renders `runs` independent sessions from `make` (seeds `seed_base` + r, 16-pixel tiles)
+/// and checks each for invalid deposits and non-finite pixels; returns the images and the
+/// last outcome (for its statistics).
+pub fn independent_runs(
+    label: &str,
+    runs: u64,
+    seed_base: u64,
+    make: &dyn Fn() -> Session,
+) -> (Vec<Vec<Rgb>>, RenderOutcome) {
+    let mut images = Vec::new();
+    let mut last = None;
+    for r in 0..runs {
+        let mut s = make();
+        s.options.seed = seed_base + r;
+        s.options.tile_size = 16;
+        let out = render(&s);
+        assert_eq!(out.stats.invalid_deposits, 0, "{label}: invalid deposits");
+        let img = out.frame.image();
+        assert!(
+            img.iter().all(|c| c.is_valid_radiance()),
+            "{label}: NaN/Inf in the image"
+        );
+        images.push(img);
+        last = Some(out);
+    }
+    (images, last.expect("at least one run"))
+}
+
+/// The unbiasedness z-test per 8×8 region of 32×32 `images` (independent runs) against
+/// `reference`, with the reference's own noise: |z| < 5 in each of the 16 regions.
+///
+/// A region's variance from n runs has only n − 1 degrees of freedom and is often several
+/// times too small by chance (with 6 runs, |t| > 5 has probability 0.4% per region, about 6%
+/// per check of 16 regions): it is floored at a quarter of the relative variance pooled over
+/// all regions (16·(n − 1) degrees of freedom), so that one region's lucky spread cannot fail
+/// the test. A bias shifts the region's mean, and the image mean ([`assert_image_mean`]).
+/// `ERPT_DEBUG=1` prints every region.
+pub fn assert_regions_unbiased(label: &str, images: &[Vec<Rgb>], reference: &[Rgb]) {
+    let runs = images.len() as f64;
+    let per_run: Vec<Vec<f64>> = images.iter().map(|img| regions(img)).collect();
+    let refs = regions(reference);
+    let ref_se: Vec<f64> = (0..16)
+        .map(|k| {
+            let px: Vec<Rgb> = reference
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| ((i / 32) / 8) * 4 + (i % 32) / 8 == k)
+                .map(|(_, c)| *c)
+                .collect();
+            mean_and_stderr(&px, |c| c.luminance()).1
+        })
+        .collect();
+    let mean_var = |k: usize| {
+        let vals: Vec<f64> = per_run.iter().map(|r| r[k]).collect();
+        let m = vals.iter().sum::<f64>() / runs;
+        (
+            m,
+            vals.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (runs - 1.0),
+        )
+    };
+    let pooled_rel_var = (0..16)
+        .filter(|&k| refs[k].abs() > 1e-12)
+        .map(|k| mean_var(k).1 / refs[k].powi(2))
+        .sum::<f64>()
+        / 16.0;
+    for k in 0..16 {
+        let (m, var) = mean_var(k);
+        let var = var.max(0.25 * pooled_rel_var * refs[k].powi(2));
+        let se = (var / runs + ref_se[k].powi(2))
+            .sqrt()
+            .max(1e-4 * refs[k].abs())
+            .max(1e-12); // a region that sees only a black sky
+        let z = (m - refs[k]) / se;
+        if std::env::var("ERPT_DEBUG").is_ok() {
+            eprintln!("{label}: region {k}: {m:.5} vs {:.5}, z = {z:.2}", refs[k]);
+        }
+        assert!(
+            z.abs() < 5.0,
+            "{label}: region {k}: ERPT {m:.5} vs reference {:.5} (z = {z:.2})",
+            refs[k]
+        );
+    }
+}
+
+/// How close the runs' image mean must come to the reference's ([`assert_image_mean`]).
+#[derive(Clone, Copy, Debug)]
+pub enum MeanRule {
+    /// Within this relative distance.
+    Within(f64),
+    /// Within the relative distance, or within `z` standard errors (the runs' spread and
+    /// the reference's pixel noise) where caustics make both sides heavy-tailed.
+    WithinOrZ(f64, f64),
+    /// Within `z` standard errors (floored at 1e-4 of the mean).
+    Z(f64),
+}
+
+/// The mean luminance of `images` (independent runs) against `reference`'s, by `rule`.
+pub fn assert_image_mean(label: &str, images: &[Vec<Rgb>], reference: &[Rgb], rule: MeanRule) {
+    let runs = images.len() as f64;
+    let means: Vec<f64> = images
+        .iter()
+        .map(|img| img.iter().map(|c| c.luminance() as f64).sum::<f64>() / img.len() as f64)
+        .collect();
+    let (ref_mean, ref_mean_se) = mean_and_stderr(reference, |c| c.luminance());
+    let m = means.iter().sum::<f64>() / runs;
+    let var = means.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (runs - 1.0);
+    let se = (var / runs + ref_mean_se.powi(2))
+        .sqrt()
+        .max(1e-4 * ref_mean)
+        .max(1e-12);
+    let (rel, z) = ((m / ref_mean - 1.0).abs(), (m - ref_mean) / se);
+    let ok = match rule {
+        MeanRule::Within(r) => rel < r,
+        MeanRule::WithinOrZ(r, zmax) => rel < r || z.abs() < zmax,
+        MeanRule::Z(zmax) => z.abs() < zmax,
+    };
+    assert!(
+        ok,
+        "{label}: image mean {m:.5} vs reference {ref_mean:.5} (relative {rel:.4}, z = {z:.2}, rule {rule:?})"
+    );
+}
