@@ -7,8 +7,8 @@
 mod common;
 
 use common::{
-    assert_image_mean, assert_regions_unbiased, chromaticity, independent_runs, mutations, render,
-    session_at, sun_node, MeanRule, FLOOR,
+    assert_image_mean, assert_regions_unbiased, assert_same_wall_hues, independent_runs, mutations,
+    render, session_at, sun_node, MeanRule, FLOOR,
 };
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
@@ -417,24 +417,7 @@ fn entangled_seeds_do_not_shift_hue_between_red_and_blue_walls() {
     let erpt = render(&session_at(config, 64, 64, 8, &[entangled()]))
         .frame
         .image();
-    for (name, range) in [("red side", 0..21usize), ("blue side", 43..64usize)] {
-        let pick = |img: &[Rgb]| -> Vec<Rgb> {
-            img.iter()
-                .enumerate()
-                .filter(|(i, _)| range.contains(&(i % 64)))
-                .map(|(_, c)| *c)
-                .collect()
-        };
-        let (a, b) = (chromaticity(&pick(&mcpt)), chromaticity(&pick(&erpt)));
-        assert!(
-            (a.0 - b.0).abs() < 0.008 && (a.1 - b.1).abs() < 0.008,
-            "{name}: MCPT chromaticity (r {:.4}, b {:.4}) vs ERPT (r {:.4}, b {:.4})",
-            a.0,
-            a.1,
-            b.0,
-            b.1
-        );
-    }
+    assert_same_wall_hues(&mcpt, &erpt);
 }
 
 /// Entangled MCPT of `config` at `size`², `spp` samples per pixel (the config's other

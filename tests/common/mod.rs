@@ -168,6 +168,31 @@ pub fn chromaticity(img: &[Rgb]) -> (f64, f64) {
     (sum[0] / t, sum[2] / t)
 }
 
+/// The red/blue hue test on 64-pixel-wide images of `cornell-box/red-blue.toml`: the
+/// chromaticity of the left and right thirds (the red and the blue wall with the light they
+/// bleed) of `erpt` within 0.008 of `mcpt`'s. A chain that carried its seed's colour into
+/// every deposit drops the blue side's b share by about 0.025.
+pub fn assert_same_wall_hues(mcpt: &[Rgb], erpt: &[Rgb]) {
+    for (name, range) in [("red side", 0..21usize), ("blue side", 43..64usize)] {
+        let pick = |img: &[Rgb]| -> Vec<Rgb> {
+            img.iter()
+                .enumerate()
+                .filter(|(i, _)| range.contains(&(i % 64)))
+                .map(|(_, c)| *c)
+                .collect()
+        };
+        let (a, b) = (chromaticity(&pick(mcpt)), chromaticity(&pick(erpt)));
+        assert!(
+            (a.0 - b.0).abs() < 0.008 && (a.1 - b.1).abs() < 0.008,
+            "{name}: MCPT chromaticity (r {:.4}, b {:.4}) vs ERPT (r {:.4}, b {:.4})",
+            a.0,
+            a.1,
+            b.0,
+            b.1
+        );
+    }
+}
+
 /// A directional light node travelling down and tilted by `tilt` degrees towards +Z (it comes
 /// from behind the wall): a rotation about +X by −(90° + tilt) of the node's −Z.
 pub fn sun_node(tilt: f32) -> String {

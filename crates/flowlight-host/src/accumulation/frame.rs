@@ -2,7 +2,7 @@
 //! the render's precision, and the per-pixel sample counts.
 
 use super::cells::Cells;
-use super::{add_sums, from_fixed, is_large, to_fixed, PixelDeposit, Precision};
+use super::{add_sums, from_fixed, is_large, to_fixed, Precision};
 use flowlight_core::Rgb;
 
 /// One framebuffer's RGB sums: fixed point (exact precision), or f32 stored as planar R, G,
@@ -79,13 +79,6 @@ impl Plane {
         match self {
             Plane::Exact(p) => p[i].map(from_fixed),
             Plane::F32(p) => [p[0][i] as f64, p[1][i] as f64, p[2][i] as f64],
-        }
-    }
-
-    pub fn fill_zero(&mut self) {
-        match self {
-            Plane::Exact(p) => p.fill([0; 3]),
-            Plane::F32(p) => p.iter_mut().for_each(|c| c.fill(0.0)),
         }
     }
 
@@ -250,24 +243,6 @@ impl Frame {
         self.uniform_spp = Some(spp);
     }
 
-    /// Adds a finished Blasting unit: its buffer (tile and flange), its overflow deposits,
-    /// and `samples` more samples for each pixel of its tile.
-    pub fn merge(&mut self, tile: &super::TileAccumulator, samples: u32) {
-        for (k, plane) in self.planes.iter_mut().enumerate() {
-            tile.flush_plane(k, plane, self.width);
-        }
-        for d in tile.overflow() {
-            let f = d.y as usize * self.width as usize + d.x as usize;
-            add_deposit_to(&mut self.planes, &mut self.large, f, d);
-        }
-        let (x0, y0, x1, y1) = tile.tile();
-        for y in y0..y1 {
-            for x in x0..x1 {
-                self.samples[y as usize * self.width as usize + x as usize] += samples;
-            }
-        }
-    }
-
     /// Adds another frame of the same size and precision: its sums and sample counts.
     pub fn add_frame(&mut self, other: &Frame) {
         debug_assert_eq!((self.width, self.height), (other.width, other.height));
@@ -282,41 +257,16 @@ impl Frame {
         }
     }
 
-    /// Zeroes every sum and count, keeping the buffers.
-    pub fn clear(&mut self) {
-        for p in &mut self.planes {
-            p.fill_zero();
-        }
-        self.samples.fill(0);
-        for l in &mut self.large {
-            l.clear();
-        }
-    }
-
     pub fn samples(&self) -> &[u32] {
         &self.samples
     }
 
     fn resolve(&self, k: usize) -> Vec<Rgb> {
-        let (plane, large) = (&self.planes[k], &self.large[k]);
-        let scaled = |i: usize, k: f64| {
-            let s = plane.get(i);
-            let l = large.get(&i).copied().unwrap_or([0.0; 3]);
-            Rgb::new(
-                ((s[0] + l[0]) * k) as f32,
-                ((s[1] + l[1]) * k) as f32,
-                ((s[2] + l[2]) * k) as f32,
-            )
-        };
-        let n = self.samples.len();
-        if let Some(spp) = self.uniform_spp {
-            let k = if spp > 0.0 { 1.0 / spp } else { 0.0 };
-            return (0..n).map(|i| scaled(i, k)).collect();
-        }
-        (0..n)
-            .map(|i| match self.samples[i] {
-                0 => Rgb::ZERO,
-                s => scaled(i, 1.0 / s as f64),
+        let scale = pixel_scale(self.uniform_spp, &self.samples);
+        (0..self.samples.len())
+            .map(|i| {
+                let (s, f) = (self.sum(k, i), scale(i));
+                Rgb::new((s[0] * f) as f32, (s[1] * f) as f32, (s[2] * f) as f32)
             })
             .collect()
     }
@@ -328,17 +278,7 @@ impl Frame {
     /// again panics).
     pub fn take_channels(&mut self, k: usize) -> [Vec<f32>; 3] {
         let n = self.samples.len();
-        let uniform = self
-            .uniform_spp
-            .map(|spp| if spp > 0.0 { 1.0 / spp } else { 0.0 });
-        let samples = &self.samples;
-        let scale = |i: usize| match uniform {
-            Some(k) => k,
-            None => match samples[i] {
-                0 => 0.0,
-                s => 1.0 / s as f64,
-            },
-        };
+        let scale = pixel_scale(self.uniform_spp, &self.samples);
         let precision = self.precision();
         match std::mem::replace(&mut self.planes[k], Plane::new(precision, 0)) {
             // Scaled in place: the f32 sums become the channels.
@@ -382,21 +322,6 @@ impl Frame {
     }
 }
 
-/// Adds one deposit at pixel index `f` to the main plane and its layer's, the f64 large-value
-/// sums taking channels an exact plane cannot hold.
-pub(crate) fn add_deposit_to(
-    planes: &mut [Plane],
-    large: &mut [LargeSums],
-    f: usize,
-    d: &PixelDeposit,
-) {
-    let layer = (d.layer as usize + 1 < planes.len()).then_some(d.layer as usize + 1);
-    add_deposit_to_plane(&mut planes[0], &mut large[0], f, d.value);
-    if let Some(k) = layer {
-        add_deposit_to_plane(&mut planes[k], &mut large[k], f, d.value);
-    }
-}
-
 /// One deposit into one plane (and its large-value sums).
 pub(crate) fn add_deposit_to_plane(plane: &mut Plane, large: &mut LargeSums, f: usize, v: Rgb) {
     if matches!(plane, Plane::Exact(_)) && is_large(v) {
@@ -415,6 +340,17 @@ pub(crate) fn add_deposit_to_plane(plane: &mut Plane, large: &mut LargeSums, f: 
     }
 }
 
+/// The factor pixel `i`'s sums are multiplied by: 1 / the uniform sample count when one is
+/// set (0 for none), else 1 / the pixel's own count (0, a black pixel, where none finished).
+fn pixel_scale(uniform_spp: Option<f64>, samples: &[u32]) -> impl Fn(usize) -> f64 + '_ {
+    let uniform = uniform_spp.map(|spp| if spp > 0.0 { 1.0 / spp } else { 0.0 });
+    move |i| match (uniform, samples[i]) {
+        (Some(k), _) => k,
+        (None, 0) => 0.0,
+        (None, s) => 1.0 / s as f64,
+    }
+}
+
 pub(crate) fn add_large(a: &mut LargeSums, b: &LargeSums) {
     for (f, v) in b {
         let e = a.entry(*f).or_insert([0.0; 3]);
@@ -426,10 +362,29 @@ pub(crate) fn add_large(a: &mut LargeSums, b: &LargeSums) {
 
 #[cfg(test)]
 mod tests {
-    use super::super::{from_fixed, to_fixed, TileAccumulator};
+    use super::super::{from_fixed, to_fixed, SharedFrame, TileAccumulator};
     use super::*;
     use flowlight_sdk::abi::Deposit;
     use flowlight_sdk::Accumulator;
+
+    /// An exact buffer for tile (x0, y0, x1, y1) of a `film`, with `flange` and `layers`.
+    fn tile(
+        t: (u32, u32, u32, u32),
+        flange: u32,
+        film: (u32, u32),
+        layers: u32,
+    ) -> TileAccumulator {
+        TileAccumulator::with_precision(t, flange, film, layers, Precision::Exact)
+    }
+
+    /// The frame of `units` (buffer, samples) merged as the scheduler merges Blasting units.
+    fn merged(film: (u32, u32), layers: u32, units: &[(&TileAccumulator, u32)]) -> Frame {
+        let shared = SharedFrame::new(film.0, film.1, layers, Precision::Exact);
+        for (t, samples) in units {
+            shared.merge_tile(t, *samples);
+        }
+        shared.into_frame()
+    }
 
     fn d(x: f32, y: f32, layer: u32, v: f32) -> Deposit {
         Deposit {
@@ -442,7 +397,7 @@ mod tests {
 
     #[test]
     fn tile_discards_and_counts_invalid_deposits() {
-        let mut t = TileAccumulator::new(2, 2, 4, 4, 0, 4, 4, 2);
+        let mut t = tile((2, 2, 4, 4), 0, (4, 4), 2);
         t.deposit(&[
             d(2.5, 2.5, 0, 1.0),
             d(3.5, 2.5, 1, 2.0),
@@ -453,8 +408,7 @@ mod tests {
         ]);
         assert_eq!(t.counts.invalid, 3);
         assert_eq!(t.counts.stray, 1);
-        let mut f = Frame::new(4, 4, 2);
-        f.merge(&t, 2);
+        let f = merged((4, 4), 2, &[(&t, 2)]);
         let img = f.image();
         assert_eq!(img[2 * 4 + 2], Rgb::splat(0.5));
         assert_eq!(img[2 * 4 + 3], Rgb::splat(1.0));
@@ -467,18 +421,16 @@ mod tests {
     #[test]
     fn flange_and_overflow_deposits_are_merged_not_lost() {
         // Tile (4..6)², flange 1 → buffer (3..7)² of an 8×8 film.
-        let mut t = TileAccumulator::new(4, 4, 6, 6, 1, 8, 8, 0);
+        let mut t = tile((4, 4, 6, 6), 1, (8, 8), 0);
         t.deposit(&[
             d(4.5, 4.5, 0, 1.0),
             d(3.5, 6.5, 0, 2.0),
             d(0.5, 7.5, 0, 3.0),
         ]);
         assert_eq!(t.counts.overflow, 1);
-        let mut f = Frame::new(8, 8, 0);
-        f.merge(&t, 1);
         // Other units sample the flange and overflow pixels.
-        let other = TileAccumulator::new(0, 0, 8, 8, 0, 8, 8, 0);
-        f.merge(&other, 1);
+        let other = tile((0, 0, 8, 8), 0, (8, 8), 0);
+        let f = merged((8, 8), 0, &[(&t, 1), (&other, 1)]);
         let img = f.image();
         assert_eq!(img[4 * 8 + 4], Rgb::splat(0.5));
         assert_eq!(img[6 * 8 + 3], Rgb::splat(2.0));
@@ -491,10 +443,9 @@ mod tests {
     fn uniform_normalisation_divides_every_pixel_alike() {
         // Pixel 0 got a neighbour's deposit but no sample of its own: per-pixel
         // normalisation leaves it black, a uniform 1.5 samples does not.
-        let mut t = TileAccumulator::new(1, 0, 2, 1, 1, 2, 1, 1);
+        let mut t = tile((1, 0, 2, 1), 1, (2, 1), 1);
         t.deposit(&[d(0.5, 0.5, 0, 3.0), d(1.5, 0.5, 0, 6.0)]);
-        let mut f = Frame::new(2, 1, 1);
-        f.merge(&t, 1);
+        let mut f = merged((2, 1), 1, &[(&t, 1)]);
         assert_eq!(f.image(), vec![Rgb::ZERO, Rgb::splat(6.0)]);
         f.set_uniform_spp(1.5);
         assert_eq!(f.image(), vec![Rgb::splat(2.0), Rgb::splat(4.0)]);
@@ -507,22 +458,19 @@ mod tests {
     fn sums_do_not_depend_on_the_grouping_of_deposits() {
         // Values whose f32/f64 sums depend on the order: 1e8 + 1 − … in floating point.
         let values = [1.0e8f32, 1.0, 3.0e-7, 2.5, 7.0e-12, 1.0e8, 0.1];
-        let mut one = TileAccumulator::new(0, 0, 1, 1, 0, 1, 1, 0);
+        let mut one = tile((0, 0, 1, 1), 0, (1, 1), 0);
         for &v in &values {
             one.deposit(&[d(0.5, 0.5, 0, v)]);
         }
-        let mut a = Frame::new(1, 1, 0);
-        a.merge(&one, 7);
+        let a = merged((1, 1), 0, &[(&one, 7)]);
         // The same deposits split over three units merged in another order.
         let mut b = Frame::new(1, 1, 0);
         for chunk in [&values[4..], &values[..2], &values[2..4]] {
-            let mut t = TileAccumulator::new(0, 0, 1, 1, 0, 1, 1, 0);
+            let mut t = tile((0, 0, 1, 1), 0, (1, 1), 0);
             for &v in chunk.iter().rev() {
                 t.deposit(&[d(0.5, 0.5, 0, v)]);
             }
-            let mut pass = Frame::new(1, 1, 0);
-            pass.merge(&t, chunk.len() as u32);
-            b.add_frame(&pass);
+            b.add_frame(&merged((1, 1), 0, &[(&t, chunk.len() as u32)]));
         }
         assert_eq!(a.main_sums(), b.main_sums());
         assert_eq!(a.image()[0].r.to_bits(), b.image()[0].r.to_bits());
@@ -531,10 +479,9 @@ mod tests {
         assert!((from_fixed(a.main_sums()[0][0]) - exact).abs() <= 1e-9 * exact);
         assert_eq!(to_fixed(1.0), 1u128 << 64);
         // A 10³⁰ deposit keeps its energy (f64 side sum), beside a small one in fixed point.
-        let mut t = TileAccumulator::new(0, 0, 1, 1, 0, 1, 1, 1);
+        let mut t = tile((0, 0, 1, 1), 0, (1, 1), 1);
         t.deposit(&[d(0.5, 0.5, 0, 1.0e30), d(0.5, 0.5, 0, 0.5)]);
-        let mut f = Frame::new(1, 1, 1);
-        f.merge(&t, 2);
+        let f = merged((1, 1), 1, &[(&t, 2)]);
         let r = f.image()[0].r as f64;
         assert!((r / 5.0e29 - 1.0).abs() < 1e-6, "{r}");
         assert_eq!(f.layer(0)[0], f.image()[0]);
@@ -546,7 +493,6 @@ mod tests {
     fn taken_channels_are_the_resolved_image_bit_for_bit() {
         for precision in [Precision::Exact, Precision::F32] {
             for uniform in [None, Some(1.5)] {
-                let mut f = Frame::with_precision(3, 2, 1, precision);
                 let mut t = TileAccumulator::with_precision((0, 0, 2, 2), 1, (3, 2), 1, precision);
                 t.deposit(&[
                     d(0.5, 0.5, 0, 0.3),
@@ -554,7 +500,9 @@ mod tests {
                     d(2.5, 0.5, 0, 1.0e31),
                     d(2.5, 1.5, 0, 2.0),
                 ]);
-                f.merge(&t, 3);
+                let shared = SharedFrame::new(3, 2, 1, precision);
+                shared.merge_tile(&t, 3);
+                let mut f = shared.into_frame();
                 if let Some(spp) = uniform {
                     f.set_uniform_spp(spp);
                 }

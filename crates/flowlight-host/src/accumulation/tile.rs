@@ -30,28 +30,6 @@ pub struct TileAccumulator {
 }
 
 impl TileAccumulator {
-    /// An exact-precision buffer for tile [x0, x1) × [y0, y1) of a `width` × `height` film
-    /// with `flange` pixels around it.
-    #[allow(clippy::too_many_arguments)]
-    pub fn new(
-        x0: u32,
-        y0: u32,
-        x1: u32,
-        y1: u32,
-        flange: u32,
-        width: u32,
-        height: u32,
-        layer_count: u32,
-    ) -> Self {
-        Self::with_precision(
-            (x0, y0, x1, y1),
-            flange,
-            (width, height),
-            layer_count,
-            Precision::Exact,
-        )
-    }
-
     /// A buffer for `tile` = (x0, y0, x1, y1) of a `film` = (width, height) in `precision`.
     pub fn with_precision(
         tile: (u32, u32, u32, u32),
