@@ -92,24 +92,31 @@ impl SharedFrame {
         }
         for k in 0..self.planes.len() {
             let mut guard = self.lock_plane(k);
-            let (plane, large) = &mut *guard;
-            for d in deposits {
-                if k == 0 || d.layer as usize + 1 == k {
-                    let f = d.y as usize * self.width as usize + d.x as usize;
-                    add_deposit_to_plane(plane, large, f, d.value);
-                }
+            self.add_to_plane(k, &mut guard, deposits);
+        }
+    }
+
+    /// The deposits of framebuffer `k` (all for the main image, those of layer k − 1
+    /// otherwise) into its locked sums.
+    fn add_to_plane(&self, k: usize, guard: &mut (Plane, LargeSums), deposits: &[PixelDeposit]) {
+        let (plane, large) = guard;
+        for d in deposits {
+            if k == 0 || d.layer as usize + 1 == k {
+                let f = d.y as usize * self.width as usize + d.x as usize;
+                add_deposit_to_plane(plane, large, f, d.value);
             }
         }
     }
 
-    /// Merges a finished Blasting unit and its `samples` samples.
+    /// Merges a finished Blasting unit (its buffer and its overflow deposits, under one lock
+    /// per framebuffer) and its `samples` samples.
     pub fn merge_tile(&self, tile: &TileAccumulator, samples: u32) {
         self.count_flush();
         for k in 0..self.planes.len() {
             let mut guard = self.lock_plane(k);
             tile.flush_plane(k, &mut guard.0, self.width);
+            self.add_to_plane(k, &mut guard, tile.overflow());
         }
-        self.add_deposits(tile.overflow());
         self.add_samples(tile.tile(), samples);
     }
 
