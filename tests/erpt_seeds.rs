@@ -10,7 +10,7 @@ use common::{
     assert_image_mean, assert_regions_unbiased, assert_same_wall_hues, independent_runs, mutations,
     render, session_at, sun_node, MeanRule, FLOOR,
 };
-use flowlight_core::path::Path;
+use flowlight_core::path::{NodeType, Path};
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
 use flowlight_host::intersector::UnitTracer;
@@ -146,6 +146,125 @@ fn check_seed_estimates(config: &str, session: flowlight_host::session::Session)
     counts
 }
 
+/// Keeps seeds whose vertex before the light is glossy: for a connection from a vertex with a
+/// diffuse and a glossy lobe the answer depends on which one scatters most.
+struct GlossyLast;
+impl seeds::SeedFilter for GlossyLast {
+    fn keeps(&self, types: &[NodeType]) -> bool {
+        types.len() >= 3
+            && matches!(
+                types[types.len() - 2],
+                NodeType::GlossyReflection | NodeType::GlossyTransmission
+            )
+    }
+}
+
+/// Keeps caustic paths: a Dirac vertex between the light and a smooth one.
+struct Caustic;
+impl seeds::SeedFilter for Caustic {
+    fn keeps(&self, types: &[NodeType]) -> bool {
+        let dirac = |t: &NodeType| {
+            matches!(
+                t,
+                NodeType::SpecularReflection | NodeType::SpecularTransmission
+            )
+        };
+        let smooth = types[1..types.len() - 1].iter().position(|t| !dirac(t));
+        smooth.is_some_and(|i| types[i + 1..types.len() - 1].iter().any(dirac))
+    }
+}
+
+/// `seeds::trace_split` stores exactly the seeds of `seeds::trace` whose path type the filter
+/// keeps (same records, same order), and hands the others' estimates to the split, in order.
+#[test]
+fn splitting_while_tracing_stores_exactly_the_kept_seeds() {
+    let mut totals = [[0usize; 2]; 2];
+    for config in [
+        "cornell-box/cornell-box.toml",
+        "glass-caustic/glass-caustic.toml",
+        "satin",
+    ] {
+        let session = if config == "satin" {
+            sun_and_sky_in("split-satin", SATIN, "plugin = \"mcpt\"", 1)
+        } else {
+            session_at(config, 32, 32, 1, &[])
+        };
+        // SAFETY: the session keeps the view's data alive.
+        let scene = unsafe { Scene::from_view(session.instance.view()) };
+        let mut unit_tracer = UnitTracer::new(&session.scene, session.intersector.as_ref());
+        let table = unit_tracer.table();
+        let tracer = Tracer::new(&table);
+        let settings = PathSettings::from_params(&flowlight_sdk::Params::from_slice(&[])).unwrap();
+        let filters: [&dyn seeds::SeedFilter; 2] = [&GlossyLast, &Caustic];
+        for (f, filter) in filters.into_iter().enumerate() {
+            let (mut all, mut kept) = (SeedStore::default(), SeedStore::default());
+            let mut rest = SampleContributions::default();
+            let mut path = Box::new(Path::empty());
+            let (mut n_kept, mut n_rest) = (0usize, 0usize);
+            for i in 0..3000u64 {
+                let raster = glam::Vec2::new((i % 32) as f32 + 0.5, ((i / 32) % 32) as f32 + 0.25);
+                let stream = Rng::hash(&[i, 7]);
+                all.clear();
+                kept.clear();
+                rest.clear();
+                let mut a = Rng::new(stream, 0);
+                seeds::trace(&scene, &tracer, &settings, &mut a, raster, &mut all);
+                let mut split = seeds::SeedSplit {
+                    filter,
+                    rest: &mut rest,
+                    count: 0,
+                };
+                let mut b = Rng::new(stream, 0);
+                seeds::trace_split(
+                    &scene, &tracer, &settings, &mut b, raster, &mut kept, &mut split,
+                );
+                let count = split.count as usize;
+                assert_eq!(
+                    a.uniform(),
+                    b.uniform(),
+                    "{config}: random streams diverged"
+                );
+                let (mut k, mut r) = (0, 0);
+                for j in 0..all.seeds.len() {
+                    all.path(j, &mut path);
+                    let types: Vec<NodeType> = path.vertices().iter().map(|v| v.node).collect();
+                    let want = all.seeds[j];
+                    if filter.keeps(&types) {
+                        let got = kept.seeds[k];
+                        let mut got_path = Box::new(Path::empty());
+                        kept.path(k, &mut got_path);
+                        assert_eq!(got_path.heckbert(), path.heckbert(), "{config}");
+                        assert_eq!(got.estimate, want.estimate, "{config}");
+                        assert_eq!((got.layer, got.technique), (want.layer, want.technique));
+                        assert_eq!(got.density.to_bits(), want.density.to_bits());
+                        assert_eq!(got.light.p, want.light.p);
+                        k += 1;
+                    } else {
+                        assert_eq!(rest.entries[r], (want.layer, want.estimate), "{config}");
+                        r += 1;
+                    }
+                }
+                assert_eq!((k, r), (kept.seeds.len(), count), "{config}");
+                assert_eq!(r, rest.entries.len(), "{config}");
+                n_kept += k;
+                n_rest += r;
+            }
+            // Both sides of every filter are exercised.
+            totals[f][0] += n_kept;
+            totals[f][1] += n_rest;
+        }
+    }
+    // Both sides of each filter are exercised (the glossy one on the satin scene, where a
+    // connection's type depends on the lobe that scatters most; the caustic one through the
+    // glass).
+    for (f, [kept, rest]) in totals.into_iter().enumerate() {
+        assert!(
+            kept > 20 && rest > 1000,
+            "filter {f}: kept {kept}, rest {rest}"
+        );
+    }
+}
+
 const SHORT_WALL: [[f32; 3]; 4] = [
     [-10.0, 0.0, -1.0],
     [10.0, 0.0, -1.0],
@@ -159,9 +278,22 @@ const VARNISH: &str = r#"{"name": "varnish", "pbrMetallicRoughness": {"baseColor
 /// A varnished floor and wall under a sun and a constant sky (lights at infinity, Dirac and
 /// smooth lobes mixed), rendered by `integrator`.
 fn sun_and_sky(name: &str, integrator: &str, spp: u32) -> flowlight_host::session::Session {
+    sun_and_sky_in(name, VARNISH, integrator, spp)
+}
+
+/// A dielectric of roughness 0.35: a diffuse base and a glossy GGX layer at every vertex.
+const SATIN: &str = r#"{"name": "satin", "pbrMetallicRoughness": {"baseColorFactor": [0.6, 0.6, 0.6, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.35}}"#;
+
+/// [`sun_and_sky`] with the floor and wall of `material`.
+fn sun_and_sky_in(
+    name: &str,
+    material: &str,
+    integrator: &str,
+    spp: u32,
+) -> flowlight_host::session::Session {
     let gltf = common::quads_gltf(
         &[FLOOR, SHORT_WALL],
-        VARNISH,
+        material,
         &[sun_node(40.0)],
         r#"[{"type": "directional", "intensity": 2000.0, "color": [1.0, 0.8, 0.6]}]"#,
     );

@@ -41,10 +41,19 @@
 //! Seeds of one work unit are stored in a [`SeedStore`]: every trunk once, and per seed its
 //! trunk prefix and light vertex, so that the unit's seeds are traced once and serve both the
 //! deposition quantum and the flow.
+//!
+//! With a [`SeedSplit`] ([`trace_split`]) only the seeds whose path type the caller's
+//! [`SeedFilter`] keeps are stored; the others only add their estimates to the split's
+//! [`SampleContributions`], for the caller to deposit at the sample's pixel as path tracing
+//! would. The type is known as the trunk grows (each vertex's node type, then the light), so a
+//! seed outside the filter costs no record, no copy of its path and no second
+//! classification. A connection vertex's stored type is that of the smooth component that
+//! scatters most light (above); it is only computed when the filter's answer depends on it.
 
 use crate::settings::PathSettings;
 use crate::shading::{connect_light, side_consistent, Shading};
 use crate::untangled::light_vertex;
+use crate::SampleContributions;
 use flowlight_core::bsdf::{volume, Bsdf};
 use flowlight_core::light::{area_to_solid_angle, LightKind};
 use flowlight_core::path::{NodeType, Path, PathVertex, MAX_PATH_VERTICES};
@@ -183,6 +192,20 @@ enum Step {
     Smooth(f32),
 }
 
+/// Which seeds [`trace_split`] stores with their paths.
+pub trait SeedFilter {
+    /// Whether a seed whose path has the node types `types` (eye first, light last) is kept.
+    fn keeps(&self, types: &[NodeType]) -> bool;
+}
+
+/// The seeds a [`SeedFilter`] does not keep: their estimates go to `rest` (lighting layer,
+/// estimate), and `count` counts them.
+pub struct SeedSplit<'a> {
+    pub filter: &'a dyn SeedFilter,
+    pub rest: &'a mut SampleContributions,
+    pub count: u64,
+}
+
 /// Traces one entangled path tree through `raster` and appends its seeds (every light
 /// connection, emitter hit and environment escape that carries light) to `store`. The
 /// estimates sum to the entangled sampler's estimate of the same path tree
@@ -195,13 +218,103 @@ pub fn trace(
     raster: Vec2,
     store: &mut SeedStore,
 ) {
+    trace_with(scene, tracer, settings, rng, raster, store, None);
+}
+
+/// [`trace`] that stores only the seeds `split.filter` keeps; the others' estimates are added
+/// to `split.rest` (not cleared first). The same random numbers are drawn as by [`trace`], and
+/// a seed is stored here exactly when [`trace`] stores it and the filter keeps its path.
+pub fn trace_split(
+    scene: &Scene,
+    tracer: &Tracer,
+    settings: &PathSettings,
+    rng: &mut Rng,
+    raster: Vec2,
+    store: &mut SeedStore,
+    split: &mut SeedSplit,
+) {
+    trace_with(scene, tracer, settings, rng, raster, store, Some(split));
+}
+
+fn trace_with(
+    scene: &Scene,
+    tracer: &Tracer,
+    settings: &PathSettings,
+    rng: &mut Rng,
+    raster: Vec2,
+    store: &mut SeedStore,
+    split: Option<&mut SeedSplit>,
+) {
     store.samples += 1;
     let (trunk, seeds) = (store.vertices.len(), store.seeds.len());
-    trace_tree(scene, tracer, settings, rng, raster, store);
+    trace_tree(scene, tracer, settings, rng, raster, store, split);
     // A tree without seeds keeps no trunk.
     if store.seeds.len() == seeds {
         store.vertices.truncate(trunk);
     }
+}
+
+/// Where a seed of type `types` goes: `true` to the store, `false` to the split's rest (after
+/// adding its estimate there). Without a split every seed is stored.
+#[inline]
+fn route(
+    split: &mut Option<&mut SeedSplit>,
+    types: &[NodeType],
+    layer: u32,
+    estimate: Rgb,
+) -> bool {
+    match split {
+        None => true,
+        Some(s) if s.filter.keeps(types) => true,
+        Some(s) => {
+            s.count += 1;
+            s.rest.add(layer, estimate);
+            false
+        }
+    }
+}
+
+/// [`route`] for a light connection from the trunk's last vertex, `types[types.len() − 2]`:
+/// the vertex's type is that of [`connection_node`], computed only when the seed is stored or
+/// when the filter's answer depends on which smooth component's type it is. Returns the node
+/// type and component to store, or `None` when the seed went to the split's rest.
+fn connection_route(
+    split: &mut Option<&mut SeedSplit>,
+    bsdf: &Bsdf,
+    shading: &Shading,
+    wi: Vec3,
+    types: &mut [NodeType],
+    layer: u32,
+    estimate: Rgb,
+) -> Option<(NodeType, u8)> {
+    let n = types.len();
+    types[n - 1] = NodeType::Light;
+    if let Some(s) = split.as_deref_mut() {
+        // The filter's answer for each type a smooth component can give the vertex: when they
+        // agree, the most-scattering component need not be found.
+        let mut answer = None;
+        let mut agree = true;
+        for (c, _) in bsdf.components().filter(|(c, _)| !c.is_delta()) {
+            types[n - 2] = c.node_type(shading.wo, wi);
+            let keeps = s.filter.keeps(types);
+            agree &= answer.is_none_or(|a| a == keeps);
+            answer = Some(keeps);
+        }
+        if agree && answer == Some(false) {
+            s.count += 1;
+            s.rest.add(layer, estimate);
+            return None;
+        }
+        if !agree {
+            let node = connection_node(bsdf, shading.wo, wi);
+            types[n - 2] = node.0;
+            if !route(split, types, layer, estimate) {
+                return None;
+            }
+            return Some(node);
+        }
+    }
+    Some(connection_node(bsdf, shading.wo, wi))
 }
 
 fn trace_tree(
@@ -211,12 +324,15 @@ fn trace_tree(
     rng: &mut Rng,
     raster: Vec2,
     store: &mut SeedStore,
+    mut split: Option<&mut SeedSplit>,
 ) {
     let trunk = store.vertices.len();
     let mut ray = scene.camera.generate_ray(raster);
     store
         .vertices
         .push(PathVertex::eye(ray.origin, scene.camera.forward));
+    // Node types of the trunk (eye first) and room for a connection vertex and a light.
+    let mut types = [NodeType::Eye; MAX_PATH_VERTICES + 1];
     let mut beta = Rgb::ONE;
     let mut density = 1.0f64; // p of the trunk so far, survival included
     let mut inside: Option<Rgb> = None;
@@ -226,13 +342,11 @@ fn trace_tree(
     let mut prev_p = ray.origin;
     let mut last = false;
     let emit = |store: &mut SeedStore, prefix: usize, seed: Seed| {
-        if !seed.estimate.is_black() {
-            store.seeds.push(Seed {
-                trunk: trunk as u32,
-                prefix: prefix as u32,
-                ..seed
-            });
-        }
+        store.seeds.push(Seed {
+            trunk: trunk as u32,
+            prefix: prefix as u32,
+            ..seed
+        });
     };
     loop {
         let count = store.vertices.len() - trunk;
@@ -252,6 +366,11 @@ fn trace_tree(
                     density * pdf as f64,
                 ),
             };
+            let estimate = beta * le * w;
+            types[count] = NodeType::Light;
+            if estimate.is_black() || !route(&mut split, &types[..=count], depth, estimate) {
+                return;
+            }
             let light = PathVertex {
                 p: ray.origin + ray.dir,
                 p_error: Vec3::ZERO,
@@ -272,7 +391,7 @@ fn trace_tree(
                 connect: None,
                 light,
                 raster,
-                estimate: beta * le * w,
+                estimate,
                 layer: depth,
                 mis_weight: w,
                 density: p,
@@ -310,19 +429,23 @@ fn trace_tree(
                         power_heuristic(pdf, pdf_light)
                     }
                 };
-                let seed = Seed {
-                    trunk: 0,
-                    prefix: 0,
-                    connect: None,
-                    light: PathVertex::from_hit(&hit, NodeType::Light, 0),
-                    raster,
-                    estimate: beta * le * w,
-                    layer: depth,
-                    mis_weight: w,
-                    density,
-                    technique: Technique::Hit,
-                };
-                emit(store, count, seed);
+                let estimate = beta * le * w;
+                types[count] = NodeType::Light;
+                if !estimate.is_black() && route(&mut split, &types[..=count], depth, estimate) {
+                    let seed = Seed {
+                        trunk: 0,
+                        prefix: 0,
+                        connect: None,
+                        light: PathVertex::from_hit(&hit, NodeType::Light, 0),
+                        raster,
+                        estimate,
+                        layer: depth,
+                        mis_weight: w,
+                        density,
+                        technique: Technique::Hit,
+                    };
+                    emit(store, count, seed);
+                }
             }
         }
         if last {
@@ -364,22 +487,36 @@ fn trace_tree(
                         } else {
                             conn.pdf
                         };
-                        let seed = Seed {
-                            trunk: 0,
-                            prefix: 0,
-                            connect: Some(connection_node(&bsdf, shading.wo, conn.wi_local)),
-                            light: light_vertex(scene, &ls, hit.p),
-                            raster,
-                            estimate: beta
-                                * f
-                                * conn.radiance
-                                * (conn.wi_local.z.abs() * w / conn.pdf),
-                            layer: depth,
-                            mis_weight: w,
-                            density: density * p_light as f64,
-                            technique: Technique::Connection,
-                        };
-                        emit(store, count + 1, seed);
+                        let estimate =
+                            beta * f * conn.radiance * (conn.wi_local.z.abs() * w / conn.pdf);
+                        let connect = (!estimate.is_black())
+                            .then(|| {
+                                connection_route(
+                                    &mut split,
+                                    &bsdf,
+                                    &shading,
+                                    conn.wi_local,
+                                    &mut types[..count + 2],
+                                    depth,
+                                    estimate,
+                                )
+                            })
+                            .flatten();
+                        if let Some(connect) = connect {
+                            let seed = Seed {
+                                trunk: 0,
+                                prefix: 0,
+                                connect: Some(connect),
+                                light: light_vertex(scene, &ls, hit.p),
+                                raster,
+                                estimate,
+                                layer: depth,
+                                mis_weight: w,
+                                density: density * p_light as f64,
+                                technique: Technique::Connection,
+                            };
+                            emit(store, count + 1, seed);
+                        }
                     }
                 }
             }
@@ -415,6 +552,7 @@ fn trace_tree(
             v.node = s.node;
             v.component = component as u8;
         }
+        types[count] = s.node;
         let wi_world = shading.frame.to_world(s.wi);
         if !side_consistent(&hit, wi_world, s.wi) {
             return;

@@ -61,6 +61,7 @@
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]
 
+mod automaton;
 mod flow;
 mod part;
 mod settings;
@@ -70,8 +71,8 @@ use flow::Flow;
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
-use flowlight_pathtrace::seeds::{self, SeedStore};
-use flowlight_pathtrace::untangled;
+use flowlight_pathtrace::seeds::{self, SeedSplit, SeedStore};
+use flowlight_pathtrace::{untangled, SampleContributions};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::{
     export_integrator, AccumulationStyle, Film, Integrator, IntegratorInfo, MutationSet, Params,
@@ -114,9 +115,24 @@ struct UnitSeeds {
     in_part: Vec<bool>,
 }
 
+/// Entangled seeds outside the chains' part, split off while a sample is traced: their
+/// estimates (lighting layer, estimate) and how many there were.
+#[derive(Default)]
+struct RestOfSample {
+    contributions: SampleContributions,
+    seeds: u64,
+}
+
 impl Erpt {
+    /// Whether entangled seeds are split while traced (only the chains' part is stored).
+    fn splits_while_tracing(&self) -> bool {
+        self.settings.seed_kind == SeedKind::Entangled && !self.settings.part.is_everything()
+    }
+
     /// Traces the seeds of camera sample `s` of pixel (x, y) into `store` (random stream
-    /// `rng`); `path` is scratch space.
+    /// `rng`); `path` is scratch space. When [`Self::splits_while_tracing`], only the seeds of
+    /// the chains' part are stored, and `rest` receives the others.
+    #[allow(clippy::too_many_arguments)]
     fn trace_sample(
         &self,
         tracer: &Tracer,
@@ -125,6 +141,7 @@ impl Erpt {
         y: u32,
         store: &mut SeedStore,
         path: &mut Path,
+        rest: &mut RestOfSample,
     ) {
         let raster = Vec2::new(x as f32, y as f32) + rng.uniform2();
         match self.settings.seed_kind {
@@ -139,6 +156,23 @@ impl Erpt {
                 );
                 store.push_path(path);
             }
+            SeedKind::Entangled if self.splits_while_tracing() => {
+                let mut split = SeedSplit {
+                    filter: &self.settings.part,
+                    rest: &mut rest.contributions,
+                    count: 0,
+                };
+                seeds::trace_split(
+                    &self.scene,
+                    tracer,
+                    &self.settings.seeds,
+                    rng,
+                    raster,
+                    store,
+                    &mut split,
+                );
+                rest.seeds += split.count;
+            }
             SeedKind::Entangled => {
                 seeds::trace(
                     &self.scene,
@@ -152,7 +186,10 @@ impl Erpt {
         }
     }
 
-    /// Traces every seed of `pixels` × `samples` once (random streams from `seed`).
+    /// Traces every seed of `pixels` × `samples` once (random streams from `seed`). Seeds
+    /// split off while traced (outside the chains' part) are handed to `rest` per sample,
+    /// with the sample's pixel.
+    #[allow(clippy::too_many_arguments)]
     fn trace_unit(
         &self,
         tracer: &Tracer,
@@ -161,7 +198,9 @@ impl Erpt {
         samples: std::ops::Range<u32>,
         out: &mut UnitSeeds,
         path: &mut Path,
+        rest: &mut dyn FnMut(u32, u32, &RestOfSample),
     ) {
+        let mut sample_rest = RestOfSample::default();
         for (x, y) in pixels {
             for s in samples.clone() {
                 out.keys.push(SampleKey {
@@ -171,11 +210,25 @@ impl Erpt {
                     first: out.store.seeds.len(),
                 });
                 let (mut rng, _) = seed_rngs(seed, x, y, s);
-                self.trace_sample(tracer, &mut rng, x, y, &mut out.store, path);
+                sample_rest.contributions.clear();
+                sample_rest.seeds = 0;
+                self.trace_sample(
+                    tracer,
+                    &mut rng,
+                    x,
+                    y,
+                    &mut out.store,
+                    path,
+                    &mut sample_rest,
+                );
+                if sample_rest.seeds > 0 {
+                    rest(x, y, &sample_rest);
+                }
             }
         }
         let part = &self.settings.part;
-        let everything = part.is_everything();
+        // Split while traced: every stored seed is in the part.
+        let everything = part.is_everything() || self.splits_while_tracing();
         out.in_part = (0..out.store.seeds.len())
             .map(|i| {
                 everything || {
@@ -283,6 +336,7 @@ impl Integrator for Erpt {
                 ..UnitSeeds::default()
             };
             row.store.clear();
+            // Only the part's energy enters e_d: the rest is not deposited here.
             self.trace_unit(
                 tracer,
                 0x5eed_f1a6,
@@ -290,6 +344,7 @@ impl Integrator for Erpt {
                 0..1,
                 &mut row,
                 &mut path,
+                &mut |_, _, _| {},
             );
             sum += Self::part_energy(&row);
             samples += row.store.samples;
@@ -311,8 +366,32 @@ impl Integrator for Erpt {
         // Every seed of the unit is traced once, here; the quantum and the flow use the store.
         let start = Instant::now();
         let mut seeds = UnitSeeds::default();
-        self.trace_unit(tracer, unit.seed, pixels, samples, &mut seeds, &mut path);
         let c = &self.counters;
+        // Seeds split off while traced go to their pixel now, as path tracing deposits them
+        // (the same deposits as the loop below makes for stored seeds outside the part).
+        let (mut rest_seeds, mut rest_deposits, mut rest_skipped) = (0u64, 0u64, 0u64);
+        self.trace_unit(
+            tracer,
+            unit.seed,
+            pixels,
+            samples,
+            &mut seeds,
+            &mut path,
+            &mut |x, y, rest| {
+                rest_seeds += rest.seeds;
+                for &(layer, value) in &rest.contributions.entries {
+                    if value.is_valid_radiance() {
+                        rest_deposits += 1;
+                        film.deposit(x as f32 + 0.5, y as f32 + 0.5, layer, value);
+                    } else {
+                        rest_skipped += 1;
+                    }
+                }
+            },
+        );
+        stats.add(c.seeds, rest_seeds as f64);
+        stats.add(c.mcpt_part_seeds, rest_deposits as f64);
+        stats.add(c.seeds_skipped, rest_skipped as f64);
         stats.add(c.seed_seconds, start.elapsed().as_secs_f64());
         stats.add(c.camera_samples, seeds.store.samples as f64);
         let quantum = match self.image_quantum {

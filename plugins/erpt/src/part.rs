@@ -30,7 +30,9 @@
 //!   (one of), `*`, `+`, `?`, `|` and parentheses, matched against the whole type, e.g.
 //!   `"E[DG]+S+[DG]*L"`.
 
+use crate::automaton::Dfa;
 use flowlight_core::path::{NodeType, Path, MAX_PATH_VERTICES};
+use flowlight_pathtrace::seeds::SeedFilter;
 
 /// The Heckbert letter of a stored node type in the alphabet of the module docs.
 pub fn letter(node: NodeType) -> u8 {
@@ -44,21 +46,28 @@ pub fn letter(node: NodeType) -> u8 {
 }
 
 /// Lighting layer of a path from its type: interior vertices after the leading Dirac run.
+#[cfg(test)]
 pub fn type_layer(path: &Path) -> usize {
+    let mut types = [NodeType::Eye; MAX_PATH_VERTICES];
     let v = path.vertices();
-    if v.len() < 2 {
+    for (t, x) in types.iter_mut().zip(v) {
+        *t = x.node;
+    }
+    layer_of(&types[..v.len()])
+}
+
+/// [`type_layer`] of the node types of a path (eye first, light last).
+fn layer_of(types: &[NodeType]) -> usize {
+    if types.len() < 2 {
         return 0;
     }
-    let interior = &v[1..v.len() - 1];
-    let leading = interior
-        .iter()
-        .take_while(|x| letter(x.node) == b'S')
-        .count();
+    let interior = &types[1..types.len() - 1];
+    let leading = interior.iter().take_while(|&&t| letter(t) == b'S').count();
     interior.len() - leading
 }
 
 #[derive(Clone, Debug, PartialEq)]
-enum Node {
+pub(crate) enum Node {
     /// One letter out of a set (bit i: the letter `LETTERS[i]`).
     Class(u8),
     /// Alternatives, each a sequence.
@@ -66,25 +75,43 @@ enum Node {
 }
 
 #[derive(Clone, Debug, PartialEq)]
-struct Item {
-    node: Node,
+pub(crate) struct Item {
+    pub node: Node,
     /// Repetitions: at least `min` (0 or 1), unbounded when `many`: `*` (0, many), `+` (1,
     /// many), `?` (0, at most one), none (exactly one).
-    min: u8,
-    many: bool,
+    pub min: u8,
+    pub many: bool,
 }
 
 const LETTERS: &[u8; 5] = b"EDGSL";
 
-/// A compiled Heckbert pattern, matched against a whole path type.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Pattern {
-    alternatives: Vec<Vec<Item>>,
+/// Index of a node type's letter in [`LETTERS`] (the bit of [`Node::Class`] masks).
+#[inline]
+fn letter_index(node: NodeType) -> usize {
+    match node {
+        NodeType::Eye => 0,
+        NodeType::DiffuseReflection | NodeType::DiffuseTransmission => 1,
+        NodeType::GlossyReflection | NodeType::GlossyTransmission => 2,
+        NodeType::SpecularReflection | NodeType::SpecularTransmission => 3,
+        NodeType::Light => 4,
+    }
 }
 
-/// Set of string positions 0..=MAX_PATH_VERTICES.
+/// A compiled Heckbert pattern, matched against a whole path type: the parsed items, and the
+/// deterministic automaton that matches them (`automaton.rs`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Pattern {
+    /// The parse; the position-set matcher over it is the automaton's test oracle.
+    #[cfg_attr(not(test), allow(dead_code))]
+    alternatives: Vec<Vec<Item>>,
+    dfa: Dfa,
+}
+
+/// Set of string positions 0..=MAX_PATH_VERTICES + 1 (a seed's type has at most one vertex
+/// more than a stored path).
+#[cfg(test)]
 type Positions = u64;
-const _: () = assert!(MAX_PATH_VERTICES < 64);
+const _: () = assert!(MAX_PATH_VERTICES + 1 < 64);
 
 impl Pattern {
     pub fn parse(text: &str) -> Result<Pattern, String> {
@@ -94,11 +121,30 @@ impl Pattern {
         if pos != bytes.len() {
             return Err(format!("unmatched ')' at position {pos} of \"{text}\""));
         }
-        Ok(Pattern { alternatives })
+        let dfa = Dfa::new(&alternatives)?;
+        Ok(Pattern { alternatives, dfa })
     }
 
-    /// Whether the whole of `letters` matches.
+    /// Whether the whole of `letters` (from `E D G S L`) matches.
+    #[cfg(test)]
     pub fn matches(&self, letters: &[u8]) -> bool {
+        self.dfa.accepts(letters.iter().map(|&l| {
+            LETTERS
+                .iter()
+                .position(|&x| x == l)
+                .expect("a Heckbert letter")
+        }))
+    }
+
+    /// Whether the path type `types` (eye first, light last) matches.
+    #[inline]
+    pub fn matches_types(&self, types: &[NodeType]) -> bool {
+        self.dfa.accepts(types.iter().map(|&t| letter_index(t)))
+    }
+
+    /// [`Pattern::matches`] by the position-set matcher over the parse (the test oracle).
+    #[cfg(test)]
+    fn matches_by_positions(&self, letters: &[u8]) -> bool {
         let end = ends_alternatives(&self.alternatives, letters, 1);
         end & (1u64 << letters.len()) != 0
     }
@@ -182,6 +228,7 @@ fn letter_bit(c: u8) -> Result<u8, String> {
         })
 }
 
+#[cfg(test)]
 /// Positions reachable after matching `node` from any position in `from`.
 fn ends_node(node: &Node, s: &[u8], from: Positions) -> Positions {
     match node {
@@ -198,12 +245,14 @@ fn ends_node(node: &Node, s: &[u8], from: Positions) -> Positions {
     }
 }
 
+#[cfg(test)]
 fn ends_alternatives(alts: &[Vec<Item>], s: &[u8], from: Positions) -> Positions {
     alts.iter().fold(0, |acc, seq| {
         acc | seq.iter().fold(from, |at, item| ends_item(item, s, at))
     })
 }
 
+#[cfg(test)]
 fn ends_item(item: &Item, s: &[u8], from: Positions) -> Positions {
     let mut at = from;
     for _ in 0..item.min {
@@ -256,18 +305,31 @@ impl Part {
 
     /// Whether the chains render `path`.
     pub fn contains(&self, path: &Path) -> bool {
-        if self.direct_by_mcpt && type_layer(path) <= 1 {
+        let mut types = [NodeType::Eye; MAX_PATH_VERTICES];
+        let v = path.vertices();
+        for (t, x) in types.iter_mut().zip(v) {
+            *t = x.node;
+        }
+        self.contains_type(&types[..v.len()])
+    }
+
+    /// Whether the chains render the paths of node types `types` (eye first, light last).
+    pub fn contains_type(&self, types: &[NodeType]) -> bool {
+        if self.direct_by_mcpt && layer_of(types) <= 1 {
             return false;
         }
         let Some(p) = &self.chains_for else {
             return true;
         };
-        let mut letters = [0u8; MAX_PATH_VERTICES];
-        let v = path.vertices();
-        for (l, x) in letters.iter_mut().zip(v) {
-            *l = letter(x.node);
-        }
-        p.matches(&letters[..v.len()])
+        p.matches_types(types)
+    }
+}
+
+/// Entangled seeds are split while they are traced: those outside the part never become
+/// records (`flowlight_pathtrace::seeds::trace_split`).
+impl SeedFilter for Part {
+    fn keeps(&self, types: &[NodeType]) -> bool {
+        self.contains_type(types)
     }
 }
 
@@ -311,6 +373,66 @@ mod tests {
         assert!(m("ED|EL", "EL") && !m("ED", "EDL"));
         for bad in ["EX", "E[DS", "E(D", "ED)"] {
             assert!(Pattern::parse(bad).is_err(), "{bad}");
+        }
+    }
+
+    /// The automaton against the position-set matcher on every word over `EDGSL` of up to 7
+    /// letters, for patterns with nested groups, empty alternatives and loops over optional
+    /// items (where a naive Thompson construction re-enters a shared state).
+    #[test]
+    fn the_automaton_matches_as_the_pattern_does() {
+        let patterns = [
+            "E.*[DG].*S.*L",
+            "ES*[DG]?L",
+            "E(DS|SD)+L",
+            "E[^S]+L",
+            "ED|EL",
+            "E(D?S?)*L",
+            "E((D|G)+S)?L",
+            "(E|)D*(|S)L",
+            "E(D*G*)+L",
+            "E(S(D|G)*)*L",
+            "E[DG]+S+[DG]*L",
+            ".*",
+            "",
+        ];
+        let mut words: Vec<Vec<u8>> = vec![Vec::new()];
+        let mut all = vec![Vec::new()];
+        for _ in 0..7 {
+            words = words
+                .iter()
+                .flat_map(|w| {
+                    LETTERS.iter().map(move |&l| {
+                        let mut w = w.clone();
+                        w.push(l);
+                        w
+                    })
+                })
+                .collect();
+            all.extend(words.iter().cloned());
+        }
+        for text in patterns {
+            let p = Pattern::parse(text).unwrap();
+            let mut accepted = 0;
+            for w in &all {
+                let want = p.matches_by_positions(w);
+                assert_eq!(
+                    p.matches(w),
+                    want,
+                    "{text} on {}",
+                    String::from_utf8_lossy(w)
+                );
+                accepted += want as usize;
+            }
+            assert!(
+                p.dfa.state_count() < 64,
+                "{text}: {} states",
+                p.dfa.state_count()
+            );
+            // Every pattern but the empty one accepts some word and rejects another.
+            if !text.is_empty() && text != ".*" {
+                assert!(accepted > 0 && accepted < all.len(), "{text}");
+            }
         }
     }
 
