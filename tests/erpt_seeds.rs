@@ -265,6 +265,113 @@ fn splitting_while_tracing_stores_exactly_the_kept_seeds() {
     }
 }
 
+/// `seeds::trace_wavefront` (ray batches, shading from compact hits) fills the store exactly as
+/// path-at-a-time `trace` / `trace_split` calls in the same order do, and hands each tree's
+/// first seed and split-off estimates to its callback, for waves of 1, 7 and 64 trees.
+#[test]
+fn the_seed_wavefront_stores_what_path_at_a_time_tracing_stores() {
+    for config in [
+        "cornell-box/cornell-box.toml",
+        "glass-caustic/glass-caustic.toml",
+        "satin",
+    ] {
+        let session = if config == "satin" {
+            sun_and_sky_in("wavefront-satin", SATIN, "plugin = \"mcpt\"", 1)
+        } else {
+            session_at(config, 32, 32, 1, &[])
+        };
+        // SAFETY: the session keeps the view's data alive.
+        let scene = unsafe { Scene::from_view(session.instance.view()) };
+        let mut unit_tracer = UnitTracer::new(&session.scene, session.intersector.as_ref());
+        let table = unit_tracer.table();
+        let tracer = Tracer::new(&table);
+        let settings = PathSettings::from_params(&flowlight_sdk::Params::from_slice(&[])).unwrap();
+        let starts: Vec<(Rng, glam::Vec2)> = (0..700u64)
+            .map(|i| {
+                let mut rng = Rng::new(Rng::hash(&[i, 3]), 0);
+                let raster =
+                    glam::Vec2::new((i % 32) as f32, ((i / 32) % 32) as f32) + rng.uniform2();
+                (rng, raster)
+            })
+            .collect();
+        let filters: [Option<&dyn seeds::SeedFilter>; 3] =
+            [None, Some(&GlossyLast), Some(&Caustic)];
+        for filter in filters {
+            // Path at a time.
+            let mut want = SeedStore::default();
+            let mut want_rest = Vec::new();
+            let mut want_first = Vec::new();
+            for (rng, raster) in &starts {
+                let mut rng = rng.clone();
+                let mut rest = SampleContributions::default();
+                want_first.push(want.seeds.len());
+                match filter {
+                    None => seeds::trace(&scene, &tracer, &settings, &mut rng, *raster, &mut want),
+                    Some(filter) => {
+                        let mut split = seeds::SeedSplit {
+                            filter,
+                            rest: &mut rest,
+                            count: 0,
+                        };
+                        seeds::trace_split(
+                            &scene, &tracer, &settings, &mut rng, *raster, &mut want, &mut split,
+                        );
+                        assert_eq!(split.count as usize, rest.entries.len());
+                    }
+                }
+                want_rest.push(rest.entries);
+            }
+            for wave in [1usize, 7, 64] {
+                let mut got = SeedStore::default();
+                let mut wf = seeds::SeedWavefront::default();
+                let mut index = 0;
+                for chunk in starts.chunks(wave) {
+                    seeds::trace_wavefront(
+                        &scene,
+                        &tracer,
+                        &settings,
+                        chunk,
+                        filter,
+                        &mut wf,
+                        &mut got,
+                        |t| {
+                            let k = index + t.index;
+                            assert_eq!(t.first_seed, want_first[k], "{config}: tree {k}");
+                            assert_eq!(t.rest.entries, want_rest[k], "{config}: tree {k}");
+                            assert_eq!(t.rest_count as usize, want_rest[k].len());
+                        },
+                    );
+                    index += chunk.len();
+                }
+                assert_eq!(got.samples, want.samples, "{config}");
+                assert_eq!(
+                    got.vertices.len(),
+                    want.vertices.len(),
+                    "{config}, wave {wave}"
+                );
+                for (a, b) in got.vertices.iter().zip(&want.vertices) {
+                    assert_eq!(
+                        (a.p, a.ns, a.node, a.component),
+                        (b.p, b.ns, b.node, b.component),
+                        "{config}"
+                    );
+                }
+                assert_eq!(got.seeds.len(), want.seeds.len(), "{config}, wave {wave}");
+                for (a, b) in got.seeds.iter().zip(&want.seeds) {
+                    assert_eq!(
+                        (a.trunk, a.prefix, a.layer, a.technique, a.connect),
+                        (b.trunk, b.prefix, b.layer, b.technique, b.connect),
+                        "{config}"
+                    );
+                    assert_eq!(a.estimate, b.estimate, "{config}");
+                    assert_eq!(a.density.to_bits(), b.density.to_bits(), "{config}");
+                    assert_eq!((a.light.p, a.raster), (b.light.p, b.raster), "{config}");
+                }
+            }
+        }
+    }
+}
+
 const SHORT_WALL: [[f32; 3]; 4] = [
     [-10.0, 0.0, -1.0],
     [10.0, 0.0, -1.0],

@@ -49,13 +49,21 @@
 //! seed outside the filter costs no record, no copy of its path and no second
 //! classification. A connection vertex's stored type is that of the smooth component that
 //! scatters most light (above); it is only computed when the filter's answer depends on it.
+//!
+//! [`trace_wavefront`] traces many trees at once as ray batches (camera, then per bounce
+//! extension and shadow rays), each tree into buffers of its own that join the store in the
+//! order of the trees: the same store, bit for bit, as path-at-a-time calls in that order.
+//! Both run the same per-vertex step (`Tree::vertex`), which returns a light connection's
+//! shadow ray instead of tracing it.
 
 use crate::settings::PathSettings;
-use crate::shading::{connect_light, side_consistent, Shading};
+use crate::shading::{light_connection, side_consistent, Shading};
 use crate::untangled::light_vertex;
 use crate::SampleContributions;
 use flowlight_core::bsdf::{volume, Bsdf};
+use flowlight_core::geometry::{Ray, SurfaceHit};
 use flowlight_core::light::{area_to_solid_angle, LightKind};
+use flowlight_core::mesh::CompactHit;
 use flowlight_core::path::{NodeType, Path, PathVertex, MAX_PATH_VERTICES};
 use flowlight_core::rng::Rng;
 use flowlight_core::sampling::power_heuristic;
@@ -182,7 +190,7 @@ fn connection_node(bsdf: &Bsdf, wo: Vec3, wi: Vec3) -> (NodeType, u8) {
 }
 
 /// How the trunk's last step was drawn, for the density of the vertex it reaches.
-#[derive(Clone, Copy, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 enum Step {
     /// The camera ray: density 1 in the film measure.
     Eye,
@@ -247,51 +255,278 @@ fn trace_with(
 ) {
     store.samples += 1;
     let (trunk, seeds) = (store.vertices.len(), store.seeds.len());
-    trace_tree(scene, tracer, settings, rng, raster, store, split);
+    let mut tree = Tree::start(scene, rng.clone(), raster);
+    let mut out = TreeOut {
+        vertices: &mut store.vertices,
+        seeds: &mut store.seeds,
+        base: trunk,
+        split,
+    };
+    tree.begin(scene, &mut out);
+    loop {
+        let Some(hit) = tracer.intersect(&tree.ray) else {
+            tree.escape(scene, &mut out);
+            break;
+        };
+        let (going, pending) = tree.vertex(scene, settings, &hit, &mut out);
+        if let Some(p) = pending {
+            if !tracer.occluded(&p.ray) {
+                out.connect(p);
+            }
+        }
+        if !going {
+            break;
+        }
+    }
+    *rng = tree.rng;
     // A tree without seeds keeps no trunk.
     if store.seeds.len() == seeds {
         store.vertices.truncate(trunk);
     }
 }
 
-/// Where a seed of type `types` goes: `true` to the store, `false` to the split's rest (after
-/// adding its estimate there). Without a split every seed is stored.
-#[inline]
-fn route(
-    split: &mut Option<&mut SeedSplit>,
-    types: &[NodeType],
-    layer: u32,
-    estimate: Rgb,
-) -> bool {
-    match split {
-        None => true,
-        Some(s) if s.filter.keeps(types) => true,
-        Some(s) => {
-            s.count += 1;
-            s.rest.add(layer, estimate);
-            false
+/// Reusable buffers of [`trace_wavefront`]: the trees of one wave and their own trunks, seeds
+/// and split-off estimates (one set per work unit, so no allocation per path).
+#[derive(Default)]
+pub struct SeedWavefront {
+    trees: Vec<Tree>,
+    vertices: Vec<Vec<PathVertex>>,
+    seeds: Vec<Vec<Seed>>,
+    rest: Vec<SampleContributions>,
+    rest_counts: Vec<u64>,
+    active: Vec<u32>,
+    rays: Vec<Ray>,
+    hits: Vec<CompactHit>,
+    shadow_rays: Vec<Ray>,
+    pending: Vec<(u32, PendingConnection)>,
+    blocked: Vec<u8>,
+}
+
+/// What [`trace_wavefront`] hands back per tree, in the order of `starts`: the index of the
+/// tree, the index in `store.seeds` of its first seed, and, with a filter, the estimates and
+/// the number of its seeds the filter did not keep.
+pub struct TreeSeeds<'a> {
+    pub index: usize,
+    pub first_seed: usize,
+    pub rest: &'a SampleContributions,
+    pub rest_count: u64,
+}
+
+/// [`trace`] (no `filter`) or [`trace_split`] for `starts.len()` path trees at once: the
+/// camera rays as one batch (marked coherent), then per bounce one batch of extension rays and
+/// one of shadow rays, as [`crate::entangled::trace_wavefront`] does, with the shading built
+/// from the compact hits by [`Scene::surface`] (the host's own surface code). Tree `i` starts
+/// from `starts[i]` = (its generator, its raster position). The seeds land in `store` tree by
+/// tree in the order of `starts`, each tree's trunk followed by nothing of another tree, so the
+/// store equals what the path-at-a-time calls in that order give, bit for bit; `each` is
+/// called for every tree in that order, after its seeds are stored.
+#[allow(clippy::too_many_arguments)]
+pub fn trace_wavefront(
+    scene: &Scene,
+    tracer: &Tracer,
+    settings: &PathSettings,
+    starts: &[(Rng, Vec2)],
+    filter: Option<&dyn SeedFilter>,
+    wf: &mut SeedWavefront,
+    store: &mut SeedStore,
+    mut each: impl FnMut(TreeSeeds),
+) {
+    let n = starts.len();
+    if wf.vertices.len() < n {
+        wf.vertices.resize_with(n, Vec::new);
+        wf.seeds.resize_with(n, Vec::new);
+        wf.rest.resize_with(n, SampleContributions::default);
+        wf.rest_counts.resize(n, 0);
+    }
+    wf.trees.clear();
+    wf.active.clear();
+    for (i, (rng, raster)) in starts.iter().enumerate() {
+        let tree = Tree::start(scene, rng.clone(), *raster);
+        wf.vertices[i].clear();
+        wf.seeds[i].clear();
+        wf.rest[i].clear();
+        wf.rest_counts[i] = 0;
+        let mut split = filter.map(|filter| SeedSplit {
+            filter,
+            rest: &mut wf.rest[i],
+            count: 0,
+        });
+        let mut out = TreeOut {
+            vertices: &mut wf.vertices[i],
+            seeds: &mut wf.seeds[i],
+            base: 0,
+            split: split.as_mut(),
+        };
+        tree.begin(scene, &mut out);
+        wf.trees.push(tree);
+        wf.active.push(i as u32);
+    }
+    let mut coherent = true;
+    while !wf.active.is_empty() {
+        wf.rays.clear();
+        wf.rays
+            .extend(wf.active.iter().map(|&i| wf.trees[i as usize].ray));
+        tracer.intersect_batch(&wf.rays, coherent, &mut wf.hits);
+        coherent = false;
+        wf.shadow_rays.clear();
+        wf.pending.clear();
+        let mut kept = 0;
+        for k in 0..wf.active.len() {
+            let i = wf.active[k] as usize;
+            let tree = &mut wf.trees[i];
+            let mut split = filter.map(|filter| SeedSplit {
+                filter,
+                rest: &mut wf.rest[i],
+                count: 0,
+            });
+            let mut out = TreeOut {
+                vertices: &mut wf.vertices[i],
+                seeds: &mut wf.seeds[i],
+                base: 0,
+                split: split.as_mut(),
+            };
+            let compact = wf.hits[k];
+            let going = if compact.is_hit() {
+                let hit = scene.surface(&tree.ray, &compact);
+                let (going, pending) = tree.vertex(scene, settings, &hit, &mut out);
+                if let Some(p) = pending {
+                    wf.shadow_rays.push(p.ray);
+                    wf.pending.push((i as u32, p));
+                }
+                going
+            } else {
+                tree.escape(scene, &mut out);
+                false
+            };
+            wf.rest_counts[i] += split.map_or(0, |s| s.count);
+            if going {
+                wf.active[kept] = i as u32;
+                kept += 1;
+            }
+        }
+        wf.active.truncate(kept);
+        if !wf.shadow_rays.is_empty() {
+            tracer.occluded_batch(&wf.shadow_rays, &mut wf.blocked);
+            for (&(i, p), &b) in wf.pending.iter().zip(&wf.blocked) {
+                if b != 0 {
+                    continue;
+                }
+                let i = i as usize;
+                let mut split = filter.map(|filter| SeedSplit {
+                    filter,
+                    rest: &mut wf.rest[i],
+                    count: 0,
+                });
+                let mut out = TreeOut {
+                    vertices: &mut wf.vertices[i],
+                    seeds: &mut wf.seeds[i],
+                    base: 0,
+                    split: split.as_mut(),
+                };
+                out.connect(p);
+                wf.rest_counts[i] += split.map_or(0, |s| s.count);
+            }
+        }
+    }
+    for i in 0..n {
+        store.samples += 1;
+        let first_seed = store.seeds.len();
+        if !wf.seeds[i].is_empty() {
+            let base = store.vertices.len() as u32;
+            store.vertices.extend_from_slice(&wf.vertices[i]);
+            store.seeds.extend(wf.seeds[i].iter().map(|s| Seed {
+                trunk: s.trunk + base,
+                ..*s
+            }));
+        }
+        each(TreeSeeds {
+            index: i,
+            first_seed,
+            rest: &wf.rest[i],
+            rest_count: wf.rest_counts[i],
+        });
+    }
+}
+
+/// Where a tree's trunk and seeds go: `vertices` from index `base` on holds the trunk, `seeds`
+/// the stored seeds, and `split` (if any) takes the seeds its filter does not keep.
+struct TreeOut<'a, 'b> {
+    vertices: &'a mut Vec<PathVertex>,
+    seeds: &'a mut Vec<Seed>,
+    base: usize,
+    split: Option<&'a mut SeedSplit<'b>>,
+}
+
+impl TreeOut<'_, '_> {
+    /// Trunk vertices so far (eye included).
+    fn trunk_len(&self) -> usize {
+        self.vertices.len() - self.base
+    }
+
+    /// Stores `seed` with the first `prefix` trunk vertices.
+    fn push(&mut self, prefix: usize, seed: Seed) {
+        self.seeds.push(Seed {
+            trunk: self.base as u32,
+            prefix: prefix as u32,
+            ..seed
+        });
+    }
+
+    /// Where a seed of type `types` goes: `true` to the store, `false` to the split's rest
+    /// (after adding its estimate there). Without a split every seed is stored.
+    fn route(&mut self, types: &[NodeType], layer: u32, estimate: Rgb) -> bool {
+        match &mut self.split {
+            None => true,
+            Some(s) if s.filter.keeps(types) => true,
+            Some(s) => {
+                s.count += 1;
+                s.rest.add(layer, estimate);
+                false
+            }
+        }
+    }
+
+    /// A light connection found unoccluded.
+    fn connect(&mut self, p: PendingConnection) {
+        match p.seed {
+            Some(seed) => self.push(p.prefix as usize, seed),
+            None => {
+                if let Some(s) = &mut self.split {
+                    s.count += 1;
+                    s.rest.add(p.layer, p.estimate);
+                }
+            }
         }
     }
 }
 
-/// [`route`] for a light connection from the trunk's last vertex, `types[types.len() − 2]`:
-/// the vertex's type is that of [`connection_node`], computed only when the seed is stored or
-/// when the filter's answer depends on which smooth component's type it is. Returns the node
-/// type and component to store, or `None` when the seed went to the split's rest.
-fn connection_route(
-    split: &mut Option<&mut SeedSplit>,
+/// A light connection waiting for its shadow ray: the seed to store if it is unoccluded, or,
+/// when the split's filter does not keep it, `None` and the estimate for the split's rest.
+#[derive(Clone, Copy, Debug)]
+struct PendingConnection {
+    ray: Ray,
+    seed: Option<Seed>,
+    prefix: u32,
+    layer: u32,
+    estimate: Rgb,
+}
+
+/// The class of a light connection from the trunk's last vertex, `types[types.len() − 2]`,
+/// decided before its shadow ray: `Some` with the node type and component to store the vertex
+/// with ([`connection_node`]), or `None` when the split's filter does not keep it. The
+/// most-scattering component is only looked for when the seed is stored or when the filter's
+/// answer depends on which smooth component's type the vertex gets.
+fn connection_class(
+    split: Option<&SeedSplit>,
     bsdf: &Bsdf,
     shading: &Shading,
     wi: Vec3,
     types: &mut [NodeType],
-    layer: u32,
-    estimate: Rgb,
 ) -> Option<(NodeType, u8)> {
     let n = types.len();
     types[n - 1] = NodeType::Light;
-    if let Some(s) = split.as_deref_mut() {
-        // The filter's answer for each type a smooth component can give the vertex: when they
-        // agree, the most-scattering component need not be found.
+    if let Some(s) = split {
+        // The filter's answer for each type a smooth component can give the vertex.
         let mut answer = None;
         let mut agree = true;
         for (c, _) in bsdf.components().filter(|(c, _)| !c.is_delta()) {
@@ -300,115 +535,137 @@ fn connection_route(
             agree &= answer.is_none_or(|a| a == keeps);
             answer = Some(keeps);
         }
-        if agree && answer == Some(false) {
-            s.count += 1;
-            s.rest.add(layer, estimate);
-            return None;
-        }
-        if !agree {
-            let node = connection_node(bsdf, shading.wo, wi);
-            types[n - 2] = node.0;
-            if !route(split, types, layer, estimate) {
+        if agree {
+            if answer == Some(false) {
                 return None;
             }
-            return Some(node);
+        } else {
+            let node = connection_node(bsdf, shading.wo, wi);
+            types[n - 2] = node.0;
+            return s.filter.keeps(types).then_some(node);
         }
     }
     Some(connection_node(bsdf, shading.wo, wi))
 }
 
-fn trace_tree(
-    scene: &Scene,
-    tracer: &Tracer,
-    settings: &PathSettings,
-    rng: &mut Rng,
+/// One entangled path tree being split into seeds: the locals of the sampler between two
+/// bounces.
+#[derive(Clone, Debug)]
+struct Tree {
+    rng: Rng,
     raster: Vec2,
-    store: &mut SeedStore,
-    mut split: Option<&mut SeedSplit>,
-) {
-    let trunk = store.vertices.len();
-    let mut ray = scene.camera.generate_ray(raster);
-    store
-        .vertices
-        .push(PathVertex::eye(ray.origin, scene.camera.forward));
-    // Node types of the trunk (eye first) and room for a connection vertex and a light.
-    let mut types = [NodeType::Eye; MAX_PATH_VERTICES + 1];
-    let mut beta = Rgb::ONE;
-    let mut density = 1.0f64; // p of the trunk so far, survival included
-    let mut inside: Option<Rgb> = None;
-    let mut depth = 0u32;
-    let mut physical = 0u32;
-    let mut step = Step::Eye;
-    let mut prev_p = ray.origin;
-    let mut last = false;
-    let emit = |store: &mut SeedStore, prefix: usize, seed: Seed| {
-        store.seeds.push(Seed {
-            trunk: trunk as u32,
-            prefix: prefix as u32,
-            ..seed
-        });
-    };
-    loop {
-        let count = store.vertices.len() - trunk;
-        let Some(hit) = tracer.intersect(&ray) else {
-            let le = scene.lights.environment_radiance(ray.dir);
-            let Some(env) = scene.lights.environment_index() else {
-                return;
-            };
-            if le.is_black() {
-                return;
-            }
-            let (w, p) = match step {
-                Step::Eye => (1.0, density),
-                Step::Dirac(pdf) => (1.0, density * pdf as f64),
-                Step::Smooth(pdf) => (
-                    power_heuristic(pdf, scene.lights.pdf_environment(ray.dir)),
-                    density * pdf as f64,
-                ),
-            };
-            let estimate = beta * le * w;
-            types[count] = NodeType::Light;
-            if estimate.is_black() || !route(&mut split, &types[..=count], depth, estimate) {
-                return;
-            }
-            let light = PathVertex {
-                p: ray.origin + ray.dir,
-                p_error: Vec3::ZERO,
-                ng: ray.dir,
-                ns: ray.dir,
-                uv: Vec2::ZERO,
-                uv1: Vec2::ZERO,
-                color: [1.0; 4],
-                prim: u32::MAX,
-                material: u32::MAX,
-                emitter: env as i32,
-                node: NodeType::Light,
-                component: 0,
-            };
-            let seed = Seed {
-                trunk: 0,
-                prefix: 0,
-                connect: None,
-                light,
-                raster,
-                estimate,
-                layer: depth,
-                mis_weight: w,
-                density: p,
-                technique: Technique::Escape,
-            };
-            emit(store, count, seed);
+    ray: Ray,
+    beta: Rgb,
+    /// p of the trunk so far, survival included.
+    density: f64,
+    inside: Option<Rgb>,
+    depth: u32,
+    physical: u32,
+    step: Step,
+    prev_p: Vec3,
+    last: bool,
+    /// Node types of the trunk (eye first), with room for a connection vertex and a light.
+    types: [NodeType; MAX_PATH_VERTICES + 1],
+}
+
+impl Tree {
+    fn start(scene: &Scene, rng: Rng, raster: Vec2) -> Tree {
+        let ray = scene.camera.generate_ray(raster);
+        Tree {
+            rng,
+            raster,
+            ray,
+            beta: Rgb::ONE,
+            density: 1.0,
+            inside: None,
+            depth: 0,
+            physical: 0,
+            step: Step::Eye,
+            prev_p: ray.origin,
+            last: false,
+            types: [NodeType::Eye; MAX_PATH_VERTICES + 1],
+        }
+    }
+
+    /// Stores the eye vertex.
+    fn begin(&self, scene: &Scene, out: &mut TreeOut) {
+        out.vertices
+            .push(PathVertex::eye(self.ray.origin, scene.camera.forward));
+    }
+
+    /// The ray escaped: the environment's seed, MIS-weighted against its light sample.
+    fn escape(&mut self, scene: &Scene, out: &mut TreeOut) {
+        let ray = self.ray;
+        let le = scene.lights.environment_radiance(ray.dir);
+        let Some(env) = scene.lights.environment_index() else {
             return;
         };
-        if let Some(sigma) = inside.take() {
-            beta *= volume::transmittance(sigma, hit.t);
+        if le.is_black() {
+            return;
         }
-        let wo_world = -ray.dir;
-        density *= match step {
+        let (w, p) = match self.step {
+            Step::Eye => (1.0, self.density),
+            Step::Dirac(pdf) => (1.0, self.density * pdf as f64),
+            Step::Smooth(pdf) => (
+                power_heuristic(pdf, scene.lights.pdf_environment(ray.dir)),
+                self.density * pdf as f64,
+            ),
+        };
+        let estimate = self.beta * le * w;
+        let count = out.trunk_len();
+        self.types[count] = NodeType::Light;
+        if estimate.is_black() || !out.route(&self.types[..=count], self.depth, estimate) {
+            return;
+        }
+        let light = PathVertex {
+            p: ray.origin + ray.dir,
+            p_error: Vec3::ZERO,
+            ng: ray.dir,
+            ns: ray.dir,
+            uv: Vec2::ZERO,
+            uv1: Vec2::ZERO,
+            color: [1.0; 4],
+            prim: u32::MAX,
+            material: u32::MAX,
+            emitter: env as i32,
+            node: NodeType::Light,
+            component: 0,
+        };
+        let seed = Seed {
+            trunk: 0,
+            prefix: 0,
+            connect: None,
+            light,
+            raster: self.raster,
+            estimate,
+            layer: self.depth,
+            mis_weight: w,
+            density: p,
+            technique: Technique::Escape,
+        };
+        out.push(count, seed);
+    }
+
+    /// The sampler's step at `hit`: its emission seed, its light connection (returned with the
+    /// shadow ray that decides it, not traced here) and its BSDF sample. Returns whether the
+    /// tree goes on (with `self.ray`).
+    fn vertex(
+        &mut self,
+        scene: &Scene,
+        settings: &PathSettings,
+        hit: &SurfaceHit,
+        out: &mut TreeOut,
+    ) -> (bool, Option<PendingConnection>) {
+        let count = out.trunk_len();
+        if let Some(sigma) = self.inside.take() {
+            self.beta *= volume::transmittance(sigma, hit.t);
+        }
+        let wo_world = -self.ray.dir;
+        self.density *= match self.step {
             Step::Eye => 1.0,
             Step::Dirac(pdf) => pdf as f64,
             Step::Smooth(pdf) => {
-                let d = hit.p - prev_p;
+                let d = hit.p - self.prev_p;
                 let d2 = d.length_squared() as f64;
                 pdf as f64 * (hit.ng.dot(d).abs() as f64 / (d2 * d2.sqrt()))
             }
@@ -417,62 +674,63 @@ fn trace_tree(
         if hit.emitter >= 0 {
             let le = scene.lights.emitted(hit.emitter as usize, hit.p, wo_world);
             if !le.is_black() {
-                let w = match step {
+                let w = match self.step {
                     Step::Eye | Step::Dirac(_) => 1.0,
                     Step::Smooth(pdf) => {
                         let pdf_light = area_to_solid_angle(
                             scene.lights.pdf_area(hit.emitter as usize),
-                            prev_p,
+                            self.prev_p,
                             hit.p,
                             hit.ng,
                         );
                         power_heuristic(pdf, pdf_light)
                     }
                 };
-                let estimate = beta * le * w;
-                types[count] = NodeType::Light;
-                if !estimate.is_black() && route(&mut split, &types[..=count], depth, estimate) {
+                let estimate = self.beta * le * w;
+                self.types[count] = NodeType::Light;
+                if !estimate.is_black() && out.route(&self.types[..=count], self.depth, estimate) {
                     let seed = Seed {
                         trunk: 0,
                         prefix: 0,
                         connect: None,
-                        light: PathVertex::from_hit(&hit, NodeType::Light, 0),
-                        raster,
+                        light: PathVertex::from_hit(hit, NodeType::Light, 0),
+                        raster: self.raster,
                         estimate,
-                        layer: depth,
+                        layer: self.depth,
                         mis_weight: w,
-                        density,
+                        density: self.density,
                         technique: Technique::Hit,
                     };
-                    emit(store, count, seed);
+                    out.push(count, seed);
                 }
             }
         }
-        if last {
-            return;
+        if self.last {
+            return (false, None);
         }
 
-        let bsdf = scene.bsdf(&hit);
-        let next_depth = if depth == 0 && bsdf.is_delta() {
+        let bsdf = scene.bsdf(hit);
+        let next_depth = if self.depth == 0 && bsdf.is_delta() {
             0
         } else {
-            depth + 1
+            self.depth + 1
         };
         // Room for this vertex and a light vertex after it.
         if next_depth > settings.path_depth || count + 2 > MAX_PATH_VERTICES {
-            return;
+            return (false, None);
         }
-        depth = next_depth;
-        physical += 1;
-        let shading = Shading::new(&hit, wo_world);
+        self.depth = next_depth;
+        self.physical += 1;
+        let shading = Shading::new(hit, wo_world);
         // Its node type is the BSDF sample's, set below.
-        store
-            .vertices
-            .push(PathVertex::from_hit(&hit, NodeType::DiffuseReflection, 0));
+        out.vertices
+            .push(PathVertex::from_hit(hit, NodeType::DiffuseReflection, 0));
 
+        let rng = &mut self.rng;
+        let mut pending = None;
         if bsdf.has_non_delta() {
             if let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) {
-                if let Some(conn) = connect_light(scene, tracer, &hit, &shading, &ls) {
+                if let Some((conn, ray)) = light_connection(scene, hit, &shading, &ls) {
                     let f = bsdf.eval(shading.wo, conn.wi_local);
                     if !f.is_black() {
                         let w = if conn.delta {
@@ -488,34 +746,34 @@ fn trace_tree(
                             conn.pdf
                         };
                         let estimate =
-                            beta * f * conn.radiance * (conn.wi_local.z.abs() * w / conn.pdf);
-                        let connect = (!estimate.is_black())
-                            .then(|| {
-                                connection_route(
-                                    &mut split,
-                                    &bsdf,
-                                    &shading,
-                                    conn.wi_local,
-                                    &mut types[..count + 2],
-                                    depth,
-                                    estimate,
-                                )
-                            })
-                            .flatten();
-                        if let Some(connect) = connect {
-                            let seed = Seed {
+                            self.beta * f * conn.radiance * (conn.wi_local.z.abs() * w / conn.pdf);
+                        if !estimate.is_black() {
+                            let class = connection_class(
+                                out.split.as_deref(),
+                                &bsdf,
+                                &shading,
+                                conn.wi_local,
+                                &mut self.types[..count + 2],
+                            );
+                            let seed = class.map(|connect| Seed {
                                 trunk: 0,
                                 prefix: 0,
                                 connect: Some(connect),
                                 light: light_vertex(scene, &ls, hit.p),
-                                raster,
+                                raster: self.raster,
                                 estimate,
-                                layer: depth,
+                                layer: self.depth,
                                 mis_weight: w,
-                                density: density * p_light as f64,
+                                density: self.density * p_light as f64,
                                 technique: Technique::Connection,
-                            };
-                            emit(store, count + 1, seed);
+                            });
+                            pending = Some(PendingConnection {
+                                ray,
+                                seed,
+                                prefix: count as u32 + 1,
+                                layer: self.depth,
+                                estimate,
+                            });
                         }
                     }
                 }
@@ -524,50 +782,51 @@ fn trace_tree(
 
         // As in the entangled sampler: the BSDF sample is traced for emission also where the
         // path cannot go on.
-        let t = if depth > 0 {
+        let t = if self.depth > 0 {
             // The same decision as `entangled::trace` (same random stream, same throughput).
             settings.termination.probability_with_throughput(
-                depth,
+                self.depth,
                 bsdf.albedo(),
-                beta.max_component(),
+                self.beta.max_component(),
             )
         } else {
             0.0
         };
-        last = t >= 1.0 || physical >= settings.max_ray_depth;
-        if !last && t > 0.0 {
+        self.last = t >= 1.0 || self.physical >= settings.max_ray_depth;
+        if !self.last && t > 0.0 {
             if rng.uniform() < t {
-                return;
+                return (false, pending);
             }
-            beta /= 1.0 - t;
-            density *= 1.0 - t as f64;
+            self.beta /= 1.0 - t;
+            self.density *= 1.0 - t as f64;
         }
 
         let u_component = rng.uniform();
         let Some(s) = bsdf.sample(shading.wo, u_component, rng.uniform2()) else {
-            return;
+            return (false, pending);
         };
         let (component, _) = bsdf.choose_component(u_component);
-        if let Some(v) = store.vertices.last_mut() {
+        if let Some(v) = out.vertices.last_mut() {
             v.node = s.node;
             v.component = component as u8;
         }
-        types[count] = s.node;
+        self.types[count] = s.node;
         let wi_world = shading.frame.to_world(s.wi);
-        if !side_consistent(&hit, wi_world, s.wi) {
-            return;
+        if !side_consistent(hit, wi_world, s.wi) {
+            return (false, pending);
         }
-        beta *= s.f * (s.wi.z.abs() / s.pdf);
-        if beta.is_black() {
-            return;
+        self.beta *= s.f * (s.wi.z.abs() / s.pdf);
+        if self.beta.is_black() {
+            return (false, pending);
         }
-        step = if s.delta {
+        self.step = if s.delta {
             Step::Dirac(s.pdf)
         } else {
             Step::Smooth(s.pdf)
         };
-        prev_p = hit.p;
-        inside = volume::entered(scene.material(&hit), hit.ng, wi_world);
-        ray = hit.spawn_ray(wi_world);
+        self.prev_p = hit.p;
+        self.inside = volume::entered(scene.material(hit), hit.ng, wi_world);
+        self.ray = hit.spawn_ray(wi_world);
+        (true, pending)
     }
 }

@@ -23,7 +23,8 @@
 //! weight = 0.7
 //! ```
 //!
-//! Per work unit (a tile × a range of samples per pixel) the seeds are traced once and stored;
+//! Per work unit (a tile × a range of samples per pixel) the seeds are traced once (entangled
+//! ones as wavefronts of ray batches) and stored;
 //! the deposition quantum e_d = lum(Σ X) / (samples · M) is estimated from them (or once for
 //! the image, `quantum = "image"`), with M the expected number of mutations per camera sample
 //! (§5.2; an entangled camera sample gives several seeds); then every seed runs the corrected
@@ -71,7 +72,7 @@ use flow::Flow;
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
-use flowlight_pathtrace::seeds::{self, SeedSplit, SeedStore};
+use flowlight_pathtrace::seeds::{self, SeedFilter, SeedStore, SeedWavefront};
 use flowlight_pathtrace::{untangled, SampleContributions};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::{
@@ -80,6 +81,7 @@ use flowlight_sdk::{
 };
 use glam::Vec2;
 use settings::{ErptSettings, QuantumScope, SeedKind};
+use std::cell::RefCell;
 use std::time::Instant;
 
 pub struct Erpt {
@@ -115,12 +117,15 @@ struct UnitSeeds {
     in_part: Vec<bool>,
 }
 
-/// Entangled seeds outside the chains' part, split off while a sample is traced: their
-/// estimates (lighting layer, estimate) and how many there were.
-#[derive(Default)]
-struct RestOfSample {
-    contributions: SampleContributions,
-    seeds: u64,
+/// Camera samples whose entangled seeds are traced together as one wavefront (ray batches of
+/// the camera, extension and shadow rays, as MCPT's `wavefront`): large enough to amortise the
+/// host call, small enough that the trees' state stays in cache.
+const SEED_WAVE: usize = 256;
+
+thread_local! {
+    /// Each worker thread's wavefront buffers, kept across units so that a unit allocates
+    /// nothing for its trees.
+    static SEED_WAVEFRONT: RefCell<SeedWavefront> = RefCell::new(SeedWavefront::default());
 }
 
 impl Erpt {
@@ -129,66 +134,10 @@ impl Erpt {
         self.settings.seed_kind == SeedKind::Entangled && !self.settings.part.is_everything()
     }
 
-    /// Traces the seeds of camera sample `s` of pixel (x, y) into `store` (random stream
-    /// `rng`); `path` is scratch space. When [`Self::splits_while_tracing`], only the seeds of
-    /// the chains' part are stored, and `rest` receives the others.
-    #[allow(clippy::too_many_arguments)]
-    fn trace_sample(
-        &self,
-        tracer: &Tracer,
-        rng: &mut Rng,
-        x: u32,
-        y: u32,
-        store: &mut SeedStore,
-        path: &mut Path,
-        rest: &mut RestOfSample,
-    ) {
-        let raster = Vec2::new(x as f32, y as f32) + rng.uniform2();
-        match self.settings.seed_kind {
-            SeedKind::Untangled => {
-                untangled::trace(
-                    &self.scene,
-                    tracer,
-                    &self.settings.seeds,
-                    rng,
-                    raster,
-                    Some(path),
-                );
-                store.push_path(path);
-            }
-            SeedKind::Entangled if self.splits_while_tracing() => {
-                let mut split = SeedSplit {
-                    filter: &self.settings.part,
-                    rest: &mut rest.contributions,
-                    count: 0,
-                };
-                seeds::trace_split(
-                    &self.scene,
-                    tracer,
-                    &self.settings.seeds,
-                    rng,
-                    raster,
-                    store,
-                    &mut split,
-                );
-                rest.seeds += split.count;
-            }
-            SeedKind::Entangled => {
-                seeds::trace(
-                    &self.scene,
-                    tracer,
-                    &self.settings.seeds,
-                    rng,
-                    raster,
-                    store,
-                );
-            }
-        }
-    }
-
-    /// Traces every seed of `pixels` × `samples` once (random streams from `seed`). Seeds
-    /// split off while traced (outside the chains' part) are handed to `rest` per sample,
-    /// with the sample's pixel.
+    /// Traces every seed of `pixels` × `samples` once (random streams from `seed`): untangled
+    /// paths one at a time, entangled path trees as wavefronts of [`SEED_WAVE`] camera samples.
+    /// With entangled seeds and a split, only the seeds of the chains' part are stored; the
+    /// others are handed to `rest` per sample (its pixel, their estimates, their number).
     #[allow(clippy::too_many_arguments)]
     fn trace_unit(
         &self,
@@ -198,33 +147,81 @@ impl Erpt {
         samples: std::ops::Range<u32>,
         out: &mut UnitSeeds,
         path: &mut Path,
-        rest: &mut dyn FnMut(u32, u32, &RestOfSample),
+        rest: &mut dyn FnMut(u32, u32, &SampleContributions, u64),
     ) {
-        let mut sample_rest = RestOfSample::default();
-        for (x, y) in pixels {
-            for s in samples.clone() {
-                out.keys.push(SampleKey {
-                    x,
-                    y,
-                    s,
-                    first: out.store.seeds.len(),
-                });
-                let (mut rng, _) = seed_rngs(seed, x, y, s);
-                sample_rest.contributions.clear();
-                sample_rest.seeds = 0;
-                self.trace_sample(
-                    tracer,
-                    &mut rng,
-                    x,
-                    y,
-                    &mut out.store,
-                    path,
-                    &mut sample_rest,
-                );
-                if sample_rest.seeds > 0 {
-                    rest(x, y, &sample_rest);
+        let start = |x: u32, y: u32, s: u32| {
+            let (mut rng, _) = seed_rngs(seed, x, y, s);
+            let raster = Vec2::new(x as f32, y as f32) + rng.uniform2();
+            (rng, raster)
+        };
+        match self.settings.seed_kind {
+            SeedKind::Untangled => {
+                for (x, y) in pixels {
+                    for s in samples.clone() {
+                        out.keys.push(SampleKey {
+                            x,
+                            y,
+                            s,
+                            first: out.store.seeds.len(),
+                        });
+                        let (mut rng, raster) = start(x, y, s);
+                        untangled::trace(
+                            &self.scene,
+                            tracer,
+                            &self.settings.seeds,
+                            &mut rng,
+                            raster,
+                            Some(path),
+                        );
+                        out.store.push_path(path);
+                    }
                 }
             }
+            SeedKind::Entangled => SEED_WAVEFRONT.with_borrow_mut(|wf| {
+                let filter: Option<&dyn SeedFilter> = self
+                    .splits_while_tracing()
+                    .then_some(&self.settings.part as &dyn SeedFilter);
+                let mut starts = Vec::with_capacity(SEED_WAVE);
+                let mut wave = Vec::with_capacity(SEED_WAVE);
+                let mut flush = |starts: &mut Vec<_>, wave: &mut Vec<(u32, u32, u32)>| {
+                    let (store, keys) = (&mut out.store, &mut out.keys);
+                    seeds::trace_wavefront(
+                        &self.scene,
+                        tracer,
+                        &self.settings.seeds,
+                        starts,
+                        filter,
+                        wf,
+                        store,
+                        |tree| {
+                            let (x, y, s) = wave[tree.index];
+                            keys.push(SampleKey {
+                                x,
+                                y,
+                                s,
+                                first: tree.first_seed,
+                            });
+                            if tree.rest_count > 0 {
+                                rest(x, y, tree.rest, tree.rest_count);
+                            }
+                        },
+                    );
+                    starts.clear();
+                    wave.clear();
+                };
+                for (x, y) in pixels {
+                    for s in samples.clone() {
+                        starts.push(start(x, y, s));
+                        wave.push((x, y, s));
+                        if starts.len() == SEED_WAVE {
+                            flush(&mut starts, &mut wave);
+                        }
+                    }
+                }
+                if !starts.is_empty() {
+                    flush(&mut starts, &mut wave);
+                }
+            }),
         }
         let part = &self.settings.part;
         // Split while traced: every stored seed is in the part.
@@ -344,7 +341,7 @@ impl Integrator for Erpt {
                 0..1,
                 &mut row,
                 &mut path,
-                &mut |_, _, _| {},
+                &mut |_, _, _, _| {},
             );
             sum += Self::part_energy(&row);
             samples += row.store.samples;
@@ -377,9 +374,9 @@ impl Integrator for Erpt {
             samples,
             &mut seeds,
             &mut path,
-            &mut |x, y, rest| {
-                rest_seeds += rest.seeds;
-                for &(layer, value) in &rest.contributions.entries {
+            &mut |x, y, rest, count| {
+                rest_seeds += count;
+                for &(layer, value) in &rest.entries {
                     if value.is_valid_radiance() {
                         rest_deposits += 1;
                         film.deposit(x as f32 + 0.5, y as f32 + 0.5, layer, value);
