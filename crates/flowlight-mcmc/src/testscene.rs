@@ -84,6 +84,7 @@ pub fn scene() -> Scene<'static> {
         bounds_min: Vec3::splat(-3.0),
         bounds_max: Vec3::splat(3.0),
         mesh: Default::default(),
+        material_bsdfs: &[],
     }
 }
 

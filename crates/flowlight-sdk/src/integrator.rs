@@ -9,9 +9,10 @@ use crate::deposit::Film;
 use crate::guard::guard;
 use crate::mutation::MutationSet;
 use crate::params::Params;
-use crate::scene::Scene;
+use crate::scene::{constant_bsdfs, Scene};
 use crate::stats::{StatTable, Stats, StatsBuilder};
 use crate::tracer::Tracer;
+use flowlight_core::bsdf::Bsdf;
 use std::ffi::c_void;
 
 /// A light-transport algorithm. The host creates one instance per render and calls
@@ -54,8 +55,11 @@ pub trait Integrator: Sized + Send + Sync + 'static {
 /// What the glue boxes behind the instance pointer: the integrator and the counter list the
 /// host reads through [`StatList`] until `destroy`.
 struct Instance<T> {
+    /// Declared first, so dropped first: its scene borrows `bsdfs`.
     integrator: T,
     stats: StatTable,
+    /// The per-material BSDFs the integrator's scene borrows ([`Scene::material_bsdfs`]).
+    _bsdfs: Box<[Option<Bsdf>]>,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -75,7 +79,11 @@ unsafe extern "C" fn create<T: Integrator>(
     unsafe {
         guard(err, || {
             let params = Params::from_raw(params, param_count);
-            let scene = Scene::from_view(&*scene);
+            let mut scene = Scene::from_view(&*scene);
+            let bsdfs = constant_bsdfs(scene.materials, scene.textures);
+            // SAFETY: the slice's heap allocation lives in the instance (moving the box does
+            // not move it) and is dropped after the integrator, the only holder of this scene.
+            scene.material_bsdfs = &*(&*bsdfs as *const [Option<Bsdf>]);
             let mutations = MutationSet::from_raw(mutations, mutation_count);
             let mut builder = StatsBuilder::new();
             let (integrator, inf) = T::create(&params, mutations, scene, &mut builder)?;
@@ -83,6 +91,7 @@ unsafe extern "C" fn create<T: Integrator>(
             let boxed = Box::new(Instance {
                 integrator,
                 stats: table,
+                _bsdfs: bsdfs,
             });
             // The specs live in the box, which does not move until `destroy`.
             let specs = boxed.stats.specs();

@@ -7,7 +7,7 @@ use flowlight_core::geometry::{Ray, SurfaceHit};
 use flowlight_core::light::{Emitter, Lights, PunctualLight};
 use flowlight_core::material::{Material, ResolvedMaterial, Texture};
 use flowlight_core::mesh::{CompactHit, MeshView};
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 /// The scene as plugins see it. Borrowed from the host for the plugin instance's lifetime.
 #[derive(Clone, Copy)]
@@ -21,6 +21,38 @@ pub struct Scene<'a> {
     /// The vertex and triangle buffers: [`Scene::surface`] builds surface data from the
     /// compact hits of batched queries. Empty in scenes built by hand for shading tests.
     pub mesh: MeshView<'a>,
+    /// Per material, its BSDF when no texture enters it ([`constant_bsdfs`]): [`Scene::bsdf`]
+    /// copies it instead of building the same lobes at every hit. Empty (every BSDF built per
+    /// hit) until the plugin glue attaches the table it owns; the result is the same bit for
+    /// bit either way.
+    pub material_bsdfs: &'a [Option<Bsdf>],
+}
+
+/// The BSDF of each material whose BSDF is the same at every hit without vertex colour: one
+/// that samples none of the textures [`Material::resolve`] reads for the BSDF (base colour,
+/// metallic-roughness, transmission, specular, specular colour, clearcoat and its roughness;
+/// emission and normal maps do not enter the BSDF). `None` for the others.
+pub fn constant_bsdfs(materials: &[Material], textures: &[Texture]) -> Box<[Option<Bsdf>]> {
+    materials
+        .iter()
+        .map(|m| {
+            let textured = [
+                &m.base_color_texture,
+                &m.metallic_roughness_texture,
+                &m.transmission_texture,
+                &m.specular_texture,
+                &m.specular_color_texture,
+                &m.clearcoat_texture,
+                &m.clearcoat_roughness_texture,
+            ]
+            .iter()
+            .any(|t| t.texture(textures).is_some());
+            (!textured).then(|| {
+                let r = m.resolve([Vec2::ZERO; 2], [1.0; 4], textures);
+                Bsdf::from_material(&r.material, r.base)
+            })
+        })
+        .collect()
 }
 
 unsafe fn slice<'a, T>(ptr: *const T, len: usize) -> &'a [T] {
@@ -79,6 +111,7 @@ impl<'a> Scene<'a> {
                 bounds_min: v.bounds_min,
                 bounds_max: v.bounds_max,
                 mesh,
+                material_bsdfs: &[],
             }
         }
     }
@@ -126,6 +159,11 @@ impl<'a> Scene<'a> {
     /// already normal-mapped by the host).
     #[inline]
     pub fn bsdf(&self, hit: &SurfaceHit) -> Bsdf {
+        if hit.color == [1.0; 4] {
+            if let Some(Some(b)) = self.material_bsdfs.get(hit.material as usize) {
+                return *b;
+            }
+        }
         let r = self.resolve(hit);
         Bsdf::from_material(&r.material, r.base)
     }
@@ -155,5 +193,93 @@ pub fn mesh_tables(m: &MeshView) -> MeshTables {
         triangle_count: m.triangles.len(),
         instances: m.instances.as_ptr(),
         instance_count: m.instances.len(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use flowlight_core::material::{TexelFormat, TextureRef, Wrap};
+    use flowlight_core::rng::Rng;
+    use flowlight_core::Rgb;
+
+    /// The cached BSDF of an untextured material is the per-hit BSDF bit for bit (values,
+    /// densities and samples over random directions); a material with a texture that enters the
+    /// BSDF has no cached one.
+    #[test]
+    fn constant_bsdfs_equal_the_per_hit_bsdfs() {
+        let texel = [200u8, 100, 50, 255];
+        let textures = [Texture {
+            width: 1,
+            height: 1,
+            channels: 4,
+            format: TexelFormat::U8,
+            wrap_s: Wrap::Repeat,
+            wrap_t: Wrap::Repeat,
+            filter: flowlight_core::material::Filter::Nearest,
+            texels: texel.as_ptr(),
+        }];
+        let tex = TextureRef {
+            index: 0,
+            ..TextureRef::NONE
+        };
+        let mut materials = vec![Material::default()];
+        for (metallic, roughness, transmission, clearcoat) in [
+            (0.0, 1.0, 0.0, 0.0),
+            (1.0, 0.3, 0.0, 0.0),
+            (0.0, 0.0, 1.0, 0.0),
+            (0.2, 0.5, 0.3, 0.7),
+        ] {
+            materials.push(Material {
+                base_color: Rgb::new(0.7, 0.4, 0.2),
+                metallic,
+                roughness,
+                transmission,
+                thickness: transmission,
+                clearcoat,
+                clearcoat_roughness: 0.2,
+                ..Material::default()
+            });
+        }
+        let textured = [
+            Material {
+                base_color_texture: tex,
+                ..Material::default()
+            },
+            Material {
+                metallic_roughness_texture: tex,
+                ..Material::default()
+            },
+            Material {
+                clearcoat_roughness_texture: tex,
+                ..Material::default()
+            },
+        ];
+        let plain = materials.len();
+        materials.extend(textured);
+        let table = constant_bsdfs(&materials, &textures);
+        assert!(table[plain..].iter().all(Option::is_none));
+        let mut rng = Rng::new(5, 0);
+        for (m, cached) in materials.iter().zip(&table[..plain]) {
+            let cached = cached.expect("an untextured material has a constant BSDF");
+            let r = m.resolve([Vec2::ZERO; 2], [1.0; 4], &textures);
+            let built = Bsdf::from_material(&r.material, r.base);
+            for _ in 0..200 {
+                let dir = |rng: &mut Rng| {
+                    let u = rng.uniform2();
+                    let z = 1.0 - 2.0 * u.x;
+                    let r = (1.0 - z * z).max(0.0).sqrt();
+                    let phi = std::f32::consts::TAU * u.y;
+                    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+                };
+                let (wo, wi) = (dir(&mut rng), dir(&mut rng));
+                assert_eq!(cached.eval(wo, wi), built.eval(wo, wi));
+                assert_eq!(cached.pdf(wo, wi).to_bits(), built.pdf(wo, wi).to_bits());
+                let (uc, u) = (rng.uniform(), rng.uniform2());
+                let (a, b) = (cached.sample(wo, uc, u), built.sample(wo, uc, u));
+                assert_eq!(a.map(|s| (s.wi, s.f, s.pdf)), b.map(|s| (s.wi, s.f, s.pdf)));
+            }
+            assert_eq!(cached.albedo().to_bits(), built.albedo().to_bits());
+        }
     }
 }
