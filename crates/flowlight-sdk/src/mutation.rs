@@ -6,7 +6,8 @@ use crate::abi::{
 };
 use crate::guard::guard;
 use crate::params::Params;
-use crate::scene::Scene;
+use crate::scene::{constant_bsdfs, Scene};
+use flowlight_core::bsdf::Bsdf;
 use crate::tracer::Tracer;
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
@@ -38,6 +39,13 @@ pub trait Mutation: Sized + Send + Sync + 'static {
     fn density(&self, from: &Path, to: &Path) -> f64;
 }
 
+/// A mutation and the per-material BSDFs its scene borrows ([`Scene::material_bsdfs`]).
+struct MutationInstance<T> {
+    /// Declared first, so dropped first.
+    mutation: T,
+    _bsdfs: Box<[Option<Bsdf>]>,
+}
+
 unsafe extern "C" fn create<T: Mutation>(
     params: *const ParamValue,
     param_count: usize,
@@ -50,7 +58,16 @@ unsafe extern "C" fn create<T: Mutation>(
     unsafe {
         guard(err, || {
             let params = Params::from_raw(params, param_count);
-            let inst = T::create(&params, Scene::from_view(&*scene))?;
+            let mut scene = Scene::from_view(&*scene);
+            let bsdfs = constant_bsdfs(scene.materials, scene.textures);
+            // SAFETY: as for integrators: the table's heap allocation lives in the instance and
+            // is dropped after the mutation, the only holder of this scene.
+            scene.material_bsdfs = &*(&*bsdfs as *const [Option<Bsdf>]);
+            let mutation = T::create(&params, scene)?;
+            let inst = MutationInstance {
+                mutation,
+                _bsdfs: bsdfs,
+            };
             *instance = Box::into_raw(Box::new(inst)) as *mut c_void;
             Ok(())
         })
@@ -63,7 +80,7 @@ unsafe extern "C" fn destroy<T: Mutation>(instance: *mut c_void) {
     unsafe {
         if !instance.is_null() {
             let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                drop(Box::from_raw(instance as *mut T))
+                drop(Box::from_raw(instance as *mut MutationInstance<T>))
             }));
         }
     }
@@ -82,7 +99,7 @@ unsafe extern "C" fn propose<T: Mutation>(
     // ABI rules in `abi.rs` for the C entry points).
     unsafe {
         guard(err, || {
-            let inst = &*(instance as *const T);
+            let inst = &(*(instance as *const MutationInstance<T>)).mutation;
             *out = inst.propose(&Tracer::new(&*tracer), &mut *rng, &*current, &mut *proposal)?;
             Ok(())
         })
@@ -100,7 +117,7 @@ unsafe extern "C" fn density<T: Mutation>(
     // ABI rules in `abi.rs` for the C entry points).
     unsafe {
         guard(err, || {
-            let inst = &*(instance as *const T);
+            let inst = &(*(instance as *const MutationInstance<T>)).mutation;
             *out = inst.density(&*from, &*to);
             Ok(())
         })
