@@ -179,22 +179,7 @@ impl seeds::SeedFilter for Caustic {
 #[test]
 fn splitting_while_tracing_stores_exactly_the_kept_seeds() {
     let mut totals = [[0usize; 2]; 2];
-    for config in [
-        "cornell-box/cornell-box.toml",
-        "glass-caustic/glass-caustic.toml",
-        "satin",
-    ] {
-        let session = if config == "satin" {
-            sun_and_sky_in("split-satin", SATIN, "plugin = \"mcpt\"", 1)
-        } else {
-            session_at(config, 32, 32, 1, &[])
-        };
-        // SAFETY: the session keeps the view's data alive.
-        let scene = unsafe { Scene::from_view(session.instance.view()) };
-        let mut unit_tracer = UnitTracer::new(&session.scene, session.intersector.as_ref());
-        let table = unit_tracer.table();
-        let tracer = Tracer::new(&table);
-        let settings = PathSettings::from_params(&flowlight_sdk::Params::from_slice(&[])).unwrap();
+    for_seed_scenes("split", |config, scene, tracer, settings| {
         let filters: [&dyn seeds::SeedFilter; 2] = [&GlossyLast, &Caustic];
         for (f, filter) in filters.into_iter().enumerate() {
             let (mut all, mut kept) = (SeedStore::default(), SeedStore::default());
@@ -208,7 +193,7 @@ fn splitting_while_tracing_stores_exactly_the_kept_seeds() {
                 kept.clear();
                 rest.clear();
                 let mut a = Rng::new(stream, 0);
-                seeds::trace(&scene, &tracer, &settings, &mut a, raster, &mut all);
+                seeds::trace(scene, tracer, settings, &mut a, raster, &mut all);
                 let mut split = seeds::SeedSplit {
                     filter,
                     rest: &mut rest,
@@ -216,7 +201,7 @@ fn splitting_while_tracing_stores_exactly_the_kept_seeds() {
                 };
                 let mut b = Rng::new(stream, 0);
                 seeds::trace_split(
-                    &scene, &tracer, &settings, &mut b, raster, &mut kept, &mut split,
+                    scene, tracer, settings, &mut b, raster, &mut kept, &mut split,
                 );
                 let count = split.count as usize;
                 assert_eq!(
@@ -249,11 +234,10 @@ fn splitting_while_tracing_stores_exactly_the_kept_seeds() {
                 n_kept += k;
                 n_rest += r;
             }
-            // Both sides of every filter are exercised.
             totals[f][0] += n_kept;
             totals[f][1] += n_rest;
         }
-    }
+    });
     // Both sides of each filter are exercised (the glossy one on the satin scene, where a
     // connection's type depends on the lobe that scatters most; the caustic one through the
     // glass).
@@ -270,22 +254,7 @@ fn splitting_while_tracing_stores_exactly_the_kept_seeds() {
 /// first seed and split-off estimates to its callback, for waves of 1, 7 and 64 trees.
 #[test]
 fn the_seed_wavefront_stores_what_path_at_a_time_tracing_stores() {
-    for config in [
-        "cornell-box/cornell-box.toml",
-        "glass-caustic/glass-caustic.toml",
-        "satin",
-    ] {
-        let session = if config == "satin" {
-            sun_and_sky_in("wavefront-satin", SATIN, "plugin = \"mcpt\"", 1)
-        } else {
-            session_at(config, 32, 32, 1, &[])
-        };
-        // SAFETY: the session keeps the view's data alive.
-        let scene = unsafe { Scene::from_view(session.instance.view()) };
-        let mut unit_tracer = UnitTracer::new(&session.scene, session.intersector.as_ref());
-        let table = unit_tracer.table();
-        let tracer = Tracer::new(&table);
-        let settings = PathSettings::from_params(&flowlight_sdk::Params::from_slice(&[])).unwrap();
+    for_seed_scenes("wavefront", |config, scene, tracer, settings| {
         let starts: Vec<(Rng, glam::Vec2)> = (0..700u64)
             .map(|i| {
                 let mut rng = Rng::new(Rng::hash(&[i, 3]), 0);
@@ -306,7 +275,7 @@ fn the_seed_wavefront_stores_what_path_at_a_time_tracing_stores() {
                 let mut rest = SampleContributions::default();
                 want_first.push(want.seeds.len());
                 match filter {
-                    None => seeds::trace(&scene, &tracer, &settings, &mut rng, *raster, &mut want),
+                    None => seeds::trace(scene, tracer, settings, &mut rng, *raster, &mut want),
                     Some(filter) => {
                         let mut split = seeds::SeedSplit {
                             filter,
@@ -314,7 +283,7 @@ fn the_seed_wavefront_stores_what_path_at_a_time_tracing_stores() {
                             count: 0,
                         };
                         seeds::trace_split(
-                            &scene, &tracer, &settings, &mut rng, *raster, &mut want, &mut split,
+                            scene, tracer, settings, &mut rng, *raster, &mut want, &mut split,
                         );
                         assert_eq!(split.count as usize, rest.entries.len());
                     }
@@ -327,9 +296,9 @@ fn the_seed_wavefront_stores_what_path_at_a_time_tracing_stores() {
                 let mut index = 0;
                 for chunk in starts.chunks(wave) {
                     seeds::trace_wavefront(
-                        &scene,
-                        &tracer,
-                        &settings,
+                        scene,
+                        tracer,
+                        settings,
                         chunk,
                         filter,
                         &mut wf,
@@ -369,6 +338,29 @@ fn the_seed_wavefront_stores_what_path_at_a_time_tracing_stores() {
                 }
             }
         }
+    });
+}
+
+/// Runs `f` with each scene of the seed-tracing tests (the Cornell box and the glass caustic at
+/// 32², the satin sun-and-sky scene), a tracer for it and the default path settings.
+fn for_seed_scenes(tag: &str, mut f: impl FnMut(&str, &Scene, &Tracer, &PathSettings)) {
+    for config in [
+        "cornell-box/cornell-box.toml",
+        "glass-caustic/glass-caustic.toml",
+        "satin",
+    ] {
+        let session = if config == "satin" {
+            sun_and_sky_in(&format!("{tag}-satin"), SATIN, "plugin = \"mcpt\"", 1)
+        } else {
+            session_at(config, 32, 32, 1, &[])
+        };
+        // SAFETY: the session keeps the view's data alive.
+        let scene = unsafe { Scene::from_view(session.instance.view()) };
+        let mut unit_tracer = UnitTracer::new(&session.scene, session.intersector.as_ref());
+        let table = unit_tracer.table();
+        let tracer = Tracer::new(&table);
+        let settings = PathSettings::from_params(&flowlight_sdk::Params::from_slice(&[])).unwrap();
+        f(config, &scene, &tracer, &settings);
     }
 }
 

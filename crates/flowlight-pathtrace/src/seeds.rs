@@ -58,7 +58,7 @@
 
 use crate::settings::PathSettings;
 use crate::shading::{light_connection, side_consistent, Shading};
-use crate::untangled::light_vertex;
+use crate::untangled::{environment_vertex, light_vertex};
 use crate::SampleContributions;
 use flowlight_core::bsdf::{volume, Bsdf};
 use flowlight_core::geometry::{Ray, SurfaceHit};
@@ -290,16 +290,53 @@ fn trace_with(
 #[derive(Default)]
 pub struct SeedWavefront {
     trees: Vec<Tree>,
-    vertices: Vec<Vec<PathVertex>>,
-    seeds: Vec<Vec<Seed>>,
-    rest: Vec<SampleContributions>,
-    rest_counts: Vec<u64>,
+    buffers: Vec<TreeBuffers>,
     active: Vec<u32>,
     rays: Vec<Ray>,
     hits: Vec<CompactHit>,
     shadow_rays: Vec<Ray>,
     pending: Vec<(u32, PendingConnection)>,
     blocked: Vec<u8>,
+}
+
+/// One tree's own trunk, seeds and split-off estimates in a [`SeedWavefront`].
+#[derive(Default)]
+struct TreeBuffers {
+    vertices: Vec<PathVertex>,
+    seeds: Vec<Seed>,
+    rest: SampleContributions,
+    rest_count: u64,
+}
+
+impl TreeBuffers {
+    fn clear(&mut self) {
+        self.vertices.clear();
+        self.seeds.clear();
+        self.rest.clear();
+        self.rest_count = 0;
+    }
+
+    /// Runs `f` with this tree's [`TreeOut`], then counts the seeds it split off.
+    fn with_out<R>(
+        &mut self,
+        filter: Option<&dyn SeedFilter>,
+        f: impl FnOnce(&mut TreeOut) -> R,
+    ) -> R {
+        let mut split = filter.map(|filter| SeedSplit {
+            filter,
+            rest: &mut self.rest,
+            count: 0,
+        });
+        let mut out = TreeOut {
+            vertices: &mut self.vertices,
+            seeds: &mut self.seeds,
+            base: 0,
+            split: split.as_mut(),
+        };
+        let r = f(&mut out);
+        self.rest_count += split.map_or(0, |s| s.count);
+        r
+    }
 }
 
 /// What [`trace_wavefront`] hands back per tree, in the order of `starts`: the index of the
@@ -332,32 +369,16 @@ pub fn trace_wavefront(
     mut each: impl FnMut(TreeSeeds),
 ) {
     let n = starts.len();
-    if wf.vertices.len() < n {
-        wf.vertices.resize_with(n, Vec::new);
-        wf.seeds.resize_with(n, Vec::new);
-        wf.rest.resize_with(n, SampleContributions::default);
-        wf.rest_counts.resize(n, 0);
+    if wf.buffers.len() < n {
+        wf.buffers.resize_with(n, TreeBuffers::default);
     }
     wf.trees.clear();
     wf.active.clear();
     for (i, (rng, raster)) in starts.iter().enumerate() {
         let tree = Tree::start(scene, rng.clone(), *raster);
-        wf.vertices[i].clear();
-        wf.seeds[i].clear();
-        wf.rest[i].clear();
-        wf.rest_counts[i] = 0;
-        let mut split = filter.map(|filter| SeedSplit {
-            filter,
-            rest: &mut wf.rest[i],
-            count: 0,
-        });
-        let mut out = TreeOut {
-            vertices: &mut wf.vertices[i],
-            seeds: &mut wf.seeds[i],
-            base: 0,
-            split: split.as_mut(),
-        };
-        tree.begin(scene, &mut out);
+        let buffers = &mut wf.buffers[i];
+        buffers.clear();
+        buffers.with_out(filter, |out| tree.begin(scene, out));
         wf.trees.push(tree);
         wf.active.push(i as u32);
     }
@@ -374,31 +395,20 @@ pub fn trace_wavefront(
         for k in 0..wf.active.len() {
             let i = wf.active[k] as usize;
             let tree = &mut wf.trees[i];
-            let mut split = filter.map(|filter| SeedSplit {
-                filter,
-                rest: &mut wf.rest[i],
-                count: 0,
-            });
-            let mut out = TreeOut {
-                vertices: &mut wf.vertices[i],
-                seeds: &mut wf.seeds[i],
-                base: 0,
-                split: split.as_mut(),
-            };
             let compact = wf.hits[k];
-            let going = if compact.is_hit() {
+            let going = wf.buffers[i].with_out(filter, |out| {
+                if !compact.is_hit() {
+                    tree.escape(scene, out);
+                    return false;
+                }
                 let hit = scene.surface(&tree.ray, &compact);
-                let (going, pending) = tree.vertex(scene, settings, &hit, &mut out);
+                let (going, pending) = tree.vertex(scene, settings, &hit, out);
                 if let Some(p) = pending {
                     wf.shadow_rays.push(p.ray);
                     wf.pending.push((i as u32, p));
                 }
                 going
-            } else {
-                tree.escape(scene, &mut out);
-                false
-            };
-            wf.rest_counts[i] += split.map_or(0, |s| s.count);
+            });
             if going {
                 wf.active[kept] = i as u32;
                 kept += 1;
@@ -408,33 +418,19 @@ pub fn trace_wavefront(
         if !wf.shadow_rays.is_empty() {
             tracer.occluded_batch(&wf.shadow_rays, &mut wf.blocked);
             for (&(i, p), &b) in wf.pending.iter().zip(&wf.blocked) {
-                if b != 0 {
-                    continue;
+                if b == 0 {
+                    wf.buffers[i as usize].with_out(filter, |out| out.connect(p));
                 }
-                let i = i as usize;
-                let mut split = filter.map(|filter| SeedSplit {
-                    filter,
-                    rest: &mut wf.rest[i],
-                    count: 0,
-                });
-                let mut out = TreeOut {
-                    vertices: &mut wf.vertices[i],
-                    seeds: &mut wf.seeds[i],
-                    base: 0,
-                    split: split.as_mut(),
-                };
-                out.connect(p);
-                wf.rest_counts[i] += split.map_or(0, |s| s.count);
             }
         }
     }
-    for i in 0..n {
+    for (i, buffers) in wf.buffers[..n].iter().enumerate() {
         store.samples += 1;
         let first_seed = store.seeds.len();
-        if !wf.seeds[i].is_empty() {
+        if !buffers.seeds.is_empty() {
             let base = store.vertices.len() as u32;
-            store.vertices.extend_from_slice(&wf.vertices[i]);
-            store.seeds.extend(wf.seeds[i].iter().map(|s| Seed {
+            store.vertices.extend_from_slice(&buffers.vertices);
+            store.seeds.extend(buffers.seeds.iter().map(|s| Seed {
                 trunk: s.trunk + base,
                 ..*s
             }));
@@ -442,8 +438,8 @@ pub fn trace_wavefront(
         each(TreeSeeds {
             index: i,
             first_seed,
-            rest: &wf.rest[i],
-            rest_count: wf.rest_counts[i],
+            rest: &buffers.rest,
+            rest_count: buffers.rest_count,
         });
     }
 }
@@ -617,20 +613,7 @@ impl Tree {
         if estimate.is_black() || !out.route(&self.types[..=count], self.depth, estimate) {
             return;
         }
-        let light = PathVertex {
-            p: ray.origin + ray.dir,
-            p_error: Vec3::ZERO,
-            ng: ray.dir,
-            ns: ray.dir,
-            uv: Vec2::ZERO,
-            uv1: Vec2::ZERO,
-            color: [1.0; 4],
-            prim: u32::MAX,
-            material: u32::MAX,
-            emitter: env as i32,
-            node: NodeType::Light,
-            component: 0,
-        };
+        let light = environment_vertex(&ray, env);
         let seed = Seed {
             trunk: 0,
             prefix: 0,

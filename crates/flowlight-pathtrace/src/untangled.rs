@@ -17,6 +17,7 @@ use crate::settings::PathSettings;
 use crate::shading::{connect_light, side_consistent, Shading};
 use flowlight_core::bsdf::volume;
 use flowlight_core::camera::Camera;
+use flowlight_core::geometry::Ray;
 use flowlight_core::light::{LightKind, LightSample};
 use flowlight_core::path::{NodeClass, NodeType, Path, PathVertex};
 use flowlight_core::rng::Rng;
@@ -28,6 +29,25 @@ use glam::{Vec2, Vec3};
 /// and normal; a point or spot light its position (the normal slot holds the direction to
 /// `p_ref`); a distant light a point one unit from `p_ref` towards it, with that direction
 /// as its normal.
+/// The light vertex of a ray that escaped into environment light `env`: a point one unit
+/// along the ray, with the direction as its normal (the vertex at infinity of `measure.rs`).
+pub(crate) fn environment_vertex(ray: &Ray, env: usize) -> PathVertex {
+    PathVertex {
+        p: ray.origin + ray.dir,
+        p_error: Vec3::ZERO,
+        ng: ray.dir,
+        ns: ray.dir,
+        uv: Vec2::ZERO,
+        uv1: Vec2::ZERO,
+        color: [1.0; 4],
+        prim: u32::MAX,
+        material: u32::MAX,
+        emitter: env as i32,
+        node: NodeType::Light,
+        component: 0,
+    }
+}
+
 pub(crate) fn light_vertex(scene: &Scene, ls: &LightSample, p_ref: Vec3) -> PathVertex {
     let (p, n, prim) = match ls.kind {
         LightKind::Area => (ls.p, ls.n, scene.lights.emitters[ls.light as usize].prim),
@@ -147,20 +167,7 @@ pub fn trace(
             let Some(env) = scene.lights.environment_index() else {
                 return none;
             };
-            let light = PathVertex {
-                p: ray.origin + ray.dir,
-                p_error: Vec3::ZERO,
-                ng: ray.dir,
-                ns: ray.dir,
-                uv: Vec2::ZERO,
-                uv1: Vec2::ZERO,
-                color: [1.0; 4],
-                prim: u32::MAX,
-                material: u32::MAX,
-                emitter: env as i32,
-                node: NodeType::Light,
-                component: 0,
-            };
+            let light = environment_vertex(&ray, env);
             if !rec.push(light) {
                 return none;
             }
