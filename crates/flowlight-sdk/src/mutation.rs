@@ -7,8 +7,8 @@ use crate::abi::{
 use crate::guard::guard;
 use crate::params::Params;
 use crate::scene::{constant_bsdfs, Scene};
-use flowlight_core::bsdf::Bsdf;
 use crate::tracer::Tracer;
+use flowlight_core::bsdf::Bsdf;
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
 use std::ffi::c_void;
