@@ -270,9 +270,7 @@ fn trace_with(
         };
         let (going, pending) = tree.vertex(scene, settings, &hit, &mut out);
         if let Some(p) = pending {
-            if !tracer.occluded(&p.ray) {
-                out.connect(p);
-            }
+            out.connect(p, !tracer.occluded(&p.ray));
         }
         if !going {
             break;
@@ -418,9 +416,7 @@ pub fn trace_wavefront(
         if !wf.shadow_rays.is_empty() {
             tracer.occluded_batch(&wf.shadow_rays, &mut wf.blocked);
             for (&(i, p), &b) in wf.pending.iter().zip(&wf.blocked) {
-                if b == 0 {
-                    wf.buffers[i as usize].with_out(filter, |out| out.connect(p));
-                }
+                wf.buffers[i as usize].with_out(filter, |out| out.connect(p, b == 0));
             }
         }
     }
@@ -482,27 +478,29 @@ impl TreeOut<'_, '_> {
         }
     }
 
-    /// A light connection found unoccluded.
-    fn connect(&mut self, p: PendingConnection) {
-        match p.seed {
-            Some(seed) => self.push(p.prefix as usize, seed),
-            None => {
-                if let Some(s) = &mut self.split {
-                    s.count += 1;
-                    s.rest.add(p.layer, p.estimate);
-                }
+    /// A light connection's shadow ray answered: a stored seed stays only if `visible` (it is
+    /// the tree's last seed: nothing is stored between a connection and its answer); a seed
+    /// for the split's rest goes there only if `visible`.
+    fn connect(&mut self, p: PendingConnection, visible: bool) {
+        if p.stored {
+            if !visible {
+                self.seeds.pop();
+            }
+        } else if visible {
+            if let Some(s) = &mut self.split {
+                s.count += 1;
+                s.rest.add(p.layer, p.estimate);
             }
         }
     }
 }
 
-/// A light connection waiting for its shadow ray: the seed to store if it is unoccluded, or,
-/// when the split's filter does not keep it, `None` and the estimate for the split's rest.
+/// A light connection waiting for its shadow ray. Its seed, when stored, is stored at once
+/// (`stored`) and taken back if the ray is blocked, so the pending record stays small.
 #[derive(Clone, Copy, Debug)]
 struct PendingConnection {
     ray: Ray,
-    seed: Option<Seed>,
-    prefix: u32,
+    stored: bool,
     layer: u32,
     estimate: Rgb,
 }
@@ -738,22 +736,24 @@ impl Tree {
                                 conn.wi_local,
                                 &mut self.types[..count + 2],
                             );
-                            let seed = class.map(|connect| Seed {
-                                trunk: 0,
-                                prefix: 0,
-                                connect: Some(connect),
-                                light: light_vertex(scene, &ls, hit.p),
-                                raster: self.raster,
-                                estimate,
-                                layer: self.depth,
-                                mis_weight: w,
-                                density: self.density * p_light as f64,
-                                technique: Technique::Connection,
-                            });
+                            if let Some(connect) = class {
+                                let seed = Seed {
+                                    trunk: 0,
+                                    prefix: 0,
+                                    connect: Some(connect),
+                                    light: light_vertex(scene, &ls, hit.p),
+                                    raster: self.raster,
+                                    estimate,
+                                    layer: self.depth,
+                                    mis_weight: w,
+                                    density: self.density * p_light as f64,
+                                    technique: Technique::Connection,
+                                };
+                                out.push(count + 1, seed);
+                            }
                             pending = Some(PendingConnection {
                                 ray,
-                                seed,
-                                prefix: count as u32 + 1,
+                                stored: class.is_some(),
                                 layer: self.depth,
                                 estimate,
                             });
