@@ -600,6 +600,48 @@ const DIRECT_UNTANGLED: (&str, &[(&str, &str)]) = (
     &[("direct", "mcpt"), ("seeds", "untangled")],
 );
 
+/// Where no path of the scene can be in the chains' part (the Cornell box has no Dirac
+/// surface, so no caustic path), ERPT path-traces every unit (and the split test above checks
+/// that image against MCPT); through the glass it runs chains.
+#[test]
+fn erpt_path_traces_a_scene_without_paths_in_the_chains_part() {
+    let params = |seeds: &str| {
+        vec![
+            ("seeds", s(seeds)),
+            ("chains_for", s("caustics")),
+            ("mutations", mix()),
+        ]
+    };
+    let out = render(&session_at(
+        "cornell-box/erpt.toml",
+        16,
+        16,
+        2,
+        &params("entangled"),
+    ));
+    assert_eq!(stat(&out, "units_without_chains"), stat(&out, "units"));
+    assert!(stat(&out, "units") > 0.0 && stat(&out, "mcpt_part_seeds") > 100.0);
+    assert_eq!(stat(&out, "chains"), 0.0);
+    // Untangled seeds keep the thesis' per-path classification.
+    let out = render(&session_at(
+        "cornell-box/erpt.toml",
+        16,
+        16,
+        2,
+        &params("untangled"),
+    ));
+    assert_eq!(stat(&out, "units_without_chains"), 0.0);
+    let out = render(&session_at(
+        "glass-caustic/erpt.toml",
+        16,
+        16,
+        2,
+        &params("entangled"),
+    ));
+    assert_eq!(stat(&out, "units_without_chains"), 0.0);
+    assert!(stat(&out, "chains") > 0.0);
+}
+
 #[test]
 fn the_mcpt_and_erpt_parts_sum_to_the_image_in_the_furnace() {
     let exact = vec![Rgb::splat((2.0 * (1.0 - 0.5f64.powi(9))) as f32); 32 * 32];

@@ -163,6 +163,27 @@ impl Dfa {
         self.accepting[state]
     }
 
+    /// Whether some word over the letters in `allowed` (bit i: letter i of `E D G S L`) is
+    /// accepted: an accepting state reachable from the start through those letters only.
+    pub fn accepts_some(&self, allowed: u8) -> bool {
+        let mut seen = vec![false; self.next.len()];
+        let mut stack = vec![0usize];
+        seen[0] = true;
+        while let Some(s) = stack.pop() {
+            if self.accepting[s] {
+                return true;
+            }
+            for (letter, &t) in self.next[s].iter().enumerate() {
+                let t = t as usize;
+                if allowed >> letter & 1 != 0 && !seen[t] {
+                    seen[t] = true;
+                    stack.push(t);
+                }
+            }
+        }
+        false
+    }
+
     /// Number of DFA states (dead state included).
     #[cfg(test)]
     pub fn state_count(&self) -> usize {

@@ -69,11 +69,11 @@ mod settings;
 mod stats;
 
 use flow::Flow;
-use flowlight_core::path::Path;
+use flowlight_core::path::{NodeType, Path};
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
 use flowlight_pathtrace::seeds::{self, SeedFilter, SeedStore, SeedWavefront};
-use flowlight_pathtrace::{untangled, SampleContributions};
+use flowlight_pathtrace::{entangled, untangled, SampleContributions};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::{
     export_integrator, AccumulationStyle, Film, Integrator, IntegratorInfo, MutationSet, Params,
@@ -92,6 +92,39 @@ pub struct Erpt {
     image_quantum: Option<f64>,
     /// Handles of the counters declared in `create`.
     counters: stats::Counters,
+    /// No path of this scene can be in the chains' part ([`scene_letters`]): entangled seeds
+    /// are then path tracing, and are traced and deposited as MCPT does.
+    chains_part_empty: bool,
+}
+
+/// The Heckbert letters (`part::letter_bit_of`) the scene's surfaces can give a vertex: per
+/// material the letters of its BSDF's components (`D` diffuse, `G` glossy, `S` Dirac), read
+/// from the per-material BSDF table; every letter for a material whose BSDF depends on its
+/// textures (or without a table).
+fn scene_letters(scene: &Scene) -> u8 {
+    let all = part::letter_bit_of(NodeType::DiffuseReflection)
+        | part::letter_bit_of(NodeType::GlossyReflection)
+        | part::letter_bit_of(NodeType::SpecularReflection);
+    (0..scene.materials.len()).fold(0, |mask, i| {
+        mask | match scene.material_bsdfs.get(i) {
+            Some(Some(bsdf)) => bsdf.components().fold(0, |m, (c, _)| {
+                m | part::letter_bit_of(if c.is_delta() {
+                    NodeType::SpecularReflection
+                } else if c.is_diffuse() {
+                    NodeType::DiffuseReflection
+                } else {
+                    NodeType::GlossyReflection
+                })
+            }),
+            _ => all,
+        }
+    })
+}
+
+thread_local! {
+    /// Each worker thread's MCPT wavefront, for scenes whose chains' part is empty.
+    static MCPT_WAVEFRONT: RefCell<(entangled::Wavefront, Vec<SampleContributions>)> =
+        RefCell::new((entangled::Wavefront::default(), Vec::new()));
 }
 
 /// Random streams of a seed: its path, and its chains.
@@ -236,6 +269,79 @@ impl Erpt {
             .collect();
     }
 
+    /// A unit of a scene whose chains' part is empty: every entangled seed would go to its
+    /// pixel, so the unit is path tracing. It is traced as MCPT's wavefront
+    /// (`entangled::trace_wavefront`, whose estimate per sample and layer is the sum of the
+    /// sample's seeds, `flowlight_pathtrace::seeds`) from the seeds' own random streams, and
+    /// each valid contribution is deposited at the sample's pixel, as the split deposits seeds.
+    fn render_without_chains(
+        &self,
+        unit: &WorkUnit,
+        tracer: &Tracer,
+        film: &mut Film,
+        stats: &mut Stats,
+    ) {
+        let start = Instant::now();
+        let (mut samples, mut deposits, mut skipped) = (0u64, 0u64, 0u64);
+        MCPT_WAVEFRONT.with_borrow_mut(|(wf, out)| {
+            out.resize_with(SEED_WAVE, SampleContributions::default);
+            let mut starts = Vec::with_capacity(SEED_WAVE);
+            let mut pixels = Vec::with_capacity(SEED_WAVE);
+            let mut flush = |starts: &mut Vec<(Rng, Vec2)>, pixels: &mut Vec<(u32, u32)>| {
+                let out = &mut out[..starts.len()];
+                entangled::trace_wavefront(
+                    &self.scene,
+                    tracer,
+                    &self.settings.seeds,
+                    starts,
+                    wf,
+                    out,
+                );
+                for (&(x, y), c) in pixels.iter().zip(out.iter()) {
+                    for &(layer, value) in &c.entries {
+                        if value.is_valid_radiance() {
+                            deposits += 1;
+                            film.deposit(x as f32 + 0.5, y as f32 + 0.5, layer, value);
+                        } else {
+                            skipped += 1;
+                        }
+                    }
+                }
+                samples += starts.len() as u64;
+                starts.clear();
+                pixels.clear();
+            };
+            for y in unit.y0..unit.y1 {
+                for x in unit.x0..unit.x1 {
+                    for s in unit.sample_begin..unit.sample_begin + unit.sample_count {
+                        let (mut rng, _) = seed_rngs(unit.seed, x, y, s);
+                        let raster = Vec2::new(x as f32, y as f32) + rng.uniform2();
+                        starts.push((rng, raster));
+                        pixels.push((x, y));
+                        if starts.len() == SEED_WAVE {
+                            flush(&mut starts, &mut pixels);
+                        }
+                    }
+                }
+            }
+            if !starts.is_empty() {
+                flush(&mut starts, &mut pixels);
+            }
+        });
+        let c = &self.counters;
+        stats.add(c.seed_seconds, start.elapsed().as_secs_f64());
+        stats.add(c.camera_samples, samples as f64);
+        stats.add(c.seeds, (deposits + skipped) as f64);
+        stats.add(c.mcpt_part_seeds, deposits as f64);
+        stats.add(c.seeds_skipped, skipped as f64);
+        stats.add(c.units, 1.0);
+        stats.add(c.units_without_chains, 1.0);
+        stats.add(
+            c.image_pixels,
+            (self.scene.camera.width as f64) * (self.scene.camera.height as f64),
+        );
+    }
+
     /// Algorithm 1: e_d = lum(Σ X) / (samples · M), the sum over the valid estimates of the
     /// seeds in the chains' part, `samples` the camera samples traced (each one entangled
     /// path, or one untangled path): M mutations per camera sample in expectation.
@@ -294,6 +400,8 @@ impl Integrator for Erpt {
             .collect();
         let counters = stats::Counters::declare(stats, &names);
         let layers = params.boolean("layers", false)?;
+        let chains_part_empty = settings.seed_kind == SeedKind::Entangled
+            && settings.part.is_empty_for(scene_letters(&scene));
         let info = IntegratorInfo {
             layer_count: if layers {
                 settings.seeds.path_depth + 1
@@ -313,13 +421,14 @@ impl Integrator for Erpt {
                 settings,
                 image_quantum: None,
                 counters,
+                chains_part_empty,
             },
             info,
         ))
     }
 
     fn prepare(&mut self, tracer: &Tracer) -> Result<(), String> {
-        if self.settings.quantum != QuantumScope::Image {
+        if self.settings.quantum != QuantumScope::Image || self.chains_part_empty {
             return Ok(());
         }
         // Algorithm 1 over the whole image: one camera sample per pixel, a row at a time.
@@ -357,6 +466,10 @@ impl Integrator for Erpt {
         film: &mut Film,
         stats: &mut Stats,
     ) -> Result<(), String> {
+        if self.chains_part_empty {
+            self.render_without_chains(unit, tracer, film, stats);
+            return Ok(());
+        }
         let mut path = Box::new(Path::empty());
         let samples = unit.sample_begin..unit.sample_begin + unit.sample_count;
         let pixels = (unit.y0..unit.y1).flat_map(move |y| (unit.x0..unit.x1).map(move |x| (x, y)));

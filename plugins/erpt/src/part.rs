@@ -97,6 +97,12 @@ fn letter_index(node: NodeType) -> usize {
     }
 }
 
+/// The bit of a node type's letter in a letter mask (bit i: letter i of `E D G S L`).
+#[inline]
+pub fn letter_bit_of(node: NodeType) -> u8 {
+    1 << letter_index(node)
+}
+
 /// A compiled Heckbert pattern, matched against a whole path type: the parsed items, and the
 /// deterministic automaton that matches them (`automaton.rs`).
 #[derive(Clone, Debug, PartialEq)]
@@ -303,6 +309,17 @@ impl Part {
         self.chains_for.is_none() && !self.direct_by_mcpt
     }
 
+    /// True when no path can be in the part if its interior vertices only take letters of
+    /// `interior` (a letter mask, [`letter_bit_of`]): the pattern accepts no word over those
+    /// letters, the eye and the light. E.g. `caustics` in a scene without a Dirac surface.
+    pub fn is_empty_for(&self, interior: u8) -> bool {
+        let ends = letter_bit_of(NodeType::Eye) | letter_bit_of(NodeType::Light);
+        match &self.chains_for {
+            None => false,
+            Some(p) => !p.dfa.accepts_some(interior | ends),
+        }
+    }
+
     /// Whether the chains render `path`.
     pub fn contains(&self, path: &Path) -> bool {
         let mut types = [NodeType::Eye; MAX_PATH_VERTICES];
@@ -434,6 +451,27 @@ mod tests {
                 assert!(accepted > 0 && accepted < all.len(), "{text}");
             }
         }
+    }
+
+    #[test]
+    fn a_part_is_empty_where_the_scene_lacks_its_letters() {
+        let bit = letter_bit_of;
+        let d = bit(NodeType::DiffuseReflection);
+        let g = bit(NodeType::GlossyTransmission);
+        let s = bit(NodeType::SpecularReflection);
+        let caustics = Part::new("caustics", true).unwrap();
+        assert!(caustics.is_empty_for(d) && caustics.is_empty_for(d | g));
+        assert!(
+            caustics.is_empty_for(s),
+            "a Dirac surface alone makes no caustic"
+        );
+        assert!(!caustics.is_empty_for(d | s) && !caustics.is_empty_for(g | s));
+        let glossy = Part::new("E.*G.*L", false).unwrap();
+        assert!(glossy.is_empty_for(d | s) && !glossy.is_empty_for(g));
+        // Chains for every path (direct light or not) are never empty by letters.
+        assert!(!Part::new("all", true).unwrap().is_empty_for(0));
+        // A pattern that needs no interior vertex (emitters seen directly).
+        assert!(!Part::new("EL", false).unwrap().is_empty_for(0));
     }
 
     #[test]

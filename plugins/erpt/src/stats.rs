@@ -10,7 +10,8 @@
 //!
 //! The split and the seeds: `camera_samples` (camera paths traced for seeds, once per unit),
 //! `seeds` (stored seeds: paths with an estimate), `seeds_per_sample`, `mcpt_part_seeds`
-//! (seeds outside the chains' part, deposited directly), `part_misses` (proposals outside it).
+//! (seeds outside the chains' part, deposited directly), `part_misses` (proposals outside it),
+//! `units_without_chains` (units path-traced because no path of the scene can be in the part).
 //!
 //! Costs (§5.5 leaves them out; they decide whether a mixture pays): per group g
 //! `g.propose_seconds` (time in the strategy's `propose`), `g.density_calls` and
@@ -67,6 +68,7 @@ pub struct Counters {
     pub camera_samples: Counter,
     pub mcpt_part_seeds: Counter,
     pub part_misses: Counter,
+    pub units_without_chains: Counter,
     pub measure_calls: Counter,
     pub measure_seconds: Counter,
     pub seed_seconds: Counter,
@@ -90,6 +92,7 @@ impl Counters {
         let camera_samples = b.sum("camera_samples");
         let mcpt_part_seeds = b.sum("mcpt_part_seeds");
         let part_misses = b.sum("part_misses");
+        let units_without_chains = b.sum("units_without_chains");
         let measure_calls = b.sum("measure_calls");
         let measure_seconds = b.sum("measure_seconds");
         let seed_seconds = b.sum("seed_seconds");
@@ -165,6 +168,7 @@ impl Counters {
             camera_samples,
             mcpt_part_seeds,
             part_misses,
+            units_without_chains,
             measure_calls,
             measure_seconds,
             seed_seconds,
