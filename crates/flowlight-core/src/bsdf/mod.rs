@@ -283,15 +283,21 @@ impl Bsdf {
         (0, 1.0)
     }
 
+    /// The components by reference (the hot loops: a component is ~100 bytes).
+    #[inline]
+    fn component_refs(&self) -> impl Iterator<Item = &(Component, f32)> + '_ {
+        self.components[..self.count].iter().flatten()
+    }
+
     /// Mixture BSDF value Σ wᵢ fᵢ (Dirac lobes contribute nothing).
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Rgb {
-        self.components()
-            .fold(Rgb::ZERO, |acc, (c, w)| acc + c.eval(wo, wi) * w)
+        self.component_refs()
+            .fold(Rgb::ZERO, |acc, (c, w)| acc + c.eval(wo, wi) * *w)
     }
 
     /// Mixture density Σ wᵢ pᵢ (Dirac lobes contribute nothing).
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        self.components().map(|(c, w)| c.pdf(wo, wi) * w).sum()
+        self.component_refs().map(|(c, w)| c.pdf(wo, wi) * w).sum()
     }
 
     /// Samples the whole mixture: chooses a component by `u_component`, samples it with `u`,

@@ -37,6 +37,11 @@ impl OrenNayar {
 
     #[inline]
     fn factor(&self, wo: Vec3, wi: Vec3) -> f32 {
+        if self.b == 0.0 {
+            // Lambert (σ = 0, the glTF default): A = 1. The general formula gives the same
+            // wherever f is evaluated (both cosines non-zero), after two roots and divisions.
+            return self.a;
+        }
         let sin_i = (1.0 - wi.z * wi.z).max(0.0).sqrt();
         let sin_o = (1.0 - wo.z * wo.z).max(0.0).sqrt();
         let mut max_cos = 0.0;
