@@ -195,19 +195,20 @@ fn tree_shape_is_wide() {
     let tris = random_soup(20_000, 10.0, 0.5, 41);
     let wide = Bvh::build(&tris);
     // 20k triangles in packs of at most 4; every node but the root is some node's child, so
-    // the children per node are (nodes + leaves − 1) / nodes: 2 for a binary tree, at most 4
-    // here (less where a node of 5–8 triangles has only two leaves to hold them).
+    // the children per node are (nodes + leaves − 1) / nodes: 2 for a binary tree, at most 8
+    // here (less near the leaves, where a node of 5–8 triangles has only two leaves to hold
+    // them: most nodes are such bottom nodes, so the mean is about 3.5).
     let leaves = wide.leaf_count();
     assert!((5000..10_000).contains(&leaves), "{leaves} leaves");
     let nodes = wide.node_count();
     let per_node = (nodes + leaves - 1) as f64 / nodes as f64;
     assert!(
-        per_node > 2.7 && per_node <= 4.0,
+        per_node > 3.0 && per_node <= 8.0,
         "{per_node} children per node ({nodes} nodes, {leaves} leaves)"
     );
     let binary = BinaryBvh::build(&tris);
     assert!(
-        2 * wide.depth() <= binary.depth() + 2,
+        3 * wide.depth() <= binary.depth() + 3,
         "wide depth {}, binary depth {}",
         wide.depth(),
         binary.depth()
