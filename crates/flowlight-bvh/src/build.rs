@@ -309,8 +309,18 @@ impl Binner {
     }
 }
 
-/// Best SAH split: `(cost = Σ area·count, axis, first bin of the right side)`.
-fn best_split(bins: &Bins, active: [bool; 3]) -> Option<(f32, usize, usize)> {
+/// Best SAH split: `(cost = Σ area·count, axis, first bin of the right side)`. With
+/// `blocks`, `count` is the number of leaf packs, `⌈n / MAX_LEAF_SIZE⌉`, rather than of
+/// triangles (the wide tree tests a pack of up to four triangles in one pass, so a pack of
+/// one costs what a full one does; Embree's builders use the same block rounding).
+fn best_split(bins: &Bins, active: [bool; 3], blocks: bool) -> Option<(f32, usize, usize)> {
+    let weight = |n: u32| {
+        if blocks {
+            n.div_ceil(MAX_LEAF_SIZE as u32) as f32
+        } else {
+            n as f32
+        }
+    };
     let mut best: Option<(f32, usize, usize)> = None;
     for axis in 0..3 {
         if !active[axis] {
@@ -335,7 +345,7 @@ fn best_split(bins: &Bins, active: [bool; 3]) -> Option<(f32, usize, usize)> {
             if n == 0 || left_count[i - 1] == 0 {
                 continue;
             }
-            let cost = left_area[i - 1] * left_count[i - 1] as f32 + acc.area() * n as f32;
+            let cost = left_area[i - 1] * weight(left_count[i - 1]) + acc.area() * weight(n);
             if cost.is_finite() && best.is_none_or(|(c, _, _)| cost < c) {
                 best = Some((cost, axis, i));
             }
@@ -376,7 +386,8 @@ fn median_split(refs: &mut [PrimRef], axis: usize) -> Decision {
     Decision::Split { mid, axis }
 }
 
-/// Chooses between a leaf and a split, and partitions `refs` for a split.
+/// Chooses between a leaf and a split, and partitions `refs` for a split. `blocks`: the SAH
+/// counts leaf packs instead of triangles (see [`best_split`]).
 #[allow(clippy::neg_cmp_op_on_partial_ord)] // NaN extents and costs must take the fallbacks
 pub(crate) fn decide(
     refs: &mut [PrimRef],
@@ -384,6 +395,7 @@ pub(crate) fn decide(
     cbounds: &Aabb,
     depth: u32,
     parallel: bool,
+    blocks: bool,
 ) -> Decision {
     let n = refs.len();
     if n <= 1 {
@@ -420,7 +432,7 @@ pub(crate) fn decide(
     } else {
         binner.fill(refs)
     };
-    let Some((cost, axis, split)) = best_split(&bins, binner.active) else {
+    let Some((cost, axis, split)) = best_split(&bins, binner.active, blocks) else {
         return if n <= MAX_LEAF_SIZE {
             Decision::Leaf
         } else {
@@ -449,7 +461,7 @@ pub(crate) fn build_parallel(refs: &mut [PrimRef], base: u32, depth: u32) -> Vec
         return out;
     }
     let (bounds, cbounds) = scan(refs);
-    match decide(refs, &bounds, &cbounds, depth, true) {
+    match decide(refs, &bounds, &cbounds, depth, true, false) {
         Decision::Leaf => vec![Node::leaf(&bounds, base, refs.len())],
         Decision::Split { mid, axis } => {
             let (l, r) = refs.split_at_mut(mid);
@@ -477,7 +489,7 @@ pub(crate) fn build_parallel(refs: &mut [PrimRef], base: u32, depth: u32) -> Vec
 
 fn build_sequential(refs: &mut [PrimRef], base: u32, depth: u32, out: &mut Vec<Node>) {
     let (bounds, cbounds) = scan_seq(refs);
-    match decide(refs, &bounds, &cbounds, depth, false) {
+    match decide(refs, &bounds, &cbounds, depth, false, false) {
         Decision::Leaf => out.push(Node::leaf(&bounds, base, refs.len())),
         Decision::Split { mid, axis } => {
             let idx = out.len();
