@@ -93,14 +93,13 @@ impl TwoLevelBvh {
                     if c & 2 == 0 { lo.y } else { hi.y },
                     if c & 4 == 0 { lo.z } else { hi.z },
                 );
-                b.grow(a.transform_point3(corner));
+                b.grow(a.transform_point3(corner).into());
             }
             let pad = b.min.abs().max(b.max.abs()).max_element() * 4.0 * f32::EPSILON;
-            b.min -= Vec3::splat(pad);
-            b.max += Vec3::splat(pad);
+            b.min -= pad;
+            b.max += pad;
             refs.push(PrimRef {
                 bounds: b,
-                centroid: b.min * 0.5 + b.max * 0.5,
                 index: i as u32,
             });
         }

@@ -228,16 +228,16 @@ fn widen(refs: &mut [PrimRef], root: Child) -> ([Child; WIDTH], usize) {
         };
         let c = ch[i];
         let slice = &mut refs[c.start..c.start + c.len];
-        let mid = match decide(slice, &c.bounds, &c.cbounds, c.depth, true, true) {
-            Decision::Split { mid, .. } => mid,
+        let (mid, sides) = match decide(slice, &c.bounds, &c.cbounds, c.depth, true, true) {
+            Decision::Split { mid, sides, .. } => (mid, sides),
             // `decide` only returns a leaf for at most MAX_LEAF_SIZE triangles.
-            Decision::Leaf => c.len / 2,
+            Decision::Leaf => (c.len / 2, None),
         };
         let (l, r) = slice.split_at(mid);
-        let ((lb, lc), (rb, rc)) = if c.len >= PARALLEL_BUILD_THRESHOLD {
-            rayon::join(|| scan(l), || scan(r))
-        } else {
-            (scan(l), scan(r))
+        let ((lb, lc), (rb, rc)) = match sides {
+            Some([l, r]) => (l, r),
+            None if c.len >= PARALLEL_BUILD_THRESHOLD => rayon::join(|| scan(l), || scan(r)),
+            None => (scan(l), scan(r)),
         };
         ch[i] = Child {
             start: c.start,
@@ -406,7 +406,7 @@ impl Bvh {
             nodes: tree.nodes,
             packs,
             pack_prims,
-            bounds: (bounds.min, bounds.max),
+            bounds: (bounds.min.into(), bounds.max.into()),
             stored: refs.len(),
             stack_bound: bound,
             ..empty
@@ -1162,7 +1162,10 @@ mod tests {
             for slot in 0..(1 + k % WIDTH) {
                 let a = Vec3::new(u(), u(), u()) * 4.0 - 2.0;
                 let b = a + Vec3::new(u(), u(), u()) * if k % 7 == 0 { 0.0 } else { 1.0 };
-                let b = Aabb { min: a, max: b };
+                let b = Aabb {
+                    min: a.into(),
+                    max: b.into(),
+                };
                 node.set(slot, &b, slot as u32 + 1);
                 boxes.push(b);
             }
