@@ -21,7 +21,10 @@
 //!   4-wide tree's incoherent throughput (docs/performance.md).
 //! * **Triangles** — each leaf is one *pack* of up to four triangles stored SoA
 //!   (`v[vertex][axis]` holds that coordinate of the four triangles), so one leaf is one pass
-//!   of the watertight test over four lanes.
+//!   of the watertight test over four lanes; the four original triangle indices follow the
+//!   vertices (160 bytes a pack), so reporting a closest hit costs no extra cache miss, and
+//!   `occluded` never reads them (the traversal returns pack and lane; only
+//!   `intersect` looks the index up).
 //! * **Box test** — the slabs of all eight children: `t_near = max_a (near_a − o_a)·(1/d_a)`,
 //!   `t_far = (1 + 2γ₃)·min_a (far_a − o_a)·(1/d_a)`, where `near_a` is the min plane for
 //!   `d_a ≥ +0` and the max plane otherwise; a child is entered when `t_near ≤ t_far`,
@@ -107,15 +110,20 @@ impl WideNode {
 }
 
 /// Up to four triangles, SoA: `v[vertex][axis]` holds that coordinate of each lane's triangle.
-/// Unused lanes repeat lane 0 (they are masked out by the leaf's count).
+/// Unused lanes repeat lane 0 (they are masked out by the leaf's count). `prims`: each lane's
+/// original triangle index (`u32::MAX` for unused lanes), stored right after the vertices so
+/// that reporting a hit touches no other cache line.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct TriPack {
     v: [[Vec4; 3]; 3],
+    prims: [u32; LANES],
 }
 
+const _: () = assert!(std::mem::size_of::<TriPack>() == 160);
+
 impl TriPack {
-    fn new(tris: &[[Vec3; 3]]) -> TriPack {
+    fn new(tris: &[[Vec3; 3]], prims: [u32; LANES]) -> TriPack {
         debug_assert!(!tris.is_empty() && tris.len() <= LANES);
         let mut v = [[Vec4::ZERO; 3]; 3];
         for lane in 0..LANES {
@@ -126,7 +134,7 @@ impl TriPack {
                 }
             }
         }
-        TriPack { v }
+        TriPack { v, prims }
     }
 
     fn triangle(&self, lane: usize) -> [Vec3; 3] {
@@ -141,6 +149,10 @@ impl TriPack {
     }
 }
 
+/// A hit found by traversal: pack, lane, t, b1, b2 (the triangle id is looked up only when
+/// the caller wants it, so `occluded` never loads it).
+type RawHit = (usize, usize, f32, f32, f32);
+
 #[inline]
 fn leaf_ref(pack: usize, count: usize) -> u32 {
     LEAF_BIT | ((pack as u32) << 2) | (count as u32 - 1)
@@ -153,8 +165,6 @@ pub struct Bvh {
     /// Depth first, root at 0; empty when there is nothing to intersect.
     nodes: Vec<WideNode>,
     packs: Vec<TriPack>,
-    /// Original triangle index of each lane of each pack.
-    pack_prims: Vec<[u32; LANES]>,
     bounds: (Vec3, Vec3),
     stored: usize,
     input_count: usize,
@@ -362,7 +372,6 @@ impl Bvh {
         let empty = Bvh {
             nodes: Vec::new(),
             packs: Vec::new(),
-            pack_prims: Vec::new(),
             bounds: (Vec3::INFINITY, Vec3::NEG_INFINITY),
             stored: 0,
             input_count: triangles.len(),
@@ -388,7 +397,7 @@ impl Bvh {
         let bound = stack_bound(&tree.nodes, 0);
         // The SAH depth cap keeps trees far below this (`MAX_SAH_DEPTH + 32` binary levels).
         assert!(bound <= STACK_SIZE, "BVH too deep for the traversal stack");
-        let (packs, pack_prims) = tree
+        let packs = tree
             .leaves
             .par_iter()
             .map(|&(first, count)| {
@@ -399,13 +408,12 @@ impl Bvh {
                     tris[k] = triangles[p.index as usize];
                     prims[k] = p.index;
                 }
-                (TriPack::new(&tris[..r.len()]), prims)
+                TriPack::new(&tris[..r.len()], prims)
             })
-            .unzip();
+            .collect();
         Bvh {
             nodes: tree.nodes,
             packs,
-            pack_prims,
             bounds: (bounds.min.into(), bounds.max.into()),
             stored: refs.len(),
             stack_bound: bound,
@@ -464,6 +472,7 @@ impl Bvh {
     /// Closest hit with `t ∈ (0, ray.t_max)`, or `None`.
     pub fn intersect(&self, ray: &Ray) -> Option<TriangleHit> {
         self.traverse::<false, false, _>(ray, &|_, _, _| true)
+            .map(|h| self.hit(h))
     }
 
     /// Whether any triangle is hit with `t ∈ (0, ray.t_max)`. Returns at the first hit found.
@@ -476,6 +485,7 @@ impl Bvh {
     /// candidate does not shorten the ray, so traversal finds the closest accepted hit.
     pub fn intersect_filtered(&self, ray: &Ray, accept: HitFilter) -> Option<TriangleHit> {
         self.traverse::<false, true, _>(ray, &accept)
+            .map(|h| self.hit(h))
     }
 
     /// [`Bvh::occluded`] counting only the hits `accept` keeps.
@@ -490,7 +500,7 @@ impl Bvh {
         &self,
         ray: &Ray,
         accept: &F,
-    ) -> Option<TriangleHit> {
+    ) -> Option<RawHit> {
         if self.nodes.is_empty() {
             return None;
         }
@@ -529,7 +539,7 @@ impl Bvh {
         &self,
         ray: &Ray,
         accept: &F,
-    ) -> Option<TriangleHit> {
+    ) -> Option<RawHit> {
         self.traverse_with::<ANY_HIT, FILTER, F, STACK, true>(ray, accept)
     }
 
@@ -545,14 +555,14 @@ impl Bvh {
         &self,
         ray: &Ray,
         accept: &F,
-    ) -> Option<TriangleHit> {
+    ) -> Option<RawHit> {
         let wray = WatertightRay::new(ray)?;
         let pray = PackRay::new(ray, &wray);
         let bray = BoxRay::new(ray);
         let mut t_max = ray.t_max;
         // The closest hit so far: pack, lane, t, b1, b2 (its triangle id is looked up once,
         // at the end, instead of at every closer hit).
-        let mut hit: Option<(usize, usize, f32, f32, f32)> = None;
+        let mut hit: Option<RawHit> = None;
         let mut stack = [(0u32, 0f32); STACK];
         let mut sp = 0usize;
         let mut cur = 0u32;
@@ -603,11 +613,11 @@ impl Bvh {
                     None => scalar_pack_test(&wray, &self.packs[pack], valid, t_max),
                 };
                 if lanes.mask != 0 {
-                    let prims = &self.pack_prims[pack];
+                    let prims = &self.packs[pack].prims;
                     if let Some(k) = lanes.pick::<ANY_HIT, FILTER, F>(prims, accept) {
                         let h = (pack, k, lanes.t[k], lanes.b1[k], lanes.b2[k]);
                         if ANY_HIT {
-                            return Some(self.hit(h));
+                            return Some(h);
                         }
                         t_max = h.2;
                         hit = Some(h);
@@ -617,7 +627,7 @@ impl Bvh {
             // Pop the next entry that can still hold a closer hit.
             loop {
                 if sp == 0 {
-                    return hit.map(|h| self.hit(h));
+                    return hit;
                 }
                 sp -= 1;
                 let (r, t) = stack[sp];
@@ -632,10 +642,10 @@ impl Bvh {
 
 impl Bvh {
     #[inline(always)]
-    fn hit(&self, (pack, lane, t, b1, b2): (usize, usize, f32, f32, f32)) -> TriangleHit {
+    fn hit(&self, (pack, lane, t, b1, b2): RawHit) -> TriangleHit {
         TriangleHit {
             t,
-            prim: self.pack_prims[pack][lane],
+            prim: self.packs[pack].prims[lane],
             b1,
             b2,
         }
@@ -974,13 +984,15 @@ mod tests {
                 let pack = ((r & !LEAF_BIT) >> 2) as usize;
                 let count = (r & 3) as usize + 1;
                 for lane in 0..count {
-                    let prim = bvh.pack_prims[pack][lane] as usize;
+                    let prim = bvh.packs[pack].prims[lane] as usize;
                     seen[prim] += 1;
                     let t = bvh.packs[pack].triangle(lane);
                     assert_eq!(t, tris[prim]);
                     assert!(t.iter().all(|&p| inside(p)));
                 }
-                assert!(bvh.pack_prims[pack][count..].iter().all(|&p| p == u32::MAX));
+                assert!(bvh.packs[pack].prims[count..]
+                    .iter()
+                    .all(|&p| p == u32::MAX));
                 continue;
             }
             let n = &bvh.nodes[r as usize];
@@ -1056,7 +1068,7 @@ mod tests {
             if tris.is_empty() {
                 continue;
             }
-            let pack = TriPack::new(&tris);
+            let pack = TriPack::new(&tris, [0; LANES]);
             let valid = (1u32 << tris.len()) - 1;
             let (origin, dir) = if k % 3 == 0 {
                 let v = tris[0][k % 3];
