@@ -426,7 +426,9 @@ fn median_split(refs: &mut [PrimRef], axis: usize) -> Decision {
 }
 
 /// Chooses between a leaf and a split, and partitions `refs` for a split. `blocks`: the SAH
-/// counts leaf packs instead of triangles (see [`best_split`]).
+/// counts leaf packs instead of triangles (see [`best_split`]). Up to `max_leaf` triangles,
+/// a leaf is chosen when its cost (triangles, or packs with `blocks`) is at most the best
+/// split's.
 #[allow(clippy::neg_cmp_op_on_partial_ord)] // NaN extents and costs must take the fallbacks
 pub(crate) fn decide(
     refs: &mut [PrimRef],
@@ -435,6 +437,7 @@ pub(crate) fn decide(
     depth: u32,
     parallel: bool,
     blocks: bool,
+    max_leaf: usize,
 ) -> Decision {
     let n = refs.len();
     if n <= 1 {
@@ -479,11 +482,16 @@ pub(crate) fn decide(
             median_split(refs, longest)
         };
     };
-    if n <= MAX_LEAF_SIZE {
+    if n <= max_leaf {
         let area = bounds.area();
         let split_cost = TRAVERSAL_COST + cost / area;
+        let leaf_cost = if blocks {
+            n.div_ceil(MAX_LEAF_SIZE) as f32
+        } else {
+            n as f32
+        };
         // A flat or overflowing box gives a non-finite ratio: keep the small leaf then.
-        if !(area > 0.0 && split_cost.is_finite()) || n as f32 <= split_cost {
+        if !(area > 0.0 && split_cost.is_finite()) || leaf_cost <= split_cost {
             return Decision::Leaf;
         }
     }
@@ -505,7 +513,7 @@ pub(crate) fn build_parallel(refs: &mut [PrimRef], base: u32, depth: u32) -> Vec
         return out;
     }
     let (bounds, cbounds) = scan(refs);
-    match decide(refs, &bounds, &cbounds, depth, true, false) {
+    match decide(refs, &bounds, &cbounds, depth, true, false, MAX_LEAF_SIZE) {
         Decision::Leaf => vec![Node::leaf(&bounds, base, refs.len())],
         Decision::Split { mid, axis, .. } => {
             let (l, r) = refs.split_at_mut(mid);
@@ -533,7 +541,7 @@ pub(crate) fn build_parallel(refs: &mut [PrimRef], base: u32, depth: u32) -> Vec
 
 fn build_sequential(refs: &mut [PrimRef], base: u32, depth: u32, out: &mut Vec<Node>) {
     let (bounds, cbounds) = scan_seq(refs);
-    match decide(refs, &bounds, &cbounds, depth, false, false) {
+    match decide(refs, &bounds, &cbounds, depth, false, false, MAX_LEAF_SIZE) {
         Decision::Leaf => out.push(Node::leaf(&bounds, base, refs.len())),
         Decision::Split { mid, axis, .. } => {
             let idx = out.len();

@@ -3,25 +3,28 @@
 //! * **Build** — the binned-SAH splits of the binary build ([`crate::BinaryBvh`], Wald 2007,
 //!   pbrt-v4 §7.3), applied top-down to widen each node to up to [`WIDTH`] (8) children:
 //!   starting from the node's triangles as one child, the child with the largest surface area
-//!   that holds more than [`MAX_LEAF_SIZE`] triangles is split by the SAH until there are
-//!   eight children (the "wide BVH by repeated splitting of the largest child" of Wald,
-//!   Benthin & Boulos, "Getting Rid of Packets", IRT 2008, and Embree's BVH4/BVH8 builders).
-//!   Children of at most [`MAX_LEAF_SIZE`] triangles become leaves. The SAH of these splits
-//!   counts leaf packs, `⌈n/4⌉`, not triangles (Embree's block rounding): a pack of one
-//!   triangle costs one pass of the 4-lane test like a full one, so splits that fill packs
-//!   win (about 40% fewer nodes, faster builds). No binary tree is
+//!   that is not a leaf is split by the SAH until there are eight children (the "wide BVH by
+//!   repeated splitting of the largest child" of Wald, Benthin & Boulos, "Getting Rid of
+//!   Packets", IRT 2008, and Embree's BVH4/BVH8 builders). Children of at most
+//!   [`MAX_LEAF_SIZE`] triangles are leaves; so is a child of up to `LEAF_PACKS · 4` (8)
+//!   triangles whose leaf cost the SAH finds no higher than its best split's (as Embree's
+//!   leaves of several triangle blocks; ~30% fewer nodes, faster 100k-triangle traversal).
+//!   The SAH of these splits counts leaf packs, `⌈n/4⌉`, not triangles (Embree's block
+//!   rounding): a pack of one triangle costs one pass of the 4-lane test like a full one, so
+//!   splits that fill packs win (about 40% fewer nodes, faster builds). No binary tree is
 //!   materialised; the upper levels are built in parallel (rayon) and the result does not
 //!   depend on the thread schedule.
 //! * **Nodes** — 256 bytes, four cache lines: the eight children's boxes in SoA order
 //!   (`min x` of the 8 children, `max x`, `min y`, …, each row 32 bytes: one AVX register or
-//!   two SSE ones) and eight child references (interior node index, or leaf: pack index and
-//!   triangle count, or empty). Empty slots have the box `(+∞, −∞)`, which no ray hits.
+//!   two SSE ones) and eight child references (interior node index, or leaf: first pack
+//!   index and pack count, or empty). Empty slots have the box `(+∞, −∞)`, which no ray hits.
 //!   Eight children rather than four: a third fewer levels, so fewer dependent cache misses
 //!   per ray (Embree uses BVH8 on AVX2 machines for the same reason); measured 1.1–1.3× the
 //!   4-wide tree's incoherent throughput (docs/performance.md).
-//! * **Triangles** — each leaf is one *pack* of up to four triangles stored SoA
-//!   (`v[vertex][axis]` holds that coordinate of the four triangles), so one leaf is one pass
-//!   of the watertight test over four lanes; the four original triangle indices follow the
+//! * **Triangles** — each leaf is one or two consecutive *packs* of up to four triangles
+//!   stored SoA (`v[vertex][axis]` holds that coordinate of the four triangles), so a pack is
+//!   one pass of the watertight test over four lanes; the four original triangle indices
+//!   (`u32::MAX` in unused lanes, which also gives the pack's lane count) follow the
 //!   vertices (160 bytes a pack), so reporting a closest hit costs no extra cache miss, and
 //!   `occluded` never reads them (the traversal returns pack and lane; only
 //!   `intersect` looks the index up).
@@ -63,7 +66,10 @@ use rayon::prelude::*;
 pub const WIDTH: usize = 8;
 /// Triangles per leaf pack (lanes of the pack test).
 const LANES: usize = 4;
-/// A child reference with this bit set is a leaf: `pack << 2 | (count − 1)` below it.
+/// Most packs in one leaf (the SAH decides between a leaf of several packs and a node).
+const LEAF_PACKS: usize = 2;
+const _: () = assert!(LEAF_PACKS >= 1 && LEAF_PACKS <= 4 && MAX_LEAF_SIZE == LANES);
+/// A child reference with this bit set is a leaf: `first pack << 2 | (packs − 1)` below it.
 const LEAF_BIT: u32 = 1 << 31;
 /// An unused child slot (its box is empty, so it is never entered).
 const EMPTY_CHILD: u32 = u32::MAX;
@@ -137,6 +143,13 @@ impl TriPack {
         TriPack { v, prims }
     }
 
+    /// The lanes that hold a triangle (the first ones).
+    #[inline(always)]
+    fn valid(&self) -> u32 {
+        let used = |k: usize| u32::from(self.prims[k] != u32::MAX);
+        (1 << (1 + used(1) + used(2) + used(3))) - 1
+    }
+
     fn triangle(&self, lane: usize) -> [Vec3; 3] {
         let p = |vi: usize| {
             Vec3::new(
@@ -153,9 +166,19 @@ impl TriPack {
 /// the caller wants it, so `occluded` never loads it).
 type RawHit = (usize, usize, f32, f32, f32);
 
-#[inline]
-fn leaf_ref(pack: usize, count: usize) -> u32 {
-    LEAF_BIT | ((pack as u32) << 2) | (count as u32 - 1)
+/// Appends the packs of a leaf over `refs[first .. first + len]` (`len ≤ LANES·LEAF_PACKS`)
+/// to `packs`; returns the leaf's child reference.
+fn push_leaf(packs: &mut Vec<(u32, u8)>, first: usize, len: usize) -> u32 {
+    debug_assert!((1..=LANES * LEAF_PACKS).contains(&len));
+    let first_pack = packs.len();
+    let n = len.div_ceil(LANES);
+    for p in 0..n {
+        packs.push((
+            (first + p * LANES) as u32,
+            (len - p * LANES).min(LANES) as u8,
+        ));
+    }
+    LEAF_BIT | ((first_pack as u32) << 2) | (n as u32 - 1)
 }
 
 /// A 4-wide bounding volume hierarchy over a triangle soup, with closest-hit and any-hit
@@ -199,7 +222,9 @@ fn stack_bound(nodes: &[WideNode], r: u32) -> usize {
     children.clone().count() - 1 + children.map(|&c| stack_bound(nodes, c)).max().unwrap_or(0)
 }
 
-/// A child during widening: `refs[start .. start + len]`, its boxes and binary depth.
+/// A child during widening: `refs[start .. start + len]`, its boxes and binary depth, and
+/// whether it is a leaf (at most [`MAX_LEAF_SIZE`] triangles, or the SAH chose a leaf of
+/// up to [`LEAF_PACKS`] packs).
 #[derive(Clone, Copy, Debug)]
 struct Child {
     start: usize,
@@ -207,40 +232,45 @@ struct Child {
     bounds: Aabb,
     cbounds: Aabb,
     depth: u32,
+    leaf: bool,
 }
 
-/// Nodes and leaves of a subtree; child references are relative to the subtree (its root
-/// node is 0, its first leaf is pack 0). `leaves` are `(first ref, count)`, absolute.
+/// Nodes and packs of a subtree; child references are relative to the subtree (its root
+/// node is 0, its first pack is pack 0). `leaves` are the packs, `(first ref, count)`,
+/// absolute.
 #[derive(Default)]
 struct Subtree {
     nodes: Vec<WideNode>,
     leaves: Vec<(u32, u8)>,
 }
 
-/// Splits the child with the largest area (among those with more than `MAX_LEAF_SIZE`
-/// triangles) until there are `WIDTH` children or none can be split; the children are
-/// returned in the order of their triangle ranges.
+/// Splits the child with the largest area (among those that are not leaves) until there are
+/// `WIDTH` children or none can be split; the children are returned in the order of their
+/// triangle ranges.
 fn widen(refs: &mut [PrimRef], root: Child) -> ([Child; WIDTH], usize) {
+    let max_leaf = LANES * LEAF_PACKS;
     let mut ch = [root; WIDTH];
     let mut n = 1;
     while n < WIDTH {
-        let Some(i) = (0..n)
-            .filter(|&i| ch[i].len > MAX_LEAF_SIZE)
-            .max_by(|&a, &b| {
-                ch[a]
-                    .bounds
-                    .area()
-                    .total_cmp(&ch[b].bounds.area())
-                    .then(b.cmp(&a))
-            })
-        else {
+        let Some(i) = (0..n).filter(|&i| !ch[i].leaf).max_by(|&a, &b| {
+            ch[a]
+                .bounds
+                .area()
+                .total_cmp(&ch[b].bounds.area())
+                .then(b.cmp(&a))
+        }) else {
             break;
         };
         let c = ch[i];
         let slice = &mut refs[c.start..c.start + c.len];
-        let (mid, sides) = match decide(slice, &c.bounds, &c.cbounds, c.depth, true, true) {
+        let (mid, sides) = match decide(slice, &c.bounds, &c.cbounds, c.depth, true, true, max_leaf)
+        {
             Decision::Split { mid, sides, .. } => (mid, sides),
-            // `decide` only returns a leaf for at most MAX_LEAF_SIZE triangles.
+            Decision::Leaf if c.len <= max_leaf => {
+                ch[i].leaf = true;
+                continue;
+            }
+            // `decide` returns no other leaf (above MAX_LEAF_SIZE triangles).
             Decision::Leaf => (c.len / 2, None),
         };
         let (l, r) = slice.split_at(mid);
@@ -255,6 +285,7 @@ fn widen(refs: &mut [PrimRef], root: Child) -> ([Child; WIDTH], usize) {
             bounds: lb,
             cbounds: lc,
             depth: c.depth + 1,
+            leaf: mid <= MAX_LEAF_SIZE,
         };
         ch[n] = Child {
             start: c.start + mid,
@@ -262,8 +293,20 @@ fn widen(refs: &mut [PrimRef], root: Child) -> ([Child; WIDTH], usize) {
             bounds: rb,
             cbounds: rc,
             depth: c.depth + 1,
+            leaf: c.len - mid <= MAX_LEAF_SIZE,
         };
         n += 1;
+    }
+    // Children left unsplit when the node filled up: one the SAH would make a leaf becomes
+    // one here, rather than a node holding a single leaf. (A split only reorders the
+    // child's range; its subtree is built from the same set of triangles.)
+    let max_leaf = LANES * LEAF_PACKS;
+    for c in &mut ch[..n] {
+        if !c.leaf && c.len <= max_leaf {
+            let slice = &mut refs[c.start..c.start + c.len];
+            let d = decide(slice, &c.bounds, &c.cbounds, c.depth, false, true, max_leaf);
+            c.leaf = matches!(d, Decision::Leaf);
+        }
     }
     ch[..n].sort_unstable_by_key(|c| c.start);
     (ch, n)
@@ -276,9 +319,8 @@ fn build_sequential(refs: &mut [PrimRef], base: usize, root: Child, out: &mut Su
     let idx = out.nodes.len();
     out.nodes.push(WideNode::EMPTY);
     for (k, c) in ch[..n].iter().enumerate() {
-        let child = if c.len <= MAX_LEAF_SIZE {
-            out.leaves.push(((base + c.start) as u32, c.len as u8));
-            leaf_ref(out.leaves.len() - 1, c.len)
+        let child = if c.leaf {
+            push_leaf(&mut out.leaves, base + c.start, c.len)
         } else {
             let sub = Child { start: 0, ..*c };
             build_sequential(
@@ -313,10 +355,7 @@ fn build_parallel(refs: &mut [PrimRef], base: usize, root: Child) -> Subtree {
     }
     let subs: Vec<Option<Subtree>> = slices
         .into_par_iter()
-        .map(|(s, c)| {
-            (c.len > MAX_LEAF_SIZE)
-                .then(|| build_parallel(s, base + c.start, Child { start: 0, ..c }))
-        })
+        .map(|(s, c)| (!c.leaf).then(|| build_parallel(s, base + c.start, Child { start: 0, ..c })))
         .collect();
     let total: usize = subs.iter().flatten().map(|s| s.nodes.len()).sum();
     let mut out = Subtree {
@@ -326,10 +365,7 @@ fn build_parallel(refs: &mut [PrimRef], base: usize, root: Child) -> Subtree {
     out.nodes.push(WideNode::EMPTY);
     for (k, (c, sub)) in ch[..n].iter().zip(subs).enumerate() {
         let child = match sub {
-            None => {
-                out.leaves.push(((base + c.start) as u32, c.len as u8));
-                leaf_ref(out.leaves.len() - 1, c.len)
-            }
+            None => push_leaf(&mut out.leaves, base + c.start, c.len),
             Some(sub) => {
                 let node_shift = out.nodes.len() as u32;
                 let leaf_shift = (out.leaves.len() as u32) << 2;
@@ -388,6 +424,7 @@ impl Bvh {
             bounds,
             cbounds,
             depth: 0,
+            leaf: refs.len() <= MAX_LEAF_SIZE,
         };
         let tree = build_parallel(&mut refs, 0, root);
         assert!(
@@ -436,7 +473,7 @@ impl Bvh {
         self.nodes.len()
     }
 
-    /// Number of leaves (packs of up to four triangles).
+    /// Number of packs of up to four triangles (a leaf holds one or more).
     pub fn leaf_count(&self) -> usize {
         self.packs.len()
     }
@@ -606,21 +643,23 @@ impl Bvh {
                     continue;
                 }
             } else {
-                let pack = ((cur & !LEAF_BIT) >> 2) as usize;
-                let valid = (1u32 << ((cur & 3) + 1)) - 1;
-                let lanes = match pray.test(&self.packs[pack], valid, t_max) {
-                    Some(l) => l,
-                    None => scalar_pack_test(&wray, &self.packs[pack], valid, t_max),
-                };
-                if lanes.mask != 0 {
-                    let prims = &self.packs[pack].prims;
-                    if let Some(k) = lanes.pick::<ANY_HIT, FILTER, F>(prims, accept) {
-                        let h = (pack, k, lanes.t[k], lanes.b1[k], lanes.b2[k]);
-                        if ANY_HIT {
-                            return Some(h);
+                let first = ((cur & !LEAF_BIT) >> 2) as usize;
+                for pack in first..=first + (cur & 3) as usize {
+                    let p = &self.packs[pack];
+                    let valid = p.valid();
+                    let lanes = match pray.test(p, valid, t_max) {
+                        Some(l) => l,
+                        None => scalar_pack_test(&wray, p, valid, t_max),
+                    };
+                    if lanes.mask != 0 {
+                        if let Some(k) = lanes.pick::<ANY_HIT, FILTER, F>(&p.prims, accept) {
+                            let h = (pack, k, lanes.t[k], lanes.b1[k], lanes.b2[k]);
+                            if ANY_HIT {
+                                return Some(h);
+                            }
+                            t_max = h.2;
+                            hit = Some(h);
                         }
-                        t_max = h.2;
-                        hit = Some(h);
                     }
                 }
             }
@@ -973,7 +1012,9 @@ mod tests {
 
     /// Children inside their parent's slot box, every stored triangle in exactly one valid
     /// lane, empty slots with empty boxes, the stack bound respected.
-    fn check_structure(bvh: &Bvh, tris: &[[Vec3; 3]]) {
+    /// Returns the number of leaves of more than one pack.
+    fn check_structure(bvh: &Bvh, tris: &[[Vec3; 3]]) -> usize {
+        let mut multi = 0;
         let mut seen = vec![0u32; tris.len()];
         let mut stack = vec![(0u32, Vec3::NEG_INFINITY, Vec3::INFINITY, 1usize)];
         assert!(bvh.stack_bound <= (WIDTH - 1) * bvh.depth());
@@ -981,18 +1022,23 @@ mod tests {
             assert!(depth <= bvh.depth());
             let inside = |p: Vec3| p.cmpge(lo).all() && p.cmple(hi).all();
             if r & LEAF_BIT != 0 {
-                let pack = ((r & !LEAF_BIT) >> 2) as usize;
-                let count = (r & 3) as usize + 1;
-                for lane in 0..count {
-                    let prim = bvh.packs[pack].prims[lane] as usize;
-                    seen[prim] += 1;
-                    let t = bvh.packs[pack].triangle(lane);
-                    assert_eq!(t, tris[prim]);
-                    assert!(t.iter().all(|&p| inside(p)));
+                let first = ((r & !LEAF_BIT) >> 2) as usize;
+                let packs = (r & 3) as usize + 1;
+                multi += usize::from(packs > 1);
+                assert!(packs <= LEAF_PACKS);
+                for pack in first..first + packs {
+                    let count = bvh.packs[pack].valid().count_ones() as usize;
+                    for lane in 0..count {
+                        let prim = bvh.packs[pack].prims[lane] as usize;
+                        seen[prim] += 1;
+                        let t = bvh.packs[pack].triangle(lane);
+                        assert_eq!(t, tris[prim]);
+                        assert!(t.iter().all(|&p| inside(p)));
+                    }
+                    assert!(bvh.packs[pack].prims[count..]
+                        .iter()
+                        .all(|&p| p == u32::MAX));
                 }
-                assert!(bvh.packs[pack].prims[count..]
-                    .iter()
-                    .all(|&p| p == u32::MAX));
                 continue;
             }
             let n = &bvh.nodes[r as usize];
@@ -1013,6 +1059,7 @@ mod tests {
         for (i, t) in tris.iter().enumerate() {
             assert_eq!(seen[i], u32::from(!is_degenerate(t)), "triangle {i}");
         }
+        multi
     }
 
     #[test]
@@ -1020,7 +1067,8 @@ mod tests {
         for n in [1, 4, 5, 17, 3000, 40_000] {
             let tris = random_soup(n, n as u64);
             let bvh = Bvh::build(&tris);
-            check_structure(&bvh, &tris);
+            let multi = check_structure(&bvh, &tris);
+            assert!(n < 3000 || multi > 0, "{n}: no leaf of two packs");
             let one = rayon::ThreadPoolBuilder::new()
                 .num_threads(1)
                 .build()
