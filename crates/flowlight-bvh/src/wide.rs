@@ -44,6 +44,10 @@
 //! * **Traversal** — iterative with a stack of (node, entry distance). Closest hit visits the
 //!   entered children nearest first (entry distances sorted) and skips popped entries whose
 //!   entry distance is no longer below `t_max`; any hit returns at the first accepted hit.
+//!   When a node enters several children, all of them (node lines, or a leaf's first pack)
+//!   are prefetched at once, so that their cache misses overlap rather than come one after
+//!   the other as the children are visited (x86-64 `prefetcht0`; measured +7–25% at 1M
+//!   triangles, neutral at 10k–100k).
 //! * **Triangle test** — the watertight test of [`crate::WatertightRay`] (Woop, Benthin &
 //!   Wald, JCGT 2013, with pbrt-v4's conservative `t` bound), evaluated on four lanes with the
 //!   same IEEE operations in the same order, no FMA (the AVX2 build enables no FMA either, and
@@ -66,6 +70,8 @@ use rayon::prelude::*;
 pub const WIDTH: usize = 8;
 /// Triangles per leaf pack (lanes of the pack test).
 const LANES: usize = 4;
+/// Whether traversal prefetches all entered children of a node at once.
+const PREFETCH: bool = true;
 /// Most packs in one leaf (the SAH decides between a leaf of several packs and a node).
 const LEAF_PACKS: usize = 2;
 const _: () = assert!(LEAF_PACKS >= 1 && LEAF_PACKS <= 4 && MAX_LEAF_SIZE == LANES);
@@ -608,6 +614,16 @@ impl Bvh {
                 let node = &self.nodes[cur as usize];
                 let (mut mask, t_near) = bray.test::<AVX2>(node, t_max);
                 if mask != 0 {
+                    if PREFETCH && mask & (mask - 1) != 0 {
+                        // Several children entered: ask for all of them now, so that their
+                        // cache misses overlap instead of coming one after the other.
+                        let mut m = mask;
+                        while m != 0 {
+                            let j = m.trailing_zeros() as usize;
+                            m &= m - 1;
+                            self.prefetch(node.child[j]);
+                        }
+                    }
                     if ANY_HIT || mask & (mask - 1) == 0 {
                         // One child, or any order: go down the first, stack the others.
                         let k = mask.trailing_zeros() as usize;
@@ -680,6 +696,30 @@ impl Bvh {
 }
 
 impl Bvh {
+    /// Asks the cache for the lines of a node (4) or of a leaf's first pack (a 160-byte pack
+    /// at a 16-byte boundary spans up to 4); a hint, a no-op off x86-64.
+    #[inline(always)]
+    fn prefetch(&self, r: u32) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+            let (p, last) = if r & LEAF_BIT != 0 {
+                let pack = ((r & !LEAF_BIT) >> 2) as usize;
+                let p = self.packs.as_ptr().wrapping_add(pack) as *const i8;
+                (p, std::mem::size_of::<TriPack>() - 1)
+            } else {
+                let p = self.nodes.as_ptr().wrapping_add(r as usize) as *const i8;
+                (p, std::mem::size_of::<WideNode>() - 1)
+            };
+            for off in [0, 64, 128, last] {
+                // SAFETY: a prefetch never faults, whatever the address.
+                unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(off)) };
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = r;
+    }
+
     #[inline(always)]
     fn hit(&self, (pack, lane, t, b1, b2): RawHit) -> TriangleHit {
         TriangleHit {
