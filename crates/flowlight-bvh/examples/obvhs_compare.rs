@@ -1,7 +1,8 @@
 //! Measures the `obvhs` crate's CWBVH (PLOC build, 8-wide compressed nodes, SIMD traversal)
-//! against our 4-wide [`Bvh`] on the ray benchmark's lumpy closed sphere: build time, and
-//! closest / any-hit throughput on incoherent rays on one thread, with our watertight
-//! triangle test plugged into obvhs' traversal (so only the hierarchies differ). Also counts
+//! against our wide [`Bvh`] (4-wide when docs/performance.md quoted this comparison, 8-wide
+//! now) on the ray benchmark's lumpy closed sphere: build time, and closest / any-hit
+//! throughput on incoherent rays on one thread, with our watertight triangle test plugged
+//! into obvhs' traversal (so only the hierarchies differ). Also counts
 //! rays where obvhs' closest hit differs from ours (a box test that culls a box the ray
 //! touches shows up here). Alternating rounds; prints medians and ranges of the ratios.
 //!

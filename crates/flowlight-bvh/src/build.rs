@@ -1,8 +1,15 @@
 //! Binned SAH build (Wald 2007; pbrt-v4 §7.3) and the depth-first flattened node layout
 //! (pbrt-v4 `LinearBVHNode`); see the crate documentation for the method.
+//!
+//! Shared by [`BinaryBvh`], the widening of [`crate::Bvh`] and the top level of
+//! [`crate::TwoLevelBvh`]. Boxes are `Vec3A` (SIMD unions); a [`PrimRef`] is a box and an
+//! index (48 bytes), its centroid recomputed when needed; a bin index is one clamped
+//! float-to-i32 conversion per axis ([`Binner::bins_of`]); the partition of a split gathers
+//! both children's bounds and centroid bounds, so the widening needs no second pass over
+//! them; [`decide`] can weigh the SAH by leaf packs instead of triangles ([`best_split`]).
 
 use crate::triangle::is_degenerate;
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 use rayon::prelude::*;
 
 /// Largest number of triangles in a leaf.
@@ -148,16 +155,17 @@ impl BinaryBvh {
     }
 }
 
+/// A box; `Vec3A` (16 bytes, SIMD) so that unions are two vector instructions.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Aabb {
-    pub(crate) min: Vec3,
-    pub(crate) max: Vec3,
+    pub(crate) min: Vec3A,
+    pub(crate) max: Vec3A,
 }
 
 impl Aabb {
     pub(crate) const EMPTY: Aabb = Aabb {
-        min: Vec3::INFINITY,
-        max: Vec3::NEG_INFINITY,
+        min: Vec3A::INFINITY,
+        max: Vec3A::NEG_INFINITY,
     };
 
     #[inline]
@@ -169,7 +177,7 @@ impl Aabb {
     }
 
     #[inline]
-    pub(crate) fn grow(&mut self, p: Vec3) {
+    pub(crate) fn grow(&mut self, p: Vec3A) {
         self.min = self.min.min(p);
         self.max = self.max.max(p);
     }
@@ -186,24 +194,31 @@ impl Aabb {
     }
 }
 
-/// A triangle during the build: bounds, centroid of the bounds, original index.
+/// A triangle during the build: bounds and original index (48 bytes; the centroid is
+/// recomputed from the bounds where needed, which is cheaper than moving it around).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct PrimRef {
     pub(crate) bounds: Aabb,
-    pub(crate) centroid: Vec3,
     pub(crate) index: u32,
 }
 
 impl PrimRef {
     pub(crate) fn new(t: &[Vec3; 3], index: u32) -> PrimRef {
-        let min = t[0].min(t[1]).min(t[2]);
-        let max = t[0].max(t[1]).max(t[2]);
-        // Halve first: `min + max` can overflow for coordinates near f32::MAX.
+        let [a, b, c] = t.map(Vec3A::from);
         PrimRef {
-            bounds: Aabb { min, max },
-            centroid: min * 0.5 + max * 0.5,
+            bounds: Aabb {
+                min: a.min(b).min(c),
+                max: a.max(b).max(c),
+            },
             index,
         }
+    }
+
+    /// Centroid of the bounds. Halve first: `min + max` can overflow for coordinates near
+    /// f32::MAX.
+    #[inline(always)]
+    pub(crate) fn centroid(&self) -> Vec3A {
+        self.bounds.min * 0.5 + self.bounds.max * 0.5
     }
 }
 
@@ -213,7 +228,7 @@ pub(crate) fn scan_seq(refs: &[PrimRef]) -> (Aabb, Aabb) {
     let mut c = Aabb::EMPTY;
     for r in refs {
         b = b.union(r.bounds);
-        c.grow(r.centroid);
+        c.grow(r.centroid());
     }
     (b, c)
 }
@@ -244,8 +259,8 @@ const EMPTY_BINS: Bins = [[Bin {
 /// Maps centroids to bins along each axis with non-zero centroid extent.
 #[derive(Clone, Copy, Debug)]
 struct Binner {
-    cmin: Vec3,
-    scale: [f32; 3],
+    cmin: Vec3A,
+    scale: Vec3A,
     active: [bool; 3],
 }
 
@@ -253,13 +268,13 @@ impl Binner {
     fn new(c: &Aabb) -> Binner {
         let ext = c.max - c.min;
         let active = [ext.x > 0.0, ext.y > 0.0, ext.z > 0.0];
-        let scale = [0, 1, 2].map(|a| {
+        let scale = Vec3A::from([0, 1, 2].map(|a| {
             if active[a] {
                 SAH_BINS as f32 / ext[a]
             } else {
                 0.0
             }
-        });
+        }));
         Binner {
             cmin: c.min,
             scale,
@@ -267,19 +282,29 @@ impl Binner {
         }
     }
 
-    /// Bin of a centroid along `axis`. Saturating casts map NaN and negatives to 0, overflow to
-    /// the last bin. Binning and partitioning both use this function, so they agree exactly.
-    #[inline]
-    fn bin(&self, c: Vec3, axis: usize) -> usize {
-        (((c[axis] - self.cmin[axis]) * self.scale[axis]) as usize).min(SAH_BINS - 1)
+    /// Bins of a centroid on the three axes: `⌊(c_a − cmin_a)·scale_a⌋` clamped to the bins,
+    /// NaN and negatives to bin 0 (the SSE `max` returns its second operand, 0, for a NaN
+    /// first one), overflow to the last bin — what the saturating cast
+    /// `(f as usize).min(SAH_BINS − 1)` gives, without its cost (a float to 64-bit integer
+    /// conversion with range checks was 15% of a build). Binning and partitioning both use
+    /// this function, so they agree exactly.
+    #[inline(always)]
+    fn bins_of(&self, c: Vec3A) -> [usize; 3] {
+        let f = ((c - self.cmin) * self.scale)
+            .max(Vec3A::ZERO)
+            .min(Vec3A::splat((SAH_BINS - 1) as f32))
+            .to_array();
+        // SAFETY: every lane is in [0, SAH_BINS − 1] (not NaN), so it fits an i32.
+        f.map(|x| unsafe { x.to_int_unchecked::<i32>() } as usize)
     }
 
     fn fill(&self, refs: &[PrimRef]) -> Bins {
         let mut bins = EMPTY_BINS;
         for r in refs {
+            let k = self.bins_of(r.centroid());
             for (a, axis_bins) in bins.iter_mut().enumerate() {
                 if self.active[a] {
-                    let b = &mut axis_bins[self.bin(r.centroid, a)];
+                    let b = &mut axis_bins[k[a]];
                     b.bounds = b.bounds.union(r.bounds);
                     b.count += 1;
                 }
@@ -309,8 +334,18 @@ impl Binner {
     }
 }
 
-/// Best SAH split: `(cost = Σ area·count, axis, first bin of the right side)`.
-fn best_split(bins: &Bins, active: [bool; 3]) -> Option<(f32, usize, usize)> {
+/// Best SAH split: `(cost = Σ area·count, axis, first bin of the right side)`. With
+/// `blocks`, `count` is the number of leaf packs, `⌈n / MAX_LEAF_SIZE⌉`, rather than of
+/// triangles (the wide tree tests a pack of up to four triangles in one pass, so a pack of
+/// one costs what a full one does; Embree's builders use the same block rounding).
+fn best_split(bins: &Bins, active: [bool; 3], blocks: bool) -> Option<(f32, usize, usize)> {
+    let weight = |n: u32| {
+        if blocks {
+            n.div_ceil(MAX_LEAF_SIZE as u32) as f32
+        } else {
+            n as f32
+        }
+    };
     let mut best: Option<(f32, usize, usize)> = None;
     for axis in 0..3 {
         if !active[axis] {
@@ -335,7 +370,7 @@ fn best_split(bins: &Bins, active: [bool; 3]) -> Option<(f32, usize, usize)> {
             if n == 0 || left_count[i - 1] == 0 {
                 continue;
             }
-            let cost = left_area[i - 1] * left_count[i - 1] as f32 + acc.area() * n as f32;
+            let cost = left_area[i - 1] * weight(left_count[i - 1]) + acc.area() * weight(n);
             if cost.is_finite() && best.is_none_or(|(c, _, _)| cost < c) {
                 best = Some((cost, axis, i));
             }
@@ -346,37 +381,54 @@ fn best_split(bins: &Bins, active: [bool; 3]) -> Option<(f32, usize, usize)> {
 
 pub(crate) enum Decision {
     Leaf,
-    /// `refs[..mid]` and `refs[mid..]` are the children; `axis` orders traversal.
+    /// `refs[..mid]` and `refs[mid..]` are the children; `axis` orders traversal. `sides`:
+    /// the (bounds, centroid bounds) of the two children when the split computed them.
     Split {
         mid: usize,
         axis: usize,
+        sides: Option<[(Aabb, Aabb); 2]>,
     },
 }
 
-/// In-place stable-order-independent partition; returns the number of elements satisfying `pred`.
-fn partition(refs: &mut [PrimRef], pred: impl Fn(&PrimRef) -> bool) -> usize {
+/// In-place partition; returns the number of elements satisfying `pred` (moved to the front)
+/// and the (bounds, centroid bounds) of both sides, gathered on the way (so the children need
+/// no second pass over their triangles). Min/max are exact, so the boxes equal `scan`'s.
+fn partition(refs: &mut [PrimRef], pred: impl Fn(&PrimRef) -> bool) -> (usize, [(Aabb, Aabb); 2]) {
+    let mut sides = [(Aabb::EMPTY, Aabb::EMPTY); 2];
     let mut i = 0;
     for j in 0..refs.len() {
-        if pred(&refs[j]) {
+        let r = refs[j];
+        let left = pred(&r);
+        let s = &mut sides[usize::from(!left)];
+        s.0 = s.0.union(r.bounds);
+        s.1.grow(r.centroid());
+        if left {
             refs.swap(i, j);
             i += 1;
         }
     }
-    i
+    (i, sides)
 }
 
 /// Object median split along `axis` (ties broken by index, so the result is deterministic).
 fn median_split(refs: &mut [PrimRef], axis: usize) -> Decision {
     let mid = refs.len() / 2;
     refs.select_nth_unstable_by(mid, |a, b| {
-        a.centroid[axis]
-            .total_cmp(&b.centroid[axis])
+        a.centroid()[axis]
+            .total_cmp(&b.centroid()[axis])
             .then(a.index.cmp(&b.index))
     });
-    Decision::Split { mid, axis }
+    Decision::Split {
+        mid,
+        axis,
+        sides: None,
+    }
 }
 
-/// Chooses between a leaf and a split, and partitions `refs` for a split.
+/// Chooses between a leaf and a split, and partitions `refs` for a split. `blocks`: the SAH
+/// counts leaf packs instead of triangles (see [`best_split`]). Up to `max_leaf` triangles,
+/// a leaf is chosen when its cost (triangles, or packs with `blocks`) is at most the best
+/// split's.
 #[allow(clippy::neg_cmp_op_on_partial_ord)] // NaN extents and costs must take the fallbacks
 pub(crate) fn decide(
     refs: &mut [PrimRef],
@@ -384,6 +436,8 @@ pub(crate) fn decide(
     cbounds: &Aabb,
     depth: u32,
     parallel: bool,
+    blocks: bool,
+    max_leaf: usize,
 ) -> Decision {
     let n = refs.len();
     if n <= 1 {
@@ -405,6 +459,7 @@ pub(crate) fn decide(
         return Decision::Split {
             mid: n / 2,
             axis: longest,
+            sides: None,
         };
     }
     if depth >= MAX_SAH_DEPTH {
@@ -420,24 +475,33 @@ pub(crate) fn decide(
     } else {
         binner.fill(refs)
     };
-    let Some((cost, axis, split)) = best_split(&bins, binner.active) else {
+    let Some((cost, axis, split)) = best_split(&bins, binner.active, blocks) else {
         return if n <= MAX_LEAF_SIZE {
             Decision::Leaf
         } else {
             median_split(refs, longest)
         };
     };
-    if n <= MAX_LEAF_SIZE {
+    if n <= max_leaf {
         let area = bounds.area();
         let split_cost = TRAVERSAL_COST + cost / area;
+        let leaf_cost = if blocks {
+            n.div_ceil(MAX_LEAF_SIZE) as f32
+        } else {
+            n as f32
+        };
         // A flat or overflowing box gives a non-finite ratio: keep the small leaf then.
-        if !(area > 0.0 && split_cost.is_finite()) || n as f32 <= split_cost {
+        if !(area > 0.0 && split_cost.is_finite()) || leaf_cost <= split_cost {
             return Decision::Leaf;
         }
     }
-    let mid = partition(refs, |r| binner.bin(r.centroid, axis) < split);
+    let (mid, sides) = partition(refs, |r| binner.bins_of(r.centroid())[axis] < split);
     debug_assert!(mid > 0 && mid < n);
-    Decision::Split { mid, axis }
+    Decision::Split {
+        mid,
+        axis,
+        sides: Some(sides),
+    }
 }
 
 /// Builds the subtree over `refs` (which start at `base` in the final triangle order) as a
@@ -449,9 +513,9 @@ pub(crate) fn build_parallel(refs: &mut [PrimRef], base: u32, depth: u32) -> Vec
         return out;
     }
     let (bounds, cbounds) = scan(refs);
-    match decide(refs, &bounds, &cbounds, depth, true) {
+    match decide(refs, &bounds, &cbounds, depth, true, false, MAX_LEAF_SIZE) {
         Decision::Leaf => vec![Node::leaf(&bounds, base, refs.len())],
-        Decision::Split { mid, axis } => {
+        Decision::Split { mid, axis, .. } => {
             let (l, r) = refs.split_at_mut(mid);
             let (left, right) = rayon::join(
                 || build_parallel(l, base, depth + 1),
@@ -477,9 +541,9 @@ pub(crate) fn build_parallel(refs: &mut [PrimRef], base: u32, depth: u32) -> Vec
 
 fn build_sequential(refs: &mut [PrimRef], base: u32, depth: u32, out: &mut Vec<Node>) {
     let (bounds, cbounds) = scan_seq(refs);
-    match decide(refs, &bounds, &cbounds, depth, false) {
+    match decide(refs, &bounds, &cbounds, depth, false, false, MAX_LEAF_SIZE) {
         Decision::Leaf => out.push(Node::leaf(&bounds, base, refs.len())),
-        Decision::Split { mid, axis } => {
+        Decision::Split { mid, axis, .. } => {
             let idx = out.len();
             out.push(Node::interior(&bounds, axis));
             let (l, r) = refs.split_at_mut(mid);
@@ -544,6 +608,39 @@ mod tests {
         // Depth-first: every node is reachable, so the count matches.
         let leaves = bvh.nodes.iter().filter(|n| n.count > 0).count();
         assert_eq!(bvh.nodes.len(), 2 * leaves - 1);
+    }
+
+    /// The clamped conversion of `Binner::bins_of` is the saturating cast it replaced.
+    #[test]
+    fn bin_index_is_the_saturating_cast() {
+        let binner = Binner {
+            cmin: Vec3A::ZERO,
+            scale: Vec3A::ONE,
+            active: [true; 3],
+        };
+        let mut rng = Rng::new(2, 2);
+        let special = [
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            -1.0,
+            -0.0,
+            0.0,
+            0.999_999_9,
+            1.0,
+            14.999_999,
+            15.0,
+            15.5,
+            16.0,
+            1e30,
+            f32::MAX,
+        ];
+        let random = (0..10_000).map(|_| rng.uniform() * 40.0 - 10.0);
+        for f in special.into_iter().chain(random) {
+            let k = binner.bins_of(Vec3A::new(f, f * 0.5, -f));
+            let want = [f, f * 0.5, -f].map(|x| (x as usize).min(SAH_BINS - 1));
+            assert_eq!(k, want, "{f}");
+        }
     }
 
     #[test]

@@ -4,9 +4,9 @@
 //! * **Build**: each instance's world box is the box of the eight transformed corners of its
 //!   mesh's object-space box, padded by 4ε of its largest coordinate so that rounding of the
 //!   corner transform cannot make it smaller than the transformed triangles. The top level is
-//!   the same binned-SAH build as [`Bvh`] over those boxes (pbrt-v4 §7.3; leaves of at most
-//!   [`crate::MAX_LEAF_SIZE`] instances).
-//! * **Traversal**: the top level is traversed like a [`Bvh`]; at a leaf the ray is taken to
+//!   the binary binned-SAH build of [`crate::BinaryBvh`] over those boxes (pbrt-v4 §7.3;
+//!   leaves of at most [`crate::MAX_LEAF_SIZE`] instances); each mesh is an 8-wide [`Bvh`].
+//! * **Traversal**: the top level is traversed like a [`crate::BinaryBvh`]; at a leaf the ray is taken to
 //!   each instance's object space, `o' = M⁻¹ o`, `d' = M⁻¹ d` (the linear part only), with
 //!   `d'` *not* normalised, so that the ray parameter `t` means the same point in both spaces
 //!   (`M (o' + t d') = o + t d`) and one `t_max` shrinks across instances (pbrt-v4 §7.1.4,
@@ -93,14 +93,13 @@ impl TwoLevelBvh {
                     if c & 2 == 0 { lo.y } else { hi.y },
                     if c & 4 == 0 { lo.z } else { hi.z },
                 );
-                b.grow(a.transform_point3(corner));
+                b.grow(a.transform_point3(corner).into());
             }
             let pad = b.min.abs().max(b.max.abs()).max_element() * 4.0 * f32::EPSILON;
-            b.min -= Vec3::splat(pad);
-            b.max += Vec3::splat(pad);
+            b.min -= pad;
+            b.max += pad;
             refs.push(PrimRef {
                 bounds: b,
-                centroid: b.min * 0.5 + b.max * 0.5,
                 index: i as u32,
             });
         }

@@ -7,17 +7,21 @@
 //!   median split when the SAH cannot separate the triangles (all centroids equal, non-finite
 //!   costs). The upper levels of the tree are built in parallel with `rayon::join`; the result
 //!   does not depend on the thread schedule (same input, same tree).
-//! * **Layout**: [`Bvh`] is 4-wide (module `wide`): each node is widened to up to four
-//!   children by repeatedly splitting its largest child with the same SAH (Wald, Benthin &
-//!   Boulos 2008; Embree's BVH4), stored as 128-byte nodes with the children's boxes in SoA
-//!   order, and each leaf is a pack of up to four triangles stored SoA. [`BinaryBvh`], the
-//!   binary tree of the same splits flattened depth-first into 32-byte nodes (pbrt-v4's
-//!   `LinearBVHNode`), is kept as the reference the wide tree is tested and benchmarked
-//!   against, and as the top level of [`TwoLevelBvh`].
-//! * **Traversal**: iterative with a fixed-size stack. [`Bvh`] tests the four child boxes of
-//!   a node at once with SSE (glam's `Vec4`), visits entered children nearest first for the
-//!   closest hit, and tests a leaf's four triangles at once with a 4-lane version of the
-//!   watertight test that gives each lane bit for bit the scalar result; [`BinaryBvh`] visits
+//! * **Layout**: [`Bvh`] is 8-wide (module `wide`): each node is widened to up to eight
+//!   children by repeatedly splitting its largest child with the same SAH, weighted by leaf
+//!   packs rather than triangles (Wald, Benthin & Boulos 2008; Embree's BVH8), stored as
+//!   256-byte nodes with the children's boxes in SoA order, and each leaf is a pack of up to
+//!   four triangles stored SoA with their ids. [`BinaryBvh`], the binary tree of the plain-SAH
+//!   splits flattened depth-first into 32-byte nodes (pbrt-v4's `LinearBVHNode`), is kept as
+//!   the reference the wide tree is tested and benchmarked against, and as the top level of
+//!   [`TwoLevelBvh`].
+//! * **Traversal**: iterative with a fixed-size stack. [`Bvh`] tests the eight child boxes of
+//!   a node at once — one AVX pass on x86-64 CPUs with AVX2 (detected at build time, the
+//!   traversal compiled for it through `#[target_feature]`), else two 4-lane passes of
+//!   glam's `Vec4` (SSE2, NEON or scalar), same bits either way — visits entered children
+//!   nearest first for the closest hit, and tests a leaf's four triangles at once with a
+//!   4-lane version of the watertight test that gives each lane bit for bit the scalar
+//!   result; [`BinaryBvh`] visits
 //!   the nearer child first according to the sign of the ray direction on the node's split
 //!   axis. The ray/box slab test uses the
 //!   precomputed reciprocal direction (±∞ for zero components, the sign of `-0.0` respected)

@@ -155,8 +155,8 @@ mod tests {
     fn slab_test_handles_signed_zero_and_planes() {
         let node = Node::interior(
             &Aabb {
-                min: Vec3::ZERO,
-                max: Vec3::ONE,
+                min: glam::Vec3A::ZERO,
+                max: glam::Vec3A::ONE,
             },
             0,
         );

@@ -1,5 +1,5 @@
 //! Ray benchmark (not a test): incoherent closest-hit and any-hit throughput and build time
-//! of the Embree intersector, the host's BVH intersector (the 4-wide `flowlight_bvh::Bvh`)
+//! of the Embree intersector, the host's BVH intersector (the 8-wide `flowlight_bvh::Bvh`)
 //! and the binary `flowlight_bvh::BinaryBvh` on closed meshes of ~10k, ~100k and ~1M
 //! triangles, with 1 and 2 threads. Prints a Markdown table (docs/performance.md holds the
 //! last one): medians over `FLOWLIGHT_BENCH_REPEAT` rounds (default 5) with the range, and
@@ -118,7 +118,7 @@ fn build_all(scene: &Scene, tris: &[[Vec3; 3]]) -> (Vec<Backend>, Vec<f64>) {
     let b = std::sync::Arc::new(b);
     let b2 = b.clone();
     out.push(Backend {
-        name: "bvh (4-wide)",
+        name: "bvh (8-wide)",
         closest: Box::new(move |r| b.intersect(r).is_some()),
         any: Box::new(move |r| b2.occluded(r)),
     });
