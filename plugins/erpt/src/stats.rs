@@ -210,8 +210,8 @@ mod tests {
         let mut b = StatsBuilder::new();
         let c = Counters::declare(&mut b, &names);
         assert!(b.error().is_none(), "{:?}", b.error());
-        // 16 globals + 4 ratios, and per group (total + 8) 20 counters + 10 ratios.
-        assert_eq!(b.len(), 16 + 4 + 9 * (20 + 10));
+        // 17 globals + 4 ratios, and per group (total + 8) 20 counters + 10 ratios.
+        assert_eq!(b.len(), 17 + 4 + 9 * (20 + 10));
         assert_eq!(c.groups.len(), 9);
     }
 
