@@ -24,8 +24,8 @@ threads="${THREADS:-2}"
 table=(
   "glass-caustic|480|46080|variant=untangled termination=equi"
   "mirror-chain|720|11264|variant=entangled termination=bxdf"
-  "indirect-room|720|8192|variant=entangled termination=expo"
-  "ring-caustic|600|40960|variant=untangled termination=equi"
+  "indirect-room|1200|16384|variant=entangled termination=expo"
+  "ring-caustic|900|61440|variant=untangled termination=equi"
   "cornell-box|420|20480|variant=entangled termination=bxdf"
   "narrow-gap|480|23552|variant=entangled termination=equi"
 )
