@@ -121,6 +121,28 @@ fn scene_letters(scene: &Scene) -> u8 {
     })
 }
 
+/// Deposits seed estimates outside the chains (per lighting layer) at the centre of their
+/// sample's pixel (x, y), as path tracing deposits a sample (a box filter: the jittered raster
+/// position could round into the next pixel), counting the valid ones in `deposits` and
+/// skipping and counting the others in `skipped`.
+fn deposit_at_pixel(
+    film: &mut Film,
+    x: u32,
+    y: u32,
+    estimates: &SampleContributions,
+    deposits: &mut u64,
+    skipped: &mut u64,
+) {
+    for &(layer, value) in &estimates.entries {
+        if value.is_valid_radiance() {
+            *deposits += 1;
+            film.deposit(x as f32 + 0.5, y as f32 + 0.5, layer, value);
+        } else {
+            *skipped += 1;
+        }
+    }
+}
+
 thread_local! {
     /// Each worker thread's MCPT wavefront, for scenes whose chains' part is empty.
     static MCPT_WAVEFRONT: RefCell<(entangled::Wavefront, Vec<SampleContributions>)> =
@@ -298,14 +320,7 @@ impl Erpt {
                     out,
                 );
                 for (&(x, y), c) in pixels.iter().zip(out.iter()) {
-                    for &(layer, value) in &c.entries {
-                        if value.is_valid_radiance() {
-                            deposits += 1;
-                            film.deposit(x as f32 + 0.5, y as f32 + 0.5, layer, value);
-                        } else {
-                            skipped += 1;
-                        }
-                    }
+                    deposit_at_pixel(film, x, y, c, &mut deposits, &mut skipped);
                 }
                 samples += starts.len() as u64;
                 starts.clear();
@@ -489,14 +504,7 @@ impl Integrator for Erpt {
             &mut path,
             &mut |x, y, rest, count| {
                 rest_seeds += count;
-                for &(layer, value) in &rest.entries {
-                    if value.is_valid_radiance() {
-                        rest_deposits += 1;
-                        film.deposit(x as f32 + 0.5, y as f32 + 0.5, layer, value);
-                    } else {
-                        rest_skipped += 1;
-                    }
-                }
+                deposit_at_pixel(film, x, y, rest, &mut rest_deposits, &mut rest_skipped);
             },
         );
         stats.add(c.seeds, rest_seeds as f64);
