@@ -218,9 +218,10 @@ pub const MAX_THREADS_PER_CORE: usize = 4;
 /// Side of the tiles of a flanged integrator under a time budget. Small, so that the units in
 /// flight at the deadline finish soon (a unit's chains cost about M mutations per camera sample
 /// with the per-tile quantum); not smaller, because each unit has a fixed cost (its quantum, its
-/// flow's buffers and statistics, its micro-tile cache traffic): ERPT reached 6% (narrow gap)
-/// and 15% (Cornell box, `chains_for = "caustics"`) more samples in 4 s with 8×8 units than
-/// with 4×4 ones, and 16×16 added only 1–2% more.
+/// flow's buffers and statistics, its micro-tile cache traffic). Measured while other jobs
+/// loaded the machine, ERPT reached 6% (narrow gap) and 15% (Cornell box) more samples in 4 s
+/// with 8×8 units than with 4×4 ones; a later fixed-spp check found no measurable difference
+/// between 8×8 and 64×64 units, so the gain over 4×4 is unconfirmed.
 pub const FLANGED_TIME_TILE: u32 = 8;
 
 /// The pool size for `requested` threads (0: one per core), clamped to

@@ -106,10 +106,8 @@ pub fn dirac_component(
 /// The BSDF at a stored vertex, with the material's textures and vertex colour applied at
 /// the vertex's texture coordinates (the same BSDF [`Scene::bsdf`] gives at the hit).
 pub fn vertex_bsdf(scene: &Scene, v: &PathVertex) -> Option<Bsdf> {
-    if v.color == [1.0; 4] {
-        if let Some(Some(b)) = scene.material_bsdfs.get(v.material as usize) {
-            return Some(*b);
-        }
+    if let Some(b) = scene.constant_bsdf(v.material, v.color) {
+        return Some(b);
     }
     let m = scene.materials.get(v.material as usize)?;
     let r = m.resolve(v.uvs(), v.color, scene.textures);

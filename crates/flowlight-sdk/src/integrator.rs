@@ -9,7 +9,7 @@ use crate::deposit::Film;
 use crate::guard::guard;
 use crate::mutation::MutationSet;
 use crate::params::Params;
-use crate::scene::{constant_bsdfs, Scene};
+use crate::scene::Scene;
 use crate::stats::{StatTable, Stats, StatsBuilder};
 use crate::tracer::Tracer;
 use flowlight_core::bsdf::Bsdf;
@@ -80,10 +80,8 @@ unsafe extern "C" fn create<T: Integrator>(
         guard(err, || {
             let params = Params::from_raw(params, param_count);
             let mut scene = Scene::from_view(&*scene);
-            let bsdfs = constant_bsdfs(scene.materials, scene.textures);
-            // SAFETY: the slice's heap allocation lives in the instance (moving the box does
-            // not move it) and is dropped after the integrator, the only holder of this scene.
-            scene.material_bsdfs = &*(&*bsdfs as *const [Option<Bsdf>]);
+            // The instance keeps the table and drops it after the integrator, the scene's only holder.
+            let bsdfs = scene.attach_constant_bsdfs();
             let mutations = MutationSet::from_raw(mutations, mutation_count);
             let mut builder = StatsBuilder::new();
             let (integrator, inf) = T::create(&params, mutations, scene, &mut builder)?;

@@ -6,7 +6,7 @@ use crate::abi::{
 };
 use crate::guard::guard;
 use crate::params::Params;
-use crate::scene::{constant_bsdfs, Scene};
+use crate::scene::Scene;
 use crate::tracer::Tracer;
 use flowlight_core::bsdf::Bsdf;
 use flowlight_core::path::Path;
@@ -59,10 +59,8 @@ unsafe extern "C" fn create<T: Mutation>(
         guard(err, || {
             let params = Params::from_raw(params, param_count);
             let mut scene = Scene::from_view(&*scene);
-            let bsdfs = constant_bsdfs(scene.materials, scene.textures);
-            // SAFETY: as for integrators: the table's heap allocation lives in the instance and
-            // is dropped after the mutation, the only holder of this scene.
-            scene.material_bsdfs = &*(&*bsdfs as *const [Option<Bsdf>]);
+            // The instance keeps the table and drops it after the mutation, the scene's only holder.
+            let bsdfs = scene.attach_constant_bsdfs();
             let mutation = T::create(&params, scene)?;
             let inst = MutationInstance {
                 mutation,

@@ -155,14 +155,35 @@ impl<'a> Scene<'a> {
             .resolve(hit.uvs(), hit.color, self.textures)
     }
 
+    /// The table's BSDF of `material` (from [`constant_bsdfs`]) where it is the BSDF at a
+    /// point of vertex colour `color`: the material has an entry and the colour is white.
+    #[inline]
+    pub fn constant_bsdf(&self, material: u32, color: [f32; 4]) -> Option<Bsdf> {
+        if color != [1.0; 4] {
+            return None;
+        }
+        *self.material_bsdfs.get(material as usize)?
+    }
+
+    /// Builds [`constant_bsdfs`] for this scene and points [`Scene::material_bsdfs`] at it.
+    ///
+    /// # Safety
+    /// The returned table must outlive every copy of this scene (the plugin glue keeps it in
+    /// the instance, dropped after the integrator or mutation that holds the scene). Moving
+    /// the box does not move the slice.
+    pub unsafe fn attach_constant_bsdfs(&mut self) -> Box<[Option<Bsdf>]> {
+        let table = constant_bsdfs(self.materials, self.textures);
+        // SAFETY: the caller keeps `table` alive for as long as the scene (above).
+        self.material_bsdfs = unsafe { &*(&*table as *const [Option<Bsdf>]) };
+        table
+    }
+
     /// The BSDF at a hit (textures and vertex colour applied; the hit's shading normal is
     /// already normal-mapped by the host).
     #[inline]
     pub fn bsdf(&self, hit: &SurfaceHit) -> Bsdf {
-        if hit.color == [1.0; 4] {
-            if let Some(Some(b)) = self.material_bsdfs.get(hit.material as usize) {
-                return *b;
-            }
+        if let Some(b) = self.constant_bsdf(hit.material, hit.color) {
+            return b;
         }
         let r = self.resolve(hit);
         Bsdf::from_material(&r.material, r.base)
