@@ -1202,6 +1202,23 @@ mod tests {
         );
     }
 
+    /// `a` and `b` give the same closest hit and the same any-hit answer on `n` rays between
+    /// random points around the soup; returns how many rays hit.
+    fn assert_same_hits(a: &Bvh, b: &Bvh, seed: u64, n: usize) -> usize {
+        let mut rng = Rng::new(seed, seed);
+        let mut u = || rng.uniform();
+        let mut hits = 0;
+        for _ in 0..n {
+            let o = Vec3::new(u(), u(), u()) * 14.0 - 2.0;
+            let ray = Ray::new(o, Vec3::new(u(), u(), u()) * 10.0 - o, f32::INFINITY);
+            let h = a.intersect(&ray);
+            assert_eq!(h, b.intersect(&ray));
+            assert_eq!(a.occluded(&ray), b.occluded(&ray));
+            hits += h.is_some() as usize;
+        }
+        hits
+    }
+
     /// The AVX2 and the SSE traversal give the same hits (where the CPU has AVX2).
     #[test]
     fn avx2_and_sse_agree() {
@@ -1212,17 +1229,7 @@ mod tests {
             avx2: false,
             ..bvh.clone()
         };
-        let mut rng = Rng::new(4, 4);
-        let mut u = || rng.uniform();
-        let mut hits = 0;
-        for _ in 0..20_000 {
-            let o = Vec3::new(u(), u(), u()) * 14.0 - 2.0;
-            let ray = Ray::new(o, Vec3::new(u(), u(), u()) * 10.0 - o, f32::INFINITY);
-            let h = bvh.intersect(&ray);
-            assert_eq!(h, sse.intersect(&ray));
-            assert_eq!(bvh.occluded(&ray), sse.occluded(&ray));
-            hits += h.is_some() as usize;
-        }
+        let hits = assert_same_hits(&bvh, &sse, 4, 20_000);
         assert!(hits > 5000, "{hits}");
     }
 
@@ -1236,17 +1243,7 @@ mod tests {
             stack_bound: STACK_SIZE,
             ..small.clone()
         };
-        let mut rng = Rng::new(3, 3);
-        let mut u = || rng.uniform();
-        let mut hits = 0;
-        for _ in 0..5000 {
-            let o = Vec3::new(u(), u(), u()) * 14.0 - 2.0;
-            let ray = Ray::new(o, Vec3::new(u(), u(), u()) * 10.0 - o, f32::INFINITY);
-            let h = small.intersect(&ray);
-            assert_eq!(h, large.intersect(&ray));
-            assert_eq!(small.occluded(&ray), large.occluded(&ray));
-            hits += h.is_some() as usize;
-        }
+        let hits = assert_same_hits(&small, &large, 3, 5000);
         assert!(hits > 1000, "{hits}");
     }
 
