@@ -245,6 +245,7 @@ pub fn trace_wavefront(
             let path = &mut wf.paths[i as usize];
             let compact = wf.hits[k];
             let o = &mut out[i as usize];
+            scene.prefetch_surfaces(&wf.hits, k);
             let going = if compact.is_hit() {
                 let hit = scene.surface(&path.ray, &compact);
                 let (going, shadow) = vertex(scene, settings, path, &hit, o, &mut wf.shadow_rays);

@@ -394,6 +394,7 @@ pub fn trace_wavefront(
             let i = wf.active[k] as usize;
             let tree = &mut wf.trees[i];
             let compact = wf.hits[k];
+            scene.prefetch_surfaces(&wf.hits, k);
             let going = wf.buffers[i].with_out(filter, |out| {
                 if !compact.is_hit() {
                     tree.escape(scene, out);
