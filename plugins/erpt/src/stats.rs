@@ -19,7 +19,9 @@
 //! per step with k strategies, reported under the strategy asked), their ratios per mutation
 //! `g.propose_seconds_per_mutation`, `g.density_calls_per_mutation`; globally `measure_calls` and
 //! `measure_seconds` (target function at proposals), `seed_seconds` (tracing the unit's seeds)
-//! and `flow_seconds` (everything the chains do). Seconds are summed over threads.
+//! and `flow_seconds` (everything the chains do). Seconds are summed over threads; the
+//! per-step ones (propose, density, measure) are estimates from one step in
+//! [`crate::flow::STEP_TIMING_STRIDE`], as reading the clock at every step cost 8% of a render.
 
 use flowlight_mcmc::norms::{Tally, EVENTS};
 use flowlight_sdk::stats::{Counter, Stats, StatsBuilder};
