@@ -35,7 +35,7 @@ impl StepTimer {
     /// Whether this step is timed; advances to the next step.
     fn next(&mut self) -> bool {
         self.step = self.step.wrapping_add(1);
-        self.step % STEP_TIMING_STRIDE == 0
+        self.step.is_multiple_of(STEP_TIMING_STRIDE)
     }
 
     /// The clock at the start of a timed part of a step, `None` when the step is not timed.
