@@ -73,7 +73,7 @@
 //! energy: 9 % at roughness 0.5 and 68 % at roughness 1, near normal view); transmission and coat attenuation are
 //! applied on both faces alike.
 
-use super::albedo::{average, schlick_albedo, schlick_average};
+use super::albedo::{average, schlick_albedo, schlick_albedo_pair, schlick_average};
 use super::microfacet::{reflect, Ggx};
 use super::{BsdfSample, Dielectric, OrenNayar, DELTA_ALPHA};
 use crate::path::NodeType;
@@ -126,10 +126,27 @@ impl GltfShared {
         (1.0 - self.coat * schlick_albedo(COAT_F0, 1.0, self.coat_alpha, mu)).max(0.0)
     }
 
+    /// A(μ_o) A(μ_i) for a coated material, the two lookups sharing their roughness
+    /// coordinate ([`super::albedo::directional_pair`]); the same value as the product of two
+    /// [`GltfShared::coat_attenuation`] calls, bit for bit.
+    #[inline]
+    fn coat_attenuation_pair(&self, mu_o: f32, mu_i: f32) -> f32 {
+        let (eo, ei) = schlick_albedo_pair(COAT_F0, 1.0, self.coat_alpha, mu_o, mu_i);
+        (1.0 - self.coat * eo).max(0.0) * (1.0 - self.coat * ei).max(0.0)
+    }
+
     /// Directional albedo E_d(μ) of the dielectric specular layer (largest channel).
     #[inline]
     pub fn dielectric_albedo(&self, mu: f32) -> f32 {
         schlick_albedo(self.diel_f0, self.diel_f90, self.alpha, mu)
+    }
+
+    /// The diffuse base's coupling (1 − E_d(μ_o)) (1 − E_d(μ_i)) / (1 − Ē_d), its two albedo
+    /// lookups sharing their roughness coordinate.
+    #[inline]
+    fn diffuse_coupling(&self, mu_o: f32, mu_i: f32) -> f32 {
+        let (eo, ei) = schlick_albedo_pair(self.diel_f0, self.diel_f90, self.alpha, mu_o, mu_i);
+        (1.0 - eo).max(0.0) * (1.0 - ei).max(0.0) * self.diffuse_norm
     }
 
     /// Max-channel dielectric Schlick Fresnel at cos = `c`.
@@ -232,7 +249,7 @@ impl GltfLobe {
         if self.kind == GltfLobeKind::Coat || self.shared.coat <= 0.0 {
             return 1.0;
         }
-        self.shared.coat_attenuation(wo.z) * self.shared.coat_attenuation(wi.z)
+        self.shared.coat_attenuation_pair(wo.z, wi.z)
     }
 
     /// The GGX reflection value D G2 / (4 μ_o μ_i) and ω_o·h for upper-hemisphere `wo`, `wi`.
@@ -281,9 +298,7 @@ impl GltfLobe {
                 if wo.z * wi.z <= 0.0 || sh.diffuse_norm <= 0.0 {
                     return Rgb::ZERO;
                 }
-                let k = (1.0 - sh.dielectric_albedo(wo.z)).max(0.0)
-                    * (1.0 - sh.dielectric_albedo(wi.z)).max(0.0)
-                    * sh.diffuse_norm;
+                let k = sh.diffuse_coupling(wo.z, wi.z);
                 self.diffuse.eval(wo, wi) * self.f0 * k
             }
             GltfLobeKind::ThinTransmission => {
@@ -963,6 +978,63 @@ mod tests {
                     assert!(pi > 0.5, "{kind:?}: ∫pdf {pi}");
                     check_energy(&c, wo, n, 60_000, 68, 0.02);
                 }
+            }
+        }
+    }
+
+    /// The diffuse coupling through the paired lookup is the single lookups' formula, bit for
+    /// bit, with and without a dielectric layer, at any α (NaN included) and any cosines (NaN,
+    /// ±0, beyond ±1).
+    #[test]
+    fn diffuse_coupling_equals_the_lookups() {
+        let by_lookup = |sh: &GltfShared, a: f32, b: f32| {
+            (1.0 - sh.dielectric_albedo(a)).max(0.0)
+                * (1.0 - sh.dielectric_albedo(b)).max(0.0)
+                * sh.diffuse_norm
+        };
+        let mut r = Rng::new(75, 0);
+        let mut mus = vec![0.0f32, -0.0, 1.0, -1.0, 1.5, f32::NAN, f32::INFINITY, 1e-30];
+        mus.extend((0..100).map(|_| 2.0 * r.uniform() - 1.0));
+        for (f0, f90) in [(0.0f32, 0.0f32), (0.04, 1.0), (0.0, 0.5)] {
+            for alpha in [0.0f32, 0.3, 1.0, 2.0, f32::INFINITY, f32::NAN] {
+                let sh = GltfShared {
+                    coat: 0.0,
+                    coat_alpha: 0.0,
+                    alpha,
+                    diel_f0: f0,
+                    diel_f90: f90,
+                    diffuse_norm: 1.25,
+                };
+                for (k, &a) in mus.iter().enumerate() {
+                    let b = mus[(k * 5 + 1) % mus.len()];
+                    let (got, want) = (sh.diffuse_coupling(a, b), by_lookup(&sh, a, b));
+                    assert!(
+                        got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()),
+                        "f0 {f0} f90 {f90} α {alpha} μ {a}, {b}: {got} vs {want}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// The paired coat attenuation A(μ_o) A(μ_i) is the product of the single ones, bit for
+    /// bit.
+    #[test]
+    fn paired_coat_attenuation_is_the_product() {
+        let mut r = Rng::new(76, 0);
+        for (coat, coat_alpha) in [(1.0f32, 0.09f32), (0.5, 0.0), (0.8, 0.6)] {
+            let sh = GltfShared {
+                coat,
+                coat_alpha,
+                alpha: 0.3,
+                diel_f0: 0.04,
+                diel_f90: 1.0,
+                diffuse_norm: 1.1,
+            };
+            for _ in 0..500 {
+                let (a, b) = (2.0 * r.uniform() - 1.0, 2.0 * r.uniform() - 1.0);
+                let single = sh.coat_attenuation(a) * sh.coat_attenuation(b);
+                assert_eq!(sh.coat_attenuation_pair(a, b).to_bits(), single.to_bits());
             }
         }
     }
