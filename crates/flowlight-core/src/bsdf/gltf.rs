@@ -77,7 +77,7 @@ use super::albedo::{average, schlick_albedo, schlick_albedo_pair, schlick_averag
 use super::microfacet::{reflect, Ggx};
 use super::{BsdfSample, Dielectric, OrenNayar, DELTA_ALPHA};
 use crate::path::NodeType;
-use crate::sampling::{two_sided_cosine, two_sided_cosine_pdf};
+use crate::sampling::{cosine_hemisphere_pdf, two_sided_cosine, two_sided_cosine_pdf};
 use crate::Rgb;
 use glam::{Vec2, Vec3};
 
@@ -171,6 +171,29 @@ pub fn schlick_f0_f90(f0: Rgb, f90: Rgb, c: f32) -> Rgb {
     f0 * (1.0 - w) + f90 * w
 }
 
+/// The coat attenuation A(μ_o) A(μ_i) of one (ω_o, ω_i) pair, computed by the first lobe of a
+/// mixture pass that needs it and reused by the others with the same coat (c, α_c): the lobes
+/// of one material all have the same, so a coated material looks its coat albedo up twice per
+/// pass instead of twice per lobe. Make a new one for every pair.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct CoatAttenuation {
+    /// (c, α_c) bits of the value held, if any.
+    key: Option<(u32, u32)>,
+    value: f32,
+}
+
+impl CoatAttenuation {
+    #[inline]
+    fn get(&mut self, shared: &GltfShared, wo: Vec3, wi: Vec3) -> f32 {
+        let key = (shared.coat.to_bits(), shared.coat_alpha.to_bits());
+        if self.key != Some(key) {
+            self.value = shared.coat_attenuation_pair(wo.z, wi.z);
+            self.key = Some(key);
+        }
+        self.value
+    }
+}
+
 /// Both directions mirrored into the upper hemisphere of `wo`.
 #[inline]
 fn to_upper(wo: Vec3, wi: Vec3) -> (Vec3, Vec3) {
@@ -252,6 +275,15 @@ impl GltfLobe {
         self.shared.coat_attenuation_pair(wo.z, wi.z)
     }
 
+    /// [`GltfLobe::attenuation`] through a mixture pass's [`CoatAttenuation`].
+    #[inline]
+    fn attenuation_with(&self, wo: Vec3, wi: Vec3, coat: &mut CoatAttenuation) -> f32 {
+        if self.kind == GltfLobeKind::Coat || self.shared.coat <= 0.0 {
+            return 1.0;
+        }
+        coat.get(&self.shared, wo, wi)
+    }
+
     /// The GGX reflection value D G2 / (4 μ_o μ_i) and ω_o·h for upper-hemisphere `wo`, `wi`.
     #[inline]
     fn ggx_reflection(&self, wo: Vec3, wi: Vec3) -> Option<(f32, f32)> {
@@ -261,6 +293,21 @@ impl GltfLobe {
         let wm = (wo + wi).try_normalize()?;
         let ggx = Ggx::new(self.alpha);
         Some((ggx.d(wm) * ggx.g2(wo, wi) / (4.0 * wo.z * wi.z), wo.dot(wm)))
+    }
+
+    /// [`GltfLobe::ggx_reflection`] and [`GltfLobe::ggx_pdf`] together (value, ω_o·h,
+    /// density), sharing the half vector, D and Λ(ω_o); `None` where the value is `None`
+    /// (the density is 0 there too).
+    #[inline]
+    fn ggx_reflection_pdf(&self, wo: Vec3, wi: Vec3) -> Option<(f32, f32, f32)> {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return None;
+        }
+        let wm = (wo + wi).try_normalize()?;
+        let (d, g2, pdf_wm) = Ggx::new(self.alpha).d_g2_pdf_wm(wo, wi, wm);
+        let c = wo.dot(wm);
+        let pdf = if c <= 0.0 { 0.0 } else { pdf_wm / (4.0 * c) };
+        Some((d * g2 / (4.0 * wo.z * wi.z), c, pdf))
     }
 
     /// Density of the GGX visible-normal reflection for upper-hemisphere `wo`, `wi`.
@@ -293,14 +340,7 @@ impl GltfLobe {
                     None => Rgb::ZERO,
                 }
             }
-            GltfLobeKind::Diffuse => {
-                let sh = &self.shared;
-                if wo.z * wi.z <= 0.0 || sh.diffuse_norm <= 0.0 {
-                    return Rgb::ZERO;
-                }
-                let k = sh.diffuse_coupling(wo.z, wi.z);
-                self.diffuse.eval(wo, wi) * self.f0 * k
-            }
+            GltfLobeKind::Diffuse => self.raw_diffuse(wo, wi),
             GltfLobeKind::ThinTransmission => {
                 if self.is_delta() || wo.z * wi.z >= 0.0 {
                     return Rgb::ZERO;
@@ -315,6 +355,61 @@ impl GltfLobe {
         }
     }
 
+    /// The diffuse base's raw value (energy-coupled Oren–Nayar or Lambert).
+    #[inline]
+    fn raw_diffuse(&self, wo: Vec3, wi: Vec3) -> Rgb {
+        let sh = &self.shared;
+        if wo.z * wi.z <= 0.0 || sh.diffuse_norm <= 0.0 {
+            return Rgb::ZERO;
+        }
+        let k = sh.diffuse_coupling(wo.z, wi.z);
+        self.diffuse.eval(wo, wi) * self.f0 * k
+    }
+
+    /// [`GltfLobe::raw_eval`] and [`GltfLobe::pdf`] in one pass: one `to_upper` flip, one
+    /// half vector, D and Λ(ω_o) once ([`GltfLobe::ggx_reflection_pdf`]), one side test for
+    /// the diffuse base. Both equal the separate values bit for bit.
+    #[inline]
+    fn raw_eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        const NONE: (Rgb, f32) = (Rgb::ZERO, 0.0);
+        match self.kind {
+            GltfLobeKind::Coat | GltfLobeKind::Specular => {
+                if self.is_delta() {
+                    return NONE;
+                }
+                let (wo, wi) = to_upper(wo, wi);
+                match self.ggx_reflection_pdf(wo, wi) {
+                    Some((s, c, pdf)) => (schlick_f0_f90(self.f0, self.f90, c) * s, pdf),
+                    None => NONE,
+                }
+            }
+            GltfLobeKind::Diffuse => {
+                // two_sided_cosine_pdf's own side test, which raw_diffuse repeats.
+                if wo.z * wi.z <= 0.0 {
+                    return NONE;
+                }
+                (self.raw_diffuse(wo, wi), cosine_hemisphere_pdf(wi.z.abs()))
+            }
+            GltfLobeKind::ThinTransmission => {
+                if self.is_delta() || wo.z * wi.z >= 0.0 {
+                    return NONE;
+                }
+                let (wo, wi) = to_upper(wo, flip(wi));
+                match self.ggx_reflection_pdf(wo, wi) {
+                    Some((s, c, pdf)) => (
+                        self.f0 * ((1.0 - self.shared.diel_fresnel(c)).max(0.0) * s),
+                        pdf,
+                    ),
+                    None => NONE,
+                }
+            }
+            GltfLobeKind::Refraction => {
+                let (f, pdf) = self.dielectric.eval_pdf(wo, wi);
+                (f * self.f0, pdf)
+            }
+        }
+    }
+
     #[inline]
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Rgb {
         let f = self.raw_eval(wo, wi);
@@ -322,6 +417,27 @@ impl GltfLobe {
             return f;
         }
         f * (self.scale * self.attenuation(wo, wi))
+    }
+
+    /// `(eval, pdf)` in one pass ([`super::Bsdf::eval_pdf`]); the same values, bit for bit.
+    #[inline]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        self.eval_pdf_with(wo, wi, &mut CoatAttenuation::default())
+    }
+
+    /// [`GltfLobe::eval_pdf`] with the coat attenuation of a mixture pass.
+    #[inline]
+    pub(crate) fn eval_pdf_with(
+        &self,
+        wo: Vec3,
+        wi: Vec3,
+        coat: &mut CoatAttenuation,
+    ) -> (Rgb, f32) {
+        let (f, pdf) = self.raw_eval_pdf(wo, wi);
+        if f.is_black() {
+            return (f, pdf);
+        }
+        (f * (self.scale * self.attenuation_with(wo, wi, coat)), pdf)
     }
 
     #[inline]
