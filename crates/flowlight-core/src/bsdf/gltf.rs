@@ -284,6 +284,17 @@ impl GltfLobe {
         coat.get(&self.shared, wo, wi)
     }
 
+    /// The lobe's value from its raw value: times `scale` and the coat attenuation, black
+    /// left as it is. [`GltfLobe::eval`] and the samplers both end with it, so that a
+    /// sampled value is `eval` at the sampled direction by construction.
+    #[inline]
+    fn finish(&self, f: Rgb, wo: Vec3, wi: Vec3) -> Rgb {
+        if f.is_black() {
+            return f;
+        }
+        f * (self.scale * self.attenuation(wo, wi))
+    }
+
     /// The GGX reflection value D G2 / (4 μ_o μ_i) and ω_o·h for upper-hemisphere `wo`, `wi`.
     #[inline]
     fn ggx_reflection(&self, wo: Vec3, wi: Vec3) -> Option<(f32, f32)> {
@@ -412,11 +423,7 @@ impl GltfLobe {
 
     #[inline]
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Rgb {
-        let f = self.raw_eval(wo, wi);
-        if f.is_black() {
-            return f;
-        }
-        f * (self.scale * self.attenuation(wo, wi))
+        self.finish(self.raw_eval(wo, wi), wo, wi)
     }
 
     /// `(eval, pdf)` in one pass ([`super::Bsdf::eval_pdf`]); the same values, bit for bit.
@@ -438,6 +445,32 @@ impl GltfLobe {
             return (f, pdf);
         }
         (f * (self.scale * self.attenuation_with(wo, wi, coat)), pdf)
+    }
+
+    /// `(eval, pdf)` at the direction of `s`, a non-Dirac sample of this lobe from `wo`,
+    /// reusing what the sample already holds where it is provably the same: the value of
+    /// the diffuse and GGX reflection lobes (both [`GltfLobe::finish`] the raw value at the
+    /// sampled direction, as `eval` does) and the diffuse base's cosine density (the side
+    /// test is the one `two_sided_cosine_pdf` makes). The GGX density is recomputed: the
+    /// sample's comes from the sampled normal, not from the half vector of ω_o and ω_i, and
+    /// differs in the last bits. The refracting lobe is evaluated anew.
+    #[inline]
+    pub(crate) fn eval_pdf_sampled(
+        &self,
+        wo: Vec3,
+        s: &BsdfSample,
+        coat: &mut CoatAttenuation,
+    ) -> (Rgb, f32) {
+        if s.delta {
+            return self.eval_pdf_with(wo, s.wi, coat);
+        }
+        match self.kind {
+            GltfLobeKind::Diffuse if wo.z * s.wi.z > 0.0 => (s.f, s.pdf),
+            GltfLobeKind::Coat | GltfLobeKind::Specular | GltfLobeKind::ThinTransmission => {
+                (s.f, self.pdf(wo, s.wi))
+            }
+            _ => self.eval_pdf_with(wo, s.wi, coat),
+        }
     }
 
     #[inline]
@@ -488,7 +521,7 @@ impl GltfLobe {
                 s
             }
         };
-        s.f *= self.scale * self.attenuation(wo, s.wi);
+        s.f = self.finish(s.f, wo, s.wi);
         (s.pdf > 0.0 && s.pdf.is_finite()).then_some(s)
     }
 

@@ -115,6 +115,23 @@ impl Component {
         }
     }
 
+    /// `(eval, pdf)` at the direction of `s`, which this component sampled from `wo`, taking
+    /// from `s` whatever is provably the same bit for bit (see
+    /// [`GltfLobe::eval_pdf_sampled`]): Lambert and Oren–Nayar sample with exactly their
+    /// `eval` and `pdf` expressions wherever the pair is on one side (the test `eval` makes).
+    /// The conductor and dielectric compute theirs from the sampled normal instead of the
+    /// half vector, so they are evaluated anew.
+    #[inline]
+    fn eval_pdf_sampled(&self, wo: Vec3, s: &BsdfSample, coat: &mut CoatAttenuation) -> (Rgb, f32) {
+        match self {
+            Component::Lambert(_) | Component::OrenNayar(_) if !s.delta && wo.z * s.wi.z > 0.0 => {
+                (s.f, s.pdf)
+            }
+            Component::Gltf(c) => c.eval_pdf_sampled(wo, s, coat),
+            _ => self.eval_pdf_with(wo, s.wi, coat),
+        }
+    }
+
     /// Samples with two numbers. The dielectric needs a third to choose reflection or
     /// refraction and takes it from the low bits of `u.x`; prefer [`Component::sample_with`].
     #[inline]
@@ -293,15 +310,24 @@ impl Bsdf {
     /// Chooses a component with probability equal to its weight: (index, probability).
     #[inline]
     pub fn choose_component(&self, u: f32) -> (usize, f32) {
+        let (i, w, _) = self.choose(u);
+        (i, w)
+    }
+
+    /// [`Bsdf::choose_component`] and the sum of the weights before the chosen one (the lower
+    /// end of its interval of `u`, which the walk has at hand).
+    #[inline]
+    fn choose(&self, u: f32) -> (usize, f32, f32) {
         let mut acc = 0.0;
         for i in 0..self.count {
             let (_, w) = self.components[i].unwrap();
+            let lo = acc;
             acc += w;
             if u < acc || i + 1 == self.count {
-                return (i, w);
+                return (i, w, lo);
             }
         }
-        (0, 1.0)
+        (0, 1.0, 0.0)
     }
 
     /// The components by reference (the hot loops: a component is ~100 bytes).
@@ -343,6 +369,29 @@ impl Bsdf {
         (f, pdf)
     }
 
+    /// [`Bsdf::eval_pdf`] at the direction of `s`, a non-Dirac sample of component `chosen`:
+    /// that component's terms come from [`Component::eval_pdf_sampled`], which reuses the
+    /// sample's own value (and for the diffuse lobes its density) where they are provably
+    /// equal to `eval` and `pdf`. The same results as `eval_pdf(wo, s.wi)`, bit for bit.
+    #[inline]
+    fn eval_pdf_sampled(&self, wo: Vec3, chosen: usize, s: &BsdfSample) -> (Rgb, f32) {
+        let mut coat = CoatAttenuation::default();
+        let mut f = Rgb::ZERO;
+        let mut pdf = -0.0f32;
+        // By index, as `sample` chose (`component_refs` would skip an empty slot).
+        for (i, slot) in self.components[..self.count].iter().enumerate() {
+            let Some((c, w)) = slot else { continue };
+            let (cf, cp) = if i == chosen {
+                c.eval_pdf_sampled(wo, s, &mut coat)
+            } else {
+                c.eval_pdf_with(wo, s.wi, &mut coat)
+            };
+            f += cf * *w;
+            pdf += cp * w;
+        }
+        (f, pdf)
+    }
+
     /// Samples the whole mixture: chooses a component by `u_component`, samples it with `u`,
     /// and for a non-Dirac lobe returns the mixture's f and pdf (so MIS sees the true density).
     ///
@@ -352,23 +401,24 @@ impl Bsdf {
     /// `u_component` within the chosen component's interval is rescaled to [0, 1) and passed on
     /// as the component's discrete sample (the dielectric's reflect/refract choice).
     ///
-    /// The mixture's f and pdf come from one [`Bsdf::eval_pdf`] pass, bit for bit
-    /// `eval(wo, s.wi)` and `pdf(wo, s.wi)`.
+    /// The mixture's f and pdf come from one pass ([`Bsdf::eval_pdf`]) that takes the chosen
+    /// component's own terms from the sample where they are provably the same; f and pdf are
+    /// bit for bit `eval(wo, s.wi)` and `pdf(wo, s.wi)`.
     pub fn sample(&self, wo: Vec3, u_component: f32, u: Vec2) -> Option<BsdfSample> {
-        let (i, p) = self.choose_component(u_component);
-        let lo: f32 = self.components[..i].iter().flatten().map(|&(_, w)| w).sum();
+        // `lo`, the weights before i summed in order, is the sum the walk had reached.
+        let (i, p, lo) = self.choose(u_component);
         let uc = if p > 0.0 {
             ((u_component - lo) / p).clamp(0.0, ONE_MINUS_EPSILON)
         } else {
             0.0
         };
-        let (c, w) = self.components[i]?;
+        let (c, w) = self.components[i].as_ref()?;
         let mut s = c.sample_with(wo, uc, u)?;
         if s.delta {
-            s.f *= w;
+            s.f *= *w;
             s.pdf *= p;
         } else {
-            (s.f, s.pdf) = self.eval_pdf(wo, s.wi);
+            (s.f, s.pdf) = self.eval_pdf_sampled(wo, i, &s);
         }
         (s.pdf > 0.0).then_some(s)
     }
@@ -897,8 +947,8 @@ mod tests {
         assert!(nonzero.0 > 100_000 && nonzero.1 > 100_000, "{nonzero:?}");
     }
 
-    /// A non-Dirac sample of a mixture carries `eval` and `pdf` at its direction bit for bit
-    /// (`sample` takes them from one `eval_pdf` pass).
+    /// A non-Dirac sample of a mixture carries `eval` and `pdf` at its direction bit for bit,
+    /// although `sample` reuses the chosen component's own value (and diffuse density).
     #[test]
     fn mixture_samples_carry_eval_and_pdf_bit_for_bit() {
         let mut r = Rng::new(82, 0);
