@@ -143,8 +143,17 @@ impl GltfShared {
 
     /// The diffuse base's coupling (1 − E_d(μ_o)) (1 − E_d(μ_i)) / (1 − Ē_d), its two albedo
     /// lookups sharing their roughness coordinate.
+    ///
+    /// Without a dielectric layer (`KHR_materials_specular` factor 0: f0 = f90 = 0, as in the
+    /// Lambertian Cornell box) the lookups are skipped: E_d = 0·(E₁ − E₅) + 0·E₅ is ±0 for the
+    /// finite table values every non-NaN α reads (a NaN μ reads the μ = 1 column, as `min`
+    /// drops NaN), so each factor (1 − E_d).max(0) is exactly 1 and the coupling is exactly
+    /// 1/(1 − Ē_d), the value the lookups give, bit for bit.
     #[inline]
     fn diffuse_coupling(&self, mu_o: f32, mu_i: f32) -> f32 {
+        if self.diel_f0 == 0.0 && self.diel_f90 == 0.0 && !self.alpha.is_nan() {
+            return self.diffuse_norm;
+        }
         let (eo, ei) = schlick_albedo_pair(self.diel_f0, self.diel_f90, self.alpha, mu_o, mu_i);
         (1.0 - eo).max(0.0) * (1.0 - ei).max(0.0) * self.diffuse_norm
     }
@@ -1131,9 +1140,9 @@ mod tests {
         }
     }
 
-    /// The diffuse coupling through the paired lookup is the single lookups' formula, bit for
-    /// bit, with and without a dielectric layer, at any α (NaN included) and any cosines (NaN,
-    /// ±0, beyond ±1).
+    /// The diffuse coupling without a dielectric layer (no lookups) is what the lookups give,
+    /// bit for bit, at any α (NaN included, where the lookups run) and any cosines (NaN, ±0,
+    /// beyond ±1); with a layer it is the lookups' formula.
     #[test]
     fn diffuse_coupling_equals_the_lookups() {
         let by_lookup = |sh: &GltfShared, a: f32, b: f32| {
