@@ -11,7 +11,7 @@
 //! (in the white furnace of albedo ½ at N = 1: 1.245 instead of 1.5).
 
 use crate::settings::PathSettings;
-use crate::shading::{connect_light, light_connection, side_consistent, Shading};
+use crate::shading::{connect_light, connection_bsdf, light_connection, side_consistent, Shading};
 use crate::SampleContributions;
 use flowlight_core::bsdf::volume;
 use flowlight_core::geometry::{Ray, SurfaceHit};
@@ -101,14 +101,7 @@ pub fn trace(
         if bsdf.has_non_delta() {
             if let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) {
                 if let Some(conn) = connect_light(scene, tracer, &hit, &shading, &ls) {
-                    let f = bsdf.eval(shading.wo, conn.wi_local);
-                    if !f.is_black() {
-                        // A delta light cannot be hit by the BSDF sample: weight 1.
-                        let w = if conn.delta {
-                            1.0
-                        } else {
-                            power_heuristic(conn.pdf, bsdf.pdf(shading.wo, conn.wi_local))
-                        };
+                    if let Some((f, w)) = connection_bsdf(&bsdf, shading.wo, &conn) {
                         out.add(
                             depth,
                             beta * f * conn.radiance * (conn.wi_local.z.abs() * w / conn.pdf),
@@ -343,13 +336,7 @@ fn vertex(
     if bsdf.has_non_delta() {
         if let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) {
             if let Some((conn, ray)) = light_connection(scene, hit, &shading, &ls) {
-                let f = bsdf.eval(shading.wo, conn.wi_local);
-                if !f.is_black() {
-                    let w = if conn.delta {
-                        1.0
-                    } else {
-                        power_heuristic(conn.pdf, bsdf.pdf(shading.wo, conn.wi_local))
-                    };
+                if let Some((f, w)) = connection_bsdf(&bsdf, shading.wo, &conn) {
                     let value =
                         path.beta * f * conn.radiance * (conn.wi_local.z.abs() * w / conn.pdf);
                     if !value.is_black() {

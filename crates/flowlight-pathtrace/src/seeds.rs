@@ -57,7 +57,7 @@
 //! shadow ray instead of tracing it.
 
 use crate::settings::PathSettings;
-use crate::shading::{light_connection, side_consistent, Shading};
+use crate::shading::{connection_bsdf, light_connection, side_consistent, Shading};
 use crate::untangled::{environment_vertex, light_vertex};
 use crate::SampleContributions;
 use flowlight_core::bsdf::{volume, Bsdf};
@@ -713,13 +713,7 @@ impl Tree {
         if bsdf.has_non_delta() {
             if let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) {
                 if let Some((conn, ray)) = light_connection(scene, hit, &shading, &ls) {
-                    let f = bsdf.eval(shading.wo, conn.wi_local);
-                    if !f.is_black() {
-                        let w = if conn.delta {
-                            1.0
-                        } else {
-                            power_heuristic(conn.pdf, bsdf.pdf(shading.wo, conn.wi_local))
-                        };
+                    if let Some((f, w)) = connection_bsdf(&bsdf, shading.wo, &conn) {
                         // The light's own density in the target's measure: area density on an
                         // area light, else what next-event estimation divides by.
                         let p_light = if ls.kind == LightKind::Area {

@@ -1,7 +1,9 @@
 //! Per-vertex shading helpers shared by both samplers.
 
+use flowlight_core::bsdf::Bsdf;
 use flowlight_core::geometry::{Frame, Ray, SurfaceHit};
 use flowlight_core::light::{LightSample, ShadowTarget};
+use flowlight_core::sampling::power_heuristic;
 use flowlight_core::Rgb;
 use flowlight_sdk::{Scene, Tracer};
 use glam::Vec3;
@@ -41,6 +43,22 @@ pub(crate) struct Connection {
     pub pdf: f32,
     /// A delta light: no BSDF sample can reach it, so no MIS weight.
     pub delta: bool,
+}
+
+/// The BSDF value f at a light connection from a vertex with outgoing direction `wo` (local)
+/// and the connection's MIS weight against that vertex's BSDF sample (power heuristic);
+/// `None` where f is black. A delta light cannot be hit by the BSDF sample: weight 1, no
+/// density needed. Otherwise f and the density come from one [`Bsdf::eval_pdf`] pass, which
+/// gives `eval` and `pdf` bit for bit. The one place the samplers weight a connection, so the
+/// path-at-a-time and wavefront tracers agree by construction.
+#[inline]
+pub(crate) fn connection_bsdf(bsdf: &Bsdf, wo: Vec3, conn: &Connection) -> Option<(Rgb, f32)> {
+    if conn.delta {
+        let f = bsdf.eval(wo, conn.wi_local);
+        return (!f.is_black()).then_some((f, 1.0));
+    }
+    let (f, pdf) = bsdf.eval_pdf(wo, conn.wi_local);
+    (!f.is_black()).then(|| (f, power_heuristic(conn.pdf, pdf)))
 }
 
 /// Turns a light sample into a connection from `hit` if it carries light and is visible.

@@ -35,6 +35,9 @@ struct Tables {
     e5: [[f32; N]; N],
     avg1: [f32; N],
     avg5: [f32; N],
+    /// The μ nodes [`mu_node`]`(j)`, so that a lookup reads them instead of recomputing them
+    /// (a conversion and a division each, twice per lookup): the same values.
+    mu: [f32; N],
 }
 
 fn mu_node(j: usize) -> f32 {
@@ -88,27 +91,41 @@ fn row_average(row: &[f32; N]) -> f32 {
     (2.0 * s) as f32
 }
 
+/// The tables, built on first use. Inlined, so that a lookup's check for them is a load and
+/// a branch in the caller rather than a call (the build itself stays out of line).
+#[inline]
 fn tables() -> &'static Tables {
     static TABLES: OnceLock<Tables> = OnceLock::new();
-    TABLES.get_or_init(|| {
-        let mut t = Tables {
-            e1: [[0.0; N]; N],
-            e5: [[0.0; N]; N],
-            avg1: [0.0; N],
-            avg5: [0.0; N],
-        };
-        for i in 0..N {
-            let r = i as f32 / (N - 1) as f32;
-            for j in 0..N {
-                let (e1, e5) = estimate(r * r, mu_node(j));
-                t.e1[i][j] = e1.min(1.0);
-                t.e5[i][j] = e5.min(t.e1[i][j]);
-            }
-            t.avg1[i] = row_average(&t.e1[i]);
-            t.avg5[i] = row_average(&t.e5[i]);
+    TABLES.get_or_init(build_tables)
+}
+
+#[cold]
+fn build_tables() -> Tables {
+    let mut t = Tables {
+        e1: [[0.0; N]; N],
+        e5: [[0.0; N]; N],
+        avg1: [0.0; N],
+        avg5: [0.0; N],
+        mu: std::array::from_fn(mu_node),
+    };
+    for i in 0..N {
+        let r = i as f32 / (N - 1) as f32;
+        for j in 0..N {
+            let (e1, e5) = estimate(r * r, mu_node(j));
+            t.e1[i][j] = e1.min(1.0);
+            t.e5[i][j] = e5.min(t.e1[i][j]);
         }
-        t
-    })
+        t.avg1[i] = row_average(&t.e1[i]);
+        t.avg5[i] = row_average(&t.e5[i]);
+    }
+    t
+}
+
+/// ⌊x⌋ clamped to a cell index, 0..=N − 2, for x ≥ 0 or NaN (0): `(x as usize).min(N − 2)`
+/// with the cheaper 32-bit saturating conversion (the same index for every such x).
+#[inline]
+fn cell(x: f32) -> usize {
+    (x as i32).clamp(0, N as i32 - 2) as usize
 }
 
 /// Index and fraction of `r = √α` on the roughness axis.
@@ -117,32 +134,49 @@ fn roughness_coord(alpha: f32) -> (usize, f32) {
     let r = alpha.clamp(0.0, 1.0).sqrt() * (N - 1) as f32;
     // r ≥ 0 (or NaN, which casts to 0 either way), so truncation is the floor, without the
     // libm call that `floor` is on baseline x86-64 (no SSE4.1 `roundss`).
-    let i = (r as usize).min(N - 2);
+    let i = cell(r);
     (i, (r - i as f32).clamp(0.0, 1.0))
 }
 
 /// Index and fraction (linear in μ) on the μ axis.
 #[inline]
-fn mu_coord(mu: f32) -> (usize, f32) {
+fn mu_coord(t: &Tables, mu: f32) -> (usize, f32) {
     let mu = mu.abs().min(1.0);
     let x = mu.sqrt() * (N - 1) as f32;
-    let j = (x as usize).min(N - 2); // x ≥ 0: truncation is the floor
-    let (a, b) = (mu_node(j), mu_node(j + 1));
+    let j = cell(x); // x ≥ 0: truncation is the floor
+    let (a, b) = (t.mu[j], t.mu[j + 1]);
     (j, ((mu - a) / (b - a)).clamp(0.0, 1.0))
 }
 
-/// (E₁(μ), E₅(μ)) for GGX roughness `alpha` at cos θ_o = `mu` (|μ| is used).
+/// (E₁, E₅) at the roughness coordinate `(i, s)` and the μ coordinate `(j, u)`.
 #[inline]
-pub fn directional(alpha: f32, mu: f32) -> (f32, f32) {
-    let t = tables();
-    let (i, s) = roughness_coord(alpha);
-    let (j, u) = mu_coord(mu);
+fn lookup(t: &Tables, (i, s): (usize, f32), (j, u): (usize, f32)) -> (f32, f32) {
     let lerp2 = |tab: &[[f32; N]; N]| {
         let r0 = tab[i][j] * (1.0 - u) + tab[i][j + 1] * u;
         let r1 = tab[i + 1][j] * (1.0 - u) + tab[i + 1][j + 1] * u;
         r0 * (1.0 - s) + r1 * s
     };
     (lerp2(&t.e1), lerp2(&t.e5))
+}
+
+/// (E₁(μ), E₅(μ)) for GGX roughness `alpha` at cos θ_o = `mu` (|μ| is used).
+#[inline]
+pub fn directional(alpha: f32, mu: f32) -> (f32, f32) {
+    let t = tables();
+    lookup(t, roughness_coord(alpha), mu_coord(t, mu))
+}
+
+/// [`directional`] at two cosines (of ω_o and ω_i) for one roughness, as the energy coupling
+/// needs them: the roughness coordinate (a square root) and the table's once-per-process
+/// initialisation check are shared. Each pair equals [`directional`]'s, bit for bit.
+#[inline]
+pub fn directional_pair(alpha: f32, mu_a: f32, mu_b: f32) -> ((f32, f32), (f32, f32)) {
+    let t = tables();
+    let r = roughness_coord(alpha);
+    (
+        lookup(t, r, mu_coord(t, mu_a)),
+        lookup(t, r, mu_coord(t, mu_b)),
+    )
 }
 
 /// Hemispherical averages (Ē₁, Ē₅) = 2 ∫₀¹ (E₁, E₅)(μ) μ dμ of [`directional`], exactly.
@@ -161,6 +195,13 @@ pub fn average(alpha: f32) -> (f32, f32) {
 pub fn schlick_albedo(f0: f32, f90: f32, alpha: f32, mu: f32) -> f32 {
     let (e1, e5) = directional(alpha, mu);
     f0 * (e1 - e5) + f90 * e5
+}
+
+/// [`schlick_albedo`] at two cosines, through [`directional_pair`]; the same values.
+#[inline]
+pub fn schlick_albedo_pair(f0: f32, f90: f32, alpha: f32, mu_a: f32, mu_b: f32) -> (f32, f32) {
+    let ((a1, a5), (b1, b5)) = directional_pair(alpha, mu_a, mu_b);
+    (f0 * (a1 - a5) + f90 * a5, f0 * (b1 - b5) + f90 * b5)
 }
 
 /// Hemispherical average of [`schlick_albedo`].
@@ -216,6 +257,48 @@ mod tests {
         // Mirror: E1 = 1, E5 = (1 − μ)^5 (up to interpolation between nodes).
         let (e1, e5) = directional(0.0, 0.3);
         assert!((e1 - 1.0).abs() < 1e-6 && (e5 - 0.7f32.powi(5)).abs() < 2e-3);
+    }
+
+    #[test]
+    fn cell_is_the_clamped_floor() {
+        let mut xs = vec![
+            0.0f32,
+            -0.0,
+            0.5,
+            1.0,
+            29.999,
+            30.0,
+            30.5,
+            31.0,
+            1e9,
+            f32::NAN,
+        ];
+        xs.extend((0..=3100).map(|k| k as f32 * 0.01));
+        for x in xs {
+            assert_eq!(cell(x), (x as usize).min(N - 2), "{x}");
+        }
+    }
+
+    /// The paired lookup is the single one twice, bit for bit, for cosines of either sign,
+    /// on and between the nodes, and out of range.
+    #[test]
+    fn paired_lookup_equals_two_single_ones() {
+        let mut r = Rng::new(8, 0);
+        let mut mus: Vec<f32> = (0..N).map(mu_node).collect();
+        mus.extend([-1.0, -0.3, 0.0, 1.0, 1.5, f32::MIN_POSITIVE]);
+        mus.extend((0..200).map(|_| 2.0 * r.uniform() - 1.0));
+        for alpha in [0.0f32, 1e-3, 0.09, 0.37, 1.0] {
+            for (k, &a) in mus.iter().enumerate() {
+                let b = mus[(k * 7 + 3) % mus.len()];
+                let (pa, pb) = directional_pair(alpha, a, b);
+                let bits = |(x, y): (f32, f32)| (x.to_bits(), y.to_bits());
+                assert_eq!(bits(pa), bits(directional(alpha, a)), "α {alpha} μ {a}");
+                assert_eq!(bits(pb), bits(directional(alpha, b)), "α {alpha} μ {b}");
+                let (sa, sb) = schlick_albedo_pair(0.04, 0.9, alpha, a, b);
+                assert_eq!(sa.to_bits(), schlick_albedo(0.04, 0.9, alpha, a).to_bits());
+                assert_eq!(sb.to_bits(), schlick_albedo(0.04, 0.9, alpha, b).to_bits());
+            }
+        }
     }
 
     #[test]

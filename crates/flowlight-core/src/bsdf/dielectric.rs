@@ -211,6 +211,44 @@ impl Dielectric {
         }
     }
 
+    /// `(eval, pdf)` sharing the generalised half vector, the Fresnel reflectance at ω_m, D,
+    /// Λ(ω_o) ([`Ggx::d_g2_pdf_wm`]) and the refraction Jacobian's (ω_i·ω_m + ω_o·ω_m/η')²;
+    /// each equals the separate function's value bit for bit.
+    #[inline]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        if self.is_delta() {
+            return (Rgb::ZERO, 0.0);
+        }
+        let Some((wm, etap, is_reflect)) = self.half_vector(wo, wi) else {
+            return (Rgb::ZERO, 0.0);
+        };
+        let (d, g2, pdf_wm) = self.ggx().d_g2_pdf_wm(wo, wi, wm);
+        let (co, ci) = (wo.z, wi.z);
+        let dom = wo.dot(wm);
+        let r = fresnel_dielectric(dom, self.eta);
+        let t = 1.0 - r;
+        if is_reflect {
+            let f = Rgb::splat(d * g2 * r / (4.0 * ci * co).abs());
+            (f, pdf_wm / (4.0 * dom.abs()) * r / (r + t))
+        } else {
+            let dim = wi.dot(wm);
+            let q = (dim + dom / etap).powi(2);
+            let denom = q * ci * co;
+            let f = if denom == 0.0 {
+                Rgb::ZERO
+            } else {
+                let ft = d * (1.0 - r) * g2 * (dim * dom / denom).abs();
+                self.transmission_scale(etap) * ft
+            };
+            let pdf = if q == 0.0 {
+                0.0
+            } else {
+                pdf_wm * (dim.abs() / q) * t / (r + t)
+            };
+            (f, pdf)
+        }
+    }
+
     /// Samples with `uc` choosing reflection vs. refraction and `u` the microfacet normal.
     #[inline]
     pub fn sample_with(&self, wo: Vec3, uc: f32, u: Vec2) -> Option<BsdfSample> {

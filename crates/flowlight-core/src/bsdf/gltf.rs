@@ -73,11 +73,11 @@
 //! energy: 9 % at roughness 0.5 and 68 % at roughness 1, near normal view); transmission and coat attenuation are
 //! applied on both faces alike.
 
-use super::albedo::{average, schlick_albedo, schlick_average};
+use super::albedo::{average, schlick_albedo, schlick_albedo_pair, schlick_average};
 use super::microfacet::{reflect, Ggx};
 use super::{BsdfSample, Dielectric, OrenNayar, DELTA_ALPHA};
 use crate::path::NodeType;
-use crate::sampling::{two_sided_cosine, two_sided_cosine_pdf};
+use crate::sampling::{cosine_hemisphere_pdf, two_sided_cosine, two_sided_cosine_pdf};
 use crate::Rgb;
 use glam::{Vec2, Vec3};
 
@@ -126,10 +126,36 @@ impl GltfShared {
         (1.0 - self.coat * schlick_albedo(COAT_F0, 1.0, self.coat_alpha, mu)).max(0.0)
     }
 
+    /// A(μ_o) A(μ_i) for a coated material, the two lookups sharing their roughness
+    /// coordinate ([`super::albedo::directional_pair`]); the same value as the product of two
+    /// [`GltfShared::coat_attenuation`] calls, bit for bit.
+    #[inline]
+    fn coat_attenuation_pair(&self, mu_o: f32, mu_i: f32) -> f32 {
+        let (eo, ei) = schlick_albedo_pair(COAT_F0, 1.0, self.coat_alpha, mu_o, mu_i);
+        (1.0 - self.coat * eo).max(0.0) * (1.0 - self.coat * ei).max(0.0)
+    }
+
     /// Directional albedo E_d(μ) of the dielectric specular layer (largest channel).
     #[inline]
     pub fn dielectric_albedo(&self, mu: f32) -> f32 {
         schlick_albedo(self.diel_f0, self.diel_f90, self.alpha, mu)
+    }
+
+    /// The diffuse base's coupling (1 − E_d(μ_o)) (1 − E_d(μ_i)) / (1 − Ē_d), its two albedo
+    /// lookups sharing their roughness coordinate.
+    ///
+    /// Without a dielectric layer (`KHR_materials_specular` factor 0: f0 = f90 = 0, as in the
+    /// Lambertian Cornell box) the lookups are skipped: E_d = 0·(E₁ − E₅) + 0·E₅ is ±0 for the
+    /// finite table values every non-NaN α reads (a NaN μ reads the μ = 1 column, as `min`
+    /// drops NaN), so each factor (1 − E_d).max(0) is exactly 1 and the coupling is exactly
+    /// 1/(1 − Ē_d), the value the lookups give, bit for bit.
+    #[inline]
+    fn diffuse_coupling(&self, mu_o: f32, mu_i: f32) -> f32 {
+        if self.diel_f0 == 0.0 && self.diel_f90 == 0.0 && !self.alpha.is_nan() {
+            return self.diffuse_norm;
+        }
+        let (eo, ei) = schlick_albedo_pair(self.diel_f0, self.diel_f90, self.alpha, mu_o, mu_i);
+        (1.0 - eo).max(0.0) * (1.0 - ei).max(0.0) * self.diffuse_norm
     }
 
     /// Max-channel dielectric Schlick Fresnel at cos = `c`.
@@ -152,6 +178,29 @@ fn w5(c: f32) -> f32 {
 pub fn schlick_f0_f90(f0: Rgb, f90: Rgb, c: f32) -> Rgb {
     let w = w5(c);
     f0 * (1.0 - w) + f90 * w
+}
+
+/// The coat attenuation A(μ_o) A(μ_i) of one (ω_o, ω_i) pair, computed by the first lobe of a
+/// mixture pass that needs it and reused by the others with the same coat (c, α_c): the lobes
+/// of one material all have the same, so a coated material looks its coat albedo up twice per
+/// pass instead of twice per lobe. Make a new one for every pair.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct CoatAttenuation {
+    /// (c, α_c) bits of the value held, if any.
+    key: Option<(u32, u32)>,
+    value: f32,
+}
+
+impl CoatAttenuation {
+    #[inline]
+    fn get(&mut self, shared: &GltfShared, wo: Vec3, wi: Vec3) -> f32 {
+        let key = (shared.coat.to_bits(), shared.coat_alpha.to_bits());
+        if self.key != Some(key) {
+            self.value = shared.coat_attenuation_pair(wo.z, wi.z);
+            self.key = Some(key);
+        }
+        self.value
+    }
 }
 
 /// Both directions mirrored into the upper hemisphere of `wo`.
@@ -232,7 +281,27 @@ impl GltfLobe {
         if self.kind == GltfLobeKind::Coat || self.shared.coat <= 0.0 {
             return 1.0;
         }
-        self.shared.coat_attenuation(wo.z) * self.shared.coat_attenuation(wi.z)
+        self.shared.coat_attenuation_pair(wo.z, wi.z)
+    }
+
+    /// [`GltfLobe::attenuation`] through a mixture pass's [`CoatAttenuation`].
+    #[inline]
+    fn attenuation_with(&self, wo: Vec3, wi: Vec3, coat: &mut CoatAttenuation) -> f32 {
+        if self.kind == GltfLobeKind::Coat || self.shared.coat <= 0.0 {
+            return 1.0;
+        }
+        coat.get(&self.shared, wo, wi)
+    }
+
+    /// The lobe's value from its raw value: times `scale` and the coat attenuation, black
+    /// left as it is. [`GltfLobe::eval`] and the samplers both end with it, so that a
+    /// sampled value is `eval` at the sampled direction by construction.
+    #[inline]
+    fn finish(&self, f: Rgb, wo: Vec3, wi: Vec3) -> Rgb {
+        if f.is_black() {
+            return f;
+        }
+        f * (self.scale * self.attenuation(wo, wi))
     }
 
     /// The GGX reflection value D G2 / (4 μ_o μ_i) and ω_o·h for upper-hemisphere `wo`, `wi`.
@@ -244,6 +313,21 @@ impl GltfLobe {
         let wm = (wo + wi).try_normalize()?;
         let ggx = Ggx::new(self.alpha);
         Some((ggx.d(wm) * ggx.g2(wo, wi) / (4.0 * wo.z * wi.z), wo.dot(wm)))
+    }
+
+    /// [`GltfLobe::ggx_reflection`] and [`GltfLobe::ggx_pdf`] together (value, ω_o·h,
+    /// density), sharing the half vector, D and Λ(ω_o); `None` where the value is `None`
+    /// (the density is 0 there too).
+    #[inline]
+    fn ggx_reflection_pdf(&self, wo: Vec3, wi: Vec3) -> Option<(f32, f32, f32)> {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return None;
+        }
+        let wm = (wo + wi).try_normalize()?;
+        let (d, g2, pdf_wm) = Ggx::new(self.alpha).d_g2_pdf_wm(wo, wi, wm);
+        let c = wo.dot(wm);
+        let pdf = if c <= 0.0 { 0.0 } else { pdf_wm / (4.0 * c) };
+        Some((d * g2 / (4.0 * wo.z * wi.z), c, pdf))
     }
 
     /// Density of the GGX visible-normal reflection for upper-hemisphere `wo`, `wi`.
@@ -276,16 +360,7 @@ impl GltfLobe {
                     None => Rgb::ZERO,
                 }
             }
-            GltfLobeKind::Diffuse => {
-                let sh = &self.shared;
-                if wo.z * wi.z <= 0.0 || sh.diffuse_norm <= 0.0 {
-                    return Rgb::ZERO;
-                }
-                let k = (1.0 - sh.dielectric_albedo(wo.z)).max(0.0)
-                    * (1.0 - sh.dielectric_albedo(wi.z)).max(0.0)
-                    * sh.diffuse_norm;
-                self.diffuse.eval(wo, wi) * self.f0 * k
-            }
+            GltfLobeKind::Diffuse => self.raw_diffuse(wo, wi),
             GltfLobeKind::ThinTransmission => {
                 if self.is_delta() || wo.z * wi.z >= 0.0 {
                     return Rgb::ZERO;
@@ -300,13 +375,111 @@ impl GltfLobe {
         }
     }
 
+    /// The diffuse base's raw value (energy-coupled Oren–Nayar or Lambert).
+    #[inline]
+    fn raw_diffuse(&self, wo: Vec3, wi: Vec3) -> Rgb {
+        let sh = &self.shared;
+        if wo.z * wi.z <= 0.0 || sh.diffuse_norm <= 0.0 {
+            return Rgb::ZERO;
+        }
+        let k = sh.diffuse_coupling(wo.z, wi.z);
+        self.diffuse.eval(wo, wi) * self.f0 * k
+    }
+
+    /// [`GltfLobe::raw_eval`] and [`GltfLobe::pdf`] in one pass: one `to_upper` flip, one
+    /// half vector, D and Λ(ω_o) once ([`GltfLobe::ggx_reflection_pdf`]), one side test for
+    /// the diffuse base. Both equal the separate values bit for bit.
+    #[inline]
+    fn raw_eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        const NONE: (Rgb, f32) = (Rgb::ZERO, 0.0);
+        match self.kind {
+            GltfLobeKind::Coat | GltfLobeKind::Specular => {
+                if self.is_delta() {
+                    return NONE;
+                }
+                let (wo, wi) = to_upper(wo, wi);
+                match self.ggx_reflection_pdf(wo, wi) {
+                    Some((s, c, pdf)) => (schlick_f0_f90(self.f0, self.f90, c) * s, pdf),
+                    None => NONE,
+                }
+            }
+            GltfLobeKind::Diffuse => {
+                // two_sided_cosine_pdf's own side test, which raw_diffuse repeats.
+                if wo.z * wi.z <= 0.0 {
+                    return NONE;
+                }
+                (self.raw_diffuse(wo, wi), cosine_hemisphere_pdf(wi.z.abs()))
+            }
+            GltfLobeKind::ThinTransmission => {
+                if self.is_delta() || wo.z * wi.z >= 0.0 {
+                    return NONE;
+                }
+                let (wo, wi) = to_upper(wo, flip(wi));
+                match self.ggx_reflection_pdf(wo, wi) {
+                    Some((s, c, pdf)) => (
+                        self.f0 * ((1.0 - self.shared.diel_fresnel(c)).max(0.0) * s),
+                        pdf,
+                    ),
+                    None => NONE,
+                }
+            }
+            GltfLobeKind::Refraction => {
+                let (f, pdf) = self.dielectric.eval_pdf(wo, wi);
+                (f * self.f0, pdf)
+            }
+        }
+    }
+
     #[inline]
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Rgb {
-        let f = self.raw_eval(wo, wi);
+        self.finish(self.raw_eval(wo, wi), wo, wi)
+    }
+
+    /// `(eval, pdf)` in one pass ([`super::Bsdf::eval_pdf`]); the same values, bit for bit.
+    #[inline]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        self.eval_pdf_with(wo, wi, &mut CoatAttenuation::default())
+    }
+
+    /// [`GltfLobe::eval_pdf`] with the coat attenuation of a mixture pass.
+    #[inline]
+    pub(crate) fn eval_pdf_with(
+        &self,
+        wo: Vec3,
+        wi: Vec3,
+        coat: &mut CoatAttenuation,
+    ) -> (Rgb, f32) {
+        let (f, pdf) = self.raw_eval_pdf(wo, wi);
         if f.is_black() {
-            return f;
+            return (f, pdf);
         }
-        f * (self.scale * self.attenuation(wo, wi))
+        (f * (self.scale * self.attenuation_with(wo, wi, coat)), pdf)
+    }
+
+    /// `(eval, pdf)` at the direction of `s`, a non-Dirac sample of this lobe from `wo`,
+    /// reusing what the sample already holds where it is provably the same: the value of
+    /// the diffuse and GGX reflection lobes (both [`GltfLobe::finish`] the raw value at the
+    /// sampled direction, as `eval` does) and the diffuse base's cosine density (the side
+    /// test is the one `two_sided_cosine_pdf` makes). The GGX density is recomputed: the
+    /// sample's comes from the sampled normal, not from the half vector of ω_o and ω_i, and
+    /// differs in the last bits. The refracting lobe is evaluated anew.
+    #[inline]
+    pub(crate) fn eval_pdf_sampled(
+        &self,
+        wo: Vec3,
+        s: &BsdfSample,
+        coat: &mut CoatAttenuation,
+    ) -> (Rgb, f32) {
+        if s.delta {
+            return self.eval_pdf_with(wo, s.wi, coat);
+        }
+        match self.kind {
+            GltfLobeKind::Diffuse if wo.z * s.wi.z > 0.0 => (s.f, s.pdf),
+            GltfLobeKind::Coat | GltfLobeKind::Specular | GltfLobeKind::ThinTransmission => {
+                (s.f, self.pdf(wo, s.wi))
+            }
+            _ => self.eval_pdf_with(wo, s.wi, coat),
+        }
     }
 
     #[inline]
@@ -357,7 +530,7 @@ impl GltfLobe {
                 s
             }
         };
-        s.f *= self.scale * self.attenuation(wo, s.wi);
+        s.f = self.finish(s.f, wo, s.wi);
         (s.pdf > 0.0 && s.pdf.is_finite()).then_some(s)
     }
 
@@ -963,6 +1136,63 @@ mod tests {
                     assert!(pi > 0.5, "{kind:?}: ∫pdf {pi}");
                     check_energy(&c, wo, n, 60_000, 68, 0.02);
                 }
+            }
+        }
+    }
+
+    /// The diffuse coupling without a dielectric layer (no lookups) is what the lookups give,
+    /// bit for bit, at any α (NaN included, where the lookups run) and any cosines (NaN, ±0,
+    /// beyond ±1); with a layer it is the lookups' formula.
+    #[test]
+    fn diffuse_coupling_equals_the_lookups() {
+        let by_lookup = |sh: &GltfShared, a: f32, b: f32| {
+            (1.0 - sh.dielectric_albedo(a)).max(0.0)
+                * (1.0 - sh.dielectric_albedo(b)).max(0.0)
+                * sh.diffuse_norm
+        };
+        let mut r = Rng::new(75, 0);
+        let mut mus = vec![0.0f32, -0.0, 1.0, -1.0, 1.5, f32::NAN, f32::INFINITY, 1e-30];
+        mus.extend((0..100).map(|_| 2.0 * r.uniform() - 1.0));
+        for (f0, f90) in [(0.0f32, 0.0f32), (0.04, 1.0), (0.0, 0.5)] {
+            for alpha in [0.0f32, 0.3, 1.0, 2.0, f32::INFINITY, f32::NAN] {
+                let sh = GltfShared {
+                    coat: 0.0,
+                    coat_alpha: 0.0,
+                    alpha,
+                    diel_f0: f0,
+                    diel_f90: f90,
+                    diffuse_norm: 1.25,
+                };
+                for (k, &a) in mus.iter().enumerate() {
+                    let b = mus[(k * 5 + 1) % mus.len()];
+                    let (got, want) = (sh.diffuse_coupling(a, b), by_lookup(&sh, a, b));
+                    assert!(
+                        got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()),
+                        "f0 {f0} f90 {f90} α {alpha} μ {a}, {b}: {got} vs {want}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// The paired coat attenuation A(μ_o) A(μ_i) is the product of the single ones, bit for
+    /// bit.
+    #[test]
+    fn paired_coat_attenuation_is_the_product() {
+        let mut r = Rng::new(76, 0);
+        for (coat, coat_alpha) in [(1.0f32, 0.09f32), (0.5, 0.0), (0.8, 0.6)] {
+            let sh = GltfShared {
+                coat,
+                coat_alpha,
+                alpha: 0.3,
+                diel_f0: 0.04,
+                diel_f90: 1.0,
+                diffuse_norm: 1.1,
+            };
+            for _ in 0..500 {
+                let (a, b) = (2.0 * r.uniform() - 1.0, 2.0 * r.uniform() - 1.0);
+                let single = sh.coat_attenuation(a) * sh.coat_attenuation(b);
+                assert_eq!(sh.coat_attenuation_pair(a, b).to_bits(), single.to_bits());
             }
         }
     }

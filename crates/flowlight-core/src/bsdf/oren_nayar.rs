@@ -8,7 +8,7 @@
 
 use super::BsdfSample;
 use crate::path::NodeType;
-use crate::sampling::{two_sided_cosine, two_sided_cosine_pdf};
+use crate::sampling::{cosine_hemisphere_pdf, two_sided_cosine, two_sided_cosine_pdf};
 use crate::Rgb;
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
@@ -68,6 +68,19 @@ impl OrenNayar {
     #[inline]
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         two_sided_cosine_pdf(wo, wi)
+    }
+
+    /// `(eval, pdf)` with one side test for both (see [`super::Bsdf::eval_pdf`]); the same
+    /// values, bit for bit.
+    #[inline]
+    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        if wo.z * wi.z <= 0.0 {
+            return (Rgb::ZERO, 0.0);
+        }
+        (
+            self.albedo * (FRAC_1_PI * self.factor(wo, wi)),
+            cosine_hemisphere_pdf(wi.z.abs()),
+        )
     }
 
     #[inline]

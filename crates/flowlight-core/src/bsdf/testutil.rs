@@ -61,6 +61,68 @@ pub fn test_directions_both_sides() -> Vec<Vec3> {
         .collect()
 }
 
+/// `a` and `b` are the same float: equal bits, or both NaN (a NaN's payload may depend on
+/// whether the compiler folded it).
+pub fn same_float(a: f32, b: f32) -> bool {
+    a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan())
+}
+
+/// [`same_float`] per channel.
+pub fn same_rgb(a: Rgb, b: Rgb) -> bool {
+    a.to_array()
+        .into_iter()
+        .zip(b.to_array())
+        .all(|(x, y)| same_float(x, y))
+}
+
+/// `n` direction pairs (ω_o, ω_i) on both sides of the surface, for comparing two ways of
+/// computing one function of the pair: a third uniform on the sphere (either side, ω_i on
+/// ω_o's side or not at random), a third near ω_o's mirror direction (inside narrow glossy
+/// lobes) on either side, a third near its straight continuation through the surface
+/// (inside narrow transmission lobes); and the degenerate pairs: ω_i = ±ω_o, the exact
+/// mirror, grazing directions, the normal.
+pub fn direction_pairs(n: usize, seed: u64) -> Vec<(Vec3, Vec3)> {
+    let mut r = Rng::new(seed, 6);
+    let mut pairs = Vec::with_capacity(n + 16);
+    for k in 0..n {
+        let wo = uniform_sphere(r.uniform2());
+        let jitter = uniform_sphere(r.uniform2()) * (0.2 * r.uniform() * r.uniform());
+        let wi = match k % 3 {
+            0 => uniform_sphere(r.uniform2()),
+            1 => {
+                let m = Vec3::new(-wo.x, -wo.y, wo.z) + jitter;
+                let m = m.normalize_or(Vec3::Z);
+                if r.uniform() < 0.1 {
+                    flip(m)
+                } else {
+                    m
+                }
+            }
+            _ => (-wo + jitter).normalize_or(Vec3::Z),
+        };
+        pairs.push((wo, wi));
+    }
+    let a = dir(0.7, 0.4);
+    let grazing = Vec3::new(1.0, 0.0, 0.0);
+    for (wo, wi) in [
+        (a, a),
+        (a, -a),
+        (a, Vec3::new(-a.x, -a.y, a.z)),
+        (flip(a), flip(a)),
+        (flip(a), a),
+        (grazing, a),
+        (a, grazing),
+        (grazing, -grazing),
+        (grazing, grazing),
+        (Vec3::Z, Vec3::Z),
+        (Vec3::Z, Vec3::NEG_Z),
+        (Vec3::NEG_Z, Vec3::NEG_Z),
+    ] {
+        pairs.push((wo, wi));
+    }
+    pairs
+}
+
 fn rel_close(a: f32, b: f32, rel: f32) -> bool {
     (a - b).abs() <= rel * a.abs().max(b.abs()) + 1e-6
 }
