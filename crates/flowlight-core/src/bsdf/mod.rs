@@ -913,32 +913,26 @@ mod tests {
                 nonzero.1 += (p != 0.0) as usize;
             }
         };
+        // 50 of a model's own samples at each test direction, drawn by `sample(wo, uc, u)`.
+        let mut own_pairs = |sample: &dyn Fn(Vec3, f32, Vec2) -> Option<BsdfSample>| {
+            let mut v = Vec::new();
+            for wo in test_directions_both_sides() {
+                for _ in 0..50 {
+                    if let Some(s) = sample(wo, r.uniform(), r.uniform2()) {
+                        v.push((wo, s.wi));
+                    }
+                }
+            }
+            v
+        };
         for c in every_component() {
-            let own: Vec<_> = test_directions_both_sides()
-                .into_iter()
-                .flat_map(|wo| {
-                    let v: Vec<_> = (0..50)
-                        .filter_map(|_| c.sample_with(wo, r.uniform(), r.uniform2()))
-                        .map(|s| (wo, s.wi))
-                        .collect();
-                    v
-                })
-                .collect();
+            let own = own_pairs(&|wo, uc, u| c.sample_with(wo, uc, u));
             let m = |wo, wi| (c.eval_pdf(wo, wi), c.eval(wo, wi), c.pdf(wo, wi));
             check(&format!("{c:?}"), &m, &pairs);
             check(&format!("{c:?} (own samples)"), &m, &own);
         }
         for b in every_mixture() {
-            let own: Vec<_> = test_directions_both_sides()
-                .into_iter()
-                .flat_map(|wo| {
-                    let v: Vec<_> = (0..50)
-                        .filter_map(|_| b.sample(wo, r.uniform(), r.uniform2()))
-                        .map(|s| (wo, s.wi))
-                        .collect();
-                    v
-                })
-                .collect();
+            let own = own_pairs(&|wo, uc, u| b.sample(wo, uc, u));
             let m = |wo, wi| (b.eval_pdf(wo, wi), b.eval(wo, wi), b.pdf(wo, wi));
             check(&format!("{b:?}"), &m, &pairs);
             check(&format!("{b:?} (own samples)"), &m, &own);
