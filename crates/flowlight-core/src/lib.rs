@@ -11,7 +11,9 @@ pub mod material;
 pub mod mesh;
 pub mod path;
 pub mod rng;
+pub mod sampler;
 pub mod sampling;
+pub mod sobol;
 pub mod spectrum;
 pub mod termination;
 

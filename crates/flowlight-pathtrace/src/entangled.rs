@@ -18,18 +18,20 @@ use flowlight_core::geometry::{Ray, SurfaceHit};
 use flowlight_core::light::area_to_solid_angle;
 use flowlight_core::mesh::CompactHit;
 use flowlight_core::rng::Rng;
+use flowlight_core::sampler::{SampleStream, SLOT_BSDF, SLOT_LIGHT, SLOT_ROULETTE};
 use flowlight_core::sampling::power_heuristic;
 use flowlight_core::Rgb;
 use flowlight_sdk::{Scene, Tracer};
 use glam::{Vec2, Vec3};
 
 /// Traces one entangled path tree through raster position `raster`, adding each contribution
-/// to `out` with its lighting layer.
-pub fn trace(
+/// to `out` with its lighting layer. `rng` is any [`SampleStream`]: independent numbers
+/// ([`Rng`]) or a pixel's stratified samples ([`flowlight_core::sobol::SobolSampler`]).
+pub fn trace<S: SampleStream>(
     scene: &Scene,
     tracer: &Tracer,
     settings: &PathSettings,
-    rng: &mut Rng,
+    rng: &mut S,
     raster: Vec2,
     out: &mut SampleContributions,
 ) {
@@ -99,6 +101,7 @@ pub fn trace(
         let shading = Shading::new(&hit, wo_world);
 
         if bsdf.has_non_delta() {
+            rng.seek(physical, SLOT_LIGHT);
             if let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) {
                 if let Some(conn) = connect_light(scene, tracer, &hit, &shading, &ls) {
                     if let Some((f, w)) = connection_bsdf(&bsdf, shading.wo, &conn) {
@@ -128,12 +131,14 @@ pub fn trace(
         };
         last = t >= 1.0 || physical >= settings.max_ray_depth;
         if !last && t > 0.0 {
+            rng.seek(physical, SLOT_ROULETTE);
             if rng.uniform() < t {
                 return;
             }
             beta /= 1.0 - t;
         }
 
+        rng.seek(physical, SLOT_BSDF);
         let Some(s) = bsdf.sample(shading.wo, rng.uniform(), rng.uniform2()) else {
             return;
         };
@@ -156,8 +161,8 @@ pub fn trace(
 /// The state of one path of a [`Wavefront`] between two bounces: exactly the locals of
 /// [`trace`]'s loop.
 #[derive(Clone, Debug)]
-struct PathState {
-    rng: Rng,
+struct PathState<S> {
+    rng: S,
     ray: Ray,
     beta: Rgb,
     inside: Option<Rgb>,
@@ -170,9 +175,8 @@ struct PathState {
 }
 
 /// Reusable buffers of [`trace_wavefront`] (one per work unit, so no allocation per path).
-#[derive(Default)]
-pub struct Wavefront {
-    paths: Vec<PathState>,
+pub struct Wavefront<S = Rng> {
+    paths: Vec<PathState<S>>,
     /// Indices of the paths still going, in their original order.
     active: Vec<u32>,
     rays: Vec<Ray>,
@@ -181,6 +185,20 @@ pub struct Wavefront {
     /// Per shadow ray: its path and the contribution it carries when unblocked.
     shadow_owner: Vec<(u32, u32, Rgb)>,
     blocked: Vec<u8>,
+}
+
+impl<S> Default for Wavefront<S> {
+    fn default() -> Self {
+        Wavefront {
+            paths: Vec::new(),
+            active: Vec::new(),
+            rays: Vec::new(),
+            hits: Vec::new(),
+            shadow_rays: Vec::new(),
+            shadow_owner: Vec::new(),
+            blocked: Vec::new(),
+        }
+    }
 }
 
 /// Traces `starts.len()` entangled paths as a wavefront: the camera rays as one batch (marked
@@ -195,12 +213,12 @@ pub struct Wavefront {
 /// `out[i]` equals what [`trace`] gives for the same start, bit for bit, and so does the
 /// image whatever the batch size. One difference that changes no pixel: a light connection
 /// whose contribution is black is not traced.
-pub fn trace_wavefront(
+pub fn trace_wavefront<S: SampleStream + Clone>(
     scene: &Scene,
     tracer: &Tracer,
     settings: &PathSettings,
-    starts: &[(Rng, Vec2)],
-    wf: &mut Wavefront,
+    starts: &[(S, Vec2)],
+    wf: &mut Wavefront<S>,
     out: &mut [SampleContributions],
 ) {
     debug_assert_eq!(starts.len(), out.len());
@@ -269,7 +287,7 @@ pub fn trace_wavefront(
 
 /// [`trace`]'s escape branch: the environment, MIS-weighted against its light sample.
 #[inline]
-fn escape(scene: &Scene, path: &PathState, out: &mut SampleContributions) {
+fn escape<S>(scene: &Scene, path: &PathState<S>, out: &mut SampleContributions) {
     let le = scene.lights.environment_radiance(path.ray.dir);
     if !le.is_black() {
         let w = if path.prev_delta {
@@ -285,10 +303,10 @@ fn escape(scene: &Scene, path: &PathState, out: &mut SampleContributions) {
 /// `shadow_rays` instead of traced. Returns whether the path goes on (with `path.ray`) and
 /// the (layer, contribution) of the shadow ray pushed, if one was.
 #[inline]
-fn vertex(
+fn vertex<S: SampleStream>(
     scene: &Scene,
     settings: &PathSettings,
-    path: &mut PathState,
+    path: &mut PathState<S>,
     hit: &SurfaceHit,
     out: &mut SampleContributions,
     shadow_rays: &mut Vec<Ray>,
@@ -334,6 +352,7 @@ fn vertex(
 
     let mut shadow = None;
     if bsdf.has_non_delta() {
+        rng.seek(path.physical, SLOT_LIGHT);
         if let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) {
             if let Some((conn, ray)) = light_connection(scene, hit, &shading, &ls) {
                 if let Some((f, w)) = connection_bsdf(&bsdf, shading.wo, &conn) {
@@ -361,11 +380,13 @@ fn vertex(
     };
     path.last = t >= 1.0 || path.physical >= settings.max_ray_depth;
     if !path.last && t > 0.0 {
+        rng.seek(path.physical, SLOT_ROULETTE);
         if rng.uniform() < t {
             return (false, shadow);
         }
         path.beta /= 1.0 - t;
     }
+    rng.seek(path.physical, SLOT_BSDF);
     let Some(s) = bsdf.sample(shading.wo, rng.uniform(), rng.uniform2()) else {
         return (false, shadow);
     };

@@ -20,7 +20,7 @@ use flowlight_core::camera::Camera;
 use flowlight_core::geometry::Ray;
 use flowlight_core::light::{LightKind, LightSample};
 use flowlight_core::path::{NodeClass, NodeType, Path, PathVertex};
-use flowlight_core::rng::Rng;
+use flowlight_core::sampler::SampleStream;
 use flowlight_core::Rgb;
 use flowlight_sdk::{Scene, Tracer};
 use glam::{Vec2, Vec3};
@@ -117,11 +117,11 @@ impl Recorder<'_> {
 /// Traces one untangled path through raster position `raster`. When `record` is given, the
 /// path's vertices, layer and contribution are stored in it (vertex_count = 0 when the path
 /// carries no light).
-pub fn trace(
+pub fn trace<S: SampleStream>(
     scene: &Scene,
     tracer: &Tracer,
     settings: &PathSettings,
-    rng: &mut Rng,
+    rng: &mut S,
     raster: Vec2,
     record: Option<&mut Path>,
 ) -> PathSample {

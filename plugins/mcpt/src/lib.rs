@@ -20,10 +20,12 @@
 //! | `max_ray_depth` | int | 64 | physical ray depth cap, every bounce counted |
 //! | `narrow_glossy_alpha` | float | 0.05 | untangled only: a glossy lobe with GGX α below it is Λα — no light connection there, light is found only by hitting it. A small lamp seen in a surface of roughness 0.2 (α = 0.04) is then nearly black; set 0 to connect at every non-Dirac vertex. Entangled MCPT connects at every non-Dirac vertex regardless |
 //! | `wavefront` | int | 256 | entangled only: paths traced together, as batches of camera, extension and shadow rays handed to the host in one call each (ABI 4); 0 traces one path at a time with one host call per ray. The image is the same bit for bit either way; only the speed differs |
+//! | `sampler` | string | `"sobol"` | where each pixel sample's random numbers come from: `"sobol"`, Owen-scrambled Sobol' points shuffled per dimension (randomised quasi-Monte Carlo: the samples of a pixel are stratified against each other in every dimension, at every power of two of samples per pixel; unbiased); `"independent"`, a PCG32 stream per sample |
 //! | `layers` | bool | false | also write lighting layers 0..=N (layer k = paths of virtual length k+1) as EXR layers `layer0`…; they sum to the image |
 //!
-//! Each pixel sample uses its own PCG32 stream seeded from (seed, pixel, sample index), so an
-//! image does not depend on the number of threads. A sample whose contributions are not all
+//! Each pixel sample's numbers depend only on (seed, pixel, sample index) — a PCG32 stream
+//! seeded from them, or the sample's Sobol' points — so an image does not depend on the
+//! number of threads or on how the samples are split into work units. A sample whose contributions are not all
 //! finite and non-negative is handed to the host as one invalid deposit, which the host counts
 //! and discards.
 
@@ -31,6 +33,8 @@
 #![forbid(unsafe_code)]
 
 use flowlight_core::rng::Rng;
+use flowlight_core::sampler::SampleStream;
+use flowlight_core::sobol::SobolSampler;
 use flowlight_core::Rgb;
 use flowlight_pathtrace::{entangled, untangled, PathSettings, SampleContributions, Variant};
 use flowlight_sdk::abi::ParamSpec;
@@ -45,9 +49,16 @@ pub struct Mcpt {
     settings: PathSettings,
     /// Paths per wavefront; 0 = path at a time.
     wavefront: usize,
+    sampler: SamplerKind,
 }
 
-const PARAMS: [ParamSpec; 9] = {
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum SamplerKind {
+    Independent,
+    Sobol,
+}
+
+const PARAMS: [ParamSpec; 10] = {
     let p = flowlight_pathtrace::settings::PATH_PARAMS;
     [
         p[0],
@@ -74,6 +85,12 @@ const PARAMS: [ParamSpec; 9] = {
             "256",
             "entangled only: paths traced together as ray batches (0 = one path at a time, one host call per ray)",
         ),
+        param(
+            "sampler",
+            ParamKind::String,
+            "\"sobol\"",
+            "random numbers per pixel sample: \"sobol\" (Owen-scrambled Sobol', stratified across a pixel's samples) or \"independent\" (PCG32)",
+        ),
     ]
 };
 
@@ -90,6 +107,10 @@ impl Integrator for Mcpt {
     ) -> Result<(Self, IntegratorInfo), String> {
         let settings = PathSettings::from_params(params)?;
         let layers = params.boolean("layers", false)?;
+        let sampler = match params.choice("sampler", "sobol", &["sobol", "independent"])? {
+            "independent" => SamplerKind::Independent,
+            _ => SamplerKind::Sobol,
+        };
         let wavefront = params.int("wavefront", WAVEFRONT as i64)?;
         if !(0..=65536).contains(&wavefront) {
             return Err(format!(
@@ -105,6 +126,7 @@ impl Integrator for Mcpt {
                 scene,
                 settings,
                 wavefront: wavefront as usize,
+                sampler,
             },
             info,
         ))
@@ -117,14 +139,53 @@ impl Integrator for Mcpt {
         film: &mut Film,
         _stats: &mut Stats,
     ) -> Result<(), String> {
+        match self.sampler {
+            SamplerKind::Independent => self.render_with::<Rng>(unit, tracer, film),
+            SamplerKind::Sobol => self.render_with::<SobolSampler>(unit, tracer, film),
+        }
+    }
+}
+
+/// Paths traced together as one wavefront by default: large enough that a batch amortises
+/// the host call, small enough that the batch's rays and states stay in cache.
+const WAVEFRONT: usize = 256;
+
+/// The random numbers of one pixel sample.
+trait PixelSampler: SampleStream + Clone {
+    /// The numbers of sample `s` of pixel (`x`, `y`) of a render with seed `seed`.
+    fn for_sample(seed: u64, x: u32, y: u32, s: u32) -> Self;
+}
+
+impl PixelSampler for Rng {
+    #[inline]
+    fn for_sample(seed: u64, x: u32, y: u32, s: u32) -> Self {
+        Rng::new(Rng::hash(&[seed, x as u64, y as u64, s as u64]), 0)
+    }
+}
+
+impl PixelSampler for SobolSampler {
+    #[inline]
+    fn for_sample(seed: u64, x: u32, y: u32, s: u32) -> Self {
+        // Every sample of a pixel shares the pixel's scrambles, so they stratify together.
+        SobolSampler::new(Rng::hash(&[seed, x as u64, y as u64]), s)
+    }
+}
+
+impl Mcpt {
+    fn render_with<S: PixelSampler>(
+        &self,
+        unit: &WorkUnit,
+        tracer: &Tracer,
+        film: &mut Film,
+    ) -> Result<(), String> {
         if self.settings.variant == Variant::Entangled && self.wavefront > 0 {
-            return self.render_wavefront(unit, tracer, film);
+            return self.render_wavefront::<S>(unit, tracer, film);
         }
         let mut contributions = SampleContributions::default();
         for y in unit.y0..unit.y1 {
             for x in unit.x0..unit.x1 {
                 for s in unit.sample_begin..unit.sample_begin + unit.sample_count {
-                    let (mut rng, raster) = sample_start(unit, x, y, s);
+                    let (mut rng, raster) = sample_start::<S>(unit, x, y, s);
                     contributions.clear();
                     match self.settings.variant {
                         Variant::Entangled => entangled::trace(
@@ -153,28 +214,22 @@ impl Integrator for Mcpt {
         }
         Ok(())
     }
-}
 
-/// Paths traced together as one wavefront by default: large enough that a batch amortises
-/// the host call, small enough that the batch's rays and states stay in cache.
-const WAVEFRONT: usize = 256;
-
-impl Mcpt {
     /// Entangled MCPT over a unit as wavefronts of `wavefront` paths, in the unit's
     /// (row, pixel, sample) order; each wave's contributions are deposited in that order
     /// afterwards, so the film sees exactly the deposits of a path-at-a-time loop.
-    fn render_wavefront(
+    fn render_wavefront<S: PixelSampler>(
         &self,
         unit: &WorkUnit,
         tracer: &Tracer,
         film: &mut Film,
     ) -> Result<(), String> {
-        let mut wf = entangled::Wavefront::default();
+        let mut wf = entangled::Wavefront::<S>::default();
         let n = self.wavefront;
         let mut starts = Vec::with_capacity(n);
         let mut pixels = Vec::with_capacity(n);
         let mut out = vec![SampleContributions::default(); n];
-        let mut flush = |starts: &mut Vec<(Rng, Vec2)>, pixels: &mut Vec<(u32, u32)>| {
+        let mut flush = |starts: &mut Vec<(S, Vec2)>, pixels: &mut Vec<(u32, u32)>| {
             let out = &mut out[..starts.len()];
             entangled::trace_wavefront(&self.scene, tracer, &self.settings, starts, &mut wf, out);
             for (&(x, y), c) in pixels.iter().zip(out.iter()) {
@@ -186,7 +241,7 @@ impl Mcpt {
         for y in unit.y0..unit.y1 {
             for x in unit.x0..unit.x1 {
                 for s in unit.sample_begin..unit.sample_begin + unit.sample_count {
-                    starts.push(sample_start(unit, x, y, s));
+                    starts.push(sample_start::<S>(unit, x, y, s));
                     pixels.push((x, y));
                     if starts.len() == n {
                         flush(&mut starts, &mut pixels);
@@ -201,11 +256,11 @@ impl Mcpt {
     }
 }
 
-/// The generator of sample `s` of pixel (`x`, `y`), seeded from (seed, pixel, sample), and the
-/// sample's jittered raster position (its first two numbers).
+/// The numbers of sample `s` of pixel (`x`, `y`) and the sample's jittered raster position
+/// (its first pair).
 #[inline]
-fn sample_start(unit: &WorkUnit, x: u32, y: u32, s: u32) -> (Rng, Vec2) {
-    let mut rng = Rng::new(Rng::hash(&[unit.seed, x as u64, y as u64, s as u64]), 0);
+fn sample_start<S: PixelSampler>(unit: &WorkUnit, x: u32, y: u32, s: u32) -> (S, Vec2) {
+    let mut rng = S::for_sample(unit.seed, x, y, s);
     let raster = Vec2::new(x as f32, y as f32) + rng.uniform2();
     (rng, raster)
 }

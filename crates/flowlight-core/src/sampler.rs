@@ -1,0 +1,58 @@
+//! Where a path's random numbers come from: a stream of uniform numbers in [0, 1).
+//!
+//! Two sources implement [`SampleStream`]:
+//!
+//! * [`crate::rng::Rng`], PCG32: independent numbers; what the Markov chains and every test
+//!   that needs independence use;
+//! * [`crate::sobol::SobolSampler`]: randomised quasi-Monte Carlo, the samples of one pixel
+//!   stratified against each other dimension by dimension (Owen-scrambled Sobol' points).
+//!
+//! A path tracer asks for numbers in the same order from either. It also says which decision
+//! each draw is for ([`SampleStream::seek`]: vertex and slot), so that a stratified source
+//! gives the same decision at the same vertex the same dimension in every sample of a pixel,
+//! even where another sample drew fewer numbers before it (a Dirac vertex has no light
+//! sample, a roulette number is drawn only from `rr_depth` on); an independent source
+//! ignores it, so its numbers (and images) do not change.
+
+use crate::rng::Rng;
+use glam::Vec2;
+
+/// A source of uniform numbers in [0, 1) for one path sample.
+pub trait SampleStream {
+    /// The next number.
+    fn uniform(&mut self) -> f32;
+
+    /// The next pair, meant to be used together (a point on a square): a stratified source
+    /// stratifies the pair in two dimensions.
+    fn uniform2(&mut self) -> Vec2;
+
+    /// The path is about to draw the numbers of `slot` (one of the `SLOT_*` constants) at
+    /// its `vertex`-th scattering vertex (1 for the first surface hit): a stratified source
+    /// moves to the dimension it reserves for them. Dimensions only move forward, so numbers
+    /// are never reused whatever the order of calls; this only improves stratification. An
+    /// independent source ignores it.
+    #[inline]
+    fn seek(&mut self, _vertex: u32, _slot: u32) {}
+}
+
+/// The numbers a path vertex draws, in order, as dimension slots of [`SampleStream::seek`]:
+/// the light choice (one number) and point on the light (a pair) ...
+pub const SLOT_LIGHT: u32 = 0;
+/// ... the roulette (one number) ...
+pub const SLOT_ROULETTE: u32 = 2;
+/// ... and the BSDF's component (one number) and direction (a pair).
+pub const SLOT_BSDF: u32 = 3;
+/// Slots reserved per vertex. The camera's raster position is dimension 0.
+pub const DIMS_PER_VERTEX: u32 = 5;
+
+impl SampleStream for Rng {
+    #[inline]
+    fn uniform(&mut self) -> f32 {
+        Rng::uniform(self)
+    }
+
+    #[inline]
+    fn uniform2(&mut self) -> Vec2 {
+        Rng::uniform2(self)
+    }
+}
