@@ -47,6 +47,9 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.normpath(os.path.join(HERE, "..", "..", ".."))
 VENV = os.environ.get("PEERS_VENV", os.path.join(ROOT, "target", "peers", "venv"))
 VARIANTS = ("llvm_ad_rgb", "scalar_rgb")
+# Not `orthogonal`: it rounds the sample count to the square of a prime, so it would not render
+# --spp samples. `stratified` rounds it to a square (64 is one).
+MITSUBA_SAMPLERS = ("independent", "stratified", "multijitter", "ldsampler")
 
 
 def die(msg):
@@ -187,6 +190,7 @@ def prepare_dragon(a, out):
     <default name="width" value="{a.width}"/>
     <default name="height" value="{a.height}"/>
     <default name="max_depth" value="{a.depth + 1}"/>
+    <default name="sampler" value="independent"/>
     <integrator type="path">
         <integer name="max_depth" value="$max_depth"/>
     </integrator>
@@ -198,7 +202,7 @@ def prepare_dragon(a, out):
         <transform name="to_world">
             <lookat origin="{p[0]}, {p[1]}, {p[2]}" target="{t[0]}, {t[1]}, {t[2]}" up="0, 1, 0"/>
         </transform>
-        <sampler type="independent"><integer name="sample_count" value="$spp"/></sampler>
+        <sampler type="$sampler"><integer name="sample_count" value="$spp"/></sampler>
         <film type="hdrfilm">
             <integer name="width" value="$width"/>
             <integer name="height" value="$height"/>
@@ -241,8 +245,10 @@ def flowlight_render(a, cfg, seed, out):
             "wall": field(text, "wall time", "flowlight render")}
 
 
-def mitsuba_render(a, variant, xml, seed, out):
-    """Renders in a fresh worker process of the venv (one variant per process)."""
+def mitsuba_render(a, renderer, xml, seed, out):
+    """Renders in a fresh worker process of the venv (one variant per process); `renderer` is
+    "variant/sampler"."""
+    variant, sampler = renderer.split("/")
     py = os.path.join(VENV, "bin", "python")
     if not os.path.exists(py):
         die(f"{py} is missing: run crates/flowlight-bench/peers/setup.sh first")
@@ -250,11 +256,12 @@ def mitsuba_render(a, variant, xml, seed, out):
     llvm_env = os.path.join(VENV, "llvm.env")
     if "DRJIT_LIBLLVM_PATH" not in env and os.path.exists(llvm_env):
         env["DRJIT_LIBLLVM_PATH"] = open(llvm_env).read().strip().split("=", 1)[1]
-    job = {"variant": variant, "xml": xml, "spp": a.spp, "pass_spp": a.mitsuba_pass_spp,
+    job = {"variant": variant, "sampler": sampler, "xml": xml, "spp": a.spp, "pass_spp": a.mitsuba_pass_spp,
            "seed": seed, "threads": a.threads, "depth": a.depth + a.mitsuba_depth_offset,
            "width": a.width, "height": a.height, "out": out}
     text = run([py, os.path.abspath(__file__), "--mitsuba-worker", json.dumps(job)], env=env)
-    return json.loads(text.strip().splitlines()[-1])
+    last = text.strip().splitlines()[-1]
+    return json.loads(last[last.index("{"):])  # after any colour codes of Mitsuba's log
 
 
 def mitsuba_worker(job):
@@ -269,7 +276,7 @@ def mitsuba_worker(job):
     size = {"res": job["width"]} if xml.endswith("cbox.xml") else {"width": job["width"], "height": job["height"]}
     if xml.endswith("cbox.xml") and job["width"] != job["height"]:
         raise SystemExit("the Cornell box's Mitsuba file renders square images only")
-    scene = mi.load_file(xml, max_depth=job["depth"], **size)
+    scene = mi.load_file(xml, max_depth=job["depth"], sampler=job["sampler"], **size)
     # Warm-up: the wavefront (llvm) variants trace and JIT-compile kernels on first use; one
     # untimed pass of the timed passes' size keeps compilation out of the timing whatever the
     # kernels depend on. Scalar compiles nothing: 1 spp.
@@ -363,7 +370,10 @@ def report(a, name, rows, flowlight_label):
 
 
 def label(r, flowlight_label):
-    return flowlight_label if r == "flowlight" else f"Mitsuba {MITSUBA_VERSION} `{r}`"
+    if r == "flowlight":
+        return flowlight_label
+    variant, sampler = r.split("/")
+    return f"Mitsuba {MITSUBA_VERSION} `{variant}` ({sampler})"
 
 
 MITSUBA_VERSION = "3.9.1"
@@ -379,6 +389,8 @@ def main():
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="Flowlight MCPT parameter, as `flowlight render --set` (repeatable), e.g. termination=throughput")
     ap.add_argument("--variants", default=",".join(VARIANTS), help="Mitsuba variants, comma separated")
+    ap.add_argument("--mitsuba-samplers", default="independent",
+                    help="Mitsuba samplers, comma separated (independent, stratified, multijitter, ldsampler): each variant renders with each")
     ap.add_argument("--width", type=int, default=256)
     ap.add_argument("--height", type=int, default=256)
     ap.add_argument("--depth", type=int, default=32, help="Flowlight path_depth; Mitsuba gets max_depth = depth + 1 (it counts segments)")
@@ -400,16 +412,21 @@ def main():
     for v in variants:
         if v not in VARIANTS:
             die(f"--variants: unknown variant '{v}' (known: {', '.join(VARIANTS)})")
+    samplers = [s for s in a.mitsuba_samplers.split(",") if s]
+    for s in samplers:
+        if s not in MITSUBA_SAMPLERS:
+            die(f"--mitsuba-samplers: unknown sampler '{s}' (known: {', '.join(MITSUBA_SAMPLERS)})")
     os.makedirs(a.out, exist_ok=True)
     # The label names the termination in use: the user's --set, else the plugin's default.
     sets = dict(s.split("=", 1) for s in a.set if "=" in s)
-    if "termination" not in sets:
-        text = run([a.flowlight, "plugins"])
-        m = re.search(r"^mcpt \(Integrator\).*?^\s+termination\s+string\s+default \"(\w+)\"", text, re.M | re.S)
-        sets = {"termination": (m.group(1) if m else "?") + " (default)", **sets}
+    for key in ("sampler", "termination"):
+        if key not in sets:
+            text = run([a.flowlight, "plugins"])
+            m = re.search(rf"^mcpt \(Integrator\).*?^\s+{key}\s+string\s+default \"(\w+)\"", text, re.M | re.S)
+            sets = {key: (m.group(1) if m else "?") + " (default)", **sets}
     fl_label = "Flowlight MCPT (entangled, " + ", ".join(f"{k} {v}" for k, v in sets.items()) + ")"
     rev = subprocess.run(["git", "-C", ROOT, "describe", "--always", "--dirty"], capture_output=True, text=True).stdout.strip()
-    print(f"# Peers: Flowlight {rev or '?'} ({a.flowlight}) vs Mitsuba {MITSUBA_VERSION} {', '.join(variants)}")
+    print(f"# Peers: Flowlight {rev or '?'} ({a.flowlight}) vs Mitsuba {MITSUBA_VERSION} {', '.join(variants)}; Mitsuba samplers {', '.join(samplers)}")
     print(f"\nCommand: {' '.join(sys.argv)}")
     cpu = next((l.split(":", 1)[1].strip() for l in open("/proc/cpuinfo") if l.startswith("model name")), "?") \
         if os.path.exists("/proc/cpuinfo") else "?"
@@ -423,12 +440,12 @@ def main():
         ref = reference(a, name, cfg, a.out)
         if a.reference_only:
             continue
-        renderers = ["flowlight"] + variants
+        renderers = ["flowlight"] + [f"{v}/{s}" for v in variants for s in samplers]
         rows = {r: [] for r in renderers}
         for k in range(a.runs):
             order = renderers if k % 2 == 0 else renderers[::-1]
             for r in order:
-                img = os.path.join(a.out, f"{name}-{r}-{k}.exr")
+                img = os.path.join(a.out, f"{name}-{r.replace('/', '-')}-{k}.exr")
                 seed = 1000 + k
                 t = flowlight_render(a, cfg, seed, img) if r == "flowlight" else mitsuba_render(a, r, xml, seed, img)
                 t.update(compare(a, img, ref))

@@ -235,7 +235,9 @@ mod tests {
     #[test]
     fn unscrambled_dimensions_zero_and_one_are_nets() {
         for m in 0..=12 {
-            let pts: Vec<(u32, u32)> = (0..1u32 << m).map(|i| (i.reverse_bits(), sobol1(i))).collect();
+            let pts: Vec<(u32, u32)> = (0..1u32 << m)
+                .map(|i| (i.reverse_bits(), sobol1(i)))
+                .collect();
             assert!(is_net(&pts, m), "m = {m}");
         }
         // Sobol's dimension 1 for the first indices: 1/2, 3/4, 1/4, 3/8 … (bit patterns).
@@ -337,7 +339,13 @@ mod tests {
             for p in 0..pixels {
                 let mut s = SobolSampler::new(Rng::hash(&[7, p]), index);
                 let u: Vec<f32> = (0..8)
-                    .map(|d| if d % 2 == 0 { s.uniform() } else { s.uniform2().y })
+                    .map(|d| {
+                        if d % 2 == 0 {
+                            s.uniform()
+                        } else {
+                            s.uniform2().y
+                        }
+                    })
                     .collect();
                 for d in 0..8 {
                     assert!((0.0..1.0).contains(&u[d]));
