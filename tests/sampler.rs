@@ -113,4 +113,17 @@ fn untangled_refuses_sobol_and_defaults_to_independent() {
         "unclear error: {err}"
     );
     assert!(Session::prepare(&config, &ov(&[("variant", "untangled".into())])).is_ok());
+    // ERPT's untangled seeds likewise.
+    let erpt = common::scene_config("glass-caustic/erpt.toml");
+    let err = Session::prepare(
+        &erpt,
+        &ov(&[("seeds", "untangled".into()), ("sampler", "sobol".into())]),
+    )
+    .err()
+    .expect("untangled seeds with sobol must be refused")
+    .to_string();
+    assert!(
+        err.contains("'sampler'") && err.contains("entangled"),
+        "unclear error: {err}"
+    );
 }

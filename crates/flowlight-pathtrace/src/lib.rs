@@ -3,6 +3,8 @@
 //! * [`untangled`]: one light connection per path (thesis §3.7); ERPT's seed sampler.
 //! * [`entangled`]: next-event estimation at every vertex combined with BSDF sampling by
 //!   multiple importance sampling.
+//! * [`sampler`]: where a pixel sample's random numbers come from (`sampler = "sobol"` or
+//!   `"independent"`).
 //! * [`seeds`]: the entangled sampler split into its techniques, each a stored path with its
 //!   MIS-weighted estimate: ERPT's entangled seeds.
 //!
@@ -13,6 +15,7 @@
 //! virtual length k + 1); the path-space depth N is the deepest layer.
 
 pub mod entangled;
+pub mod sampler;
 pub mod seeds;
 pub mod settings;
 mod shading;

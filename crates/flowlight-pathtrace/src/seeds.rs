@@ -66,6 +66,7 @@ use flowlight_core::light::{area_to_solid_angle, LightKind};
 use flowlight_core::mesh::CompactHit;
 use flowlight_core::path::{NodeType, Path, PathVertex, MAX_PATH_VERTICES};
 use flowlight_core::rng::Rng;
+use flowlight_core::sampler::{SampleStream, SLOT_BSDF, SLOT_LIGHT, SLOT_ROULETTE};
 use flowlight_core::sampling::power_heuristic;
 use flowlight_core::Rgb;
 use flowlight_sdk::{Scene, Tracer};
@@ -218,11 +219,11 @@ pub struct SeedSplit<'a> {
 /// connection, emitter hit and environment escape that carries light) to `store`. The
 /// estimates sum to the entangled sampler's estimate of the same path tree
 /// ([`crate::entangled::trace`], same random-number order).
-pub fn trace(
+pub fn trace<S: SampleStream + Clone>(
     scene: &Scene,
     tracer: &Tracer,
     settings: &PathSettings,
-    rng: &mut Rng,
+    rng: &mut S,
     raster: Vec2,
     store: &mut SeedStore,
 ) {
@@ -232,11 +233,11 @@ pub fn trace(
 /// [`trace`] that stores only the seeds `split.filter` keeps; the others' estimates are added
 /// to `split.rest` (not cleared first). The same random numbers are drawn as by [`trace`], and
 /// a seed is stored here exactly when [`trace`] stores it and the filter keeps its path.
-pub fn trace_split(
+pub fn trace_split<S: SampleStream + Clone>(
     scene: &Scene,
     tracer: &Tracer,
     settings: &PathSettings,
-    rng: &mut Rng,
+    rng: &mut S,
     raster: Vec2,
     store: &mut SeedStore,
     split: &mut SeedSplit,
@@ -244,11 +245,11 @@ pub fn trace_split(
     trace_with(scene, tracer, settings, rng, raster, store, Some(split));
 }
 
-fn trace_with(
+fn trace_with<S: SampleStream + Clone>(
     scene: &Scene,
     tracer: &Tracer,
     settings: &PathSettings,
-    rng: &mut Rng,
+    rng: &mut S,
     raster: Vec2,
     store: &mut SeedStore,
     split: Option<&mut SeedSplit>,
@@ -285,9 +286,8 @@ fn trace_with(
 
 /// Reusable buffers of [`trace_wavefront`]: the trees of one wave and their own trunks, seeds
 /// and split-off estimates (one set per work unit, so no allocation per path).
-#[derive(Default)]
-pub struct SeedWavefront {
-    trees: Vec<Tree>,
+pub struct SeedWavefront<S = Rng> {
+    trees: Vec<Tree<S>>,
     buffers: Vec<TreeBuffers>,
     active: Vec<u32>,
     rays: Vec<Ray>,
@@ -295,6 +295,21 @@ pub struct SeedWavefront {
     shadow_rays: Vec<Ray>,
     pending: Vec<(u32, PendingConnection)>,
     blocked: Vec<u8>,
+}
+
+impl<S> Default for SeedWavefront<S> {
+    fn default() -> Self {
+        SeedWavefront {
+            trees: Vec::new(),
+            buffers: Vec::new(),
+            active: Vec::new(),
+            rays: Vec::new(),
+            hits: Vec::new(),
+            shadow_rays: Vec::new(),
+            pending: Vec::new(),
+            blocked: Vec::new(),
+        }
+    }
 }
 
 /// One tree's own trunk, seeds and split-off estimates in a [`SeedWavefront`].
@@ -356,13 +371,13 @@ pub struct TreeSeeds<'a> {
 /// store equals what the path-at-a-time calls in that order give, bit for bit; `each` is
 /// called for every tree in that order, after its seeds are stored.
 #[allow(clippy::too_many_arguments)]
-pub fn trace_wavefront(
+pub fn trace_wavefront<S: SampleStream + Clone>(
     scene: &Scene,
     tracer: &Tracer,
     settings: &PathSettings,
-    starts: &[(Rng, Vec2)],
+    starts: &[(S, Vec2)],
     filter: Option<&dyn SeedFilter>,
-    wf: &mut SeedWavefront,
+    wf: &mut SeedWavefront<S>,
     store: &mut SeedStore,
     mut each: impl FnMut(TreeSeeds),
 ) {
@@ -546,8 +561,8 @@ fn connection_class(
 /// One entangled path tree being split into seeds: the locals of the sampler between two
 /// bounces.
 #[derive(Clone, Debug)]
-struct Tree {
-    rng: Rng,
+struct Tree<S> {
+    rng: S,
     raster: Vec2,
     ray: Ray,
     beta: Rgb,
@@ -563,8 +578,8 @@ struct Tree {
     types: [NodeType; MAX_PATH_VERTICES + 1],
 }
 
-impl Tree {
-    fn start(scene: &Scene, rng: Rng, raster: Vec2) -> Tree {
+impl<S: SampleStream> Tree<S> {
+    fn start(scene: &Scene, rng: S, raster: Vec2) -> Self {
         let ray = scene.camera.generate_ray(raster);
         Tree {
             rng,
@@ -711,6 +726,7 @@ impl Tree {
         let rng = &mut self.rng;
         let mut pending = None;
         if bsdf.has_non_delta() {
+            rng.seek(self.physical, SLOT_LIGHT);
             if let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) {
                 if let Some((conn, ray)) = light_connection(scene, hit, &shading, &ls) {
                     if let Some((f, w)) = connection_bsdf(&bsdf, shading.wo, &conn) {
@@ -772,6 +788,7 @@ impl Tree {
         };
         self.last = t >= 1.0 || self.physical >= settings.max_ray_depth;
         if !self.last && t > 0.0 {
+            rng.seek(self.physical, SLOT_ROULETTE);
             if rng.uniform() < t {
                 return (false, pending);
             }
@@ -779,6 +796,7 @@ impl Tree {
             self.density *= 1.0 - t as f64;
         }
 
+        rng.seek(self.physical, SLOT_BSDF);
         let u_component = rng.uniform();
         let Some(s) = bsdf.sample(shading.wo, u_component, rng.uniform2()) else {
             return (false, pending);

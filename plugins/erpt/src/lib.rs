@@ -48,6 +48,7 @@
 //! | `termination`, `path_depth`, `max_ray_depth`, `rr_depth`, `rr_max_survival` | | `"throughput"`, 8, 32, 5, 0.95 | the seed sampler's (see `mcpt`; for untangled seeds `"throughput"` is T = 1 − min(albedo, `rr_max_survival`) and `rr_depth` is unused; entangled seeds roll it on the throughput from `rr_depth`, as MCPT) |
 //! | `layers` | bool | false | write lighting layers `layer0…layerN` |
 //! | `seeds` | string | `"untangled"` | `"untangled"` (one light connection per path) or `"entangled"` (every connection, emitter hit and escape of an entangled path, MIS-weighted) |
+//! | `sampler` | string | `"sobol"` | entangled seeds only (untangled: `"independent"`; `"sobol"` refused): the seed paths' random numbers, `"sobol"` (a pixel's samples stratified together, as MCPT's default) or `"independent"`; chains always draw independent numbers |
 //! | `direct` | string | `"erpt"` | `"mcpt"`: direct light (layers 0 and 1, `ES*L`, `ES*[DG]L`) by path tracing, as Mitsuba 0.6's `directSamples` |
 //! | `chains_for` | string | `"all"` | paths the chains render: `"all"`, `"caustics"` (`E.*[DG].*S.*L`) or a Heckbert pattern over `E D G S L` with `. [] [^] * + ? \| ()` (`part.rs`); the rest by MCPT |
 //!
@@ -71,7 +72,9 @@ mod stats;
 use flow::Flow;
 use flowlight_core::path::{NodeType, Path};
 use flowlight_core::rng::Rng;
+use flowlight_core::sobol::SobolSampler;
 use flowlight_core::Rgb;
+use flowlight_pathtrace::sampler::{sample_start, PixelSampler, SamplerKind};
 use flowlight_pathtrace::seeds::{self, SeedFilter, SeedStore, SeedWavefront};
 use flowlight_pathtrace::{entangled, untangled, SampleContributions};
 use flowlight_sdk::abi::ParamSpec;
@@ -143,11 +146,39 @@ fn deposit_at_pixel(
     }
 }
 
-thread_local! {
-    /// Each worker thread's MCPT wavefront, for scenes whose chains' part is empty.
-    static MCPT_WAVEFRONT: RefCell<(entangled::Wavefront, Vec<SampleContributions>)> =
-        RefCell::new((entangled::Wavefront::default(), Vec::new()));
+/// A pixel sampler with each worker thread's wavefront buffers for it, kept across units so
+/// that a unit allocates nothing for its trees and paths.
+trait WaveSampler: PixelSampler + 'static {
+    fn with_seed_wave<R>(f: impl FnOnce(&mut SeedWavefront<Self>) -> R) -> R;
+    fn with_mcpt_wave<R>(
+        f: impl FnOnce(&mut (entangled::Wavefront<Self>, Vec<SampleContributions>)) -> R,
+    ) -> R;
 }
+
+macro_rules! wave_sampler {
+    ($sampler:ty) => {
+        impl WaveSampler for $sampler {
+            fn with_seed_wave<R>(f: impl FnOnce(&mut SeedWavefront<Self>) -> R) -> R {
+                thread_local! {
+                    static WAVE: RefCell<SeedWavefront<$sampler>> =
+                        RefCell::new(SeedWavefront::default());
+                }
+                WAVE.with_borrow_mut(f)
+            }
+            fn with_mcpt_wave<R>(
+                f: impl FnOnce(&mut (entangled::Wavefront<Self>, Vec<SampleContributions>)) -> R,
+            ) -> R {
+                thread_local! {
+                    static WAVE: RefCell<(entangled::Wavefront<$sampler>, Vec<SampleContributions>)> =
+                        RefCell::new((entangled::Wavefront::default(), Vec::new()));
+                }
+                WAVE.with_borrow_mut(f)
+            }
+        }
+    };
+}
+wave_sampler!(Rng);
+wave_sampler!(SobolSampler);
 
 /// Random streams of a seed: its path, and its chains.
 fn seed_rngs(seed: u64, x: u32, y: u32, s: u32) -> (Rng, Rng) {
@@ -177,12 +208,6 @@ struct UnitSeeds {
 /// host call, small enough that the trees' state stays in cache.
 const SEED_WAVE: usize = 256;
 
-thread_local! {
-    /// Each worker thread's wavefront buffers, kept across units so that a unit allocates
-    /// nothing for its trees.
-    static SEED_WAVEFRONT: RefCell<SeedWavefront> = RefCell::new(SeedWavefront::default());
-}
-
 impl Erpt {
     /// Whether entangled seeds are split while traced (only the chains' part is stored).
     fn splits_while_tracing(&self) -> bool {
@@ -204,11 +229,6 @@ impl Erpt {
         path: &mut Path,
         rest: &mut dyn FnMut(u32, u32, &SampleContributions, u64),
     ) {
-        let start = |x: u32, y: u32, s: u32| {
-            let (mut rng, _) = seed_rngs(seed, x, y, s);
-            let raster = Vec2::new(x as f32, y as f32) + rng.uniform2();
-            (rng, raster)
-        };
         match self.settings.seed_kind {
             SeedKind::Untangled => {
                 for (x, y) in pixels {
@@ -219,7 +239,7 @@ impl Erpt {
                             s,
                             first: out.store.seeds.len(),
                         });
-                        let (mut rng, raster) = start(x, y, s);
+                        let (mut rng, raster) = sample_start::<Rng>(seed, x, y, s);
                         untangled::trace(
                             &self.scene,
                             tracer,
@@ -232,51 +252,14 @@ impl Erpt {
                     }
                 }
             }
-            SeedKind::Entangled => SEED_WAVEFRONT.with_borrow_mut(|wf| {
-                let filter: Option<&dyn SeedFilter> = self
-                    .splits_while_tracing()
-                    .then_some(&self.settings.part as &dyn SeedFilter);
-                let mut starts = Vec::with_capacity(SEED_WAVE);
-                let mut wave = Vec::with_capacity(SEED_WAVE);
-                let mut flush = |starts: &mut Vec<_>, wave: &mut Vec<(u32, u32, u32)>| {
-                    let (store, keys) = (&mut out.store, &mut out.keys);
-                    seeds::trace_wavefront(
-                        &self.scene,
-                        tracer,
-                        &self.settings.seeds,
-                        starts,
-                        filter,
-                        wf,
-                        store,
-                        |tree| {
-                            let (x, y, s) = wave[tree.index];
-                            keys.push(SampleKey {
-                                x,
-                                y,
-                                s,
-                                first: tree.first_seed,
-                            });
-                            if tree.rest_count > 0 {
-                                rest(x, y, tree.rest, tree.rest_count);
-                            }
-                        },
-                    );
-                    starts.clear();
-                    wave.clear();
-                };
-                for (x, y) in pixels {
-                    for s in samples.clone() {
-                        starts.push(start(x, y, s));
-                        wave.push((x, y, s));
-                        if starts.len() == SEED_WAVE {
-                            flush(&mut starts, &mut wave);
-                        }
-                    }
+            SeedKind::Entangled => match self.settings.sampler {
+                SamplerKind::Independent => {
+                    self.trace_entangled::<Rng>(tracer, seed, pixels, samples, out, rest)
                 }
-                if !starts.is_empty() {
-                    flush(&mut starts, &mut wave);
+                SamplerKind::Sobol => {
+                    self.trace_entangled::<SobolSampler>(tracer, seed, pixels, samples, out, rest)
                 }
-            }),
+            },
         }
         let part = &self.settings.part;
         // Split while traced: every stored seed is in the part.
@@ -291,6 +274,63 @@ impl Erpt {
             .collect();
     }
 
+    /// [`Self::trace_unit`]'s entangled seeds, drawn with the pixel sampler `S`.
+    fn trace_entangled<S: WaveSampler>(
+        &self,
+        tracer: &Tracer,
+        seed: u64,
+        pixels: impl Iterator<Item = (u32, u32)>,
+        samples: std::ops::Range<u32>,
+        out: &mut UnitSeeds,
+        rest: &mut dyn FnMut(u32, u32, &SampleContributions, u64),
+    ) {
+        S::with_seed_wave(|wf| {
+            let filter: Option<&dyn SeedFilter> = self
+                .splits_while_tracing()
+                .then_some(&self.settings.part as &dyn SeedFilter);
+            let mut starts = Vec::with_capacity(SEED_WAVE);
+            let mut wave = Vec::with_capacity(SEED_WAVE);
+            let mut flush = |starts: &mut Vec<_>, wave: &mut Vec<(u32, u32, u32)>| {
+                let (store, keys) = (&mut out.store, &mut out.keys);
+                seeds::trace_wavefront(
+                    &self.scene,
+                    tracer,
+                    &self.settings.seeds,
+                    starts,
+                    filter,
+                    wf,
+                    store,
+                    |tree| {
+                        let (x, y, s) = wave[tree.index];
+                        keys.push(SampleKey {
+                            x,
+                            y,
+                            s,
+                            first: tree.first_seed,
+                        });
+                        if tree.rest_count > 0 {
+                            rest(x, y, tree.rest, tree.rest_count);
+                        }
+                    },
+                );
+                starts.clear();
+                wave.clear();
+            };
+            for (x, y) in pixels {
+                for s in samples.clone() {
+                    starts.push(sample_start::<S>(seed, x, y, s));
+                    wave.push((x, y, s));
+                    if starts.len() == SEED_WAVE {
+                        flush(&mut starts, &mut wave);
+                    }
+                }
+            }
+            if !starts.is_empty() {
+                flush(&mut starts, &mut wave);
+            }
+        })
+    }
+
     /// A unit of a scene whose chains' part is empty: every entangled seed would go to its
     /// pixel, so the unit is path tracing. It is traced as MCPT's wavefront
     /// (`entangled::trace_wavefront`, whose estimate per sample and layer is the sum of the
@@ -303,13 +343,27 @@ impl Erpt {
         film: &mut Film,
         stats: &mut Stats,
     ) {
+        match self.settings.sampler {
+            SamplerKind::Independent => self.mcpt_unit::<Rng>(unit, tracer, film, stats),
+            SamplerKind::Sobol => self.mcpt_unit::<SobolSampler>(unit, tracer, film, stats),
+        }
+    }
+
+    /// [`Self::render_without_chains`] with the pixel sampler `S`.
+    fn mcpt_unit<S: WaveSampler>(
+        &self,
+        unit: &WorkUnit,
+        tracer: &Tracer,
+        film: &mut Film,
+        stats: &mut Stats,
+    ) {
         let start = Instant::now();
         let (mut samples, mut deposits, mut skipped) = (0u64, 0u64, 0u64);
-        MCPT_WAVEFRONT.with_borrow_mut(|(wf, out)| {
+        S::with_mcpt_wave(|(wf, out)| {
             out.resize_with(SEED_WAVE, SampleContributions::default);
             let mut starts = Vec::with_capacity(SEED_WAVE);
             let mut pixels = Vec::with_capacity(SEED_WAVE);
-            let mut flush = |starts: &mut Vec<(Rng, Vec2)>, pixels: &mut Vec<(u32, u32)>| {
+            let mut flush = |starts: &mut Vec<(S, Vec2)>, pixels: &mut Vec<(u32, u32)>| {
                 let out = &mut out[..starts.len()];
                 entangled::trace_wavefront(
                     &self.scene,
@@ -329,9 +383,7 @@ impl Erpt {
             for y in unit.y0..unit.y1 {
                 for x in unit.x0..unit.x1 {
                     for s in unit.sample_begin..unit.sample_begin + unit.sample_count {
-                        let (mut rng, _) = seed_rngs(unit.seed, x, y, s);
-                        let raster = Vec2::new(x as f32, y as f32) + rng.uniform2();
-                        starts.push((rng, raster));
+                        starts.push(sample_start::<S>(unit.seed, x, y, s));
                         pixels.push((x, y));
                         if starts.len() == SEED_WAVE {
                             flush(&mut starts, &mut pixels);

@@ -1,6 +1,7 @@
 //! ERPT parameters.
 
 use crate::part::Part;
+use flowlight_pathtrace::sampler::SamplerKind;
 use flowlight_pathtrace::{PathSettings, Variant};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::{param, ParamKind, Params};
@@ -40,6 +41,8 @@ pub struct ErptSettings {
     pub seed_kind: SeedKind,
     /// The part of path space the chains render (the rest by MCPT).
     pub part: Part,
+    /// Random numbers of the seed paths (entangled seeds only; chains draw independent ones).
+    pub sampler: SamplerKind,
 }
 
 /// Which sampler draws the seeds.
@@ -52,7 +55,7 @@ pub enum SeedKind {
     Entangled,
 }
 
-pub const PARAMS: [ParamSpec; 17] = [
+pub const PARAMS: [ParamSpec; 18] = [
     param("mutations", ParamKind::MutationList, "(required)", "[[integrator.mutations]] plugin = \"...\", weight = w, and that plugin's parameters"),
     param("mutations_per_sample", ParamKind::Float, "8", "expected mutations per initial MC sample (M, §5.2): e_d = lum(ΣX_f) / (count · M)"),
     param("chain_length", ParamKind::Int, "16", "mutations per chain (N); every chain of a seed has this length"),
@@ -70,6 +73,7 @@ pub const PARAMS: [ParamSpec; 17] = [
     param("seeds", ParamKind::String, "\"untangled\"", "seed sampler: \"untangled\" (one light connection per path, the thesis') or \"entangled\" (every connection and emitter hit of an entangled path, MIS-weighted)"),
     param("direct", ParamKind::String, "\"erpt\"", "direct lighting (layers 0 and 1: ES*L, ES*[DG]L) by \"erpt\" chains or \"mcpt\" (seeds deposited as path tracing would)"),
     param("chains_for", ParamKind::String, "\"all\"", "paths the chains render, the rest by MCPT: \"all\", \"caustics\" (E.*[DG].*S.*L) or a Heckbert pattern over E D G S L with . [] ^ * + ? | ()"),
+    param("sampler", ParamKind::String, "\"sobol\"", "entangled seeds only (untangled: \"independent\"): the seed paths' random numbers, \"sobol\" (a pixel's samples stratified together, as MCPT's default) or \"independent\" (PCG32); chains always draw independent numbers"),
 ];
 
 impl ErptSettings {
@@ -130,9 +134,25 @@ impl ErptSettings {
         if seed_kind == SeedKind::Entangled {
             seeds.variant = Variant::Entangled;
         }
+        // Entangled seeds take the path tracer's stratified samples; untangled seeds (the
+        // thesis' sampler) keep independent numbers, as MCPT's untangled variant does.
+        let default_sampler = match seed_kind {
+            SeedKind::Entangled => "sobol",
+            SeedKind::Untangled => "independent",
+        };
+        let sampler = match p.choice("sampler", default_sampler, &["sobol", "independent"])? {
+            "independent" => SamplerKind::Independent,
+            _ if seed_kind == SeedKind::Untangled => {
+                return Err(
+                    "parameter 'sampler' = \"sobol\" needs seeds = \"entangled\" (untangled seeds use independent numbers; see docs/mcpt.md, Samplers)".to_string(),
+                )
+            }
+            _ => SamplerKind::Sobol,
+        };
         let direct_by_mcpt = p.choice("direct", "erpt", &["erpt", "mcpt"])? == "mcpt";
         let part = Part::new(p.string("chains_for", "all")?, direct_by_mcpt)?;
         Ok(ErptSettings {
+            sampler,
             seed_kind,
             part,
             seeds,

@@ -33,9 +33,9 @@
 #![forbid(unsafe_code)]
 
 use flowlight_core::rng::Rng;
-use flowlight_core::sampler::SampleStream;
 use flowlight_core::sobol::SobolSampler;
 use flowlight_core::Rgb;
+use flowlight_pathtrace::sampler::{sample_start, PixelSampler, SamplerKind};
 use flowlight_pathtrace::{entangled, untangled, PathSettings, SampleContributions, Variant};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::{
@@ -50,12 +50,6 @@ pub struct Mcpt {
     /// Paths per wavefront; 0 = path at a time.
     wavefront: usize,
     sampler: SamplerKind,
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum SamplerKind {
-    Independent,
-    Sobol,
 }
 
 const PARAMS: [ParamSpec; 10] = {
@@ -162,27 +156,6 @@ impl Integrator for Mcpt {
 /// the host call, small enough that the batch's rays and states stay in cache.
 const WAVEFRONT: usize = 256;
 
-/// The random numbers of one pixel sample.
-trait PixelSampler: SampleStream + Clone {
-    /// The numbers of sample `s` of pixel (`x`, `y`) of a render with seed `seed`.
-    fn for_sample(seed: u64, x: u32, y: u32, s: u32) -> Self;
-}
-
-impl PixelSampler for Rng {
-    #[inline]
-    fn for_sample(seed: u64, x: u32, y: u32, s: u32) -> Self {
-        Rng::new(Rng::hash(&[seed, x as u64, y as u64, s as u64]), 0)
-    }
-}
-
-impl PixelSampler for SobolSampler {
-    #[inline]
-    fn for_sample(seed: u64, x: u32, y: u32, s: u32) -> Self {
-        // Every sample of a pixel shares the pixel's scrambles, so they stratify together.
-        SobolSampler::new(Rng::hash(&[seed, x as u64, y as u64]), s)
-    }
-}
-
 impl Mcpt {
     fn render_with<S: PixelSampler>(
         &self,
@@ -197,7 +170,7 @@ impl Mcpt {
         for y in unit.y0..unit.y1 {
             for x in unit.x0..unit.x1 {
                 for s in unit.sample_begin..unit.sample_begin + unit.sample_count {
-                    let (mut rng, raster) = sample_start::<S>(unit, x, y, s);
+                    let (mut rng, raster) = sample_start::<S>(unit.seed, x, y, s);
                     contributions.clear();
                     match self.settings.variant {
                         Variant::Entangled => entangled::trace(
@@ -253,7 +226,7 @@ impl Mcpt {
         for y in unit.y0..unit.y1 {
             for x in unit.x0..unit.x1 {
                 for s in unit.sample_begin..unit.sample_begin + unit.sample_count {
-                    starts.push(sample_start::<S>(unit, x, y, s));
+                    starts.push(sample_start::<S>(unit.seed, x, y, s));
                     pixels.push((x, y));
                     if starts.len() == n {
                         flush(&mut starts, &mut pixels);
@@ -266,15 +239,6 @@ impl Mcpt {
         }
         Ok(())
     }
-}
-
-/// The numbers of sample `s` of pixel (`x`, `y`) and the sample's jittered raster position
-/// (its first pair).
-#[inline]
-fn sample_start<S: PixelSampler>(unit: &WorkUnit, x: u32, y: u32, s: u32) -> (S, Vec2) {
-    let mut rng = S::for_sample(unit.seed, x, y, s);
-    let raster = Vec2::new(x as f32, y as f32) + rng.uniform2();
-    (rng, raster)
 }
 
 /// Deposits one sample's contributions in pixel (`x`, `y`), or one invalid deposit when any
