@@ -5,7 +5,7 @@
 //! * [`crate::rng::Rng`], PCG32: independent numbers; what the Markov chains and every test
 //!   that needs independence use;
 //! * [`crate::sobol::SobolSampler`]: randomised quasi-Monte Carlo, the samples of one pixel
-//!   stratified against each other dimension by dimension (Owen-scrambled Sobol' points).
+//!   stratified against each other dimension by dimension (Sobol' points of a shuffled index, digitally shifted).
 //!
 //! A path tracer asks for numbers in the same order from either. It also says which decision
 //! each draw is for ([`SampleStream::seek`]: vertex and slot), so that a stratified source

@@ -20,7 +20,7 @@
 //! | `max_ray_depth` | int | 64 | physical ray depth cap, every bounce counted |
 //! | `narrow_glossy_alpha` | float | 0.05 | untangled only: a glossy lobe with GGX α below it is Λα — no light connection there, light is found only by hitting it. A small lamp seen in a surface of roughness 0.2 (α = 0.04) is then nearly black; set 0 to connect at every non-Dirac vertex. Entangled MCPT connects at every non-Dirac vertex regardless |
 //! | `wavefront` | int | 256 | entangled only: paths traced together, as batches of camera, extension and shadow rays handed to the host in one call each (ABI 4); 0 traces one path at a time with one host call per ray. The image is the same bit for bit either way; only the speed differs |
-//! | `sampler` | string | `"sobol"` | entangled only (untangled: `"independent"`, and `"sobol"` is refused): where each pixel sample's random numbers come from: `"sobol"`, Owen-scrambled Sobol' points shuffled per dimension (randomised quasi-Monte Carlo: the samples of a pixel are stratified against each other in every dimension, at every power of two of samples per pixel; unbiased); `"independent"`, a PCG32 stream per sample |
+//! | `sampler` | string | `"sobol"` | entangled only (untangled: `"independent"`, and `"sobol"` is refused): where each pixel sample's random numbers come from: `"sobol"`, Sobol' points of a per-dimension shuffled (Owen-scrambled) index, digitally shifted (randomised quasi-Monte Carlo: the samples of a pixel are stratified against each other in every dimension, at every power of two of samples per pixel; unbiased); `"independent"`, a PCG32 stream per sample |
 //! | `layers` | bool | false | also write lighting layers 0..=N (layer k = paths of virtual length k+1) as EXR layers `layer0`…; they sum to the image |
 //!
 //! Each pixel sample's numbers depend only on (seed, pixel, sample index) — a PCG32 stream
@@ -83,7 +83,7 @@ const PARAMS: [ParamSpec; 10] = {
             "sampler",
             ParamKind::String,
             "\"sobol\"",
-            "random numbers per pixel sample: \"sobol\" (Owen-scrambled Sobol', stratified across a pixel's samples; entangled only) or \"independent\" (PCG32; the untangled variant's only choice)",
+            "random numbers per pixel sample: \"sobol\" (Sobol' points, shuffled and shifted per dimension, stratified across a pixel's samples; entangled only) or \"independent\" (PCG32; the untangled variant's only choice)",
         ),
     ]
 };
