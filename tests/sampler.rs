@@ -100,30 +100,27 @@ fn untangled_refuses_sobol_and_defaults_to_independent() {
         params: common::toml_params(params),
         ..Default::default()
     };
-    let config = common::scene_config("cornell-box/cornell-box.toml");
-    let err = Session::prepare(
-        &config,
-        &ov(&[("variant", "untangled".into()), ("sampler", "sobol".into())]),
-    )
-    .err()
-    .expect("untangled with sobol must be refused")
-    .to_string();
-    assert!(
-        err.contains("'sampler'") && err.contains("entangled"),
-        "unclear error: {err}"
+    // The error names the parameter and what it needs.
+    let refused = |config: &str, params: &[(&str, toml::Value)]| {
+        let err = Session::prepare(&common::scene_config(config), &ov(params))
+            .err()
+            .unwrap_or_else(|| panic!("{config} {params:?} must be refused"))
+            .to_string();
+        assert!(
+            err.contains("'sampler'") && err.contains("entangled"),
+            "unclear error: {err}"
+        );
+    };
+    let sobol = ("sampler", toml::Value::from("sobol"));
+    refused(
+        "cornell-box/cornell-box.toml",
+        &[("variant", "untangled".into()), sobol.clone()],
     );
+    let config = common::scene_config("cornell-box/cornell-box.toml");
     assert!(Session::prepare(&config, &ov(&[("variant", "untangled".into())])).is_ok());
     // ERPT's untangled seeds likewise.
-    let erpt = common::scene_config("glass-caustic/erpt.toml");
-    let err = Session::prepare(
-        &erpt,
-        &ov(&[("seeds", "untangled".into()), ("sampler", "sobol".into())]),
-    )
-    .err()
-    .expect("untangled seeds with sobol must be refused")
-    .to_string();
-    assert!(
-        err.contains("'sampler'") && err.contains("entangled"),
-        "unclear error: {err}"
+    refused(
+        "glass-caustic/erpt.toml",
+        &[("seeds", "untangled".into()), sobol],
     );
 }
