@@ -632,8 +632,8 @@ fn erpt_path_traces_a_scene_without_paths_in_the_chains_part() {
     ));
     assert_eq!(stat(&out, "units_without_chains"), 0.0);
     // With the glass caustic's own budget (M = 1/8) whether any chain starts in this small
-    // render depended on the random numbers (none with the stratified sampler's seed 1
-    // shifts); at M = 8 chains start from its caustic seeds.
+    // render depends on the random numbers (the stratified seeds drew none); at M = 8 chains
+    // start from its caustic seeds.
     let mut glass = params("entangled");
     glass.push(("mutations_per_sample", toml::Value::Float(8.0)));
     let out = render(&session_at("glass-caustic/erpt.toml", 16, 16, 2, &glass));

@@ -114,8 +114,10 @@ fn laine_karras(mut x: u32, seed: u32) -> u32 {
 
 /// Owen's nested uniform scramble of a 32-bit fraction (most significant bit first): each
 /// bit is flipped by a hash of the bits above it.
-#[inline]
-pub fn nested_uniform_scramble(x: u32, seed: u32) -> u32 {
+/// (The sampler applies it to the index in reversed form, `laine_karras` directly; this is
+/// the formula the tests check it against.)
+#[cfg(test)]
+fn nested_uniform_scramble(x: u32, seed: u32) -> u32 {
     laine_karras(x.reverse_bits(), seed).reverse_bits()
 }
 

@@ -6,7 +6,7 @@
 //! Sample s of pixel p draws its random numbers from a stream seeded by (seed, p, s) only
 //! (MCPT and ERPT's seed paths: `flowlight_pathtrace::sampler`, a stream of
 //! `Rng::hash([seed, x, y, s])` or the Sobol' points of index s scrambled by
-//! `Rng::hash([seed, x, y])`; ERPT's chains: `seed_rngs(seed, x, y, s)`),
+//! `Rng::hash([seed, x, y])`; ERPT's chains: stream 1 of `Rng::hash([seed, x, y, s])`),
 //! so a render of samples [A, B) computes exactly the deposits the full render computes for
 //! those samples. The host's sums are fixed-point integers
 //! ([`crate::accumulation`]: every deposit value v becomes ⌊v·2⁶⁴⌋, sums are `u128`

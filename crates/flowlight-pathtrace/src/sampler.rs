@@ -7,6 +7,7 @@
 use flowlight_core::rng::Rng;
 use flowlight_core::sampler::SampleStream;
 use flowlight_core::sobol::SobolSampler;
+use flowlight_sdk::Params;
 use glam::Vec2;
 
 /// The `sampler` parameter's choices.
@@ -14,8 +15,27 @@ use glam::Vec2;
 pub enum SamplerKind {
     /// A PCG32 stream per sample.
     Independent,
-    /// Owen-scrambled, shuffled Sobol' points: a pixel's samples stratified together.
+    /// Sobol' points of a shuffled index, digitally shifted: a pixel's samples stratified
+    /// together.
     Sobol,
+}
+
+impl SamplerKind {
+    /// The `sampler` parameter of a plugin whose camera paths are entangled (`entangled`) or
+    /// untangled. Untangled paths keep independent numbers and refuse `"sobol"`, naming
+    /// `needs` (the setting that would allow it): with `sobol` two white-furnace tests of the
+    /// untangled estimator failed their noise guard from a few huge weights (cause not
+    /// isolated; docs/mcpt.md, "Samplers").
+    pub fn from_params(p: &Params, entangled: bool, needs: &str) -> Result<Self, String> {
+        let default = if entangled { "sobol" } else { "independent" };
+        match p.choice("sampler", default, &["sobol", "independent"])? {
+            "independent" => Ok(SamplerKind::Independent),
+            _ if !entangled => Err(format!(
+                "parameter 'sampler' = \"sobol\" needs {needs} (untangled paths use independent numbers; see docs/mcpt.md, Samplers)"
+            )),
+            _ => Ok(SamplerKind::Sobol),
+        }
+    }
 }
 
 /// The random numbers of one pixel sample.

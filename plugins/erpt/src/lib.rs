@@ -180,10 +180,10 @@ macro_rules! wave_sampler {
 wave_sampler!(Rng);
 wave_sampler!(SobolSampler);
 
-/// Random streams of a seed: its path, and its chains.
-fn seed_rngs(seed: u64, x: u32, y: u32, s: u32) -> (Rng, Rng) {
-    let h = Rng::hash(&[seed, x as u64, y as u64, s as u64]);
-    (Rng::new(h, 0), Rng::new(h, 1))
+/// The chains' random stream of camera sample (`x`, `y`, `s`): stream 1 of the hash whose
+/// stream 0 is the independent seed path's (`PixelSampler for Rng`).
+fn chain_rng(seed: u64, x: u32, y: u32, s: u32) -> Rng {
+    Rng::new(Rng::hash(&[seed, x as u64, y as u64, s as u64]), 1)
 }
 
 /// A camera sample of a unit and the first of its seeds in the unit's store.
@@ -580,7 +580,7 @@ impl Integrator for Erpt {
         for (k, key) in seeds.keys.iter().enumerate() {
             let end = seeds.keys.get(k + 1).map_or(count, |n| n.first);
             // The chains of all seeds of one camera sample draw from its chain stream.
-            let (_, mut chain_rng) = seed_rngs(unit.seed, key.x, key.y, key.s);
+            let mut chain_rng = chain_rng(unit.seed, key.x, key.y, key.s);
             for i in key.first..end {
                 seeds.store.path(i, &mut path);
                 path.film_window = self.settings.film_window;

@@ -136,19 +136,8 @@ impl ErptSettings {
         }
         // Entangled seeds take the path tracer's stratified samples; untangled seeds (the
         // thesis' sampler) keep independent numbers, as MCPT's untangled variant does.
-        let default_sampler = match seed_kind {
-            SeedKind::Entangled => "sobol",
-            SeedKind::Untangled => "independent",
-        };
-        let sampler = match p.choice("sampler", default_sampler, &["sobol", "independent"])? {
-            "independent" => SamplerKind::Independent,
-            _ if seed_kind == SeedKind::Untangled => {
-                return Err(
-                    "parameter 'sampler' = \"sobol\" needs seeds = \"entangled\" (untangled seeds use independent numbers; see docs/mcpt.md, Samplers)".to_string(),
-                )
-            }
-            _ => SamplerKind::Sobol,
-        };
+        let sampler =
+            SamplerKind::from_params(p, seed_kind == SeedKind::Entangled, "seeds = \"entangled\"")?;
         let direct_by_mcpt = p.choice("direct", "erpt", &["erpt", "mcpt"])? == "mcpt";
         let part = Part::new(p.string("chains_for", "all")?, direct_by_mcpt)?;
         Ok(ErptSettings {

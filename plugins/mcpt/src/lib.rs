@@ -101,22 +101,11 @@ impl Integrator for Mcpt {
     ) -> Result<(Self, IntegratorInfo), String> {
         let settings = PathSettings::from_params(params)?;
         let layers = params.boolean("layers", false)?;
-        // The untangled estimator keeps independent numbers: with `sobol` two white-furnace
-        // tests failed their noise guard from a few huge weights (cause not isolated;
-        // docs/mcpt.md, "Samplers").
-        let default_sampler = match settings.variant {
-            Variant::Entangled => "sobol",
-            Variant::Untangled => "independent",
-        };
-        let sampler = match params.choice("sampler", default_sampler, &["sobol", "independent"])? {
-            "independent" => SamplerKind::Independent,
-            _ if settings.variant == Variant::Untangled => {
-                return Err(
-                    "parameter 'sampler' = \"sobol\" needs variant = \"entangled\" (the untangled variant uses independent numbers; see docs/mcpt.md, Samplers)".to_string(),
-                )
-            }
-            _ => SamplerKind::Sobol,
-        };
+        let sampler = SamplerKind::from_params(
+            params,
+            settings.variant == Variant::Entangled,
+            "variant = \"entangled\"",
+        )?;
         let wavefront = params.int("wavefront", WAVEFRONT as i64)?;
         if !(0..=65536).contains(&wavefront) {
             return Err(format!(
