@@ -31,15 +31,17 @@
 //! already in β, q = min(max_c(β) · η², 0.95) from `depth ≥ rr_depth` (default 5) on, η the
 //! product of the relative IORs crossed; pbrt-v4 (`PathIntegrator`) takes q = min(max_c(β ·
 //! η²), 1) after the BSDF sample from the second bounce on, and only when it is below one.
-//! Two differences here:
-//!
-//! * The decision comes *before* the BSDF sample (a stopped path then saves the sample, and
-//!   the call sites keep their shape), so q uses the sample's expected weight ρ_k instead of
-//!   its actual weight f·|cos θ|/p. For a Lambertian vertex sampled by its cosine the two are
-//!   equal; for a mixture it is the mixture's average.
-//! * No η² factor: a path inside glass carries the 1/η² radiance scaling in β (≈ 0.44 for
-//!   glass) and is therefore stopped somewhat more often than in Mitsuba, which costs
-//!   variance inside refracting objects but no bias.
+//! Here the entangled samplers (MCPT's and ERPT's seeds) pass max_c(β) · η² as the throughput
+//! too: a refraction into glass scales β by 1/η'² (≈ 0.44), the radiance compression across
+//! the interface, and without the η² factor a path inside glass would survive with about 0.44
+//! times the probability of one outside although it carries the same light. Each [`crate::bsdf::BsdfSample`]
+//! reports the η' it crossed, and the tracer keeps the running product of η'². (Before the
+//! fifth session the factor was left out; on the glass caustic the throughput rule was then
+//! 2.5× less efficient than `expo`, docs/results.md.) One difference remains: the decision
+//! comes *before* the BSDF sample (a stopped path then saves the sample, and the call sites
+//! keep their shape), so q uses the sample's expected weight ρ_k instead of its actual weight
+//! f·|cos θ|/p. For a Lambertian vertex sampled by its cosine the two are equal; for a mixture
+//! it is the mixture's average.
 //!
 //! In the untangled sampler (thesis §3.6–3.7) stopping at a Λβ vertex *is* its light
 //! connection, so T_k = 0 would leave layer k without an estimator, and the path throughput

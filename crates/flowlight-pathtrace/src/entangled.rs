@@ -44,6 +44,10 @@ pub fn trace<S: SampleStream>(
     let mut prev_delta = true; // the pinhole eye is a Dirac: no MIS for the first hit
     let mut prev_pdf = 0.0f32;
     let mut prev_p = ray.origin;
+    // Product of η'² over the refractions so far: undoes their 1/η'² radiance scaling in β
+    // for the throughput roulette (termination.rs), so a path inside glass is not cut more
+    // often than one outside.
+    let mut eta2 = 1.0f32;
 
     let mut last = false; // the previous vertex was the path's last: emission only
     loop {
@@ -121,7 +125,7 @@ pub fn trace<S: SampleStream>(
         // and the path ends there. A random stop (T_k < 1) is fine: survivors are divided by
         // 1 − T_k.
         let t = if depth > 0 {
-            let beta_max = beta.max_component();
+            let beta_max = beta.max_component() * eta2;
             let albedo = bsdf.albedo();
             settings
                 .termination
@@ -150,6 +154,7 @@ pub fn trace<S: SampleStream>(
         if beta.is_black() {
             return;
         }
+        eta2 *= s.eta * s.eta;
         prev_delta = s.delta;
         prev_pdf = s.pdf;
         prev_p = hit.p;
@@ -171,6 +176,7 @@ struct PathState<S> {
     prev_delta: bool,
     prev_pdf: f32,
     prev_p: Vec3,
+    eta2: f32,
     last: bool,
 }
 
@@ -236,6 +242,7 @@ pub fn trace_wavefront<S: SampleStream + Clone>(
             prev_delta: true,
             prev_pdf: 0.0,
             prev_p: ray.origin,
+            eta2: 1.0,
             last: false,
         });
         wf.active.push(i as u32);
@@ -373,7 +380,7 @@ fn vertex<S: SampleStream>(
         settings.termination.probability_with_throughput(
             depth,
             bsdf.albedo(),
-            path.beta.max_component(),
+            path.beta.max_component() * path.eta2,
         )
     } else {
         0.0
@@ -398,6 +405,7 @@ fn vertex<S: SampleStream>(
     if path.beta.is_black() {
         return (false, shadow);
     }
+    path.eta2 *= s.eta * s.eta;
     path.prev_delta = s.delta;
     path.prev_pdf = s.pdf;
     path.prev_p = hit.p;

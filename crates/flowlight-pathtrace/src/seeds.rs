@@ -573,6 +573,8 @@ struct Tree<S> {
     physical: u32,
     step: Step,
     prev_p: Vec3,
+    /// Product of η'² over the refractions so far (as `entangled::trace`).
+    eta2: f32,
     last: bool,
     /// Node types of the trunk (eye first), with room for a connection vertex and a light.
     types: [NodeType; MAX_PATH_VERTICES + 1],
@@ -592,6 +594,7 @@ impl<S: SampleStream> Tree<S> {
             physical: 0,
             step: Step::Eye,
             prev_p: ray.origin,
+            eta2: 1.0,
             last: false,
             types: [NodeType::Eye; MAX_PATH_VERTICES + 1],
         }
@@ -781,7 +784,7 @@ impl<S: SampleStream> Tree<S> {
             settings.termination.probability_with_throughput(
                 self.depth,
                 bsdf.albedo(),
-                self.beta.max_component(),
+                self.beta.max_component() * self.eta2,
             )
         } else {
             0.0
@@ -815,6 +818,7 @@ impl<S: SampleStream> Tree<S> {
         if self.beta.is_black() {
             return (false, pending);
         }
+        self.eta2 *= s.eta * s.eta;
         self.step = if s.delta {
             Step::Dirac(s.pdf)
         } else {

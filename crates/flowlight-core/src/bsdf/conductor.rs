@@ -133,6 +133,7 @@ impl Conductor {
                 pdf: 1.0,
                 node: NodeType::SpecularReflection,
                 delta: true,
+                eta: 1.0,
             });
         }
         let ggx = self.ggx();
@@ -156,6 +157,7 @@ impl Conductor {
             pdf,
             node: NodeType::GlossyReflection,
             delta: false,
+            eta: 1.0,
         })
     }
 

@@ -277,6 +277,7 @@ impl Dielectric {
                 pdf,
                 node: NodeType::GlossyReflection,
                 delta: false,
+                eta: 1.0,
             })
         } else {
             let (wi, etap) = refract(wo, wm, self.eta)?;
@@ -297,6 +298,7 @@ impl Dielectric {
                 pdf,
                 node: NodeType::GlossyTransmission,
                 delta: false,
+                eta: etap,
             })
         }
     }
@@ -314,6 +316,7 @@ impl Dielectric {
                 pdf: r / (r + t),
                 node: NodeType::SpecularReflection,
                 delta: true,
+                eta: 1.0,
             })
         } else {
             let (wi, etap) = refract(wo, Vec3::Z, self.eta)?;
@@ -327,6 +330,7 @@ impl Dielectric {
                 pdf: t / (r + t),
                 node: NodeType::SpecularTransmission,
                 delta: true,
+                eta: etap,
             })
         }
     }
@@ -543,6 +547,49 @@ mod tests {
             assert!((fr / fi - expected).abs() < 1e-4 * expected);
         }
         assert!(seen[0] && seen[1]);
+    }
+
+    /// A sample's `eta` is the index of `wi`'s side over `wo`'s for a refraction and 1 for a
+    /// reflection, and it is exactly what the radiance scaling took: the radiance-mode
+    /// throughput times η'² equals the importance-mode throughput (smooth and rough).
+    #[test]
+    fn sample_eta_undoes_the_radiance_scaling() {
+        for alpha in [0.0, 0.3] {
+            let rad = diel(alpha, TransportMode::Radiance);
+            let imp = diel(alpha, TransportMode::Importance);
+            let mut r = Rng::new(37, 0);
+            let mut seen = [false; 3];
+            for _ in 0..4000 {
+                let wo = uniform_dir(&mut r);
+                let (uc, u) = (r.uniform(), r.uniform2());
+                let (Some(sr), Some(si)) = (rad.sample_with(wo, uc, u), imp.sample_with(wo, uc, u))
+                else {
+                    continue;
+                };
+                let refracted = wo.z * sr.wi.z < 0.0;
+                let expected = match (refracted, wo.z > 0.0) {
+                    (false, _) => 1.0,
+                    (true, true) => 1.5,
+                    (true, false) => 1.0 / 1.5,
+                };
+                seen[if !refracted {
+                    0
+                } else if wo.z > 0.0 {
+                    1
+                } else {
+                    2
+                }] = true;
+                assert!(
+                    (sr.eta - expected).abs() < 1e-6,
+                    "α {alpha}: eta {}",
+                    sr.eta
+                );
+                let tr = sr.f.r * sr.wi.z.abs() / sr.pdf * sr.eta * sr.eta;
+                let ti = si.f.r * si.wi.z.abs() / si.pdf;
+                assert!((tr / ti - 1.0).abs() < 1e-4, "α {alpha}: {tr} vs {ti}");
+            }
+            assert_eq!(seen, [true; 3], "α {alpha}");
+        }
     }
 
     fn uniform_dir(r: &mut Rng) -> Vec3 {

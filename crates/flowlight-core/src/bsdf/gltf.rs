@@ -522,6 +522,7 @@ impl GltfLobe {
                     pdf,
                     node: NodeType::DiffuseReflection,
                     delta: false,
+                    eta: 1.0,
                 }
             }
             GltfLobeKind::Refraction => {
@@ -591,6 +592,7 @@ impl GltfLobe {
             pdf,
             node,
             delta,
+            eta: 1.0,
         })
     }
 }

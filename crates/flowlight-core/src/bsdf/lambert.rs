@@ -45,6 +45,7 @@ impl Lambert {
             pdf,
             node: NodeType::DiffuseReflection,
             delta: false,
+            eta: 1.0,
         })
     }
 }

@@ -61,6 +61,12 @@ pub struct BsdfSample {
     pub node: NodeType,
     /// True for a Dirac lobe: `f` and `pdf` must not enter MIS.
     pub delta: bool,
+    /// Relative index of refraction η' crossed by a refraction: the index of `wi`'s side over
+    /// that of `wo`'s (1.5 where a camera path enters glass from air), 1 for every other event. In radiance mode a refraction scales
+    /// `f` by 1/η'²; a path tracer multiplies its running η'² product by this squared to undo
+    /// that scaling in its Russian roulette (Mitsuba 3 `BSDFSample3f::eta`, pbrt-v4
+    /// `BSDFSample::eta`).
+    pub eta: f32,
 }
 
 /// One component of a mixture.

@@ -92,6 +92,7 @@ impl OrenNayar {
             pdf,
             node: NodeType::DiffuseReflection,
             delta: false,
+            eta: 1.0,
         })
     }
 
