@@ -22,7 +22,7 @@ threads="${THREADS:-2}"
 
 # scene | wall seconds (both halves) | spp (both halves) | MCPT parameters
 table=(
-  "glass-caustic|480|46080|variant=untangled termination=equi"
+  "glass-caustic|600|49152|variant=entangled termination=expo"
   "mirror-chain|720|11264|variant=entangled termination=bxdf"
   "indirect-room|1200|16384|variant=entangled termination=expo"
   "ring-caustic|900|61440|variant=untangled termination=equi"
