@@ -14,7 +14,7 @@
 //! | name | type | default | meaning |
 //! |---|---|---|---|
 //! | `variant` | string | `"entangled"` | `"entangled"` or `"untangled"` |
-//! | `termination` | string | `"throughput"` | `"bxdf"` (albedo roulette), `"equi"` (T_k = 1/(N−k+1)), `"expo"` (layer shares double with depth) — §3.8; `"throughput"`: roulette with survival min(max(β)·albedo, `rr_max_survival`) from lighting vertex `rr_depth` on (untangled: 1 − min(albedo, `rr_max_survival`) at every vertex) |
+//! | `termination` | string | `"throughput"` | `"bxdf"` (albedo roulette), `"equi"` (T_k = 1/(N−k+1)), `"expo"` (layer shares double with depth) — §3.8; `"throughput"`: roulette with survival min(max(β)·η²·albedo, `rr_max_survival`) from lighting vertex `rr_depth` on, η² over the refractions crossed (untangled: 1 − min(albedo, `rr_max_survival`) at every vertex) |
 //! | `rr_depth`, `rr_max_survival` | int, float | 5, 0.95 | `"throughput"` only: start depth (entangled) and survival cap, in [0.01, 0.999] |
 //! | `path_depth` | int | 8 | path-space depth N: deepest lighting layer; a chain of mirrors seen from the eye does not use it up (virtual depth, §2) |
 //! | `max_ray_depth` | int | 64 | physical ray depth cap, every bounce counted |
