@@ -622,6 +622,20 @@ fn erpt_path_traces_a_scene_without_paths_in_the_chains_part() {
     assert_eq!(stat(&out, "units_without_chains"), stat(&out, "units"));
     assert!(stat(&out, "units") > 0.0 && stat(&out, "mcpt_part_seeds") > 100.0);
     assert_eq!(stat(&out, "chains"), 0.0);
+    // Without chains every deposit is at its sample's pixel: the units accumulate as path
+    // tracing's do (plain tiles, no flange; a 16-pixel flange made the bench's 8-pixel time-budget
+    // tiles' buffers 25× larger), so the accumulation report equals MCPT's at the same size.
+    let report = |out: &flowlight_host::render::RenderOutcome| {
+        let r = out
+            .stats
+            .accumulation
+            .as_ref()
+            .expect("an accumulation report");
+        (format!("{:?}", r.style), r.private_bytes, r.frame_bytes)
+    };
+    let mcpt = render(&session_at("cornell-box/cornell-box.toml", 16, 16, 2, &[]));
+    assert_eq!(report(&out), report(&mcpt));
+    let chainless = report(&out);
     // Untangled seeds keep the thesis' per-path classification.
     let out = render(&session_at(
         "cornell-box/erpt.toml",
@@ -639,6 +653,8 @@ fn erpt_path_traces_a_scene_without_paths_in_the_chains_part() {
     let out = render(&session_at("glass-caustic/erpt.toml", 16, 16, 2, &glass));
     assert_eq!(stat(&out, "units_without_chains"), 0.0);
     assert!(stat(&out, "chains") > 0.0);
+    // Chains random-walk on the film, so their units get the flanged style.
+    assert_ne!(report(&out).0, chainless.0);
 }
 
 #[test]

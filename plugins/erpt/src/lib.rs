@@ -477,9 +477,19 @@ impl Integrator for Erpt {
             },
             biased: (settings.max_consecutive > 0) as u32,
             // Chains random-walk on the film by at most K/2 per step; a flange of 2K keeps most
-            // of their deposits in the unit's buffer (the host keeps the rest).
-            accumulation: AccumulationStyle::FlangedTile,
-            flange: 2 * settings.film_window,
+            // of their deposits in the unit's buffer (the host keeps the rest). Without chains
+            // every deposit is at its sample's pixel, as in path tracing: plain tiles, whose
+            // buffers are a quarter the size of 32-pixel tiles with a 16-pixel flange.
+            accumulation: if chains_part_empty {
+                AccumulationStyle::Tile
+            } else {
+                AccumulationStyle::FlangedTile
+            },
+            flange: if chains_part_empty {
+                0
+            } else {
+                2 * settings.film_window
+            },
         };
         Ok((
             Erpt {
