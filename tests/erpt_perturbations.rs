@@ -141,17 +141,45 @@ fn mirror_caustic_scene() -> String {
 
 /// `[[integrator.mutations]]` of (plugin, weight).
 fn mutations(entries: &[(&str, f64)]) -> toml::Value {
+    mutations_with(entries, &[])
+}
+
+/// [`mutations`] with `extra` parameters for every entry whose plugin declares them (the
+/// perturbations' and the drill's `free_chains`).
+fn mutations_with(entries: &[(&str, f64)], extra: &[(&str, toml::Value)]) -> toml::Value {
     toml::Value::Array(
         entries
             .iter()
             .map(|(p, w)| {
-                table(&[
+                let mut t = vec![
                     ("plugin", toml::Value::String(p.to_string())),
                     ("weight", (*w).into()),
-                ])
+                ];
+                if FREE_CHAINS.contains(p) {
+                    t.extend(extra.iter().cloned());
+                    // Veach's rules whole: the multi-chain cone aims at the next vertex too.
+                    let veach = extra
+                        .iter()
+                        .any(|(k, v)| *k == "free_chains" && v.as_bool() == Some(false));
+                    if veach && *p == MULTICHAIN {
+                        t.push(("axis", toml::Value::String("next-vertex".into())));
+                    }
+                }
+                table(&t)
             })
             .collect(),
     )
+}
+
+/// The strategies that take `free_chains` (Dirac chains of any length).
+const FREE_CHAINS: [&str; 3] = [LENS, MULTICHAIN, "drill"];
+
+/// The number of Dirac vertices of a path.
+fn dirac_count(p: &Path) -> usize {
+    p.vertices()
+        .iter()
+        .filter(|v| WeakNode::of(v).is_dirac())
+        .count()
 }
 
 /// A session of the glTF text `gltf` (or of the file at `gltf_path`) with `integrator`'s
@@ -210,8 +238,16 @@ fn dirac_run(p: &Path) -> usize {
 /// Metropolis–Hastings acceptance), and a caustic proposal, which keeps the vertex after a
 /// Dirac chain, must have density 0 under every other strategy (and the other strategies'
 /// proposals density 0 under the caustic one), so that the mixture density is consistent.
-/// Returns, per strategy, the checked proposals by the longest Dirac run of x (0 … 4, 5+).
-fn check_balance(s: &Session, size: u32, seeds: usize) -> Vec<[usize; 6]> {
+/// Returns, per strategy, the checked proposals by the longest Dirac run of x (0 … 4, 5+),
+/// and how many of them changed the number of Dirac vertices. Only a strategy with free chain
+/// lengths (`free_chains`: whether the session's take them) may; the others must keep x's
+/// length and vertex types, which is checked.
+fn check_balance(
+    s: &Session,
+    size: u32,
+    seeds: usize,
+    free_chains: bool,
+) -> (Vec<[usize; 6]>, Vec<usize>) {
     let set = s.instance.mutation_set();
     // SAFETY: the session keeps the view's data alive.
     let scene = unsafe { Scene::from_view(s.instance.view()) };
@@ -228,6 +264,7 @@ fn check_balance(s: &Session, size: u32, seeds: usize) -> Vec<[usize; 6]> {
     let mut x = Box::new(Path::empty());
     let mut y = Box::new(Path::empty());
     let mut counts = vec![[0usize; 6]; set.len()];
+    let mut changed = vec![0usize; set.len()];
     for _ in 0..seeds {
         let raster = glam::Vec2::new(rng.uniform(), rng.uniform()) * size as f32;
         let sample = untangled::trace(&scene, &tracer, &settings, &mut rng, raster, Some(&mut x));
@@ -246,15 +283,29 @@ fn check_balance(s: &Session, size: u32, seeds: usize) -> Vec<[usize; 6]> {
                 continue;
             }
             let what = || format!("{}: {} → {}", set.name(i), x.heckbert(), y.heckbert());
-            assert_eq!(y.vertex_count, x.vertex_count, "{}", what());
-            assert!(
-                x.vertices()
+            let same_types = y.vertex_count == x.vertex_count
+                && x.vertices()
                     .iter()
                     .zip(y.vertices())
-                    .all(|(a, b)| WeakNode::of(a) == WeakNode::of(b)),
-                "{}: a vertex type changed",
+                    .all(|(a, b)| WeakNode::of(a) == WeakNode::of(b));
+            let free = free_chains && FREE_CHAINS.contains(&set.name(i));
+            assert!(
+                same_types || free,
+                "{}: the length or a vertex type changed",
                 what()
             );
+            if free && !same_types {
+                // A chain of another length: only Dirac vertices come and go, and the
+                // lighting layer follows (mirror bounces after the first smooth vertex count).
+                let smooth = |p: &Path| p.vertex_count as usize - dirac_count(p);
+                assert_eq!(smooth(&x), smooth(&y), "{}", what());
+                assert_eq!(
+                    y.layer,
+                    flowlight_mcmc::regenerate::lighting_layer(y.vertices()),
+                    "{}",
+                    what()
+                );
+            }
             let forward = set.density(i, &x, &y).unwrap();
             let reverse = set.density(i, &y, &x).unwrap();
             assert!(forward > 0.0, "{}: T(x→y) = {forward}", what());
@@ -298,33 +349,65 @@ fn check_balance(s: &Session, size: u32, seeds: usize) -> Vec<[usize; 6]> {
             }
             if expected > 0.0 {
                 count[dirac_run(&x).min(5)] += 1;
+                if dirac_count(&x) != dirac_count(&y) {
+                    changed[i] += 1;
+                }
             }
         }
     }
-    counts
+    (counts, changed)
 }
 
 #[test]
 fn perturbations_satisfy_detailed_balance_through_chains_of_1_2_and_4_dirac_vertices() {
-    let list = mutations(&[
-        (LENS, 1.0),
-        (CAUSTIC, 1.0),
-        (MULTICHAIN, 1.0),
-        ("blow", 1.0),
-        ("hard-reconnection", 1.0),
-    ]);
+    for free_chains in [true, false] {
+        balance_through_chains(free_chains);
+    }
+}
+
+/// The balance test with the perturbations' and the drill's `free_chains` set.
+fn balance_through_chains(free_chains: bool) {
+    let list = mutations_with(
+        &[
+            (LENS, 1.0),
+            (CAUSTIC, 1.0),
+            (MULTICHAIN, 1.0),
+            ("drill", 1.0),
+            ("blow", 1.0),
+            ("hard-reconnection", 1.0),
+        ],
+        &[("free_chains", free_chains.into())],
+    );
     let s = session_of(
-        "perturbation-balance",
+        &format!("perturbation-balance-{free_chains}"),
         &specular_scene(),
         "plugin = \"erpt\"\npath_depth = 10",
         64,
         1,
         &[("mutations", list)],
     );
-    let counts = check_balance(&s, 64, 50_000);
+    let (counts, changed) = check_balance(&s, 64, 50_000, free_chains);
     let set = s.instance.mutation_set();
     for (i, c) in counts.iter().enumerate() {
-        eprintln!("{}: checked by Dirac run 0..4, 5+: {c:?}", set.name(i));
+        eprintln!(
+            "free_chains = {free_chains}, {}: checked by Dirac run 0..4, 5+: {c:?}, {} of them changed the number of Dirac vertices",
+            set.name(i),
+            changed[i]
+        );
+    }
+    // With free chains the perturbations and the drill do move between numbers of mirror
+    // bounces (the corridor's), and every such move passed the checks above.
+    for (i, &n) in changed.iter().enumerate() {
+        let free = free_chains && FREE_CHAINS.contains(&set.name(i));
+        if free {
+            assert!(
+                n >= 20,
+                "{}: only {n} length-changing proposals",
+                set.name(i)
+            );
+        } else {
+            assert_eq!(n, 0, "{}", set.name(i));
+        }
     }
     // Each new strategy was checked on paths with 1, 2 and 4 Dirac vertices in a row.
     for (i, c) in counts.iter().enumerate().take(3) {

@@ -13,6 +13,25 @@
 //! Every new vertex must have x's weak node type, and the path keeps its length: otherwise the
 //! proposal is a domain miss. Reconnection needs smooth (or light) vertices on both ends.
 //!
+//! **Dirac chains of any length** ([`Policy::free_chains`]). A chain of Dirac vertices is a
+//! deterministic function of the ray that enters it, so the number of its vertices is not a
+//! coordinate of the path measure: with the eye ray's raster position u and the free vertices
+//! (those after a smooth vertex) as coordinates, E S S D … and E S D … are points of one
+//! space, and a move that changes u alone has the same density T₀(u → u') whatever the two
+//! paths' numbers of mirror bounces. So, with `free_chains`, a chain is followed through
+//! *forced* Dirac vertices — a surface that emits nothing, has no smooth component and one
+//! Dirac lobe for the arriving direction (a mirror; glass, with its choice of reflection or
+//! refraction, is not forced) — as far as they go, and the vertex that ends it need only
+//! have the weak type of the vertex that ends x's chain (smooth, or the light); the vertices
+//! after it are x's, shifted. The densities are the fixed-length ones: the film term, and at
+//! each extension p_ω · J of the chain's first vertex (the chain's other vertices are not
+//! free). It applies to paths whose every Dirac vertex is forced, and a proposal must be of
+//! the same kind as x (both forced, or both not) so that the reverse move is the same rule;
+//! other paths keep Veach's fixed lengths. The lighting layer is recomputed (the mirror
+//! bounces seen from the eye are not counted, those after the first smooth vertex are), and
+//! the integrator must refuse proposals beyond its seeds' depth limits
+//! ([`within_depth`]).
+//!
 //! Densities are in the target function's measure ([`crate::measure`]): an extension step has
 //! T = (1 − p_r) · p_ω · J, with J the area Jacobian of the new vertex; a reconnection step
 //! has T = p_r. The reverse move regenerates x from y with the same rules: for the cap, the
@@ -45,7 +64,7 @@ use crate::perturbation::{ExpCone, LensJump};
 use flowlight_core::bsdf::Bsdf;
 use flowlight_core::geometry::{offset_ray_origin, Frame, Ray, SurfaceHit};
 use flowlight_core::light::LightKind;
-use flowlight_core::path::{NodeType, Path, PathVertex};
+use flowlight_core::path::{NodeType, Path, PathVertex, MAX_PATH_VERTICES};
 use flowlight_core::rng::Rng;
 use flowlight_core::sampling::{uniform_cone, uniform_cone_pdf};
 use flowlight_sdk::{Proposal, Scene, Tracer};
@@ -62,6 +81,14 @@ pub enum Extension {
     /// Veach's exponential cone around the direction to the original path's next vertex
     /// (the multi-chain perturbation, [`crate::perturbation`]).
     Cone(ExpCone),
+    /// The exponential cone around the original path's own direction at this vertex (x_j →
+    /// x_{j+1}): where the eye ray's jump moved y_j a little, the new direction stays
+    /// parallel to the old one instead of turning to aim at x_{j+1}, which turns it by
+    /// |y_j − x_j| / |x_{j+1} − x_j| — a large angle when the next vertex is near, such as a
+    /// mirror beside a floor point, and at the end of a long specular chain a miss of the
+    /// light. Symmetric like [`Extension::Cone`]: the reverse move centres its cone on y's
+    /// direction, and the ratio is J(x)/J(y).
+    ConeAlong(ExpCone),
 }
 
 /// How the raster position moves at the start of a proposal.
@@ -110,6 +137,87 @@ pub struct Policy {
     /// Never reconnect while the rest of the original path holds a Dirac vertex: caustic
     /// paths are drilled until they reach the light.
     pub drill_caustics: bool,
+    /// Follow forced Dirac chains to whatever length they have instead of requiring x's
+    /// (module docs, "Dirac chains of any length"). `false`: Veach's rule.
+    pub free_chains: bool,
+}
+
+/// Whether a path of `vertex_count` vertices and lighting layer `layer` is one the seed
+/// samplers can produce with lighting depth `path_depth` and physical depth `max_ray_depth`
+/// (every scattering vertex counted). Proposals with free chain lengths can leave that set,
+/// and the chains' target is f restricted to it.
+pub fn within_depth(vertex_count: u32, layer: u32, path_depth: u32, max_ray_depth: u32) -> bool {
+    layer <= path_depth && vertex_count.saturating_sub(2) <= max_ray_depth
+}
+
+/// Lighting layer of a path (virtual length − 1): its interior vertices but the leading
+/// Dirac ones, which a chain of mirrors seen from the camera does not count
+/// (`flowlight_pathtrace`'s lighting depth).
+pub fn lighting_layer(v: &[PathVertex]) -> u32 {
+    if v.len() < 2 {
+        return 0;
+    }
+    let interior = &v[1..v.len() - 1];
+    let leading = interior
+        .iter()
+        .take_while(|x| WeakNode::of(x).is_dirac())
+        .count();
+    (interior.len() - leading) as u32
+}
+
+/// The one Dirac lobe a ray arriving from `wo` (local frame) must follow at a surface of
+/// `bsdf`: (component, transmission). `None` when the BSDF has a smooth component, or
+/// several Dirac lobes are possible (glass: reflection or refraction), or none.
+pub fn forced_lobe(bsdf: &Bsdf, wo: Vec3) -> Option<(usize, bool)> {
+    if bsdf.has_non_delta() {
+        return None;
+    }
+    let mut found = None;
+    for (i, (c, w)) in bsdf.components().enumerate() {
+        if w <= 0.0 {
+            continue;
+        }
+        for transmission in [false, true] {
+            if dirac_scatter(&c, wo, transmission).is_some() {
+                if found.is_some() {
+                    return None;
+                }
+                found = Some((i, transmission));
+            }
+        }
+    }
+    found
+}
+
+/// Whether the stored Dirac vertex `v`, reached from `prev`, is forced: no emission and
+/// [`forced_lobe`] is the lobe it took.
+fn forced_vertex(scene: &Scene, v: &PathVertex, prev: Vec3) -> bool {
+    let kind = WeakNode::of(v);
+    if !kind.is_dirac() || v.emitter >= 0 {
+        return false;
+    }
+    let Some(bsdf) = vertex_bsdf(scene, v) else {
+        return false;
+    };
+    let Some(wo) = (prev - v.p).try_normalize() else {
+        return false;
+    };
+    forced_lobe(&bsdf, Frame::from_z(v.ns).to_local(wo))
+        == Some((v.component as usize, kind == WeakNode::DiracTransmission))
+}
+
+/// Whether every Dirac vertex of the path is forced: the paths free chain lengths apply to.
+pub fn all_forced(scene: &Scene, v: &[PathVertex]) -> bool {
+    (1..v.len().saturating_sub(1))
+        .filter(|&k| WeakNode::of(&v[k]).is_dirac())
+        .all(|k| forced_vertex(scene, &v[k], v[k - 1].p))
+}
+
+/// The first index ≥ `from` of a vertex that is not a Dirac vertex (the end of a chain).
+fn chain_end(v: &[PathVertex], from: usize) -> usize {
+    (from..v.len())
+        .find(|&k| !WeakNode::of(&v[k]).is_dirac())
+        .unwrap_or(v.len() - 1)
 }
 
 /// Probability of reconnecting at smooth vertex `j` of `x` after `extensions` extensions. 1
@@ -133,15 +241,19 @@ fn p_reconnect(scene: &Scene, policy: &Policy, x: &[PathVertex], j: usize, exten
     policy.p_reconnect
 }
 
-/// Density of extending from `from` (with previous vertex `prev`) to `to`; for a cap, centred
-/// on the direction to `target`. Solid angle times the area Jacobian of `to` (times 1 when
-/// `to` is a direction at infinity, whose measure is solid angle).
+/// Density of extending from `from` (with previous vertex `prev`) to `to`; for a cap or a
+/// cone, centred on the direction from `from` to `target` (the other path's next vertex) —
+/// or, for [`Extension::ConeAlong`], from `counterpart` (the other path's vertex standing
+/// where `from` stands) to `target`: the other path's own direction. Solid angle times the
+/// area Jacobian of `to` (times 1 when `to` is a direction at infinity, whose measure is solid
+/// angle).
 fn extension_density(
     scene: &Scene,
     ext: Extension,
     prev: &PathVertex,
     from: &PathVertex,
     to: &PathVertex,
+    counterpart: &PathVertex,
     target: &PathVertex,
 ) -> f64 {
     let Some(dir) = direction(scene, from, to) else {
@@ -167,8 +279,13 @@ fn extension_density(
                 0.0
             }
         }
-        Extension::Cone(cone) => {
-            let Some(axis) = direction(scene, from, target) else {
+        Extension::Cone(cone) | Extension::ConeAlong(cone) => {
+            let origin = if matches!(ext, Extension::Cone(_)) {
+                from
+            } else {
+                counterpart
+            };
+            let Some(axis) = direction(scene, origin, target) else {
                 return 0.0;
             };
             // The angle as the ray left: from the offset origin the extension's ray had (the
@@ -333,6 +450,10 @@ pub fn propose_with(
     if xv.len() < 2 {
         return MISS;
     }
+    let free = policy.free_chains && all_forced(scene, xv);
+    if free {
+        return propose_free(scene, tracer, rng, policy, film, x, y);
+    }
     let n = xv.len() - 1;
     let (w, h) = film_size(scene);
     let Some(raster) = film.sample(x, w, h, rng) else {
@@ -370,6 +491,15 @@ pub fn propose_with(
     {
         return MISS;
     }
+    // Free chain lengths keep both ends of a move of one kind (module docs).
+    if policy.free_chains && all_forced(scene, y.vertices()) {
+        return MISS;
+    }
+    finish(fwd, rev)
+}
+
+/// The proposal's validity and transition ratio from its forward and reverse densities.
+fn finish(fwd: f64, rev: f64) -> Proposal {
     let ratio = rev / fwd;
     if !(ratio.is_finite() && ratio >= 0.0) {
         // A valid path with a degenerate density: reported, and rejected by the integrator.
@@ -455,6 +585,9 @@ fn continue_from(
                     Frame::from_z(axis).to_world(uniform_cone(rng.uniform2(), cos_max))
                 }
                 Extension::Cone(cone) => cone.sample(direction(scene, &yj, &xv[j + 1])?, rng),
+                Extension::ConeAlong(cone) => {
+                    cone.sample(direction(scene, &xv[j], &xv[j + 1])?, rng)
+                }
             };
             if !side_consistent(yj.ng, dir, frame.to_local(dir)) {
                 return None;
@@ -465,9 +598,17 @@ fn continue_from(
             // direction and in `density`: the sampled direction and the one the positions give
             // differ by the ray-origin offset, which matters for close, grazing vertices.
             *fwd *= (1.0 - p_r) as f64
-                * extension_density(scene, ext, &y.vertices[j - 1], &yj, &next, &xv[j + 1]);
+                * extension_density(
+                    scene,
+                    ext,
+                    &y.vertices[j - 1],
+                    &yj,
+                    &next,
+                    &xv[j],
+                    &xv[j + 1],
+                );
             *rev *= (1.0 - p_r) as f64
-                * extension_density(scene, ext, &xv[j - 1], &xv[j], &xv[j + 1], &next);
+                * extension_density(scene, ext, &xv[j - 1], &xv[j], &xv[j + 1], &yj, &next);
             *extensions += 1;
             j += 1;
             y.vertices[j] = next;
@@ -488,7 +629,17 @@ pub fn density(scene: &Scene, policy: &Policy, x: &Path, y: &Path) -> f64 {
 /// [`density`] with the raster position moved by `film`.
 pub fn density_with(scene: &Scene, policy: &Policy, film: FilmMove, x: &Path, y: &Path) -> f64 {
     let (xv, yv) = (x.vertices(), y.vertices());
-    if xv.len() != yv.len() || xv.len() < 2 || x.film_window != y.film_window {
+    if xv.len() < 2 || yv.len() < 2 || x.film_window != y.film_window {
+        return 0.0;
+    }
+    if policy.free_chains {
+        match (all_forced(scene, xv), all_forced(scene, yv)) {
+            (true, true) => return density_free(scene, policy, film, x, y),
+            (false, false) => {}
+            _ => return 0.0,
+        }
+    }
+    if xv.len() != yv.len() {
         return 0.0;
     }
     if xv
@@ -530,10 +681,295 @@ pub fn density_with(scene: &Scene, policy: &Policy, film: FilmMove, x: &Path, y:
             return 0.0;
         };
         d *= (1.0 - p_r) as f64
-            * extension_density(scene, ext, &yv[j - 1], &yv[j], &yv[j + 1], &xv[j + 1]);
+            * extension_density(
+                scene,
+                ext,
+                &yv[j - 1],
+                &yv[j],
+                &yv[j + 1],
+                &xv[j],
+                &xv[j + 1],
+            );
         extensions += 1;
     }
     d
+}
+
+/// Follows `ray`, leaving the vertex at `from`, through forced Dirac vertices (stored in `y`
+/// from index `at` on) to the first other vertex, which must stand in for `end` as
+/// [`trace_vertex`] decides; returns that vertex's index in `y` (module docs, "Dirac chains of
+/// any length"). `None`: a domain miss (another end, a leak, no room in the path).
+fn trace_free_chain(
+    scene: &Scene,
+    tracer: &Tracer,
+    mut ray: Ray,
+    mut from: Vec3,
+    end: &PathVertex,
+    y: &mut Path,
+    mut at: usize,
+) -> Option<usize> {
+    loop {
+        if at >= MAX_PATH_VERTICES {
+            return None;
+        }
+        let Some(hit) = tracer.intersect(&ray) else {
+            // Only the environment ends a chain that escapes.
+            let i = light_index(scene, end).filter(|_| is_distant(scene, end))?;
+            if scene.lights.kind(i) != LightKind::Environment {
+                return None;
+            }
+            let dir = ray.dir.try_normalize()?;
+            if scene.lights.environment_radiance(dir).is_black() {
+                return None;
+            }
+            y.vertices[at] = distant_vertex(from, dir, i);
+            return Some(at);
+        };
+        let lobe = (hit.emitter < 0)
+            .then(|| scene.materials.get(hit.material as usize))
+            .flatten()
+            .and_then(|_| {
+                let wo = Frame::from_z(hit.ns).to_local((from - hit.p).try_normalize()?);
+                let bsdf = scene.bsdf(&hit);
+                let (c, transmission) = forced_lobe(&bsdf, wo)?;
+                Some((bsdf.component(c), c, transmission, wo))
+            });
+        let Some((component, c, transmission, wo)) = lobe else {
+            if is_distant(scene, end) {
+                return None;
+            }
+            y.vertices[at] = matching_vertex(scene, &hit, end, from)?;
+            return Some(at);
+        };
+        let node = if transmission {
+            NodeType::SpecularTransmission
+        } else {
+            NodeType::SpecularReflection
+        };
+        let v = PathVertex::from_hit(&hit, node, c as u8);
+        let frame = Frame::from_z(v.ns);
+        if !side_consistent(v.ng, frame.to_world(wo), wo) {
+            return None;
+        }
+        let (wi, _) = dirac_scatter(&component, wo, transmission)?;
+        let w = frame.to_world(wi);
+        if !side_consistent(v.ng, w, wi) {
+            return None;
+        }
+        y.vertices[at] = v;
+        at += 1;
+        ray = v.surface().spawn_ray(w);
+        from = v.p;
+    }
+}
+
+/// [`propose_with`] for a path whose Dirac vertices are all forced, with free chain lengths
+/// (module docs): the eye ray and every extension are followed through forced Dirac
+/// vertices to a vertex of the weak type that ends x's chain; x's vertices after a
+/// reconnection are kept, shifted to where y's chains put them.
+fn propose_free(
+    scene: &Scene,
+    tracer: &Tracer,
+    rng: &mut Rng,
+    policy: &Policy,
+    film: FilmMove,
+    x: &Path,
+    y: &mut Path,
+) -> Proposal {
+    let xv = x.vertices();
+    let n = xv.len() - 1;
+    let (w, h) = film_size(scene);
+    let Some(raster) = film.sample(x, w, h, rng) else {
+        return MISS;
+    };
+    y.raster = raster;
+    y.film_window = x.film_window;
+    y.contribution = x.contribution;
+    let eye_ray = scene.camera.generate_ray(y.raster);
+    y.vertices[0] = PathVertex::eye(eye_ray.origin, scene.camera.forward);
+    let mut jx = chain_end(xv, 1);
+    let Some(mut jy) = trace_free_chain(scene, tracer, eye_ray, eye_ray.origin, &xv[jx], y, 1)
+    else {
+        return MISS;
+    };
+    let (mut fwd, mut rev) = (1.0f64, 1.0f64);
+    let mut extensions = 0u32;
+    while jx < n {
+        let Some(step) = free_step(scene, tracer, rng, policy, xv, y, jx, jy, extensions) else {
+            return MISS;
+        };
+        fwd *= step.fwd;
+        rev *= step.rev;
+        (jx, jy) = (step.jx, step.jy);
+        extensions += 1;
+    }
+    y.vertex_count = (jy + 1) as u32;
+    y.layer = lighting_layer(y.vertices());
+    finish(fwd, rev)
+}
+
+/// One step of [`propose_free`] at the smooth vertex y[jy] standing in for x[jx]: where it
+/// got to and the step's forward and reverse densities.
+struct FreeStep {
+    jx: usize,
+    jy: usize,
+    fwd: f64,
+    rev: f64,
+}
+
+#[allow(clippy::too_many_arguments)]
+fn free_step(
+    scene: &Scene,
+    tracer: &Tracer,
+    rng: &mut Rng,
+    policy: &Policy,
+    xv: &[PathVertex],
+    y: &mut Path,
+    jx: usize,
+    jy: usize,
+    extensions: u32,
+) -> Option<FreeStep> {
+    let n = xv.len() - 1;
+    let yj = y.vertices[jy];
+    let frame = Frame::from_z(yj.ns);
+    let wo_w = (y.vertices[jy - 1].p - yj.p).try_normalize()?;
+    let wo = frame.to_local(wo_w);
+    if !side_consistent(yj.ng, wo_w, wo) {
+        return None;
+    }
+    let p_r = p_reconnect(scene, policy, xv, jx, extensions);
+    if p_r > 0.0 && rng.uniform() < p_r {
+        let target = &xv[jx + 1];
+        let distant = is_distant(scene, target);
+        let dir = direction(scene, &yj, target)?;
+        if !side_consistent(yj.ng, dir, frame.to_local(dir)) {
+            return None;
+        }
+        let tail = n - jx;
+        if jy + tail >= MAX_PATH_VERTICES {
+            return None;
+        }
+        let shadow = if distant {
+            yj.surface().spawn_ray(dir)
+        } else {
+            yj.surface()
+                .spawn_ray_to(target.p, target.p_error, target.ng)
+        };
+        if tracer.occluded(&shadow) {
+            return None;
+        }
+        y.vertices[jy + 1..=jy + tail].copy_from_slice(&xv[jx + 1..=n]);
+        if distant {
+            // The same direction, its nominal point moved with y's last smooth vertex.
+            y.vertices[jy + tail].p = yj.p + dir;
+        }
+        let p = p_r as f64;
+        return Some(FreeStep {
+            jx: n,
+            jy: jy + tail,
+            fwd: p,
+            rev: p,
+        });
+    }
+    let ext = policy.extension?;
+    let dir = match ext {
+        Extension::Bsdf => {
+            let bsdf = vertex_bsdf(scene, &yj)?;
+            frame.to_world(sample_smooth(&bsdf, wo, rng)?)
+        }
+        Extension::Cap { cos_max } => {
+            let axis = direction(scene, &yj, &xv[jx + 1])?;
+            Frame::from_z(axis).to_world(uniform_cone(rng.uniform2(), cos_max))
+        }
+        Extension::Cone(cone) => cone.sample(direction(scene, &yj, &xv[jx + 1])?, rng),
+        Extension::ConeAlong(cone) => cone.sample(direction(scene, &xv[jx], &xv[jx + 1])?, rng),
+    };
+    if !side_consistent(yj.ng, dir, frame.to_local(dir)) {
+        return None;
+    }
+    let mx = chain_end(xv, jx + 1);
+    let my = trace_free_chain(
+        scene,
+        tracer,
+        yj.surface().spawn_ray(dir),
+        yj.p,
+        &xv[mx],
+        y,
+        jy + 1,
+    )?;
+    let q = (1.0 - p_r) as f64;
+    let yv = &y.vertices;
+    Some(FreeStep {
+        jx: mx,
+        jy: my,
+        fwd: q * extension_density(
+            scene,
+            ext,
+            &yv[jy - 1],
+            &yj,
+            &yv[jy + 1],
+            &xv[jx],
+            &xv[jx + 1],
+        ),
+        rev: q * extension_density(
+            scene,
+            ext,
+            &xv[jx - 1],
+            &xv[jx],
+            &xv[jx + 1],
+            &yj,
+            &yv[jy + 1],
+        ),
+    })
+}
+
+/// [`density_with`] for two paths whose Dirac vertices are all forced, with free chain
+/// lengths: the steps of [`propose_free`] read back from the two paths.
+fn density_free(scene: &Scene, policy: &Policy, film: FilmMove, x: &Path, y: &Path) -> f64 {
+    let (xv, yv) = (x.vertices(), y.vertices());
+    let (nx, ny) = (xv.len() - 1, yv.len() - 1);
+    let (w, h) = film_size(scene);
+    let mut d = film.density(x, y, w, h);
+    let (mut jx, mut jy) = (chain_end(xv, 1), chain_end(yv, 1));
+    let mut extensions = 0u32;
+    loop {
+        if d == 0.0 || WeakNode::of(&xv[jx]) != WeakNode::of(&yv[jy]) {
+            return 0.0;
+        }
+        if jx == nx || jy == ny {
+            return if jx == nx && jy == ny { d } else { 0.0 };
+        }
+        let p_r = p_reconnect(scene, policy, xv, jx, extensions);
+        if nx - jx == ny - jy
+            && yv[jy + 1..]
+                .iter()
+                .zip(&xv[jx + 1..])
+                .all(|(a, b)| same_vertex(scene, a, b))
+        {
+            return d * p_r as f64;
+        }
+        let Some(ext) = policy.extension else {
+            return 0.0;
+        };
+        d *= (1.0 - p_r) as f64
+            * extension_density(
+                scene,
+                ext,
+                &yv[jy - 1],
+                &yv[jy],
+                &yv[jy + 1],
+                &xv[jx],
+                &xv[jx + 1],
+            );
+        let (mx, my) = (chain_end(xv, jx + 1), chain_end(yv, jy + 1));
+        // A moved Dirac chain ends on x's vertex with probability 0: such a y lies on a leaf
+        // of the caustic perturbation ([`crate::specular_chain`]).
+        if my > jy + 1 && !is_distant(scene, &xv[mx]) && same_vertex(scene, &yv[my], &xv[mx]) {
+            return 0.0;
+        }
+        extensions += 1;
+        (jx, jy) = (mx, my);
+    }
 }
 
 #[cfg(test)]
@@ -547,6 +983,7 @@ mod tests {
         p_reconnect: 0.5,
         extension: Some(Extension::Bsdf),
         drill_caustics: false,
+        free_chains: false,
     };
 
     fn soft(cap_degrees: f32) -> Policy {
@@ -555,6 +992,7 @@ mod tests {
             p_reconnect: 1.0,
             extension: Some(Extension::cap_degrees(cap_degrees)),
             drill_caustics: false,
+            free_chains: false,
         }
     }
 
@@ -628,10 +1066,10 @@ mod tests {
         let d = l.p - x1.p;
         let cos = (d.y / d.length()) as f64;
         let want = cos / PI * cos / d.length_squared() as f64;
-        let got = extension_density(&scene, Extension::Bsdf, &e, &x1, &l, &l);
+        let got = extension_density(&scene, Extension::Bsdf, &e, &x1, &l, &x1, &l);
         assert!((got / want - 1.0).abs() < 1e-5, "{got} vs {want}");
         let s = sky(x1.p, d);
-        let got = extension_density(&scene, Extension::Bsdf, &e, &x1, &s, &s);
+        let got = extension_density(&scene, Extension::Bsdf, &e, &x1, &s, &x1, &s);
         assert!((got / (cos / PI) - 1.0).abs() < 1e-5, "{got}");
     }
 }

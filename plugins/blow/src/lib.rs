@@ -65,6 +65,7 @@ impl Strategy for Blow {
             p_reconnect,
             extension: Some(extension),
             drill_caustics: false,
+            free_chains: false,
         })
     }
 }

@@ -35,6 +35,7 @@ impl Strategy for BxdfExtension {
             p_reconnect: 1.0,
             extension: Some(Extension::Bsdf),
             drill_caustics: false,
+            free_chains: false,
         })
     }
 }

@@ -12,6 +12,7 @@
 //! | `width` | string | `"narrow"` | `"narrow"` (2° caps) or `"wide"` (10° caps) |
 //! | `cap_degrees` | float | by width | cap half-angle, overrides `width` |
 //! | `p_stop` | float | 0.5 | probability of reconnecting at a smooth vertex of a non-caustic remainder |
+//! | `free_chains` | bool | true | follow mirror chains to any length (`flowlight_mcmc::regenerate`, "Dirac chains of any length"; docs/erpt.md); `false`: Veach's rule, every chain keeps x's number of vertices |
 
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]
@@ -46,6 +47,12 @@ impl Strategy for Drill {
             "0.5",
             "probability of reconnecting at a smooth vertex (non-caustic remainder)",
         ),
+        param(
+            "free_chains",
+            ParamKind::Bool,
+            "true",
+            "follow mirror chains to whatever length they have (false: keep every chain's number of bounces)",
+        ),
     ];
 
     fn policy(p: &Params) -> Result<Policy, String> {
@@ -62,6 +69,7 @@ impl Strategy for Drill {
                 default_cap,
             )?)),
             drill_caustics: true,
+            free_chains: p.boolean("free_chains", true)?,
         })
     }
 }

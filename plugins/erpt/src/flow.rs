@@ -14,6 +14,7 @@ use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
 use flowlight_mcmc::measurement;
 use flowlight_mcmc::norms::Tally;
+use flowlight_mcmc::regenerate::within_depth;
 use flowlight_sdk::{Film, MutationSet, Scene, Stats, Tracer};
 use std::time::Instant;
 
@@ -277,9 +278,16 @@ impl<'a> Flow<'a> {
                     self.mutations
                         .propose(s, self.tracer, rng, &self.state, &mut self.proposal)?;
                 StepTimer::credit(start, &mut self.costs[s].propose_seconds);
-                // A proposal outside the chains' part of path space has f = 0 in their target:
-                // a domain miss, counted.
-                let outside = proposal.valid != 0 && !self.settings.part.contains(&self.proposal);
+                // A proposal outside the chains' part of path space, or beyond the seeds' depth
+                // limits (a mutation with free chain lengths can make a path longer), has
+                // f = 0 in their target: a domain miss, counted.
+                let outside = proposal.valid != 0
+                    && !(within_depth(
+                        self.proposal.vertex_count,
+                        self.proposal.layer,
+                        self.settings.seeds.path_depth,
+                        self.settings.seeds.max_ray_depth,
+                    ) && self.settings.part.contains(&self.proposal));
                 if outside {
                     self.part_misses += 1;
                 }

@@ -30,6 +30,7 @@ impl Strategy for HardReconnection {
             p_reconnect: 1.0,
             extension: None,
             drill_caustics: false,
+            free_chains: false,
         })
     }
 }

@@ -28,6 +28,7 @@
 //! |---|---|---|---|
 //! | `r1` | float | 0.1 | smallest jump, pixels (Veach's r₁) |
 //! | `r2` | float | 0 | largest jump, pixels; 0: Veach's √(0.05·W·H/π) (5 % of the image area) |
+//! | `free_chains` | bool | true | follow mirror chains to any length (`flowlight_mcmc::regenerate`, "Dirac chains of any length"; docs/erpt.md); `false`: Veach's rule, every chain keeps x's number of vertices |
 
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]
@@ -41,16 +42,20 @@ use flowlight_sdk::core::rng::Rng;
 use flowlight_sdk::{export_mutation, param, Mutation, ParamKind, Params, Proposal, Scene, Tracer};
 
 /// Strict reconnection at the first smooth vertex: the eye end of the lens perturbation.
-const RECONNECT: Policy = Policy {
-    min_extensions: 0,
-    p_reconnect: 1.0,
-    extension: None,
-    drill_caustics: false,
-};
+fn reconnect(free_chains: bool) -> Policy {
+    Policy {
+        min_extensions: 0,
+        p_reconnect: 1.0,
+        extension: None,
+        drill_caustics: false,
+        free_chains,
+    }
+}
 
 pub struct LensPerturbation {
     scene: Scene<'static>,
     jump: LensJump,
+    policy: Policy,
 }
 
 impl Mutation for LensPerturbation {
@@ -70,11 +75,22 @@ impl Mutation for LensPerturbation {
             "0",
             "largest raster jump in pixels (0: sqrt(0.05 W H / pi)); bounded by film_window/2",
         ),
+        param(
+            "free_chains",
+            ParamKind::Bool,
+            "true",
+            "follow mirror chains to whatever length they have (false: keep the path's number of bounces, Veach's rule)",
+        ),
     ];
 
     fn create(params: &Params, scene: Scene<'static>) -> Result<Self, String> {
         let jump = LensJump::from_params(params, scene.camera.width, scene.camera.height)?;
-        Ok(LensPerturbation { scene, jump })
+        let policy = reconnect(params.boolean("free_chains", true)?);
+        Ok(LensPerturbation {
+            scene,
+            jump,
+            policy,
+        })
     }
 
     fn propose(
@@ -88,7 +104,7 @@ impl Mutation for LensPerturbation {
             &self.scene,
             tracer,
             rng,
-            &RECONNECT,
+            &self.policy,
             FilmMove::Lens(self.jump),
             current,
             proposal,
@@ -96,7 +112,13 @@ impl Mutation for LensPerturbation {
     }
 
     fn density(&self, from: &Path, to: &Path) -> f64 {
-        density_with(&self.scene, &RECONNECT, FilmMove::Lens(self.jump), from, to)
+        density_with(
+            &self.scene,
+            &self.policy,
+            FilmMove::Lens(self.jump),
+            from,
+            to,
+        )
     }
 }
 

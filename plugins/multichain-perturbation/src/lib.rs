@@ -36,6 +36,8 @@
 //! | `r2` | float | 0 | largest raster jump, pixels; 0: √(0.05·W·H/π); bounded by `film_window`/2 |
 //! | `theta1` | float | 0.0001 | smallest direction perturbation, radians |
 //! | `theta2` | float | 0.1 | largest direction perturbation, radians |
+//! | `free_chains` | bool | true | follow mirror chains to any length (`flowlight_mcmc::regenerate`, "Dirac chains of any length"; docs/erpt.md); `false`: Veach's rule, every chain keeps x's number of vertices |
+//! | `axis` | string | `"direction"` | cone centre at a smooth vertex: x's own direction x_j→x_{j+1} (ratio Π J(x)/J(y)); `"next-vertex"`: towards x_{j+1} from y_j (Veach, the ratio above) |
 
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]
@@ -83,6 +85,18 @@ impl Mutation for MultichainPerturbation {
             "0.1",
             "largest direction perturbation, radians",
         ),
+        param(
+            "axis",
+            ParamKind::String,
+            "\"direction\"",
+            "cone axis at a smooth vertex: \"direction\" (the path's own outgoing direction) or \"next-vertex\" (towards its next vertex, Veach's)",
+        ),
+        param(
+            "free_chains",
+            ParamKind::Bool,
+            "true",
+            "follow mirror chains to whatever length they have (false: keep every chain's number of bounces, Veach's rule)",
+        ),
     ];
 
     fn create(params: &Params, scene: Scene<'static>) -> Result<Self, String> {
@@ -91,8 +105,14 @@ impl Mutation for MultichainPerturbation {
         let policy = Policy {
             min_extensions: 0,
             p_reconnect: 1.0,
-            extension: Some(Extension::Cone(cone)),
+            extension: Some(
+                match params.choice("axis", "direction", &["direction", "next-vertex"])? {
+                    "direction" => Extension::ConeAlong(cone),
+                    _ => Extension::Cone(cone),
+                },
+            ),
             drill_caustics: false,
+            free_chains: params.boolean("free_chains", true)?,
         };
         Ok(MultichainPerturbation {
             scene,

@@ -44,6 +44,7 @@ impl Strategy for SoftReconnection {
             p_reconnect: 1.0,
             extension: Some(Extension::cap_degrees(cap_degrees(p, "cap_degrees", 5.0)?)),
             drill_caustics: false,
+            free_chains: false,
         })
     }
 }
