@@ -3,7 +3,8 @@
 //! vertices (mirror pairs, glass slabs and spheres), the consistency of the mixture density
 //! with the caustic perturbation's leaf, and unbiasedness of ERPT with each alone and in a
 //! mixture with the engine's strategies on the furnace, the Cornell box, the glass caustic and
-//! a mirror caustic. Build the plugins first:
+//! a mirror caustic, and the density of moves between mirror chains of different lengths
+//! against an integral computed without the engine. Build the plugins first:
 //! `cargo build -p flowlight-erpt -p flowlight-lens-perturbation -p flowlight-caustic-perturbation
 //! -p flowlight-multichain-perturbation -p flowlight-blow -p flowlight-drill
 //! -p flowlight-hard-reconnection`.
@@ -17,10 +18,9 @@ use common::{
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
-use flowlight_host::intersector::UnitTracer;
 use flowlight_host::session::{Overrides, Session};
 use flowlight_mcmc::{measurement, WeakNode};
-use flowlight_pathtrace::{untangled, PathSettings, Variant};
+use flowlight_pathtrace::untangled;
 use flowlight_sdk::{Scene, Tracer};
 use flowlight_testkit::gltf::{MaterialOptions, SceneBuilder};
 
@@ -249,113 +249,108 @@ fn check_balance(
     free_chains: bool,
 ) -> (Vec<[usize; 6]>, Vec<usize>) {
     let set = s.instance.mutation_set();
-    // SAFETY: the session keeps the view's data alive.
-    let scene = unsafe { Scene::from_view(s.instance.view()) };
-    let mut unit_tracer = UnitTracer::new(&s.scene, s.intersector.as_ref());
-    let table = unit_tracer.table();
-    let tracer = Tracer::new(&table);
-    let mut settings = PathSettings::from_params(&flowlight_sdk::Params::from_slice(&[])).unwrap();
-    settings.variant = Variant::Untangled;
-    settings.max_ray_depth = 32;
-    settings.path_depth = 10;
-    let caustic = (0..set.len()).find(|&i| set.name(i) == CAUSTIC);
+    common::with_seed_sampler(s, |scene, tracer, mut settings| {
+        settings.max_ray_depth = 32;
+        settings.path_depth = 10;
+        let caustic = (0..set.len()).find(|&i| set.name(i) == CAUSTIC);
 
-    let mut rng = Rng::new(21, 8);
-    let mut x = Box::new(Path::empty());
-    let mut y = Box::new(Path::empty());
-    let mut counts = vec![[0usize; 6]; set.len()];
-    let mut changed = vec![0usize; set.len()];
-    for _ in 0..seeds {
-        let raster = glam::Vec2::new(rng.uniform(), rng.uniform()) * size as f32;
-        let sample = untangled::trace(&scene, &tracer, &settings, &mut rng, raster, Some(&mut x));
-        if sample.value.is_black() || x.vertex_count < 3 {
-            continue;
-        }
-        x.film_window = 8;
-        let f_x = measurement(&scene, &x).luminance() as f64;
-        // NaN counts as no energy.
-        if f_x.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-            continue;
-        }
-        for (i, count) in counts.iter_mut().enumerate() {
-            let p = set.propose(i, &tracer, &mut rng, &x, &mut y).unwrap();
-            if p.valid == 0 {
+        let mut rng = Rng::new(21, 8);
+        let mut x = Box::new(Path::empty());
+        let mut y = Box::new(Path::empty());
+        let mut counts = vec![[0usize; 6]; set.len()];
+        let mut changed = vec![0usize; set.len()];
+        for _ in 0..seeds {
+            let raster = glam::Vec2::new(rng.uniform(), rng.uniform()) * size as f32;
+            let sample = untangled::trace(scene, tracer, &settings, &mut rng, raster, Some(&mut x));
+            if sample.value.is_black() || x.vertex_count < 3 {
                 continue;
             }
-            let what = || format!("{}: {} → {}", set.name(i), x.heckbert(), y.heckbert());
-            let same_types = y.vertex_count == x.vertex_count
-                && x.vertices()
-                    .iter()
-                    .zip(y.vertices())
-                    .all(|(a, b)| WeakNode::of(a) == WeakNode::of(b));
-            let free = free_chains && FREE_CHAINS.contains(&set.name(i));
-            assert!(
-                same_types || free,
-                "{}: the length or a vertex type changed",
-                what()
-            );
-            if free && !same_types {
-                // A chain of another length: only Dirac vertices come and go, and the
-                // lighting layer follows (mirror bounces after the first smooth vertex count).
-                let smooth = |p: &Path| p.vertex_count as usize - dirac_count(p);
-                assert_eq!(smooth(&x), smooth(&y), "{}", what());
-                assert_eq!(
-                    y.layer,
-                    flowlight_mcmc::regenerate::lighting_layer(y.vertices()),
-                    "{}",
-                    what()
-                );
+            x.film_window = 8;
+            let f_x = measurement(scene, &x).luminance() as f64;
+            // NaN counts as no energy.
+            if f_x.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+                continue;
             }
-            let forward = set.density(i, &x, &y).unwrap();
-            let reverse = set.density(i, &y, &x).unwrap();
-            assert!(forward > 0.0, "{}: T(x→y) = {forward}", what());
-            let expected = reverse / forward;
-            let got = p.transition_ratio as f64;
-            assert!(
-                (got - expected).abs() <= 2e-3 * expected.max(got) + 1e-30,
-                "{}: ratio {got} but T(y→x)/T(x→y) = {reverse}/{forward} = {expected}",
-                what()
-            );
-            let f_y = measurement(&scene, &y).luminance() as f64;
-            assert!(f_y.is_finite() && f_y >= 0.0, "{}: f(y) = {f_y}", what());
-            if expected > 0.0 && f_y > 0.0 {
-                // Detailed balance of the Metropolis–Hastings step with the reported ratio.
-                let a_xy = (f_y / f_x * got).min(1.0);
-                let a_yx = (f_x / f_y / got).min(1.0);
-                let (lhs, rhs) = (f_x * forward * a_xy, f_y * reverse * a_yx);
+            for (i, count) in counts.iter_mut().enumerate() {
+                let p = set.propose(i, tracer, &mut rng, &x, &mut y).unwrap();
+                if p.valid == 0 {
+                    continue;
+                }
+                let what = || format!("{}: {} → {}", set.name(i), x.heckbert(), y.heckbert());
+                let same_types = y.vertex_count == x.vertex_count
+                    && x.vertices()
+                        .iter()
+                        .zip(y.vertices())
+                        .all(|(a, b)| WeakNode::of(a) == WeakNode::of(b));
+                let free = free_chains && FREE_CHAINS.contains(&set.name(i));
                 assert!(
-                    (lhs - rhs).abs() <= 3e-3 * lhs.max(rhs),
-                    "{}: f(x)T(x→y)a = {lhs}, f(y)T(y→x)a = {rhs}",
+                    same_types || free,
+                    "{}: the length or a vertex type changed",
                     what()
                 );
-            }
-            // The caustic leaf and the engine's proposals are disjoint (module docs of
-            // flowlight_mcmc::specular_chain).
-            for j in 0..set.len() {
-                let others = Some(i) == caustic && j != i;
-                let onto_leaf = Some(j) == caustic && j != i;
-                if others || onto_leaf {
-                    let (dxy, dyx) = (
-                        set.density(j, &x, &y).unwrap(),
-                        set.density(j, &y, &x).unwrap(),
-                    );
-                    assert!(
-                        dxy == 0.0 && dyx == 0.0,
-                        "{} proposal has density {dxy} / {dyx} under {}",
-                        what(),
-                        set.name(j)
+                if free && !same_types {
+                    // A chain of another length: only Dirac vertices come and go, and the
+                    // lighting layer follows (mirror bounces after the first smooth vertex count).
+                    let smooth = |p: &Path| p.vertex_count as usize - dirac_count(p);
+                    assert_eq!(smooth(&x), smooth(&y), "{}", what());
+                    assert_eq!(
+                        y.layer,
+                        flowlight_mcmc::regenerate::lighting_layer(y.vertices()),
+                        "{}",
+                        what()
                     );
                 }
-            }
-            if expected > 0.0 {
-                count[dirac_run(&x).min(5)] += 1;
-                if dirac_count(&x) != dirac_count(&y) {
-                    changed[i] += 1;
+                let forward = set.density(i, &x, &y).unwrap();
+                let reverse = set.density(i, &y, &x).unwrap();
+                assert!(forward > 0.0, "{}: T(x→y) = {forward}", what());
+                let expected = reverse / forward;
+                let got = p.transition_ratio as f64;
+                assert!(
+                    (got - expected).abs() <= 2e-3 * expected.max(got) + 1e-30,
+                    "{}: ratio {got} but T(y→x)/T(x→y) = {reverse}/{forward} = {expected}",
+                    what()
+                );
+                let f_y = measurement(scene, &y).luminance() as f64;
+                assert!(f_y.is_finite() && f_y >= 0.0, "{}: f(y) = {f_y}", what());
+                if expected > 0.0 && f_y > 0.0 {
+                    // Detailed balance of the Metropolis–Hastings step with the reported ratio.
+                    let a_xy = (f_y / f_x * got).min(1.0);
+                    let a_yx = (f_x / f_y / got).min(1.0);
+                    let (lhs, rhs) = (f_x * forward * a_xy, f_y * reverse * a_yx);
+                    assert!(
+                        (lhs - rhs).abs() <= 3e-3 * lhs.max(rhs),
+                        "{}: f(x)T(x→y)a = {lhs}, f(y)T(y→x)a = {rhs}",
+                        what()
+                    );
+                }
+                // The caustic leaf and the engine's proposals are disjoint (module docs of
+                // flowlight_mcmc::specular_chain).
+                for j in 0..set.len() {
+                    let others = Some(i) == caustic && j != i;
+                    let onto_leaf = Some(j) == caustic && j != i;
+                    if others || onto_leaf {
+                        let (dxy, dyx) = (
+                            set.density(j, &x, &y).unwrap(),
+                            set.density(j, &y, &x).unwrap(),
+                        );
+                        assert!(
+                            dxy == 0.0 && dyx == 0.0,
+                            "{} proposal has density {dxy} / {dyx} under {}",
+                            what(),
+                            set.name(j)
+                        );
+                    }
+                }
+                if expected > 0.0 {
+                    count[dirac_run(&x).min(5)] += 1;
+                    if dirac_count(&x) != dirac_count(&y) {
+                        changed[i] += 1;
+                    }
                 }
             }
         }
-    }
-    (counts, changed)
+        (counts, changed)
+    })
 }
 
 #[test]
@@ -588,95 +583,89 @@ fn the_caustic_chain_samples_its_leaf_in_proportion_to_f_times_the_leaf_jacobian
         )],
     );
     let set = s.instance.mutation_set();
-    // SAFETY: the session keeps the view's data alive.
-    let scene = unsafe { Scene::from_view(s.instance.view()) };
-    let mut unit_tracer = UnitTracer::new(&s.scene, s.intersector.as_ref());
-    let table = unit_tracer.table();
-    let tracer = Tracer::new(&table);
-    let mut settings = PathSettings::from_params(&flowlight_sdk::Params::from_slice(&[])).unwrap();
-    settings.variant = Variant::Untangled;
-
-    // A seed on an E D S L path.
-    let mut rng = Rng::new(5, 9);
-    let mut x = Box::new(Path::empty());
-    let mut y = Box::new(Path::empty());
-    loop {
-        let raster = glam::Vec2::new(rng.uniform(), rng.uniform()) * size as f32;
-        untangled::trace(&scene, &tracer, &settings, &mut rng, raster, Some(&mut x));
-        if x.heckbert() == "EDSL" && measurement(&scene, &x).luminance() > 0.0 {
-            break;
-        }
-    }
-    x.film_window = size; // the window never binds: the stationary law is the leaf's
-    let lum = |p: &Path| measurement(&scene, p).luminance() as f64;
-
-    // The chain, with batch means for its standard error.
-    let (steps, batches) = (200_000usize, 50usize);
-    let mut f_x = lum(&x);
-    let mut batch = vec![glam::DVec2::ZERO; batches];
-    let mut accepted = 0usize;
-    for step in 0..steps {
-        let p = set.propose(0, &tracer, &mut rng, &x, &mut y).unwrap();
-        if p.valid != 0 && p.transition_ratio > 0.0 {
-            let f_y = lum(&y);
-            if rng.uniform() < (f_y / f_x * p.transition_ratio as f64).min(1.0) as f32 {
-                std::mem::swap(&mut x, &mut y);
-                f_x = f_y;
-                accepted += 1;
+    common::with_seed_sampler(&s, |scene, tracer, settings| {
+        // A seed on an E D S L path.
+        let mut rng = Rng::new(5, 9);
+        let mut x = Box::new(Path::empty());
+        let mut y = Box::new(Path::empty());
+        loop {
+            let raster = glam::Vec2::new(rng.uniform(), rng.uniform()) * size as f32;
+            untangled::trace(scene, tracer, &settings, &mut rng, raster, Some(&mut x));
+            if x.heckbert() == "EDSL" && measurement(scene, &x).luminance() > 0.0 {
+                break;
             }
         }
-        batch[step * batches / steps] += x.raster.as_dvec2();
-    }
-    let per = (steps / batches) as f64;
-    let means: Vec<glam::DVec2> = batch.iter().map(|b| *b / per).collect();
-    let chain = means.iter().sum::<glam::DVec2>() / batches as f64;
-    let var = means
-        .iter()
-        .map(|m| (*m - chain) * (*m - chain))
-        .sum::<glam::DVec2>()
-        / (batches as f64 - 1.0);
-    let chain_se = (var / batches as f64)
-        .max(glam::DVec2::splat(1e-12))
-        .powf(0.5);
+        x.film_window = size; // the window never binds: the stationary law is the leaf's
+        let lum = |p: &Path| measurement(scene, p).luminance() as f64;
 
-    // Quadrature: uniform in a cone of 0.9 rad around the seed's lamp direction.
-    let xm = x.vertices()[3];
-    let axis = (x.vertices()[2].p - xm.p).normalize();
-    let frame = flowlight_core::geometry::Frame::from_z(axis);
-    let cos_max = 0.9f32.cos();
-    let (mut sw, mut swu, mut swu2) = (0.0f64, glam::DVec2::ZERO, glam::DVec2::ZERO);
-    let mut qrng = Rng::new(6, 1);
-    let n = 200_000;
-    for _ in 0..n {
-        let w = frame.to_world(flowlight_core::sampling::uniform_cone(
-            qrng.uniform2(),
-            cos_max,
-        ));
-        let Some(p) = mirror_path(&scene, &tracer, &x, w) else {
-            continue;
-        };
-        let wt =
-            lum(&p) * flowlight_mcmc::specular_chain::leaf_jacobian(&scene, p.vertices(), 1, 3);
-        let u = p.raster.as_dvec2();
-        sw += wt;
-        swu += u * wt;
-        swu2 += u * u * wt;
-    }
-    let quad = swu / sw;
-    let spread = (swu2 / sw - quad * quad).max(glam::DVec2::ZERO).powf(0.5);
-    eprintln!(
+        // The chain, with batch means for its standard error.
+        let (steps, batches) = (200_000usize, 50usize);
+        let mut f_x = lum(&x);
+        let mut batch = vec![glam::DVec2::ZERO; batches];
+        let mut accepted = 0usize;
+        for step in 0..steps {
+            let p = set.propose(0, tracer, &mut rng, &x, &mut y).unwrap();
+            if p.valid != 0 && p.transition_ratio > 0.0 {
+                let f_y = lum(&y);
+                if rng.uniform() < (f_y / f_x * p.transition_ratio as f64).min(1.0) as f32 {
+                    std::mem::swap(&mut x, &mut y);
+                    f_x = f_y;
+                    accepted += 1;
+                }
+            }
+            batch[step * batches / steps] += x.raster.as_dvec2();
+        }
+        let per = (steps / batches) as f64;
+        let means: Vec<glam::DVec2> = batch.iter().map(|b| *b / per).collect();
+        let chain = means.iter().sum::<glam::DVec2>() / batches as f64;
+        let var = means
+            .iter()
+            .map(|m| (*m - chain) * (*m - chain))
+            .sum::<glam::DVec2>()
+            / (batches as f64 - 1.0);
+        let chain_se = (var / batches as f64)
+            .max(glam::DVec2::splat(1e-12))
+            .powf(0.5);
+
+        // Quadrature: uniform in a cone of 0.9 rad around the seed's lamp direction.
+        let xm = x.vertices()[3];
+        let axis = (x.vertices()[2].p - xm.p).normalize();
+        let frame = flowlight_core::geometry::Frame::from_z(axis);
+        let cos_max = 0.9f32.cos();
+        let (mut sw, mut swu, mut swu2) = (0.0f64, glam::DVec2::ZERO, glam::DVec2::ZERO);
+        let mut qrng = Rng::new(6, 1);
+        let n = 200_000;
+        for _ in 0..n {
+            let w = frame.to_world(flowlight_core::sampling::uniform_cone(
+                qrng.uniform2(),
+                cos_max,
+            ));
+            let Some(p) = mirror_path(scene, tracer, &x, w) else {
+                continue;
+            };
+            let wt =
+                lum(&p) * flowlight_mcmc::specular_chain::leaf_jacobian(scene, p.vertices(), 1, 3);
+            let u = p.raster.as_dvec2();
+            sw += wt;
+            swu += u * wt;
+            swu2 += u * u * wt;
+        }
+        let quad = swu / sw;
+        let spread = (swu2 / sw - quad * quad).max(glam::DVec2::ZERO).powf(0.5);
+        eprintln!(
         "caustic leaf: chain {chain:?} ± {chain_se:?} ({accepted} of {steps} accepted), quadrature {quad:?} (spread {spread:?})"
     );
-    for k in 0..2 {
-        let z = (chain[k] - quad[k]) / chain_se[k];
-        assert!(
-            z.abs() < 4.5,
-            "caustic leaf, raster axis {k}: chain {:.3} ± {:.3}, quadrature {:.3} (z = {z:.1})",
-            chain[k],
-            chain_se[k],
-            quad[k]
-        );
-    }
+        for k in 0..2 {
+            let z = (chain[k] - quad[k]) / chain_se[k];
+            assert!(
+                z.abs() < 4.5,
+                "caustic leaf, raster axis {k}: chain {:.3} ± {:.3}, quadrature {:.3} (z = {z:.1})",
+                chain[k],
+                chain_se[k],
+                quad[k]
+            );
+        }
+    })
 }
 
 /// ∫_S f dμ over the paths S that strategies `i` and `j` can both propose from `x`,
@@ -734,51 +723,231 @@ fn each_perturbation_density_is_the_density_its_proposals_have() {
             session_of(config, &corridor, "plugin = \"erpt\"", size, 1, &params)
         };
         let set = s.instance.mutation_set();
-        // SAFETY: the session keeps the view's data alive.
-        let scene = unsafe { Scene::from_view(s.instance.view()) };
-        let mut unit_tracer = UnitTracer::new(&s.scene, s.intersector.as_ref());
-        let table = unit_tracer.table();
-        let tracer = Tracer::new(&table);
-        let mut settings =
-            PathSettings::from_params(&flowlight_sdk::Params::from_slice(&[])).unwrap();
-        settings.variant = Variant::Untangled;
-        let mut rng = Rng::new(31, 2);
-        let mut x = Box::new(Path::empty());
-        let mut done = 0;
-        let mut tries = 0;
-        while done < seeds {
-            tries += 1;
-            assert!(tries < 200_000, "{config}: no {kind} seeds");
-            let raster = glam::Vec2::new(rng.uniform(), rng.uniform()) * size as f32;
-            untangled::trace(&scene, &tracer, &settings, &mut rng, raster, Some(&mut x));
-            let h = x.heckbert();
-            if x.vertex_count < 3
-                || (!kind.is_empty() && h != kind)
-                || (kind.is_empty() && h.contains('S'))
-                || measurement(&scene, &x).luminance() <= 0.0
-            {
-                continue;
-            }
-            x.film_window = 8;
-            let [(a, sa), (b, sb)] =
-                common_integral(&set, &scene, &tracer, &mut rng, &x, (0, 1), 20_000);
-            if a == 0.0 && b == 0.0 {
-                continue; // nothing both can reach from this seed
-            }
-            done += 1;
-            let z = (a - b) / (sa * sa + sb * sb).sqrt().max(1e-12 * a.abs());
-            eprintln!(
-                "{config} {h}: {} {a:.4e} ± {sa:.1e}, {} {b:.4e} ± {sb:.1e}, z = {z:.2}",
-                pair.0, pair.1
-            );
-            assert!(
+        common::with_seed_sampler(&s, |scene, tracer, settings| {
+            let mut rng = Rng::new(31, 2);
+            let mut x = Box::new(Path::empty());
+            let mut done = 0;
+            let mut tries = 0;
+            while done < seeds {
+                tries += 1;
+                assert!(tries < 200_000, "{config}: no {kind} seeds");
+                let raster = glam::Vec2::new(rng.uniform(), rng.uniform()) * size as f32;
+                untangled::trace(scene, tracer, &settings, &mut rng, raster, Some(&mut x));
+                let h = x.heckbert();
+                if x.vertex_count < 3
+                    || (!kind.is_empty() && h != kind)
+                    || (kind.is_empty() && h.contains('S'))
+                    || measurement(scene, &x).luminance() <= 0.0
+                {
+                    continue;
+                }
+                x.film_window = 8;
+                let [(a, sa), (b, sb)] =
+                    common_integral(&set, scene, tracer, &mut rng, &x, (0, 1), 20_000);
+                if a == 0.0 && b == 0.0 {
+                    continue; // nothing both can reach from this seed
+                }
+                done += 1;
+                let z = (a - b) / (sa * sa + sb * sb).sqrt().max(1e-12 * a.abs());
+                eprintln!(
+                    "{config} {h}: {} {a:.4e} ± {sa:.1e}, {} {b:.4e} ± {sb:.1e}, z = {z:.2}",
+                    pair.0, pair.1
+                );
+                assert!(
                 z.abs() < 4.5,
                 "{config} {h}: ∫f over the common support: {} gives {a:.4e} ± {sa:.1e}, {} gives {b:.4e} ± {sb:.1e} (z = {z:.1})",
                 pair.0,
                 pair.1
             );
-        }
+            }
+        });
     }
+}
+
+/// The path from raster position `raster` through the mirror chain the eye ray is forced
+/// into, the first smooth vertex (node types from `x`'s first smooth vertex), and then along
+/// `w` from there through the second chain to an emitter; built without the engine. `None`
+/// when the ray does not end where such a path must.
+fn corridor_path(
+    scene: &Scene,
+    tracer: &Tracer,
+    x: &Path,
+    raster: glam::Vec2,
+    w: impl Fn(&flowlight_core::path::PathVertex) -> glam::Vec3,
+) -> Option<Path> {
+    use flowlight_core::geometry::{Frame, Ray};
+    use flowlight_core::path::{NodeType, PathVertex, MAX_PATH_VERTICES};
+    use flowlight_mcmc::measure::{dirac_component, dirac_scatter};
+    let d = x
+        .vertices()
+        .iter()
+        .position(|v| !WeakNode::of(v).is_dirac() && v.node != NodeType::Eye)?;
+    let mut y = *x;
+    y.raster = raster;
+    let eye_ray = scene.camera.generate_ray(raster);
+    let mut at = 0;
+    y.vertices[0] = PathVertex::eye(eye_ray.origin, scene.camera.forward);
+    // Follows `ray` through mirrors; the hit that ends the chain.
+    let chain = |mut ray: Ray, y: &mut Path, at: &mut usize| loop {
+        let hit = tracer.intersect(&ray)?;
+        scene.materials.get(hit.material as usize)?;
+        let bsdf = scene.bsdf(&hit);
+        if hit.emitter >= 0 || bsdf.has_non_delta() {
+            return Some(hit);
+        }
+        let frame = Frame::from_z(hit.ns);
+        let wo = frame.to_local(-ray.dir.normalize());
+        let (c, component, _) = dirac_component(&bsdf, wo, false)?;
+        let (wi, _) = dirac_scatter(&component, wo, false)?;
+        *at += 1;
+        if *at + 2 >= MAX_PATH_VERTICES {
+            return None;
+        }
+        y.vertices[*at] = PathVertex::from_hit(&hit, NodeType::SpecularReflection, c as u8);
+        ray = hit.spawn_ray(frame.to_world(wi));
+    };
+    let hit = chain(eye_ray, &mut y, &mut at)?;
+    if !scene.bsdf(&hit).has_non_delta() {
+        return None;
+    }
+    at += 1;
+    let smooth = PathVertex::from_hit(&hit, x.vertices[d].node, x.vertices[d].component);
+    y.vertices[at] = smooth;
+    let light = chain(hit.spawn_ray(w(&smooth)), &mut y, &mut at)?;
+    if light.emitter < 0 {
+        return None;
+    }
+    at += 1;
+    y.vertices[at] = PathVertex::from_hit(&light, NodeType::Light, 0);
+    y.vertex_count = at as u32 + 1;
+    y.layer = flowlight_mcmc::regenerate::lighting_layer(y.vertices());
+    Some(y)
+}
+
+#[test]
+fn free_chain_lengths_have_the_density_the_drill_samples() {
+    // On the mirror corridor, the drill (free chain lengths, 10° caps) moves an E S D S L
+    // seed to paths with more or fewer mirror bounces in either chain. Over each class
+    // (fewer, as many, more Dirac vertices than x), the mean of f(y)/T(x→y) over its
+    // proposals must equal ∫ f dμ over the class's part of its support, estimated here
+    // without the engine: the raster uniform in the window, the direction at the smooth
+    // vertex uniform in a 20° cone around the direction to x's next vertex, the chains
+    // traced by hand, and the density p_u · p_ω · cos θ / d² of the vertex after the smooth
+    // one. The balance test cannot see a density that is wrong in the forward and the reverse
+    // evaluation alike (say 1.5 × T for moves to longer chains); this test can.
+    let size = 48;
+    let corridor = common::scene_config("mirror-chain/mirror-chain.gltf")
+        .to_string_lossy()
+        .into_owned();
+    let list = toml::Value::Array(vec![table(&[
+        ("plugin", "drill".into()),
+        ("cap_degrees", 10.0.into()),
+    ])]);
+    let s = session_of(
+        "free-chain-density",
+        &corridor,
+        "plugin = \"erpt\"",
+        size,
+        1,
+        &[("mutations", list), ("path_depth", 8.into())],
+    );
+    let set = s.instance.mutation_set();
+    common::with_seed_sampler(&s, |scene, tracer, settings| {
+        let mut rng = Rng::new(41, 3);
+        let mut x = Box::new(Path::empty());
+        let mut y = Box::new(Path::empty());
+        let window = 8u32;
+        let cos_wide = 20f32.to_radians().cos();
+        let n = 200_000;
+        let class = |x: &Path, y: &Path| dirac_count(y).cmp(&dirac_count(x)) as i32 + 1;
+        let (mut seeds, mut tries) = (0, 0);
+        // Per class: checked seeds.
+        let mut checked = [0usize; 3];
+        while seeds < 4 {
+            tries += 1;
+            assert!(tries < 200_000, "no E S D S L seeds");
+            let raster = glam::Vec2::new(rng.uniform(), rng.uniform()) * size as f32;
+            untangled::trace(scene, tracer, &settings, &mut rng, raster, Some(&mut x));
+            if x.heckbert() != "ESDSL" || measurement(scene, &x).luminance() <= 0.0 {
+                continue;
+            }
+            x.film_window = window;
+            seeds += 1;
+            let target = x.vertices[3].p;
+            // (sum, sum of squares, hits) per class, for the engine and for the hand sampler.
+            let mut engine = [[0.0f64; 3]; 3];
+            let mut hand = [[0.0f64; 3]; 3];
+            for _ in 0..n {
+                let p = set.propose(0, tracer, &mut rng, &x, &mut y).unwrap();
+                // A degenerate density (a NaN ratio) is a rejection (`finish` in the engine).
+                if p.valid != 0 && p.transition_ratio.is_finite() {
+                    let t = set.density(0, &x, &y).unwrap();
+                    let v = measurement(scene, &y).luminance() as f64 / t;
+                    let e = &mut engine[class(&x, &y) as usize];
+                    (e[0], e[1], e[2]) = (e[0] + v, e[1] + v * v, e[2] + 1.0);
+                }
+                let u = x.raster
+                    + (glam::Vec2::new(rng.uniform(), rng.uniform()) - 0.5) * window as f32;
+                if u.x < 0.0 || u.y < 0.0 || u.x >= size as f32 || u.y >= size as f32 {
+                    continue;
+                }
+                let dir = rng.uniform2();
+                let Some(z) = corridor_path(scene, tracer, &x, u, |v| {
+                    flowlight_core::geometry::Frame::from_z((target - v.p).normalize())
+                        .to_world(flowlight_core::sampling::uniform_cone(dir, cos_wide))
+                }) else {
+                    continue;
+                };
+                if set.density(0, &x, &z).unwrap() <= 0.0 {
+                    continue;
+                }
+                let zv = z.vertices();
+                let k = zv
+                    .iter()
+                    .skip(1)
+                    .position(|v| !WeakNode::of(v).is_dirac())
+                    .unwrap()
+                    + 1;
+                let (from, to) = (zv[k].p, zv[k + 1]);
+                let dist2 = (to.p - from).length_squared() as f64;
+                let cos = (to.ng.dot((to.p - from).normalize())).abs() as f64;
+                let pdf = 1.0 / (window * window) as f64
+                    * flowlight_core::sampling::uniform_cone_pdf(cos_wide) as f64
+                    * cos
+                    / dist2;
+                let v = measurement(scene, &z).luminance() as f64 / pdf;
+                let h = &mut hand[class(&x, &z) as usize];
+                (h[0], h[1], h[2]) = (h[0] + v, h[1] + v * v, h[2] + 1.0);
+            }
+            let stat = |s: [f64; 3]| {
+                let m = s[0] / n as f64;
+                (m, ((s[1] / n as f64 - m * m).max(0.0) / n as f64).sqrt())
+            };
+            for c in 0..3 {
+                let ((a, sa), (b, sb)) = (stat(engine[c]), stat(hand[c]));
+                let label = ["fewer", "as many", "more"][c];
+                eprintln!(
+                "seed {seeds}, {label} Dirac vertices: engine {a:.4e} ± {sa:.1e} ({} hits), by hand {b:.4e} ± {sb:.1e} ({} hits)",
+                engine[c][2], hand[c][2]
+            );
+                if engine[c][2] < 200.0 || hand[c][2] < 200.0 {
+                    continue;
+                }
+                checked[c] += 1;
+                let z = (a - b) / (sa * sa + sb * sb).sqrt();
+                assert!(
+                z.abs() < 4.5,
+                "seed {seeds}, paths with {label} Dirac vertices than x: ∫f by the drill's proposals {a:.4e} ± {sa:.1e}, by hand {b:.4e} ± {sb:.1e} (z = {z:.1})"
+            );
+            }
+        }
+        for (c, &k) in checked.iter().enumerate() {
+            assert!(
+                k >= 2,
+                "class {c}: only {k} seeds with enough hits ({checked:?})"
+            );
+        }
+    })
 }
 
 #[test]

@@ -324,3 +324,26 @@ pub fn assert_image_mean(label: &str, images: &[Vec<Rgb>], reference: &[Rgb], ru
         "{label}: image mean {m:.5} vs reference {ref_mean:.5} (relative {rel:.4}, z = {z:.2}, rule {rule:?})"
     );
 }
+
+/// Runs `body` with what a test that drives mutations by hand needs from session `s`: its
+/// scene view, a tracer over its intersector and the untangled seed sampler's settings.
+pub fn with_seed_sampler<R>(
+    s: &Session,
+    body: impl FnOnce(
+        &flowlight_sdk::Scene,
+        &flowlight_sdk::Tracer,
+        flowlight_pathtrace::PathSettings,
+    ) -> R,
+) -> R {
+    // SAFETY: the session keeps the view's data alive.
+    let scene = unsafe { flowlight_sdk::Scene::from_view(s.instance.view()) };
+    let mut unit_tracer =
+        flowlight_host::intersector::UnitTracer::new(&s.scene, s.intersector.as_ref());
+    let table = unit_tracer.table();
+    let tracer = flowlight_sdk::Tracer::new(&table);
+    let mut settings =
+        flowlight_pathtrace::PathSettings::from_params(&flowlight_sdk::Params::from_slice(&[]))
+            .unwrap();
+    settings.variant = flowlight_pathtrace::Variant::Untangled;
+    body(&scene, &tracer, settings)
+}

@@ -450,10 +450,7 @@ pub fn propose_with(
     if xv.len() < 2 {
         return MISS;
     }
-    let free = policy.free_chains && all_forced(scene, xv);
-    if free {
-        return propose_free(scene, tracer, rng, policy, film, x, y);
-    }
+    let chains = Chains::of(scene, policy, xv);
     let n = xv.len() - 1;
     let (w, h) = film_size(scene);
     let Some(raster) = film.sample(x, w, h, rng) else {
@@ -461,39 +458,39 @@ pub fn propose_with(
     };
     y.raster = raster;
     y.film_window = x.film_window;
-    y.vertex_count = x.vertex_count;
-    y.layer = x.layer;
     y.contribution = x.contribution;
     // The eye vertex moves with the raster position on an orthographic film.
     let eye_ray = scene.camera.generate_ray(y.raster);
     y.vertices[0] = PathVertex::eye(eye_ray.origin, scene.camera.forward);
-
-    let Some(v1) = trace_vertex(scene, tracer, &eye_ray, eye_ray.origin, &xv[1]) else {
+    let Some((mut jx, mut jy)) =
+        trace_chain(scene, tracer, chains, eye_ray, eye_ray.origin, xv, 1, y, 1)
+    else {
         return MISS;
     };
-    y.vertices[1] = v1;
     let (mut fwd, mut rev) = (1.0f64, 1.0f64);
     let mut extensions = 0u32;
-    if n > 1
-        && continue_from(
-            scene,
-            tracer,
-            rng,
-            policy,
-            xv,
-            y,
-            1,
-            &mut extensions,
-            &mut fwd,
-            &mut rev,
-        )
-        .is_none()
-    {
-        return MISS;
+    while jx < n {
+        let Some(step) = step(
+            scene, tracer, rng, policy, chains, xv, y, jx, jy, extensions,
+        ) else {
+            return MISS;
+        };
+        fwd *= step.fwd;
+        rev *= step.rev;
+        (jx, jy) = (step.jx, step.jy);
+        extensions += 1;
     }
-    // Free chain lengths keep both ends of a move of one kind (module docs).
-    if policy.free_chains && all_forced(scene, y.vertices()) {
-        return MISS;
+    y.vertex_count = (jy + 1) as u32;
+    match chains {
+        // Same types, same layer.
+        Chains::Fixed => {
+            y.layer = x.layer;
+            // Free chain lengths keep both ends of a move of one kind (module docs).
+            if policy.free_chains && all_forced(scene, y.vertices()) {
+                return MISS;
+            }
+        }
+        Chains::Free => y.layer = lighting_layer(y.vertices()),
     }
     finish(fwd, rev)
 }
@@ -514,24 +511,55 @@ fn finish(fwd: f64, rev: f64) -> Proposal {
     }
 }
 
-/// Continues the regeneration from the already placed vertex `y[j]` (j < n) to the end,
-/// multiplying the forward and reverse densities of each step into `fwd` and `rev`.
+/// How the engine follows a chain of Dirac vertices (module docs). One engine walks x and y
+/// with an index each; with fixed chains the two indices stay equal.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Chains {
+    /// Veach's rule: vertex by vertex, each of x's weak type, so y keeps x's length.
+    Fixed,
+    /// Through forced Dirac vertices as far as they go ("Dirac chains of any length").
+    Free,
+}
+
+impl Chains {
+    /// The rule for a move from (or to) the path `v`.
+    fn of(scene: &Scene, policy: &Policy, v: &[PathVertex]) -> Chains {
+        if policy.free_chains && all_forced(scene, v) {
+            Chains::Free
+        } else {
+            Chains::Fixed
+        }
+    }
+}
+
+/// Follows `ray`, leaving y's vertex at `from`, through the chain that stands in for x's
+/// chain from `xv[sx]` on (its Dirac vertices and the vertex that ends it), storing it in `y`
+/// from index `sy` on. Returns the indices, in x and in y, of the vertex that ends the two
+/// chains; `None`: a domain miss.
 #[allow(clippy::too_many_arguments)]
-fn continue_from(
+fn trace_chain(
     scene: &Scene,
     tracer: &Tracer,
-    rng: &mut Rng,
-    policy: &Policy,
+    chains: Chains,
+    ray: Ray,
+    from: Vec3,
     xv: &[PathVertex],
+    sx: usize,
     y: &mut Path,
-    mut j: usize,
-    extensions: &mut u32,
-    fwd: &mut f64,
-    rev: &mut f64,
-) -> Option<()> {
-    let n = xv.len() - 1;
-    loop {
-        let kind = WeakNode::of(&xv[j]);
+    sy: usize,
+) -> Option<(usize, usize)> {
+    let mx = chain_end(xv, sx);
+    if chains == Chains::Free {
+        return Some((
+            mx,
+            trace_free_chain(scene, tracer, ray, from, &xv[mx], y, sy)?,
+        ));
+    }
+    debug_assert_eq!(sx, sy, "fixed chains keep x's indices");
+    let mut j = sx;
+    y.vertices[j] = trace_vertex(scene, tracer, &ray, from, &xv[j])?;
+    while j < mx {
+        // y_j has x_j's Dirac type: follow its lobe.
         let yj = y.vertices[j];
         let frame = Frame::from_z(yj.ns);
         let wo_w = (y.vertices[j - 1].p - yj.p).try_normalize()?;
@@ -539,160 +567,15 @@ fn continue_from(
         if !side_consistent(yj.ng, wo_w, wo) {
             return None;
         }
-        if kind.is_dirac() {
-            let bsdf = vertex_bsdf(scene, &yj)?;
-            let (c, _) = bsdf.components().nth(yj.component as usize)?;
-            let (wi, _) = dirac_scatter(&c, wo, kind == WeakNode::DiracTransmission)?;
-            let ray = yj.surface().spawn_ray(frame.to_world(wi));
-            let next = trace_vertex(scene, tracer, &ray, yj.p, &xv[j + 1])?;
-            j += 1;
-            y.vertices[j] = next;
-        } else {
-            let p_r = p_reconnect(scene, policy, xv, j, *extensions);
-            if p_r > 0.0 && rng.uniform() < p_r {
-                let target = &xv[j + 1];
-                let distant = is_distant(scene, target);
-                let dir = direction(scene, &yj, target)?;
-                if !side_consistent(yj.ng, dir, frame.to_local(dir)) {
-                    return None;
-                }
-                let shadow = if distant {
-                    yj.surface().spawn_ray(dir)
-                } else {
-                    yj.surface()
-                        .spawn_ray_to(target.p, target.p_error, target.ng)
-                };
-                if tracer.occluded(&shadow) {
-                    return None;
-                }
-                y.vertices[j + 1..=n].copy_from_slice(&xv[j + 1..=n]);
-                if distant {
-                    // The same direction, its nominal point moved with y_{n-1}.
-                    y.vertices[n].p = yj.p + dir;
-                }
-                *fwd *= p_r as f64;
-                *rev *= p_r as f64;
-                return Some(());
-            }
-            let ext = policy.extension?;
-            let dir = match ext {
-                Extension::Bsdf => {
-                    let bsdf = vertex_bsdf(scene, &yj)?;
-                    frame.to_world(sample_smooth(&bsdf, wo, rng)?)
-                }
-                Extension::Cap { cos_max } => {
-                    let axis = direction(scene, &yj, &xv[j + 1])?;
-                    Frame::from_z(axis).to_world(uniform_cone(rng.uniform2(), cos_max))
-                }
-                Extension::Cone(cone) => cone.sample(direction(scene, &yj, &xv[j + 1])?, rng),
-                Extension::ConeAlong(cone) => {
-                    cone.sample(direction(scene, &xv[j], &xv[j + 1])?, rng)
-                }
-            };
-            if !side_consistent(yj.ng, dir, frame.to_local(dir)) {
-                return None;
-            }
-            let ray = yj.surface().spawn_ray(dir);
-            let next = trace_vertex(scene, tracer, &ray, yj.p, &xv[j + 1])?;
-            // Densities are evaluated from the vertex positions, in the forward as in the reverse
-            // direction and in `density`: the sampled direction and the one the positions give
-            // differ by the ray-origin offset, which matters for close, grazing vertices.
-            *fwd *= (1.0 - p_r) as f64
-                * extension_density(
-                    scene,
-                    ext,
-                    &y.vertices[j - 1],
-                    &yj,
-                    &next,
-                    &xv[j],
-                    &xv[j + 1],
-                );
-            *rev *= (1.0 - p_r) as f64
-                * extension_density(scene, ext, &xv[j - 1], &xv[j], &xv[j + 1], &yj, &next);
-            *extensions += 1;
-            j += 1;
-            y.vertices[j] = next;
-        }
-        if j == n {
-            return Some(());
-        }
+        let bsdf = vertex_bsdf(scene, &yj)?;
+        let (c, _) = bsdf.components().nth(yj.component as usize)?;
+        let transmission = WeakNode::of(&xv[j]) == WeakNode::DiracTransmission;
+        let (wi, _) = dirac_scatter(&c, wo, transmission)?;
+        let ray = yj.surface().spawn_ray(frame.to_world(wi));
+        y.vertices[j + 1] = trace_vertex(scene, tracer, &ray, yj.p, &xv[j + 1])?;
+        j += 1;
     }
-}
-
-/// Transition density T(x → y) of `policy`, evaluated from the two paths alone (film term in
-/// raster measure, vertices in the target function's measure). 0 when `policy` cannot turn
-/// `x` into `y`.
-pub fn density(scene: &Scene, policy: &Policy, x: &Path, y: &Path) -> f64 {
-    density_with(scene, policy, FilmMove::Window, x, y)
-}
-
-/// [`density`] with the raster position moved by `film`.
-pub fn density_with(scene: &Scene, policy: &Policy, film: FilmMove, x: &Path, y: &Path) -> f64 {
-    let (xv, yv) = (x.vertices(), y.vertices());
-    if xv.len() < 2 || yv.len() < 2 || x.film_window != y.film_window {
-        return 0.0;
-    }
-    if policy.free_chains {
-        match (all_forced(scene, xv), all_forced(scene, yv)) {
-            (true, true) => return density_free(scene, policy, film, x, y),
-            (false, false) => {}
-            _ => return 0.0,
-        }
-    }
-    if xv.len() != yv.len() {
-        return 0.0;
-    }
-    if xv
-        .iter()
-        .zip(yv)
-        .any(|(a, b)| WeakNode::of(a) != WeakNode::of(b))
-    {
-        return 0.0;
-    }
-    let n = xv.len() - 1;
-    let (w, h) = film_size(scene);
-    let mut d = film.density(x, y, w, h);
-    let mut extensions = 0u32;
-    for j in 1..n {
-        if d == 0.0 {
-            return 0.0;
-        }
-        if WeakNode::of(&xv[j]).is_dirac() {
-            // A point traced after a moved Dirac vertex lands exactly on x's next vertex with
-            // probability 0: such a y lies on a leaf of the caustic perturbation
-            // ([`crate::specular_chain`]), which this engine gives no density.
-            if !same_vertex(scene, &yv[j], &xv[j])
-                && !is_distant(scene, &xv[j + 1])
-                && same_vertex(scene, &yv[j + 1], &xv[j + 1])
-            {
-                return 0.0;
-            }
-            continue;
-        }
-        let p_r = p_reconnect(scene, policy, xv, j, extensions);
-        if yv[j + 1..=n]
-            .iter()
-            .zip(&xv[j + 1..=n])
-            .all(|(a, b)| same_vertex(scene, a, b))
-        {
-            return d * p_r as f64;
-        }
-        let Some(ext) = policy.extension else {
-            return 0.0;
-        };
-        d *= (1.0 - p_r) as f64
-            * extension_density(
-                scene,
-                ext,
-                &yv[j - 1],
-                &yv[j],
-                &yv[j + 1],
-                &xv[j],
-                &xv[j + 1],
-            );
-        extensions += 1;
-    }
-    d
+    Some((mx, mx))
 }
 
 /// Follows `ray`, leaving the vertex at `from`, through forced Dirac vertices (stored in `y`
@@ -763,72 +646,31 @@ fn trace_free_chain(
     }
 }
 
-/// [`propose_with`] for a path whose Dirac vertices are all forced, with free chain lengths
-/// (module docs): the eye ray and every extension are followed through forced Dirac
-/// vertices to a vertex of the weak type that ends x's chain; x's vertices after a
-/// reconnection are kept, shifted to where y's chains put them.
-fn propose_free(
-    scene: &Scene,
-    tracer: &Tracer,
-    rng: &mut Rng,
-    policy: &Policy,
-    film: FilmMove,
-    x: &Path,
-    y: &mut Path,
-) -> Proposal {
-    let xv = x.vertices();
-    let n = xv.len() - 1;
-    let (w, h) = film_size(scene);
-    let Some(raster) = film.sample(x, w, h, rng) else {
-        return MISS;
-    };
-    y.raster = raster;
-    y.film_window = x.film_window;
-    y.contribution = x.contribution;
-    let eye_ray = scene.camera.generate_ray(y.raster);
-    y.vertices[0] = PathVertex::eye(eye_ray.origin, scene.camera.forward);
-    let mut jx = chain_end(xv, 1);
-    let Some(mut jy) = trace_free_chain(scene, tracer, eye_ray, eye_ray.origin, &xv[jx], y, 1)
-    else {
-        return MISS;
-    };
-    let (mut fwd, mut rev) = (1.0f64, 1.0f64);
-    let mut extensions = 0u32;
-    while jx < n {
-        let Some(step) = free_step(scene, tracer, rng, policy, xv, y, jx, jy, extensions) else {
-            return MISS;
-        };
-        fwd *= step.fwd;
-        rev *= step.rev;
-        (jx, jy) = (step.jx, step.jy);
-        extensions += 1;
-    }
-    y.vertex_count = (jy + 1) as u32;
-    y.layer = lighting_layer(y.vertices());
-    finish(fwd, rev)
-}
-
-/// One step of [`propose_free`] at the smooth vertex y[jy] standing in for x[jx]: where it
-/// got to and the step's forward and reverse densities.
-struct FreeStep {
+/// One step of [`propose_with`] at the smooth vertex y[jy] standing in for x[jx]: the
+/// indices (in x, in y) of the vertex it got to and the step's forward and reverse
+/// densities.
+struct Step {
     jx: usize,
     jy: usize,
     fwd: f64,
     rev: f64,
 }
 
+/// Reconnects y[jy] to x[jx + 1] (keeping x's vertices after it, shifted) or extends it and
+/// follows the new direction's chain ([`trace_chain`]).
 #[allow(clippy::too_many_arguments)]
-fn free_step(
+fn step(
     scene: &Scene,
     tracer: &Tracer,
     rng: &mut Rng,
     policy: &Policy,
+    chains: Chains,
     xv: &[PathVertex],
     y: &mut Path,
     jx: usize,
     jy: usize,
     extensions: u32,
-) -> Option<FreeStep> {
+) -> Option<Step> {
     let n = xv.len() - 1;
     let yj = y.vertices[jy];
     let frame = Frame::from_z(yj.ns);
@@ -864,7 +706,7 @@ fn free_step(
             y.vertices[jy + tail].p = yj.p + dir;
         }
         let p = p_r as f64;
-        return Some(FreeStep {
+        return Some(Step {
             jx: n,
             jy: jy + tail,
             fwd: p,
@@ -887,19 +729,14 @@ fn free_step(
     if !side_consistent(yj.ng, dir, frame.to_local(dir)) {
         return None;
     }
-    let mx = chain_end(xv, jx + 1);
-    let my = trace_free_chain(
-        scene,
-        tracer,
-        yj.surface().spawn_ray(dir),
-        yj.p,
-        &xv[mx],
-        y,
-        jy + 1,
-    )?;
+    let ray = yj.surface().spawn_ray(dir);
+    let (mx, my) = trace_chain(scene, tracer, chains, ray, yj.p, xv, jx + 1, y, jy + 1)?;
+    // Densities are evaluated from the vertex positions, in the forward as in the reverse
+    // direction and in `density`: the sampled direction and the one the positions give
+    // differ by the ray-origin offset, which matters for close, grazing vertices.
     let q = (1.0 - p_r) as f64;
     let yv = &y.vertices;
-    Some(FreeStep {
+    Some(Step {
         jx: mx,
         jy: my,
         fwd: q * extension_density(
@@ -923,14 +760,41 @@ fn free_step(
     })
 }
 
-/// [`density_with`] for two paths whose Dirac vertices are all forced, with free chain
-/// lengths: the steps of [`propose_free`] read back from the two paths.
-fn density_free(scene: &Scene, policy: &Policy, film: FilmMove, x: &Path, y: &Path) -> f64 {
+/// Transition density T(x → y) of `policy`, evaluated from the two paths alone (film term in
+/// raster measure, vertices in the target function's measure). 0 when `policy` cannot turn
+/// `x` into `y`.
+pub fn density(scene: &Scene, policy: &Policy, x: &Path, y: &Path) -> f64 {
+    density_with(scene, policy, FilmMove::Window, x, y)
+}
+
+/// [`density`] with the raster position moved by `film`: the steps of [`propose_with`] read
+/// back from the two paths.
+pub fn density_with(scene: &Scene, policy: &Policy, film: FilmMove, x: &Path, y: &Path) -> f64 {
     let (xv, yv) = (x.vertices(), y.vertices());
+    if xv.len() < 2 || yv.len() < 2 || x.film_window != y.film_window {
+        return 0.0;
+    }
+    // A move and its reverse follow one rule (module docs).
+    let chains = Chains::of(scene, policy, xv);
+    if Chains::of(scene, policy, yv) != chains {
+        return 0.0;
+    }
+    if chains == Chains::Fixed
+        && (xv.len() != yv.len()
+            || xv
+                .iter()
+                .zip(yv)
+                .any(|(a, b)| WeakNode::of(a) != WeakNode::of(b)))
+    {
+        return 0.0;
+    }
     let (nx, ny) = (xv.len() - 1, yv.len() - 1);
     let (w, h) = film_size(scene);
     let mut d = film.density(x, y, w, h);
     let (mut jx, mut jy) = (chain_end(xv, 1), chain_end(yv, 1));
+    if on_caustic_leaf(scene, xv, yv, jx, jy, 0) {
+        return 0.0;
+    }
     let mut extensions = 0u32;
     loop {
         if d == 0.0 || WeakNode::of(&xv[jx]) != WeakNode::of(&yv[jy]) {
@@ -962,14 +826,30 @@ fn density_free(scene: &Scene, policy: &Policy, film: FilmMove, x: &Path, y: &Pa
                 &xv[jx + 1],
             );
         let (mx, my) = (chain_end(xv, jx + 1), chain_end(yv, jy + 1));
-        // A moved Dirac chain ends on x's vertex with probability 0: such a y lies on a leaf
-        // of the caustic perturbation ([`crate::specular_chain`]).
-        if my > jy + 1 && !is_distant(scene, &xv[mx]) && same_vertex(scene, &yv[my], &xv[mx]) {
+        if on_caustic_leaf(scene, xv, yv, mx, my, jy) {
             return 0.0;
         }
         extensions += 1;
         (jx, jy) = (mx, my);
     }
+}
+
+/// Whether y's chain after its vertex `sy`, ending at y[my], moved its Dirac vertices yet
+/// ends on x's vertex x[mx]: a point traced after a moved Dirac vertex lands there with
+/// probability 0, so such a y lies on a leaf of the caustic perturbation
+/// ([`crate::specular_chain`]), which this engine gives no density.
+fn on_caustic_leaf(
+    scene: &Scene,
+    xv: &[PathVertex],
+    yv: &[PathVertex],
+    mx: usize,
+    my: usize,
+    sy: usize,
+) -> bool {
+    my > sy + 1
+        && !same_vertex(scene, &yv[my - 1], &xv[mx - 1])
+        && !is_distant(scene, &xv[mx])
+        && same_vertex(scene, &yv[my], &xv[mx])
 }
 
 #[cfg(test)]
