@@ -31,6 +31,7 @@ around mi.render() in a worker process. relMSE is floor-corrected: the reference
 timings. Needs only the Python standard library here; Mitsuba runs in the venv's Python.
 """
 import argparse
+import base64
 import hashlib
 import json
 import os
@@ -60,12 +61,21 @@ def die(msg):
 # ---------------------------------------------------------------------------------------------
 # glTF buffers -> PLY (only what the dragon scene uses: float VEC3 positions, uint indices).
 
-def gltf_meshes(path):
-    """Yields (name, material name, positions [(x,y,z)] as packed bytes, indices list) of every
-    mesh primitive of a glTF file whose nodes carry no transform (true of our scenes)."""
+def gltf_meshes(path, normals=False):
+    """Yields (name, material, positions [(x,y,z)] as packed bytes, indices list) of every
+    mesh primitive of a glTF file whose nodes carry no transform (true of our scenes); with
+    `normals`, a fifth item: the NORMAL attribute's packed bytes, or None. Buffers may be
+    files beside the glTF or base64 data URIs."""
     g = json.load(open(path))
     base = os.path.dirname(path)
-    blobs = [open(os.path.join(base, b["uri"]), "rb").read() for b in g["buffers"]]
+
+    def blob(b):
+        uri = b["uri"]
+        if uri.startswith("data:"):
+            return base64.b64decode(uri.split(",", 1)[1])
+        return open(os.path.join(base, uri), "rb").read()
+
+    blobs = [blob(b) for b in g["buffers"]]
 
     def raw(acc_index, comp_size, comps):
         a = g["accessors"][acc_index]
@@ -89,17 +99,26 @@ def gltf_meshes(path):
             size, fmt = {5125: (4, "I"), 5123: (2, "H"), 5121: (1, "B")}[ct]
             idx, a = raw(prim["indices"], size, 1)
             indices = struct.unpack(f"<{a['count']}{fmt}", idx)
-            yield node.get("name", "mesh"), g["materials"][prim["material"]], pos, indices
+            item = (node.get("name", "mesh"), g["materials"][prim["material"]], pos, indices)
+            if normals:
+                n = prim["attributes"].get("NORMAL")
+                item += (raw(n, 4, 3)[0] if n is not None else None,)
+            yield item
 
 
-def write_ply(path, positions, indices):
-    """Binary little-endian PLY: float x y z per vertex, uchar 3 + int per triangle. The
-    triangles' vertex order (winding, hence the front face) is kept as in the glTF."""
+def write_ply(path, positions, indices, normals=None):
+    """Binary little-endian PLY: float x y z (and nx ny nz with `normals`) per vertex, uchar 3
+    + int per triangle. The triangles' vertex order (winding, hence the front face) is kept as
+    in the glTF."""
     nv, nf = len(positions) // 12, len(indices) // 3
+    props = "xyz" if normals is None else ("x", "y", "z", "nx", "ny", "nz")
     header = (f"ply\nformat binary_little_endian 1.0\nelement vertex {nv}\n"
-              "property float x\nproperty float y\nproperty float z\n"
-              f"element face {nf}\nproperty list uchar int vertex_indices\nend_header\n")
+              + "".join(f"property float {p}\n" for p in props)
+              + f"element face {nf}\nproperty list uchar int vertex_indices\nend_header\n")
     face = struct.Struct("<B3i")
+    if normals is not None:
+        positions = b"".join(positions[12 * i:12 * i + 12] + normals[12 * i:12 * i + 12]
+                             for i in range(nv))
     with open(path, "wb") as f:
         f.write(header.encode())
         f.write(positions)
