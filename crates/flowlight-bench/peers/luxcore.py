@@ -159,30 +159,17 @@ def luxcore_worker(job):
         session.UpdateStats()
     session.Stop()
     wall = time.perf_counter() - t0
-    stats = session.GetStats()
-    spp = stats.Get("stats.renderengine.pass").GetInt()
     session.GetFilm().SaveOutput(job["out"], pyluxcore.FilmOutputType.RGB, pyluxcore.Properties())
-    print(json.dumps({"wall": wall, "spp": spp}))
+    print(json.dumps({"wall": wall}))
     # pyluxcore 2.11's log callback crashes the interpreter's finalisation: leave at once.
     sys.stdout.flush()
     os._exit(0)
 
 
-def flowlight_render(a, cfg, seed, out, sets=()):
-    text = peers.run([a.flowlight, "render", cfg, "--quiet", "--time", str(a.seconds),
-                      "--seed", str(seed), "--threads", str(a.threads), "--out", out]
-                     + sum((["--set", s] for s in sets), []))
-    return {"wall": peers.field(text, "wall time", "flowlight render")}
-
-
 def lambert_gltf(out):
     """The glass caustic's glTF with every material but the glass Lambertian
-    (KHR_materials_specular factor 0), buffers embedded as they are."""
-    g = json.load(open(os.path.join(SCENE, "glass-caustic.gltf")))
-    g["extensionsUsed"] = sorted(set(g.get("extensionsUsed", [])) | {"KHR_materials_specular"})
-    for m in g["materials"]:
-        if "KHR_materials_transmission" not in m.get("extensions", {}):
-            m.setdefault("extensions", {})["KHR_materials_specular"] = {"specularFactor": 0.0}
+    (`peers.lambertian`), buffers embedded as they are."""
+    g = peers.lambertian(json.load(open(os.path.join(SCENE, "glass-caustic.gltf"))))
     path = os.path.join(out, "glass-caustic-lambert.gltf")
     json.dump(g, open(path, "w"))
     return path
@@ -241,10 +228,11 @@ def main():
         for r in order:
             img = os.path.join(a.out, f"{r}-{seed}.exr")
             if r.startswith("flowlight"):
+                budget = ["--time", str(a.seconds)]
                 if r == "flowlight-erpt":
-                    t = flowlight_render(a, erpt, seed, img)
+                    t = peers.flowlight_render(a, erpt, seed, img, budget, sets=[])
                 else:
-                    t = flowlight_render(a, mcpt, seed, img, ["termination=expo"])
+                    t = peers.flowlight_render(a, mcpt, seed, img, budget, ["termination=expo"])
             else:
                 sampler = "METROPOLIS" if r == "luxcore-metropolis" else "RANDOM"
                 t = luxcore_render(a, scene_lines, sampler, seed, img)

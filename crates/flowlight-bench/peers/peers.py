@@ -106,6 +106,17 @@ def gltf_meshes(path, normals=False):
             yield item
 
 
+def lambertian(g):
+    """glTF document `g` with every material but the transmissive ones made Lambertian
+    (KHR_materials_specular factor 0): the glTF BRDF's GGX layer has no exact twin in the
+    peers' diffuse materials."""
+    g["extensionsUsed"] = sorted(set(g.get("extensionsUsed", [])) | {"KHR_materials_specular"})
+    for m in g["materials"]:
+        if "KHR_materials_transmission" not in m.get("extensions", {}):
+            m.setdefault("extensions", {})["KHR_materials_specular"] = {"specularFactor": 0.0}
+    return g
+
+
 def write_ply(path, positions, indices, normals=None):
     """Binary little-endian PLY: float x y z (and nx ny nz with `normals`) per vertex, uchar 3
     + int per triangle. The triangles' vertex order (winding, hence the front face) is kept as
@@ -164,11 +175,7 @@ def prepare_dragon(a, out):
     toml = tomllib.load(open(os.path.join(src_dir, "dragon.toml"), "rb"))
     cam = toml["camera"]
 
-    g = json.load(open(src))
-    used = set(g.get("extensionsUsed", [])) | {"KHR_materials_specular"}
-    g["extensionsUsed"] = sorted(used)
-    for m in g["materials"]:
-        m.setdefault("extensions", {})["KHR_materials_specular"] = {"specularFactor": 0.0}
+    g = lambertian(json.load(open(src)))
     for b in g["buffers"]:
         b["uri"] = os.path.relpath(os.path.join(src_dir, b["uri"]), out)
     gltf = os.path.join(out, "dragon-lambert.gltf")
@@ -257,9 +264,13 @@ def field(text, name, what):
     return float(m.group(1))
 
 
-def flowlight_render(a, cfg, seed, out):
-    text = run([a.flowlight, "render", cfg, "--quiet", "--spp", str(a.spp), "--seed", str(seed),
-                "--threads", str(a.threads), "--out", out] + sum((["--set", s] for s in a.set), []))
+def flowlight_render(a, cfg, seed, out, budget=None, sets=None):
+    """CPU and wall time of a render of `cfg`; `budget` (default `--spp a.spp`) and `sets`
+    (default --set of the command line) as `flowlight render` arguments."""
+    budget = ["--spp", str(a.spp)] if budget is None else budget
+    sets = a.set if sets is None else sets
+    text = run([a.flowlight, "render", cfg, "--quiet", *budget, "--seed", str(seed),
+                "--threads", str(a.threads), "--out", out] + sum((["--set", s] for s in sets), []))
     return {"cpu": field(text, "cpu time", "flowlight render"),
             "wall": field(text, "wall time", "flowlight render")}
 
