@@ -668,6 +668,29 @@ fn the_caustic_chain_samples_its_leaf_in_proportion_to_f_times_the_leaf_jacobian
     })
 }
 
+/// Sums of an estimator's samples: the mean and its standard error over `n` draws (the draws
+/// not added count as zeros), and how many were added.
+#[derive(Clone, Copy, Default)]
+struct Tally {
+    sum: f64,
+    sum2: f64,
+    hits: usize,
+}
+
+impl Tally {
+    fn add(&mut self, v: f64) {
+        (self.sum, self.sum2, self.hits) = (self.sum + v, self.sum2 + v * v, self.hits + 1);
+    }
+
+    fn mean_se(&self, n: usize) -> (f64, f64) {
+        let m = self.sum / n as f64;
+        (
+            m,
+            ((self.sum2 / n as f64 - m * m).max(0.0) / n as f64).sqrt(),
+        )
+    }
+}
+
 /// ∫_S f dμ over the paths S that strategies `i` and `j` can both propose from `x`,
 /// estimated with each one's proposals: mean of f(y)·1[T_other(x→y) > 0] / T(x→y). Both are
 /// unbiased when each `density` is the density its `propose` samples, so they must agree:
@@ -683,18 +706,15 @@ fn common_integral(
 ) -> [(f64, f64); 2] {
     let mut y = Box::new(Path::empty());
     [(i, j), (j, i)].map(|(a, b)| {
-        let (mut s, mut s2) = (0.0f64, 0.0f64);
+        let mut t = Tally::default();
         for _ in 0..n {
             let p = set.propose(a, tracer, rng, x, &mut y).unwrap();
             if p.valid == 0 || set.density(b, x, &y).unwrap() <= 0.0 {
                 continue;
             }
-            let v = measurement(scene, &y).luminance() as f64 / set.density(a, x, &y).unwrap();
-            s += v;
-            s2 += v * v;
+            t.add(measurement(scene, &y).luminance() as f64 / set.density(a, x, &y).unwrap());
         }
-        let m = s / n as f64;
-        (m, ((s2 / n as f64 - m * m).max(0.0) / n as f64).sqrt())
+        t.mean_se(n)
     })
 }
 
@@ -859,7 +879,7 @@ fn free_chain_lengths_have_the_density_the_drill_samples() {
         let window = 8u32;
         let cos_wide = 20f32.to_radians().cos();
         let n = 200_000;
-        let class = |x: &Path, y: &Path| dirac_count(y).cmp(&dirac_count(x)) as i32 + 1;
+        let class = |x: &Path, y: &Path| (dirac_count(y).cmp(&dirac_count(x)) as i32 + 1) as usize;
         let (mut seeds, mut tries) = (0, 0);
         // Per class: checked seeds.
         let mut checked = [0usize; 3];
@@ -874,17 +894,15 @@ fn free_chain_lengths_have_the_density_the_drill_samples() {
             x.film_window = window;
             seeds += 1;
             let target = x.vertices[3].p;
-            // (sum, sum of squares, hits) per class, for the engine and for the hand sampler.
-            let mut engine = [[0.0f64; 3]; 3];
-            let mut hand = [[0.0f64; 3]; 3];
+            // Per class, for the engine and for the hand sampler.
+            let mut engine = [Tally::default(); 3];
+            let mut hand = [Tally::default(); 3];
             for _ in 0..n {
                 let p = set.propose(0, tracer, &mut rng, &x, &mut y).unwrap();
                 // A degenerate density (a NaN ratio) is a rejection (`finish` in the engine).
                 if p.valid != 0 && p.transition_ratio.is_finite() {
                     let t = set.density(0, &x, &y).unwrap();
-                    let v = measurement(scene, &y).luminance() as f64 / t;
-                    let e = &mut engine[class(&x, &y) as usize];
-                    (e[0], e[1], e[2]) = (e[0] + v, e[1] + v * v, e[2] + 1.0);
+                    engine[class(&x, &y)].add(measurement(scene, &y).luminance() as f64 / t);
                 }
                 let u = x.raster
                     + (glam::Vec2::new(rng.uniform(), rng.uniform()) - 0.5) * window as f32;
@@ -915,22 +933,16 @@ fn free_chain_lengths_have_the_density_the_drill_samples() {
                     * flowlight_core::sampling::uniform_cone_pdf(cos_wide) as f64
                     * cos
                     / dist2;
-                let v = measurement(scene, &z).luminance() as f64 / pdf;
-                let h = &mut hand[class(&x, &z) as usize];
-                (h[0], h[1], h[2]) = (h[0] + v, h[1] + v * v, h[2] + 1.0);
+                hand[class(&x, &z)].add(measurement(scene, &z).luminance() as f64 / pdf);
             }
-            let stat = |s: [f64; 3]| {
-                let m = s[0] / n as f64;
-                (m, ((s[1] / n as f64 - m * m).max(0.0) / n as f64).sqrt())
-            };
             for c in 0..3 {
-                let ((a, sa), (b, sb)) = (stat(engine[c]), stat(hand[c]));
+                let ((a, sa), (b, sb)) = (engine[c].mean_se(n), hand[c].mean_se(n));
                 let label = ["fewer", "as many", "more"][c];
                 eprintln!(
                 "seed {seeds}, {label} Dirac vertices: engine {a:.4e} ± {sa:.1e} ({} hits), by hand {b:.4e} ± {sb:.1e} ({} hits)",
-                engine[c][2], hand[c][2]
+                engine[c].hits, hand[c].hits
             );
-                if engine[c][2] < 200.0 || hand[c][2] < 200.0 {
+                if engine[c].hits < 200 || hand[c].hits < 200 {
                     continue;
                 }
                 checked[c] += 1;
