@@ -14,8 +14,8 @@ the release binaries (`cargo build --release --workspace`), then, from anywhere:
 What it does:
   1. writes the scene for both renderers from scenes/glass-caustic/glass-caustic.gltf. The
      floor's and the wall's glTF material is made Lambertian for Flowlight
-     (KHR_materials_specular factor 0: the glTF BRDF's GGX layer has no LuxCore twin; with it
-     LuxCore's image was 1-2% darker). LuxCore gets PLY meshes read straight from the
+     (KHR_materials_specular factor 0: the glTF BRDF's GGX layer has no LuxCore twin). LuxCore
+     gets PLY meshes read straight from the
      buffers (the sphere with its normals, for the same smooth shading), `matte` floor and
      wall with the glTF base colours, a `glass` sphere (IOR 1.5 inside, 1 outside,
      kr = kt = 1: exact Fresnel, as Flowlight's dielectric), the lamp as a matte emitter of
