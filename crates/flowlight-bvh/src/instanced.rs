@@ -98,17 +98,14 @@ impl TwoLevelBvh {
             let pad = b.min.abs().max(b.max.abs()).max_element() * 4.0 * f32::EPSILON;
             b.min -= pad;
             b.max += pad;
-            refs.push(PrimRef {
-                bounds: b,
-                index: i as u32,
-            });
+            refs.push(PrimRef::from_bounds(b, i as u32));
         }
         let nodes = if refs.is_empty() {
             Vec::new()
         } else {
             build_parallel(&mut refs, 0, 0)
         };
-        let order = refs.iter().map(|r| r.index).collect();
+        let order = refs.iter().map(|r| r.index()).collect();
         Ok(TwoLevelBvh {
             meshes,
             instances,

@@ -102,7 +102,7 @@ impl BvhIntersector {
                 first_virtual: l.first_virtual,
             }
         } else {
-            BvhIntersector::Flat(Bvh::build(&scene.triangle_vertices()))
+            BvhIntersector::Flat(Bvh::build_indexed(&scene.positions, &scene.triangles))
         };
         (b, start.elapsed())
     }
