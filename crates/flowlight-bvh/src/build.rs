@@ -716,6 +716,11 @@ mod tests {
         assert_eq!(bvh.nodes.len(), 2 * leaves - 1);
     }
 
+    /// Centroid coordinates every bin test must place: NaN, both infinities, a negative value
+    /// and both zeros.
+    const NAN_INFINITIES_NEGATIVE_ZEROS: [f32; 6] =
+        [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -1.0, -0.0, 0.0];
+
     /// The clamped conversion of `Binner::bins_of` is the saturating cast it replaced.
     #[test]
     fn bin_index_is_the_saturating_cast() {
@@ -725,13 +730,7 @@ mod tests {
             active: [true; 3],
         };
         let mut rng = Rng::new(2, 2);
-        let special = [
-            f32::NAN,
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-            -1.0,
-            -0.0,
-            0.0,
+        let special = NAN_INFINITIES_NEGATIVE_ZEROS.into_iter().chain([
             0.999_999_9,
             1.0,
             14.999_999,
@@ -740,9 +739,9 @@ mod tests {
             16.0,
             1e30,
             f32::MAX,
-        ];
+        ]);
         let random = (0..10_000).map(|_| rng.uniform() * 40.0 - 10.0);
-        for f in special.into_iter().chain(random) {
+        for f in special.chain(random) {
             let k = binner.bins_of(Vec3A::new(f, f * 0.5, -f));
             let want = [f, f * 0.5, -f].map(|x| (x as usize).min(SAH_BINS - 1));
             assert_eq!(k, want, "{f}");
@@ -856,13 +855,7 @@ mod tests {
             active: [true; 3],
         };
         let mut rng = Rng::new(3, 3);
-        let special = [
-            f32::NAN,
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-            -1.0,
-            -0.0,
-            0.0,
+        let special = NAN_INFINITIES_NEGATIVE_ZEROS.into_iter().chain([
             1.0 / 3.0,
             4.999_999_5,
             5.0,
@@ -871,9 +864,9 @@ mod tests {
             32.0,
             1e30,
             f32::MAX,
-        ];
+        ]);
         let random = (0..10_000).map(|_| rng.uniform() * 60.0 - 10.0);
-        for f in special.into_iter().chain(random) {
+        for f in special.chain(random) {
             // A point box: its centroid is the point (halves of equal floats add up exactly).
             let p = Vec3A::new(f, f * 0.5, -f);
             let r = PrimRef::from_bounds(Aabb { min: p, max: p }, 7);
