@@ -28,6 +28,16 @@ pub const BUILD_SOURCE: &str = env!("FLOWLIGHT_EMBREE_SOURCE");
 pub const BUILD_LIBRARY: &str = env!("FLOWLIGHT_EMBREE_LIB");
 
 /// Layouts of the structures that cross into Embree, as the 4.4 library uses them.
+mod denormals;
+
+/// Runs `f`, a loop of Embree queries, in the floating-point mode Embree asks for (flush to
+/// zero, denormals are zero; see the `denormals` module), set once for the whole loop
+/// instead of around each query. `f` should do little besides the queries: the renderer's
+/// own arithmetic belongs outside, where denormals keep their IEEE meaning.
+pub fn with_query_mode<R>(f: impl FnOnce() -> R) -> R {
+    denormals::with_denormals_flushed(f)
+}
+
 pub mod abi {
     use embree4_sys::RTCRay;
 
@@ -279,7 +289,9 @@ impl Device {
         let args = args.map_or(std::ptr::null_mut(), |a| a as *mut _ as *mut c_void);
         // SAFETY: a committed scene, a 4.4-layout ray/hit, and NULL (defaults) or arguments
         // the caller keeps alive; the filter callback only reads the context it is given.
-        unsafe { (self.api.intersect1)(scene, &mut rh, args) };
+        denormals::with_denormals_flushed(|| unsafe {
+            (self.api.intersect1)(scene, &mut rh, args)
+        });
         (rh.hit.geom_id != u32::MAX).then_some(rh)
     }
 
@@ -295,7 +307,7 @@ impl Device {
         let mut r = EmbreeScene::rtc_ray(ray);
         let args = args.map_or(std::ptr::null_mut(), |a| a as *mut _ as *mut c_void);
         // SAFETY: as in `closest_hit`; Embree sets tfar to -inf when the ray is blocked.
-        unsafe { (self.api.occluded1)(scene, &mut r, args) };
+        denormals::with_denormals_flushed(|| unsafe { (self.api.occluded1)(scene, &mut r, args) });
         r.tfar == f32::NEG_INFINITY
     }
 
@@ -638,7 +650,9 @@ impl EmbreeScene {
             }
             // SAFETY: a committed scene, a 32-byte aligned 4.4-layout packet and valid mask,
             // NULL arguments (the defaults, as for the single-ray call).
-            unsafe { (self.dev.api.intersect8)(&valid, self.scene, &mut p, std::ptr::null_mut()) };
+            denormals::with_denormals_flushed(|| unsafe {
+                (self.dev.api.intersect8)(&valid, self.scene, &mut p, std::ptr::null_mut())
+            });
             for (k, o) in out.iter_mut().enumerate() {
                 *o = (p.geom_id[k] != u32::MAX).then_some(TriangleHit {
                     t: p.tfar[k],
@@ -896,11 +910,14 @@ unsafe extern "C" fn filter_callback(args: *const embree4_sys::RTCFilterFunction
         let v = f32::from_bits(*hit.add(4 * n + i));
         let prim = *hit.add(5 * n + i);
         let inst = *hit.add(7 * n + i);
-        let keep = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| match ctx.accept {
-            Accept::Flat(f) => f(prim, u, v),
-            Accept::Instanced(f) => f(inst, prim, u, v),
-        }))
-        .unwrap_or(true);
+        // Rust code runs in the thread's own floating-point mode, not the query's.
+        let keep = crate::denormals::with_denormals_kept(|| {
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| match ctx.accept {
+                Accept::Flat(f) => f(prim, u, v),
+                Accept::Instanced(f) => f(inst, prim, u, v),
+            }))
+            .unwrap_or(true)
+        });
         if !keep {
             *a.valid.add(i) = 0;
         }

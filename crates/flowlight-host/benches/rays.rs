@@ -75,14 +75,27 @@ fn rays(n: usize) -> Vec<Ray> {
         .collect()
 }
 
-/// Mrays/s of `f` over `rays` on `threads` threads.
-fn throughput(rays: &[Ray], threads: usize, f: &(dyn Fn(&Ray) -> bool + Sync)) -> f64 {
+/// Mrays/s of `f` over `rays` on `threads` threads. Each thread's loop runs inside
+/// `batch`, as the host runs a batch of rays (for Embree: its floating-point mode set once
+/// per loop, not per ray).
+fn throughput(
+    rays: &[Ray],
+    threads: usize,
+    f: &(dyn Fn(&Ray) -> bool + Sync),
+    batch: Batch,
+) -> f64 {
     let start = Instant::now();
     let chunk = rays.len().div_ceil(threads);
     let hits: usize = std::thread::scope(|s| {
         let hs: Vec<_> = rays
             .chunks(chunk)
-            .map(|c| s.spawn(move || c.iter().filter(|r| f(r)).count()))
+            .map(|c| {
+                s.spawn(move || {
+                    let mut n = 0;
+                    batch(&mut || n = c.iter().filter(|r| f(r)).count());
+                    n
+                })
+            })
             .collect();
         hs.into_iter().map(|h| h.join().unwrap()).sum()
     });
@@ -90,9 +103,13 @@ fn throughput(rays: &[Ray], threads: usize, f: &(dyn Fn(&Ray) -> bool + Sync)) -
     rays.len() as f64 / start.elapsed().as_secs_f64() / 1e6
 }
 
-/// A backend under test: its name and its two queries.
+/// How a backend runs a loop of queries ([`Intersector::batch`]).
+type Batch = &'static (dyn Fn(&mut dyn FnMut()) + Sync);
+
+/// A backend under test: its name, its two queries and its batch scope.
 struct Backend {
     name: &'static str,
+    batch: Batch,
     closest: Box<dyn Fn(&Ray) -> bool + Sync>,
     any: Box<dyn Fn(&Ray) -> bool + Sync>,
 }
@@ -107,6 +124,7 @@ fn build_all(scene: &Scene, tris: &[[Vec3; 3]]) -> (Vec<Backend>, Vec<f64>) {
             let e2 = e.clone();
             out.push(Backend {
                 name: "embree",
+                batch: &|f| flowlight_embree::with_query_mode(f),
                 closest: Box::new(move |r| e.intersect(r).is_some()),
                 any: Box::new(move |r| e2.occluded(r)),
             });
@@ -119,6 +137,7 @@ fn build_all(scene: &Scene, tris: &[[Vec3; 3]]) -> (Vec<Backend>, Vec<f64>) {
     let b2 = b.clone();
     out.push(Backend {
         name: "bvh (8-wide)",
+        batch: &|f| f(),
         closest: Box::new(move |r| b.intersect(r).is_some()),
         any: Box::new(move |r| b2.occluded(r)),
     });
@@ -129,6 +148,7 @@ fn build_all(scene: &Scene, tris: &[[Vec3; 3]]) -> (Vec<Backend>, Vec<f64>) {
     let bin2 = bin.clone();
     out.push(Backend {
         name: "bvh-binary",
+        batch: &|f| f(),
         closest: Box::new(move |r| bin.intersect(r).is_some()),
         any: Box::new(move |r| bin2.occluded(r)),
     });
@@ -202,8 +222,8 @@ fn main() {
             for (k, b) in backends.iter().enumerate() {
                 builds[k].push(times[k]);
                 for (ti, threads) in [1, 2].into_iter().enumerate() {
-                    closest[k][ti].push(throughput(&rays, threads, &*b.closest));
-                    any[k][ti].push(throughput(&rays, threads, &*b.any));
+                    closest[k][ti].push(throughput(&rays, threads, &*b.closest, b.batch));
+                    any[k][ti].push(throughput(&rays, threads, &*b.any, b.batch));
                 }
             }
         }
