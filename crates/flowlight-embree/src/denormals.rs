@@ -3,7 +3,7 @@
 //! Embree's performance notes ask for both MXCSR flags on every thread that traces: without
 //! them, denormal operands send its traversal down the CPU's slow microcode path. On an
 //! Intel Xeon VM, Embree's share of a Stanford dragon render halved with them (2348–2564
-//! samples → 1185–1261) and the render took 0.67–0.78× the CPU, the image unchanged bit
+//! samples → 1185–1261) and the render took 0.65–0.78× the CPU, the image unchanged bit
 //! for bit (docs/performance.md, "Dragon profile split on this VM, and Embree in
 //! flush-to-zero mode").
 //!
