@@ -27,7 +27,6 @@ pub const BUILD_SOURCE: &str = env!("FLOWLIGHT_EMBREE_SOURCE");
 /// The library file the build found, opened at run time.
 pub const BUILD_LIBRARY: &str = env!("FLOWLIGHT_EMBREE_LIB");
 
-/// Layouts of the structures that cross into Embree, as the 4.4 library uses them.
 mod denormals;
 
 /// Runs `f`, a loop of Embree queries, in the floating-point mode Embree asks for (flush to
@@ -38,6 +37,7 @@ pub fn with_query_mode<R>(f: impl FnOnce() -> R) -> R {
     denormals::with_denormals_flushed(f)
 }
 
+/// Layouts of the structures that cross into Embree, as the 4.4 library uses them.
 pub mod abi {
     use embree4_sys::RTCRay;
 
@@ -900,28 +900,30 @@ unsafe extern "C" fn filter_callback(args: *const embree4_sys::RTCFilterFunction
     let ctx = &*(a.context as *const FilterContext);
     let n = a.N as usize;
     let hit = a.hit as *const u32;
-    for i in 0..n {
-        if *a.valid.add(i) == 0 {
-            continue;
+    // Rust code runs in the thread's own floating-point mode, not the query's: switched once
+    // for the callback's N candidates.
+    crate::denormals::with_denormals_kept(|| {
+        for i in 0..n {
+            if *a.valid.add(i) == 0 {
+                continue;
+            }
+            // RTCHitN: Ng_x[N], Ng_y[N], Ng_z[N], u[N], v[N], primID[N], geomID[N],
+            // instID[1][N] (the instance stack when the hit was found), instPrimID[1][N].
+            let u = f32::from_bits(*hit.add(3 * n + i));
+            let v = f32::from_bits(*hit.add(4 * n + i));
+            let prim = *hit.add(5 * n + i);
+            let inst = *hit.add(7 * n + i);
+            let keep =
+                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| match ctx.accept {
+                    Accept::Flat(f) => f(prim, u, v),
+                    Accept::Instanced(f) => f(inst, prim, u, v),
+                }))
+                .unwrap_or(true);
+            if !keep {
+                *a.valid.add(i) = 0;
+            }
         }
-        // RTCHitN: Ng_x[N], Ng_y[N], Ng_z[N], u[N], v[N], primID[N], geomID[N],
-        // instID[1][N] (the instance stack when the hit was found), instPrimID[1][N].
-        let u = f32::from_bits(*hit.add(3 * n + i));
-        let v = f32::from_bits(*hit.add(4 * n + i));
-        let prim = *hit.add(5 * n + i);
-        let inst = *hit.add(7 * n + i);
-        // Rust code runs in the thread's own floating-point mode, not the query's.
-        let keep = crate::denormals::with_denormals_kept(|| {
-            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| match ctx.accept {
-                Accept::Flat(f) => f(prim, u, v),
-                Accept::Instanced(f) => f(inst, prim, u, v),
-            }))
-            .unwrap_or(true)
-        });
-        if !keep {
-            *a.valid.add(i) = 0;
-        }
-    }
+    });
 }
 
 impl Drop for EmbreeScene {

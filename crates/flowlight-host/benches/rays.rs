@@ -82,7 +82,7 @@ fn throughput(
     rays: &[Ray],
     threads: usize,
     f: &(dyn Fn(&Ray) -> bool + Sync),
-    batch: Batch,
+    batch: &(dyn Fn(&mut dyn FnMut()) + Sync),
 ) -> f64 {
     let start = Instant::now();
     let chunk = rays.len().div_ceil(threads);
@@ -103,8 +103,8 @@ fn throughput(
     rays.len() as f64 / start.elapsed().as_secs_f64() / 1e6
 }
 
-/// How a backend runs a loop of queries ([`Intersector::batch`]).
-type Batch = &'static (dyn Fn(&mut dyn FnMut()) + Sync);
+/// How a backend runs a loop of queries: [`Intersector::batch`], as the host's batches do.
+type Batch = Box<dyn Fn(&mut dyn FnMut()) + Sync>;
 
 /// A backend under test: its name, its two queries and its batch scope.
 struct Backend {
@@ -121,10 +121,10 @@ fn build_all(scene: &Scene, tris: &[[Vec3; 3]]) -> (Vec<Backend>, Vec<f64>) {
     match EmbreeIntersector::build(scene) {
         Ok((e, t)) => {
             let e = std::sync::Arc::new(e);
-            let e2 = e.clone();
+            let (e2, e3) = (e.clone(), e.clone());
             out.push(Backend {
                 name: "embree",
-                batch: &|f| flowlight_embree::with_query_mode(f),
+                batch: Box::new(move |f| e3.batch(f)),
                 closest: Box::new(move |r| e.intersect(r).is_some()),
                 any: Box::new(move |r| e2.occluded(r)),
             });
@@ -134,10 +134,10 @@ fn build_all(scene: &Scene, tris: &[[Vec3; 3]]) -> (Vec<Backend>, Vec<f64>) {
     }
     let (b, t) = BvhIntersector::build(scene);
     let b = std::sync::Arc::new(b);
-    let b2 = b.clone();
+    let (b2, b3) = (b.clone(), b.clone());
     out.push(Backend {
         name: "bvh (8-wide)",
-        batch: &|f| f(),
+        batch: Box::new(move |f| b3.batch(f)),
         closest: Box::new(move |r| b.intersect(r).is_some()),
         any: Box::new(move |r| b2.occluded(r)),
     });
@@ -148,7 +148,7 @@ fn build_all(scene: &Scene, tris: &[[Vec3; 3]]) -> (Vec<Backend>, Vec<f64>) {
     let bin2 = bin.clone();
     out.push(Backend {
         name: "bvh-binary",
-        batch: &|f| f(),
+        batch: Box::new(|f| f()),
         closest: Box::new(move |r| bin.intersect(r).is_some()),
         any: Box::new(move |r| bin2.occluded(r)),
     });
@@ -222,8 +222,8 @@ fn main() {
             for (k, b) in backends.iter().enumerate() {
                 builds[k].push(times[k]);
                 for (ti, threads) in [1, 2].into_iter().enumerate() {
-                    closest[k][ti].push(throughput(&rays, threads, &*b.closest, b.batch));
-                    any[k][ti].push(throughput(&rays, threads, &*b.any, b.batch));
+                    closest[k][ti].push(throughput(&rays, threads, &*b.closest, &*b.batch));
+                    any[k][ti].push(throughput(&rays, threads, &*b.any, &*b.batch));
                 }
             }
         }
