@@ -617,8 +617,7 @@ impl Bvh {
         // The closest hit so far: pack, lane, t, b1, b2 (its triangle id is looked up once,
         // at the end, instead of at every closer hit).
         let mut hit: Option<RawHit> = None;
-        let mut stack = [(0u32, 0f32); STACK];
-        let mut sp = 0usize;
+        let mut stack = Stack::<STACK>::new();
         let mut cur = 0u32;
         loop {
             if cur & LEAF_BIT == 0 {
@@ -642,8 +641,7 @@ impl Bvh {
                         while mask != 0 {
                             let j = mask.trailing_zeros() as usize;
                             mask &= mask - 1;
-                            stack[sp] = (node.child[j], t_near[j]);
-                            sp += 1;
+                            stack.push((node.child[j], t_near[j]));
                         }
                         cur = node.child[k];
                         continue;
@@ -664,8 +662,7 @@ impl Bvh {
                         order[i] = e;
                         n += 1;
                     }
-                    stack[sp..sp + n - 1].copy_from_slice(&order[..n - 1]);
-                    sp += n - 1;
+                    stack.extend(&order[..n - 1]);
                     cur = order[n - 1].0;
                     continue;
                 }
@@ -692,11 +689,9 @@ impl Bvh {
             }
             // Pop the next entry that can still hold a closer hit.
             loop {
-                if sp == 0 {
+                let Some((r, t)) = stack.pop() else {
                     return hit;
-                }
-                sp -= 1;
-                let (r, t) = stack[sp];
+                };
                 if ANY_HIT || t < t_max {
                     cur = r;
                     break;
@@ -739,6 +734,47 @@ impl Bvh {
             b1,
             b2,
         }
+    }
+}
+
+/// The traversal stack of (node reference, entry distance) entries, left uninitialised: it
+/// is set up for every ray, and zeroing even the small one (768 bytes) cost 63 instructions
+/// and twelve cache-line writes per ray, 7% of a 10k-triangle tree's closest-hit
+/// instructions (callgrind). Pushes are bounds-checked (the tree's [`stack_bound`] keeps
+/// them in range; a branch that never fails is all it costs).
+struct Stack<const N: usize> {
+    entries: [std::mem::MaybeUninit<(u32, f32)>; N],
+    /// Entries `..len` are initialised.
+    len: usize,
+}
+
+impl<const N: usize> Stack<N> {
+    #[inline(always)]
+    fn new() -> Self {
+        Stack {
+            entries: [const { std::mem::MaybeUninit::uninit() }; N],
+            len: 0,
+        }
+    }
+
+    #[inline(always)]
+    fn push(&mut self, e: (u32, f32)) {
+        self.entries[self.len].write(e);
+        self.len += 1;
+    }
+
+    #[inline(always)]
+    fn extend(&mut self, es: &[(u32, f32)]) {
+        for &e in es {
+            self.push(e);
+        }
+    }
+
+    #[inline(always)]
+    fn pop(&mut self) -> Option<(u32, f32)> {
+        self.len = self.len.checked_sub(1)?;
+        // SAFETY: entries below the old `len` were written by `push` and not popped since.
+        Some(unsafe { self.entries[self.len].assume_init() })
     }
 }
 
@@ -1265,6 +1301,28 @@ mod tests {
         };
         let hits = assert_same_hits(&bvh, &sse, 4, 20_000);
         assert!(hits > 5000, "{hits}");
+    }
+
+    /// The uninitialised stack pops what was pushed, last first, and reports empty.
+    #[test]
+    fn stack_is_last_in_first_out() {
+        let mut s = Stack::<4>::new();
+        assert_eq!(s.pop(), None);
+        s.push((1, 0.5));
+        s.extend(&[(2, 1.5), (3, f32::INFINITY)]);
+        assert_eq!(s.pop(), Some((3, f32::INFINITY)));
+        s.push((4, -0.0));
+        let popped: Vec<_> = std::iter::from_fn(|| s.pop()).collect();
+        assert_eq!(popped, [(4, -0.0), (2, 1.5), (1, 0.5)]);
+        assert_eq!(s.pop(), None);
+    }
+
+    /// A push past the stack's capacity panics rather than writing past it.
+    #[test]
+    #[should_panic(expected = "index out of bounds")]
+    fn stack_push_past_capacity_panics() {
+        let mut s = Stack::<2>::new();
+        s.extend(&[(1, 1.0), (2, 2.0), (3, 3.0)]);
     }
 
     /// The small-stack and the large-stack traversal give the same hits.
