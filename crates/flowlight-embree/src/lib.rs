@@ -18,6 +18,7 @@ use embree4_sys::{
     RTCGeometryType, RTCRay, RTCRayQueryFlags, RTCScene, RTCSceneFlags,
 };
 use flowlight_core::geometry::{HitFilter, InstanceHit, InstanceHitFilter, Ray, TriangleHit};
+use flowlight_core::mesh::CompactHit;
 use glam::{Mat4, Vec3};
 use std::ffi::{c_char, c_uint, c_void};
 use std::sync::OnceLock;
@@ -58,39 +59,53 @@ pub mod abi {
         pub inst_prim_id: [u32; 1],
     }
 
-    /// `RTCRayHit8` of the 4.4 library (structure of arrays, 8 lanes; the hit with
-    /// `instPrimID` as in [`RTCHit`]), for `rtcIntersect8`.
-    #[repr(C, align(32))]
+    /// `RTCRayHit16` of the 4.4 library, for `rtcIntersect16`: the 16-lane ray, then the
+    /// 16-lane hit (structure of arrays; the hit with `instPrimID` as in [`RTCHit`]).
+    #[repr(C, align(64))]
     #[derive(Clone, Copy, Debug)]
-    pub struct RTCRayHit8 {
-        pub org_x: [f32; 8],
-        pub org_y: [f32; 8],
-        pub org_z: [f32; 8],
-        pub tnear: [f32; 8],
-        pub dir_x: [f32; 8],
-        pub dir_y: [f32; 8],
-        pub dir_z: [f32; 8],
-        pub time: [f32; 8],
-        pub tfar: [f32; 8],
-        pub mask: [u32; 8],
-        pub id: [u32; 8],
-        pub flags: [u32; 8],
-        pub ng_x: [f32; 8],
-        pub ng_y: [f32; 8],
-        pub ng_z: [f32; 8],
-        pub u: [f32; 8],
-        pub v: [f32; 8],
-        pub prim_id: [u32; 8],
-        pub geom_id: [u32; 8],
-        pub inst_id: [[u32; 8]; 1],
-        pub inst_prim_id: [[u32; 8]; 1],
+    pub struct RTCRayHit16 {
+        pub ray: RTCRay16,
+        pub hit: RTCHit16,
     }
 
-    /// The `valid` mask of a packet call (−1 = active lane), 32-byte aligned as Embree
-    /// requires.
-    #[repr(C, align(32))]
+    /// `RTCHit16` of the 4.4 library.
+    #[repr(C, align(64))]
     #[derive(Clone, Copy, Debug)]
-    pub struct Valid8(pub [i32; 8]);
+    pub struct RTCHit16 {
+        pub ng_x: [f32; 16],
+        pub ng_y: [f32; 16],
+        pub ng_z: [f32; 16],
+        pub u: [f32; 16],
+        pub v: [f32; 16],
+        pub prim_id: [u32; 16],
+        pub geom_id: [u32; 16],
+        pub inst_id: [[u32; 16]; 1],
+        pub inst_prim_id: [[u32; 16]; 1],
+    }
+
+    /// `RTCRay16`: the ray half of [`RTCRayHit16`], for `rtcOccluded16`.
+    #[repr(C, align(64))]
+    #[derive(Clone, Copy, Debug)]
+    pub struct RTCRay16 {
+        pub org_x: [f32; 16],
+        pub org_y: [f32; 16],
+        pub org_z: [f32; 16],
+        pub tnear: [f32; 16],
+        pub dir_x: [f32; 16],
+        pub dir_y: [f32; 16],
+        pub dir_z: [f32; 16],
+        pub time: [f32; 16],
+        pub tfar: [f32; 16],
+        pub mask: [u32; 16],
+        pub id: [u32; 16],
+        pub flags: [u32; 16],
+    }
+
+    /// The `valid` mask of a packet call (−1 = active lane), 64-byte aligned as Embree
+    /// requires of a 16-lane mask.
+    #[repr(C, align(64))]
+    #[derive(Clone, Copy, Debug)]
+    pub struct Valid16(pub [i32; 16]);
 
     /// `RTCRayHit` with the 4.4 hit.
     #[repr(C, align(16))]
@@ -107,9 +122,12 @@ pub mod abi {
     const _: () = assert!(std::mem::size_of::<embree4_sys::RTCRayHit>() == 80);
     const _: () = assert!(std::mem::size_of::<RTCHit>() == 48);
     const _: () = assert!(std::mem::size_of::<RTCRayHit>() == 96);
-    // RTCRay8 (12 arrays of 8) then RTCHit8 (9 arrays of 8, instID and instPrimID one level).
-    const _: () = assert!(std::mem::size_of::<RTCRayHit8>() == 21 * 32);
-    const _: () = assert!(std::mem::offset_of!(RTCRayHit8, ng_x) == 12 * 32);
+    // RTCRay16 (12 arrays of 16) then RTCHit16 (9 arrays of 16, instID and instPrimID one
+    // level).
+    const _: () = assert!(std::mem::size_of::<RTCRayHit16>() == 21 * 64);
+    const _: () = assert!(std::mem::offset_of!(RTCRayHit16, hit) == 12 * 64);
+    const _: () = assert!(std::mem::size_of::<RTCRay16>() == 12 * 64);
+    const _: () = assert!(std::mem::size_of::<Valid16>() == 64);
     const _: () = assert!(std::mem::offset_of!(RTCRayHit, hit) == 48);
     const _: () = assert!(std::mem::size_of::<embree4_sys::RTCIntersectArguments>() == 32);
     const _: () = assert!(embree4_sys::RTC_MAX_INSTANCE_LEVEL_COUNT == 1);
@@ -148,9 +166,12 @@ struct Api {
     /// The third argument is `RTCIntersectArguments*` (NULL for the defaults).
     intersect1: Fn<unsafe extern "C" fn(RTCScene, *mut abi::RTCRayHit, *mut c_void)>,
     occluded1: Fn<unsafe extern "C" fn(RTCScene, *mut RTCRay, *mut c_void)>,
-    /// `rtcIntersect8(valid, scene, rayhit, args)`.
-    intersect8:
-        Fn<unsafe extern "C" fn(*const abi::Valid8, RTCScene, *mut abi::RTCRayHit8, *mut c_void)>,
+    /// `rtcIntersect16(valid, scene, rayhit, args)`.
+    intersect16:
+        Fn<unsafe extern "C" fn(*const abi::Valid16, RTCScene, *mut abi::RTCRayHit16, *mut c_void)>,
+    /// `rtcOccluded16(valid, scene, ray, args)`.
+    occluded16:
+        Fn<unsafe extern "C" fn(*const abi::Valid16, RTCScene, *mut abi::RTCRay16, *mut c_void)>,
 }
 
 /// The process's one Embree device and the library it came from.
@@ -243,7 +264,8 @@ fn open_device() -> Result<Device, String> {
         set_geometry_transform: sym!("rtcSetGeometryTransform"),
         intersect1: sym!("rtcIntersect1"),
         occluded1: sym!("rtcOccluded1"),
-        intersect8: sym!("rtcIntersect8"),
+        intersect16: sym!("rtcIntersect16"),
+        occluded16: sym!("rtcOccluded16"),
     };
     // SAFETY: a NUL-terminated config string.
     let handle = unsafe { (api.new_device)(c"verbose=0".as_ptr()) };
@@ -285,13 +307,22 @@ impl Device {
         ray: &Ray,
         args: Option<&mut filter::IntersectArguments>,
     ) -> Option<abi::RTCRayHit> {
+        denormals::with_denormals_flushed(|| self.closest_hit_in_mode(scene, ray, args))
+    }
+
+    /// [`Device::closest_hit`] in the caller's FP mode (inside [`with_query_mode`]).
+    #[inline(always)]
+    fn closest_hit_in_mode(
+        &self,
+        scene: RTCScene,
+        ray: &Ray,
+        args: Option<&mut filter::IntersectArguments>,
+    ) -> Option<abi::RTCRayHit> {
         let mut rh = EmbreeScene::rtc_ray_hit(ray);
         let args = args.map_or(std::ptr::null_mut(), |a| a as *mut _ as *mut c_void);
         // SAFETY: a committed scene, a 4.4-layout ray/hit, and NULL (defaults) or arguments
         // the caller keeps alive; the filter callback only reads the context it is given.
-        denormals::with_denormals_flushed(|| unsafe {
-            (self.api.intersect1)(scene, &mut rh, args)
-        });
+        unsafe { (self.api.intersect1)(scene, &mut rh, args) };
         (rh.hit.geom_id != u32::MAX).then_some(rh)
     }
 
@@ -304,10 +335,21 @@ impl Device {
         ray: &Ray,
         args: Option<&mut filter::IntersectArguments>,
     ) -> bool {
+        denormals::with_denormals_flushed(|| self.any_hit_in_mode(scene, ray, args))
+    }
+
+    /// [`Device::any_hit`] in the caller's FP mode (inside [`with_query_mode`]).
+    #[inline(always)]
+    fn any_hit_in_mode(
+        &self,
+        scene: RTCScene,
+        ray: &Ray,
+        args: Option<&mut filter::IntersectArguments>,
+    ) -> bool {
         let mut r = EmbreeScene::rtc_ray(ray);
         let args = args.map_or(std::ptr::null_mut(), |a| a as *mut _ as *mut c_void);
         // SAFETY: as in `closest_hit`; Embree sets tfar to -inf when the ray is blocked.
-        denormals::with_denormals_flushed(|| unsafe { (self.api.occluded1)(scene, &mut r, args) });
+        unsafe { (self.api.occluded1)(scene, &mut r, args) };
         r.tfar == f32::NEG_INFINITY
     }
 
@@ -366,6 +408,8 @@ pub struct SceneOptions {
     /// [`EmbreeScene::intersect_filtered`] and [`EmbreeScene::occluded_filtered`] (alpha
     /// testing); without it their filter is never called.
     pub hit_filter: bool,
+    /// How [`EmbreeScene::intersect_batch`] and [`EmbreeScene::occluded_batch`] trace.
+    pub packets: Packets,
 }
 
 impl Default for SceneOptions {
@@ -374,13 +418,55 @@ impl Default for SceneOptions {
             robust: true,
             quality: BuildQuality::Medium,
             hit_filter: false,
+            packets: Packets::Auto,
+        }
+    }
+}
+
+/// Whether a flat scene answers batches of rays with Embree's 16-lane packet traversal
+/// (`rtcIntersect16` / `rtcOccluded16`) or one `rtcIntersect1` / `rtcOccluded1` per ray.
+/// Both give the same hits bit for bit (the tests below); only the speed differs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Packets {
+    /// Packets for scenes of at most [`PACKET_MAX_TRIANGLES`] triangles, single rays above.
+    Auto,
+    Always,
+    Never,
+}
+
+/// The largest scene [`Packets::Auto`] traces in packets. A packet of incoherent rays
+/// descends into the union of the nodes its rays need: in a small tree that union is nearly
+/// the whole tree anyway, so one call serves 16 rays at little extra work, while in a large
+/// one the lanes part ways and the packet does the work of many single rays. Measured on
+/// whole MCPT renders and the `rays` bench (docs/performance.md, "Tenth session"): packets
+/// cut the Cornell box's (38 triangles) render CPU to about 0.89×, at 10k triangles the
+/// bench's incoherent rays run about as fast either way, and the dragon (871k) gains nothing.
+pub const PACKET_MAX_TRIANGLES: usize = 10_000;
+
+impl Packets {
+    /// Whether a scene of `triangles` triangles uses packets.
+    pub fn resolve(self, triangles: usize) -> bool {
+        match self {
+            Packets::Auto => triangles <= PACKET_MAX_TRIANGLES,
+            Packets::Always => true,
+            Packets::Never => false,
+        }
+    }
+
+    pub fn parse(s: &str) -> Result<Packets, String> {
+        match s {
+            "auto" => Ok(Packets::Auto),
+            "always" | "1" => Ok(Packets::Always),
+            "never" | "0" => Ok(Packets::Never),
+            _ => Err(format!("{s:?}: expected auto, always or never")),
         }
     }
 }
 
 impl SceneOptions {
-    /// The defaults (robust, medium quality), changed by `FLOWLIGHT_EMBREE_QUALITY`
-    /// (`low` | `medium` | `high`) and `FLOWLIGHT_EMBREE_ROBUST` (`0` | `1`).
+    /// The defaults (robust, medium quality, packets by size), changed by
+    /// `FLOWLIGHT_EMBREE_QUALITY` (`low` | `medium` | `high`), `FLOWLIGHT_EMBREE_ROBUST`
+    /// (`0` | `1`) and `FLOWLIGHT_EMBREE_PACKETS` (`auto` | `always` | `never`).
     pub fn from_env() -> Result<Self, String> {
         let mut o = SceneOptions::default();
         if let Ok(q) = std::env::var("FLOWLIGHT_EMBREE_QUALITY") {
@@ -394,6 +480,9 @@ impl SceneOptions {
                 _ => return Err(format!("FLOWLIGHT_EMBREE_ROBUST={r:?}: expected 0 or 1")),
             };
         }
+        if let Ok(p) = std::env::var("FLOWLIGHT_EMBREE_PACKETS") {
+            o.packets = Packets::parse(&p).map_err(|e| format!("FLOWLIGHT_EMBREE_PACKETS: {e}"))?;
+        }
         Ok(o)
     }
 }
@@ -406,6 +495,18 @@ fn triangle_hit(rh: abi::RTCRayHit) -> TriangleHit {
         prim: rh.hit.prim_id,
         b1: rh.hit.u,
         b2: rh.hit.v,
+    }
+}
+
+/// A flat scene's hit as a compact hit (instance unknown).
+#[inline(always)]
+fn compact_hit(h: TriangleHit) -> CompactHit {
+    CompactHit {
+        t: h.t,
+        prim: h.prim,
+        b1: h.b1,
+        b2: h.b2,
+        instance: u32::MAX,
     }
 }
 
@@ -427,6 +528,8 @@ pub struct EmbreeScene {
     dev: &'static Device,
     scene: RTCScene,
     triangles: usize,
+    /// Batches go through 16-lane packets ([`Packets::resolve`]).
+    packets: bool,
 }
 
 // SAFETY: a committed Embree scene is read-only and may be queried from any thread.
@@ -460,6 +563,7 @@ impl EmbreeScene {
                 dev,
                 scene,
                 triangles: triangles.len(),
+                packets: options.packets.resolve(triangles.len()),
             };
             // Alpha-tested queries pass their filter in the call's arguments. The flag is set
             // only for scenes that need it, so that every other scene keeps Embree's default
@@ -607,60 +711,135 @@ impl EmbreeScene {
         self.dev.any_hit(self.scene, ray, Some(&mut args))
     }
 
-    /// Closest hits of up to 8 rays per `rtcIntersect8` packet call (Embree's packet
-    /// traversal, which pays for coherent rays: camera rays of a tile). `out[i]` is
-    /// `rays[i]`'s hit; `rays.len() == out.len()`.
-    pub fn intersect_packets(&self, rays: &[Ray], out: &mut [Option<TriangleHit>]) {
-        for (rays, out) in rays.chunks(8).zip(out.chunks_mut(8)) {
-            let mut valid = abi::Valid8([0; 8]);
-            let mut p = abi::RTCRayHit8 {
-                org_x: [0.0; 8],
-                org_y: [0.0; 8],
-                org_z: [0.0; 8],
-                tnear: [0.0; 8],
-                dir_x: [0.0; 8],
-                dir_y: [0.0; 8],
-                dir_z: [1.0; 8],
-                time: [0.0; 8],
-                tfar: [-0.0; 8],
-                mask: [u32::MAX; 8],
-                id: [0; 8],
-                flags: [0; 8],
-                ng_x: [0.0; 8],
-                ng_y: [0.0; 8],
-                ng_z: [0.0; 8],
-                u: [0.0; 8],
-                v: [0.0; 8],
-                prim_id: [u32::MAX; 8],
-                geom_id: [u32::MAX; 8],
-                inst_id: [[u32::MAX; 8]],
-                inst_prim_id: [[u32::MAX; 8]],
+    /// Whether batches go through 16-lane packets ([`SceneOptions::packets`]).
+    pub fn uses_packets(&self) -> bool {
+        self.packets
+    }
+
+    /// Closest hits of a batch of rays: `hits[i]` is `rays[i]`'s hit exactly as
+    /// [`EmbreeScene::intersect`] finds it, as a compact hit (`instance` unknown). The FP mode
+    /// is set once for the batch; the rays go 16 at a time through `rtcIntersect16` or one by
+    /// one through `rtcIntersect1` ([`SceneOptions::packets`]).
+    pub fn intersect_batch(&self, rays: &[Ray], hits: &mut [CompactHit]) {
+        assert_eq!(rays.len(), hits.len(), "one hit per ray");
+        with_query_mode(|| {
+            if self.packets {
+                let mut p = Box::new(Self::empty_packet());
+                for (rays, hits) in rays.chunks(16).zip(hits.chunks_mut(16)) {
+                    self.intersect16(&mut p, rays, hits);
+                }
+            } else {
+                for (ray, hit) in rays.iter().zip(hits.iter_mut()) {
+                    *hit = self
+                        .dev
+                        .closest_hit_in_mode(self.scene, ray, None)
+                        .map_or(CompactHit::MISS, |rh| compact_hit(triangle_hit(rh)));
+                }
+            }
+        })
+    }
+
+    /// Shadow rays of a batch: `blocked[i]` is 1 where [`EmbreeScene::occluded`] of
+    /// `rays[i]` holds, else 0; packets or single rays as [`EmbreeScene::intersect_batch`].
+    pub fn occluded_batch(&self, rays: &[Ray], blocked: &mut [u8]) {
+        assert_eq!(rays.len(), blocked.len(), "one answer per ray");
+        with_query_mode(|| {
+            if self.packets {
+                let mut p = Box::new(Self::empty_packet().ray);
+                for (rays, blocked) in rays.chunks(16).zip(blocked.chunks_mut(16)) {
+                    self.occluded16(&mut p, rays, blocked);
+                }
+            } else {
+                for (ray, b) in rays.iter().zip(blocked.iter_mut()) {
+                    *b = u8::from(self.dev.any_hit_in_mode(self.scene, ray, None));
+                }
+            }
+        })
+    }
+
+    /// A packet with every lane inactive-looking (Embree reads only the valid lanes).
+    fn empty_packet() -> abi::RTCRayHit16 {
+        abi::RTCRayHit16 {
+            ray: abi::RTCRay16 {
+                org_x: [0.0; 16],
+                org_y: [0.0; 16],
+                org_z: [0.0; 16],
+                tnear: [0.0; 16],
+                dir_x: [0.0; 16],
+                dir_y: [0.0; 16],
+                dir_z: [1.0; 16],
+                time: [0.0; 16],
+                tfar: [-0.0; 16],
+                mask: [u32::MAX; 16],
+                id: [0; 16],
+                flags: [0; 16],
+            },
+            hit: abi::RTCHit16 {
+                ng_x: [0.0; 16],
+                ng_y: [0.0; 16],
+                ng_z: [0.0; 16],
+                u: [0.0; 16],
+                v: [0.0; 16],
+                prim_id: [u32::MAX; 16],
+                geom_id: [u32::MAX; 16],
+                inst_id: [[u32::MAX; 16]],
+                inst_prim_id: [[u32::MAX; 16]],
+            },
+        }
+    }
+
+    /// Fills the first `rays.len()` (≤ 16) lanes of `ray` and returns their valid mask.
+    #[inline(always)]
+    fn load16(ray: &mut abi::RTCRay16, rays: &[Ray]) -> abi::Valid16 {
+        debug_assert!(rays.len() <= 16);
+        let mut valid = abi::Valid16([0; 16]);
+        for (k, r) in rays.iter().enumerate() {
+            let r = Self::rtc_ray(r);
+            valid.0[k] = -1;
+            ray.org_x[k] = r.org_x;
+            ray.org_y[k] = r.org_y;
+            ray.org_z[k] = r.org_z;
+            ray.tnear[k] = r.tnear;
+            ray.dir_x[k] = r.dir_x;
+            ray.dir_y[k] = r.dir_y;
+            ray.dir_z[k] = r.dir_z;
+            ray.tfar[k] = r.tfar;
+        }
+        valid
+    }
+
+    /// One `rtcIntersect16` call on up to 16 rays, in the caller's FP mode.
+    #[inline]
+    fn intersect16(&self, p: &mut abi::RTCRayHit16, rays: &[Ray], hits: &mut [CompactHit]) {
+        let valid = Self::load16(&mut p.ray, rays);
+        p.hit.geom_id = [u32::MAX; 16];
+        // SAFETY: a committed scene; the 4.4 `RTCRayHit16` layout (checked in `abi`),
+        // 64-byte aligned, as is the valid mask; NULL arguments (the defaults, as for the
+        // single-ray call).
+        unsafe { (self.dev.api.intersect16)(&valid, self.scene, p, std::ptr::null_mut()) };
+        for (k, h) in hits.iter_mut().enumerate() {
+            *h = if p.hit.geom_id[k] != u32::MAX {
+                CompactHit {
+                    t: p.ray.tfar[k],
+                    prim: p.hit.prim_id[k],
+                    b1: p.hit.u[k],
+                    b2: p.hit.v[k],
+                    instance: u32::MAX,
+                }
+            } else {
+                CompactHit::MISS
             };
-            for (k, ray) in rays.iter().enumerate() {
-                let r = Self::rtc_ray(ray);
-                valid.0[k] = -1;
-                p.org_x[k] = r.org_x;
-                p.org_y[k] = r.org_y;
-                p.org_z[k] = r.org_z;
-                p.tnear[k] = r.tnear;
-                p.dir_x[k] = r.dir_x;
-                p.dir_y[k] = r.dir_y;
-                p.dir_z[k] = r.dir_z;
-                p.tfar[k] = r.tfar;
-            }
-            // SAFETY: a committed scene, a 32-byte aligned 4.4-layout packet and valid mask,
-            // NULL arguments (the defaults, as for the single-ray call).
-            denormals::with_denormals_flushed(|| unsafe {
-                (self.dev.api.intersect8)(&valid, self.scene, &mut p, std::ptr::null_mut())
-            });
-            for (k, o) in out.iter_mut().enumerate() {
-                *o = (p.geom_id[k] != u32::MAX).then_some(TriangleHit {
-                    t: p.tfar[k],
-                    prim: p.prim_id[k],
-                    b1: p.u[k],
-                    b2: p.v[k],
-                });
-            }
+        }
+    }
+
+    /// One `rtcOccluded16` call on up to 16 rays, in the caller's FP mode.
+    #[inline]
+    fn occluded16(&self, ray: &mut abi::RTCRay16, rays: &[Ray], blocked: &mut [u8]) {
+        let valid = Self::load16(ray, rays);
+        // SAFETY: as in `intersect16`; Embree sets a blocked lane's tfar to -inf.
+        unsafe { (self.dev.api.occluded16)(&valid, self.scene, ray, std::ptr::null_mut()) };
+        for (k, b) in blocked.iter_mut().enumerate() {
+            *b = u8::from(ray.tfar[k] == f32::NEG_INFINITY);
         }
     }
 
@@ -1050,9 +1229,9 @@ mod tests {
         tris
     }
 
-    #[test]
-    fn packets_return_exactly_the_single_ray_hits() {
-        let s = EmbreeScene::build_soup(&bumpy_sphere(40), SceneOptions::default()).unwrap();
+    /// Camera rays through a 61 × 61 grid (not a multiple of 16: partial packets), then
+    /// incoherent rays with random `t_max`, some of them 0, negative or NaN.
+    fn batch_rays() -> Vec<Ray> {
         let mut state = 0x9e37_79b9_7f4a_7c15u64;
         let mut u = move || {
             state ^= state << 13;
@@ -1060,8 +1239,6 @@ mod tests {
             state ^= state << 17;
             (state >> 40) as f32 / (1u64 << 24) as f32
         };
-        // Camera rays through a 61 × 61 grid (not a multiple of 8: partial packets), and
-        // incoherent rays with random t_max.
         let mut rays: Vec<Ray> = (0..61 * 61)
             .map(|i| {
                 let (x, y) = ((i % 61) as f32 / 60.0 - 0.5, (i / 61) as f32 / 60.0 - 0.5);
@@ -1072,26 +1249,71 @@ mod tests {
                 )
             })
             .collect();
-        for _ in 0..3000 {
+        for i in 0..3001 {
             let o = Vec3::new(u() - 0.5, u() - 0.5, u() - 0.5) * 6.0;
             let d = (Vec3::new(u(), u(), u()) - 0.5 - o * 0.1).normalize();
-            rays.push(Ray::new(
-                o,
-                d,
-                if u() < 0.5 { f32::INFINITY } else { 4.0 * u() },
-            ));
-        }
-        let mut out = vec![None; rays.len()];
-        s.intersect_packets(&rays, &mut out);
-        let mut hits = 0;
-        for (i, (ray, got)) in rays.iter().zip(&out).enumerate() {
-            let want = s.intersect(ray);
-            let bits = |h: Option<TriangleHit>| {
-                h.map(|h| (h.t.to_bits(), h.prim, h.b1.to_bits(), h.b2.to_bits()))
+            let t_max = match i % 97 {
+                0 => 0.0,
+                1 => -1.0,
+                2 => f32::NAN,
+                _ if u() < 0.5 => f32::INFINITY,
+                _ => 4.0 * u(),
             };
-            assert_eq!(bits(*got), bits(want), "ray {i}: {ray:?}");
-            hits += want.is_some() as usize;
+            rays.push(Ray::new(o, d, t_max));
         }
-        assert!(hits > 1500, "{hits} hits");
+        rays
+    }
+
+    #[test]
+    fn batches_return_exactly_the_single_ray_answers() {
+        let tris = bumpy_sphere(40);
+        let rays = batch_rays();
+        let bits = |h: CompactHit| (h.t.to_bits(), h.prim, h.b1.to_bits(), h.b2.to_bits());
+        for packets in [Packets::Always, Packets::Never] {
+            let options = SceneOptions {
+                packets,
+                ..SceneOptions::default()
+            };
+            let s = EmbreeScene::build_soup(&tris, options).unwrap();
+            assert_eq!(s.uses_packets(), packets == Packets::Always);
+            let mut hits = vec![CompactHit::MISS; rays.len()];
+            s.intersect_batch(&rays, &mut hits);
+            let mut blocked = vec![7u8; rays.len()];
+            s.occluded_batch(&rays, &mut blocked);
+            let (mut n_hit, mut n_blocked) = (0, 0);
+            for (i, ray) in rays.iter().enumerate() {
+                let want = s.intersect(ray).map_or(CompactHit::MISS, compact_hit);
+                assert_eq!(bits(hits[i]), bits(want), "{packets:?}, ray {i}: {ray:?}");
+                assert_eq!(
+                    blocked[i],
+                    u8::from(s.occluded(ray)),
+                    "{packets:?}, ray {i}"
+                );
+                n_hit += want.is_hit() as usize;
+                n_blocked += blocked[i] as usize;
+            }
+            assert!(
+                n_hit > 1500 && n_blocked >= n_hit,
+                "{n_hit} hits, {n_blocked} blocked"
+            );
+        }
+    }
+
+    #[test]
+    fn packets_follow_the_scene_size() {
+        assert!(Packets::Auto.resolve(38));
+        assert!(Packets::Auto.resolve(PACKET_MAX_TRIANGLES));
+        assert!(!Packets::Auto.resolve(PACKET_MAX_TRIANGLES + 1));
+        assert!(Packets::Always.resolve(10_000_000));
+        assert!(!Packets::Never.resolve(1));
+        assert_eq!(Packets::parse("auto"), Ok(Packets::Auto));
+        assert_eq!(Packets::parse("1"), Ok(Packets::Always));
+        assert_eq!(Packets::parse("never"), Ok(Packets::Never));
+        assert!(Packets::parse("sometimes")
+            .unwrap_err()
+            .contains("auto, always or never"));
+        let big = bumpy_sphere(40);
+        let s = EmbreeScene::build_soup(&big[..8], SceneOptions::default()).unwrap();
+        assert!(s.uses_packets(), "a small scene takes packets by default");
     }
 }

@@ -1,7 +1,9 @@
 //! Ray benchmark (not a test): incoherent closest-hit and any-hit throughput and build time
-//! of the Embree intersector, the host's BVH intersector (the 8-wide `flowlight_bvh::Bvh`)
-//! and the binary `flowlight_bvh::BinaryBvh` on closed meshes of ~10k, ~100k and ~1M
-//! triangles, with 1 and 2 threads. Prints a Markdown table (docs/performance.md holds the
+//! of the Embree intersector (one `rtcIntersect1` / `rtcOccluded1` per ray, and 16-lane
+//! packets), the host's BVH intersector (the 8-wide `flowlight_bvh::Bvh`) and the binary
+//! `flowlight_bvh::BinaryBvh` on closed meshes of ~10k, ~100k and ~1M triangles, with 1 and
+//! 2 threads. Every backend is called as the host calls it: batches of [`BATCH`] rays
+//! through [`Intersector::intersect_batch`] / [`Intersector::occluded_batch`]. Prints a Markdown table (docs/performance.md holds the
 //! last one): medians over `FLOWLIGHT_BENCH_REPEAT` rounds (default 5) with the range, and
 //! each backend's ratio to Embree. Within a round the backends run one after the other on
 //! the same rays, so a ratio compares runs made seconds apart (the machine may be shared).
@@ -14,7 +16,9 @@
 
 use flowlight_bvh::BinaryBvh;
 use flowlight_core::geometry::Ray;
+use flowlight_core::mesh::CompactHit;
 use flowlight_core::rng::Rng;
+use flowlight_embree::{Packets, SceneOptions};
 use flowlight_host::intersector::{BvhIntersector, EmbreeIntersector, Intersector};
 use flowlight_scene::Scene;
 use glam::Vec3;
@@ -75,27 +79,21 @@ fn rays(n: usize) -> Vec<Ray> {
         .collect()
 }
 
-/// Mrays/s of `f` over `rays` on `threads` threads. Each thread's loop runs inside
-/// `batch`, as the host runs a batch of rays (for Embree: its floating-point mode set once
-/// per loop, not per ray).
-fn throughput(
-    rays: &[Ray],
-    threads: usize,
-    f: &(dyn Fn(&Ray) -> bool + Sync),
-    batch: &(dyn Fn(&mut dyn FnMut()) + Sync),
-) -> f64 {
+/// Rays per call, as the MCPT plugin's wavefront hands them to the host.
+const BATCH: usize = 256;
+
+/// A batch query: answers `rays` into its output slice and returns how many hit (so that
+/// nothing is optimised away).
+type Query = Box<dyn Fn(&[Ray]) -> usize + Sync>;
+
+/// Mrays/s of `f` over `rays` on `threads` threads, in batches of [`BATCH`] rays.
+fn throughput(rays: &[Ray], threads: usize, f: &(dyn Fn(&[Ray]) -> usize + Sync)) -> f64 {
     let start = Instant::now();
     let chunk = rays.len().div_ceil(threads);
     let hits: usize = std::thread::scope(|s| {
         let hs: Vec<_> = rays
             .chunks(chunk)
-            .map(|c| {
-                s.spawn(move || {
-                    let mut n = 0;
-                    batch(&mut || n = c.iter().filter(|r| f(r)).count());
-                    n
-                })
-            })
+            .map(|c| s.spawn(move || c.chunks(BATCH).map(f).sum::<usize>()))
             .collect();
         hs.into_iter().map(|h| h.join().unwrap()).sum()
     });
@@ -103,43 +101,61 @@ fn throughput(
     rays.len() as f64 / start.elapsed().as_secs_f64() / 1e6
 }
 
-/// How a backend runs a loop of queries: [`Intersector::batch`], as the host's batches do.
-type Batch = Box<dyn Fn(&mut dyn FnMut()) + Sync>;
-
-/// A backend under test: its name, its two queries and its batch scope.
+/// A backend under test: its name and its two batch queries.
 struct Backend {
     name: &'static str,
-    batch: Batch,
-    closest: Box<dyn Fn(&Ray) -> bool + Sync>,
-    any: Box<dyn Fn(&Ray) -> bool + Sync>,
+    closest: Query,
+    any: Query,
+}
+
+/// The host's two batch calls of `i` as [`Query`]s.
+fn queries<I: Intersector + 'static>(i: I) -> (Query, Query) {
+    let i = std::sync::Arc::new(i);
+    let j = i.clone();
+    (
+        Box::new(move |rays| {
+            let mut hits = [CompactHit::MISS; BATCH];
+            let hits = &mut hits[..rays.len()];
+            i.intersect_batch(rays, hits);
+            hits.iter().filter(|h| h.is_hit()).count()
+        }),
+        Box::new(move |rays| {
+            let mut blocked = [0u8; BATCH];
+            let blocked = &mut blocked[..rays.len()];
+            j.occluded_batch(rays, blocked);
+            blocked.iter().map(|&b| b as usize).sum()
+        }),
+    )
 }
 
 /// Builds every backend once; the build times of this round.
 fn build_all(scene: &Scene, tris: &[[Vec3; 3]]) -> (Vec<Backend>, Vec<f64>) {
     let mut out = Vec::new();
     let mut times = Vec::new();
-    match EmbreeIntersector::build(scene) {
-        Ok((e, t)) => {
-            let e = std::sync::Arc::new(e);
-            let (e2, e3) = (e.clone(), e.clone());
-            out.push(Backend {
-                name: "embree",
-                batch: Box::new(move |f| e3.batch(f)),
-                closest: Box::new(move |r| e.intersect(r).is_some()),
-                any: Box::new(move |r| e2.occluded(r)),
-            });
-            times.push(t.as_secs_f64());
+    // Embree twice: single rays (the row every ratio divides by) and 16-lane packets.
+    for (name, packets) in [
+        ("embree", Packets::Never),
+        ("embree (16-lane packets)", Packets::Always),
+    ] {
+        let options = SceneOptions {
+            packets,
+            ..SceneOptions::default()
+        };
+        match EmbreeIntersector::build_with(scene, options) {
+            Ok((e, t)) => {
+                let (closest, any) = queries(e);
+                out.push(Backend { name, closest, any });
+                times.push(t.as_secs_f64());
+            }
+            Err(e) => eprintln!("Embree: {e}"),
         }
-        Err(e) => eprintln!("Embree: {e}"),
     }
     let (b, t) = BvhIntersector::build(scene);
-    let b = std::sync::Arc::new(b);
-    let (b2, b3) = (b.clone(), b.clone());
+    let (closest, any) = queries(b);
     out.push(Backend {
         name: "bvh (8-wide)",
-        batch: Box::new(move |f| b3.batch(f)),
-        closest: Box::new(move |r| b.intersect(r).is_some()),
-        any: Box::new(move |r| b2.occluded(r)),
+        closest,
+        any,
     });
     times.push(t.as_secs_f64());
     let start = Instant::now();
@@ -148,9 +164,8 @@ fn build_all(scene: &Scene, tris: &[[Vec3; 3]]) -> (Vec<Backend>, Vec<f64>) {
     let bin2 = bin.clone();
     out.push(Backend {
         name: "bvh-binary",
-        batch: Box::new(|f| f()),
-        closest: Box::new(move |r| bin.intersect(r).is_some()),
-        any: Box::new(move |r| bin2.occluded(r)),
+        closest: Box::new(move |rays| rays.iter().filter(|r| bin.intersect(r).is_some()).count()),
+        any: Box::new(move |rays| rays.iter().filter(|r| bin2.occluded(r)).count()),
     });
     (out, times)
 }
@@ -222,8 +237,8 @@ fn main() {
             for (k, b) in backends.iter().enumerate() {
                 builds[k].push(times[k]);
                 for (ti, threads) in [1, 2].into_iter().enumerate() {
-                    closest[k][ti].push(throughput(&rays, threads, &*b.closest, &*b.batch));
-                    any[k][ti].push(throughput(&rays, threads, &*b.any, &*b.batch));
+                    closest[k][ti].push(throughput(&rays, threads, &*b.closest));
+                    any[k][ti].push(throughput(&rays, threads, &*b.any));
                 }
             }
         }

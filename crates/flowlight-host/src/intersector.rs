@@ -19,11 +19,25 @@ pub trait Intersector: Send + Sync {
     fn intersect_filtered(&self, ray: &Ray, accept: HitFilter) -> Option<TriangleHit>;
     /// Whether a hit that `accept` keeps lies on the ray.
     fn occluded_filtered(&self, ray: &Ray, accept: HitFilter) -> bool;
-    /// Closest hits of a batch of coherent rays by packet traversal, where the backend has
-    /// one that pays; `false` (nothing written) when the caller should loop over
-    /// [`Intersector::intersect`]. The hits must be exactly the single-ray ones.
-    fn intersect_coherent(&self, _rays: &[Ray], _hits: &mut [CompactHit]) -> bool {
-        false
+    /// Closest hits of a batch of rays (no alpha test): `hits[i]` is exactly
+    /// [`Intersector::intersect`] of `rays[i]`. By default a loop over the rays inside
+    /// [`Intersector::batch`], compiled for each backend, so no ray pays an indirect call;
+    /// Embree answers small scenes with packets.
+    fn intersect_batch(&self, rays: &[Ray], hits: &mut [CompactHit]) {
+        self.batch(&mut || {
+            for (ray, out) in rays.iter().zip(hits.iter_mut()) {
+                *out = self.intersect(ray).map_or(CompactHit::MISS, compact);
+            }
+        });
+    }
+    /// Shadow rays of a batch (no alpha test): `blocked[i]` is 1 where
+    /// [`Intersector::occluded`] of `rays[i]` holds, else 0.
+    fn occluded_batch(&self, rays: &[Ray], blocked: &mut [u8]) {
+        self.batch(&mut || {
+            for (ray, out) in rays.iter().zip(blocked.iter_mut()) {
+                *out = u8::from(self.occluded(ray));
+            }
+        });
     }
     /// Runs `queries`, a loop over a batch's rays that calls this intersector and only moves
     /// the results, in whatever mode the backend's queries want. Embree sets flush-to-zero
@@ -31,6 +45,20 @@ pub trait Intersector: Send + Sync {
     /// around every single ray the two MXCSR writes cost about a tenth of the dragon's render.
     fn batch(&self, queries: &mut dyn FnMut()) {
         queries()
+    }
+}
+
+/// A triangle hit as a compact hit (the instance left to [`MeshView::locate`]).
+///
+/// [`MeshView::locate`]: flowlight_core::mesh::MeshView::locate
+#[inline(always)]
+fn compact(h: TriangleHit) -> CompactHit {
+    CompactHit {
+        t: h.t,
+        prim: h.prim,
+        b1: h.b1,
+        b2: h.b2,
+        instance: u32::MAX,
     }
 }
 
@@ -244,32 +272,30 @@ impl Intersector for EmbreeIntersector {
     fn name(&self) -> &'static str {
         "embree"
     }
-    /// `rtcIntersect8` packets for a flat scene when `FLOWLIGHT_EMBREE_PACKETS=1` (measured
-    /// not to pay on this machine's camera rays: docs/performance.md), else single rays.
-    fn intersect_coherent(&self, rays: &[Ray], hits: &mut [CompactHit]) -> bool {
-        let EmbreeIntersector::Flat(s) = self else {
-            return false;
-        };
-        if !packets_enabled() {
-            return false;
-        }
-        let mut out = [None; 8];
-        for (rays, hits) in rays.chunks(8).zip(hits.chunks_mut(8)) {
-            s.intersect_packets(rays, &mut out[..rays.len()]);
-            for (h, o) in hits.iter_mut().zip(&out) {
-                *h = o.map_or(CompactHit::MISS, |o| CompactHit {
-                    t: o.t,
-                    prim: o.prim,
-                    b1: o.b1,
-                    b2: o.b2,
-                    instance: u32::MAX,
-                });
-            }
-        }
-        true
-    }
     fn batch(&self, queries: &mut dyn FnMut()) {
         flowlight_embree::with_query_mode(queries)
+    }
+    /// A flat scene's own batch call: packets for small scenes, else single rays, with the
+    /// FP mode set once ([`flowlight_embree::EmbreeScene::intersect_batch`]).
+    fn intersect_batch(&self, rays: &[Ray], hits: &mut [CompactHit]) {
+        match self {
+            EmbreeIntersector::Flat(s) => s.intersect_batch(rays, hits),
+            EmbreeIntersector::Instanced { .. } => self.batch(&mut || {
+                for (ray, out) in rays.iter().zip(hits.iter_mut()) {
+                    *out = self.intersect(ray).map_or(CompactHit::MISS, compact);
+                }
+            }),
+        }
+    }
+    fn occluded_batch(&self, rays: &[Ray], blocked: &mut [u8]) {
+        match self {
+            EmbreeIntersector::Flat(s) => s.occluded_batch(rays, blocked),
+            EmbreeIntersector::Instanced { .. } => self.batch(&mut || {
+                for (ray, out) in rays.iter().zip(blocked.iter_mut()) {
+                    *out = u8::from(self.occluded(ray));
+                }
+            }),
+        }
     }
     #[inline]
     fn intersect(&self, ray: &Ray) -> Option<TriangleHit> {
@@ -314,12 +340,6 @@ impl Intersector for EmbreeIntersector {
             }),
         }
     }
-}
-
-/// Whether coherent batches go to Embree's packet traversal (`FLOWLIGHT_EMBREE_PACKETS=1`).
-fn packets_enabled() -> bool {
-    static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *ON.get_or_init(|| std::env::var("FLOWLIGHT_EMBREE_PACKETS").is_ok_and(|v| v == "1"))
 }
 
 /// Builds the intersector the config asks for, and reports its build time. `auto` takes
@@ -429,26 +449,20 @@ impl<'a> UnitTracer<'a> {
     }
 
     /// Closest hits of a batch of rays as compact hits (ABI 4): `hits[i]` is `rays[i]`'s hit
-    /// exactly as [`UnitTracer::closest`] finds it. `coherent` batches may go to the
-    /// intersector's packet traversal ([`Intersector::intersect_coherent`]).
-    pub fn intersect_batch(&mut self, rays: &[Ray], coherent: bool, hits: &mut [CompactHit]) {
+    /// exactly as [`UnitTracer::closest`] finds it, from the intersector's own batch call
+    /// ([`Intersector::intersect_batch`]: for Embree, packets in small scenes) unless the
+    /// scene needs alpha tests. The plugin's `coherent` hint is not used: Embree's packets
+    /// pay by the scene's size, not by the rays' coherence (docs/performance.md, "Tenth
+    /// session").
+    pub fn intersect_batch(&mut self, rays: &[Ray], _coherent: bool, hits: &mut [CompactHit]) {
         self.counts.closest += rays.len() as u64;
-        if coherent && !self.alpha && self.intersector.intersect_coherent(rays, hits) {
-            return;
+        if !self.alpha {
+            return self.intersector.intersect_batch(rays, hits);
         }
         let this = &*self;
         this.intersector.batch(&mut || {
             for (ray, out) in rays.iter().zip(hits.iter_mut()) {
-                *out = match this.closest(ray) {
-                    Some(h) => CompactHit {
-                        t: h.t,
-                        prim: h.prim,
-                        b1: h.b1,
-                        b2: h.b2,
-                        instance: u32::MAX,
-                    },
-                    None => CompactHit::MISS,
-                };
+                *out = this.closest(ray).map_or(CompactHit::MISS, compact);
             }
         });
     }
@@ -456,6 +470,9 @@ impl<'a> UnitTracer<'a> {
     /// Shadow rays of a batch: `blocked[i]` = [`UnitTracer::blocked`] of `rays[i]`.
     pub fn occluded_batch(&mut self, rays: &[Ray], blocked: &mut [u8]) {
         self.counts.shadow += rays.len() as u64;
+        if !self.alpha {
+            return self.intersector.occluded_batch(rays, blocked);
+        }
         let this = &*self;
         this.intersector.batch(&mut || {
             for (ray, out) in rays.iter().zip(blocked.iter_mut()) {
