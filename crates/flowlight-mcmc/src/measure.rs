@@ -44,6 +44,7 @@ use flowlight_core::path::{NodeType, Path, PathVertex};
 use flowlight_core::Rgb;
 use flowlight_sdk::Scene;
 use glam::{Vec2, Vec3};
+use std::borrow::Cow;
 
 /// Node type as mutations must preserve it (the weak type, thesis §3.3).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -105,13 +106,14 @@ pub fn dirac_component(
 
 /// The BSDF at a stored vertex, with the material's textures and vertex colour applied at
 /// the vertex's texture coordinates (the same BSDF [`Scene::bsdf`] gives at the hit).
-pub fn vertex_bsdf(scene: &Scene, v: &PathVertex) -> Option<Bsdf> {
+/// Borrowed from the scene's table where the material's BSDF is constant (no copy).
+pub fn vertex_bsdf<'a>(scene: &Scene<'a>, v: &PathVertex) -> Option<Cow<'a, Bsdf>> {
     if let Some(b) = scene.constant_bsdf(v.material, v.color) {
-        return Some(b);
+        return Some(Cow::Borrowed(b));
     }
     let m = scene.materials.get(v.material as usize)?;
     let r = m.resolve(v.uvs(), v.color, scene.textures);
-    Some(Bsdf::from_material(&r.material, r.base))
+    Some(Cow::Owned(Bsdf::from_material(&r.material, r.base)))
 }
 
 /// Directions at an interior vertex: local frame, wo (to the previous vertex), wi (to the next).
