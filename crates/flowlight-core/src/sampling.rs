@@ -4,18 +4,39 @@ use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI};
 
 /// Concentric square-to-disk map (Shirley & Chiu 1997).
+///
+/// The angle is θ = φ in one wedge pair and θ = π/2 − φ in the other, with φ = (π/4)·(b/a)
+/// and |b/a| ≤ 1; so (cos θ, sin θ) is (cos φ, sin φ) or (sin φ, cos φ), and only φ ∈
+/// [−π/4, π/4] needs a sine and a cosine: [`sin_cos_quarter`], a short polynomial instead of
+/// libm's `sincosf` with its range reduction (the diffuse lobes' sampling called it at every
+/// vertex: 4.7% of a Cornell box render with the call's glue, perf).
 #[inline]
 pub fn concentric_disk(u: Vec2) -> Vec2 {
     let o = 2.0 * u - Vec2::ONE;
     if o.x == 0.0 && o.y == 0.0 {
         return Vec2::ZERO;
     }
-    let (r, theta) = if o.x.abs() > o.y.abs() {
-        (o.x, (PI / 4.0) * (o.y / o.x))
+    if o.x.abs() > o.y.abs() {
+        let (s, c) = sin_cos_quarter((PI / 4.0) * (o.y / o.x));
+        o.x * Vec2::new(c, s)
     } else {
-        (o.y, PI / 2.0 - (PI / 4.0) * (o.x / o.y))
-    };
-    r * Vec2::new(theta.cos(), theta.sin())
+        let (s, c) = sin_cos_quarter((PI / 4.0) * (o.x / o.y));
+        o.y * Vec2::new(s, c)
+    }
+}
+
+/// (sin x, cos x) for |x| ≤ π/4, by their Taylor polynomials to x⁹ and x⁸, evaluated in
+/// Horner form. The truncation error is below |x|¹¹/11! ≤ 2·10⁻⁹ and |x|¹⁰/10! ≤ 3·10⁻⁸,
+/// under half an ulp of the results; the tests bound the total against f64 at 1.2·10⁻⁷.
+#[inline]
+pub fn sin_cos_quarter(x: f32) -> (f32, f32) {
+    let x2 = x * x;
+    let s = x
+        * (1.0
+            + x2 * (-1.0 / 6.0
+                + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362_880.0)))));
+    let c = 1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40_320.0))));
+    (s, c)
 }
 
 /// Cosine-weighted direction on the +z hemisphere; density `cos θ / π`.
@@ -140,6 +161,53 @@ pub fn build_cdf(weights: &[f32]) -> Option<Vec<f32>> {
 mod tests {
     use super::*;
     use crate::rng::Rng;
+
+    #[test]
+    fn quarter_sin_cos_is_within_float_rounding_of_f64() {
+        let n = 200_001;
+        let mut worst = (0.0f64, 0.0f64);
+        for i in 0..n {
+            let x = (PI / 4.0) * (2.0 * i as f32 / (n - 1) as f32 - 1.0);
+            let (s, c) = sin_cos_quarter(x);
+            let (ws, wc) = (x as f64).sin_cos();
+            worst.0 = worst.0.max((s as f64 - ws).abs());
+            worst.1 = worst.1.max((c as f64 - wc).abs());
+        }
+        assert!(worst.0 < 1.2e-7 && worst.1 < 1.2e-7, "{worst:?}");
+        assert_eq!(sin_cos_quarter(0.0), (0.0, 1.0));
+        assert_eq!(sin_cos_quarter(-0.0).0.to_bits(), (-0.0f32).to_bits());
+    }
+
+    /// The map against the textbook form with libm's sine and cosine: the same point to
+    /// float rounding, inside the unit disk, every wedge and both edges included.
+    #[test]
+    fn concentric_disk_is_the_textbook_map() {
+        let textbook = |u: Vec2| {
+            let o = 2.0 * u - Vec2::ONE;
+            if o.x == 0.0 && o.y == 0.0 {
+                return Vec2::ZERO;
+            }
+            let (r, t) = if o.x.abs() > o.y.abs() {
+                (o.x, (PI / 4.0) * (o.y / o.x))
+            } else {
+                (o.y, PI / 2.0 - (PI / 4.0) * (o.x / o.y))
+            };
+            r * Vec2::new(t.cos(), t.sin())
+        };
+        let mut r = Rng::new(5, 0);
+        let edges = [0.0, 0.5, 1.0 - f32::EPSILON / 2.0, 0.25, 0.75];
+        let grid = edges
+            .iter()
+            .flat_map(|&a| edges.iter().map(move |&b| Vec2::new(a, b)));
+        for u in grid.chain((0..100_000).map(|_| r.uniform2())) {
+            let (got, want) = (concentric_disk(u), textbook(u));
+            assert!(
+                (got - want).abs().max_element() < 3e-7,
+                "{u:?}: {got:?} vs {want:?}"
+            );
+            assert!(got.length() <= 1.0 + 3e-7, "{u:?}: {got:?}");
+        }
+    }
 
     #[test]
     fn cosine_hemisphere_is_normalised_and_upper() {
