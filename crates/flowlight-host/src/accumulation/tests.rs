@@ -280,3 +280,41 @@ fn locks_found_held_are_counted() {
     let c = shared.counts();
     assert_eq!((c.locks, c.contended), (3, 1));
 }
+
+/// A deposit's pixel is ⌊x⌋, ⌊y⌋ on the film; anything else (negative, NaN, at or past the
+/// edge, infinite) is stray. Checked against `floor` on the edge cases.
+#[test]
+fn classify_takes_the_floor_and_drops_what_is_off_the_film() {
+    let xs = [
+        -1.0,
+        -f32::MIN_POSITIVE,
+        -0.0,
+        0.0,
+        0.5,
+        1.0 - f32::EPSILON / 2.0,
+        36.0,
+        37.0 - 4.0 * f32::EPSILON,
+        37.0,
+        37.5,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NAN,
+    ];
+    for &x in &xs {
+        for &y in &xs {
+            let d = Deposit {
+                x,
+                y,
+                layer: 0,
+                value: flowlight_core::Rgb::ONE,
+            };
+            let mut counts = DepositCounts::default();
+            let got = classify(&d, W, W, &mut counts);
+            let (fx, fy) = (x.floor(), y.floor());
+            let on = fx >= 0.0 && fy >= 0.0 && fx < W as f32 && fy < W as f32;
+            let want = on.then(|| (fx as u32, fy as u32));
+            assert_eq!(got, want, "({x}, {y})");
+            assert_eq!(counts.stray, u64::from(!on), "({x}, {y})");
+        }
+    }
+}
