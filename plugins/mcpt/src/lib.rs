@@ -50,6 +50,8 @@ pub struct Mcpt {
     /// Paths per wavefront; 0 = path at a time.
     wavefront: usize,
     sampler: SamplerKind,
+    /// Lighting layers are written: each contribution keeps its layer.
+    layers: bool,
 }
 
 const PARAMS: [ParamSpec; 10] = {
@@ -122,6 +124,7 @@ impl Integrator for Mcpt {
                 settings,
                 wavefront: wavefront as usize,
                 sampler,
+                layers,
             },
             info,
         ))
@@ -182,7 +185,7 @@ impl Mcpt {
                             contributions.add(sample.layer, sample.value);
                         }
                     }
-                    deposit(film, x, y, &contributions);
+                    deposit(film, x, y, &contributions, self.layers);
                 }
             }
         }
@@ -207,7 +210,7 @@ impl Mcpt {
             let out = &mut out[..starts.len()];
             entangled::trace_wavefront(&self.scene, tracer, &self.settings, starts, &mut wf, out);
             for (&(x, y), c) in pixels.iter().zip(out.iter()) {
-                deposit(film, x, y, c);
+                deposit(film, x, y, c, self.layers);
             }
             starts.clear();
             pixels.clear();
@@ -231,18 +234,23 @@ impl Mcpt {
 }
 
 /// Deposits one sample's contributions in pixel (`x`, `y`), or one invalid deposit when any
-/// is not finite and non-negative.
+/// is not finite and non-negative. Without lighting layers the host only needs their sum,
+/// so the sample makes one deposit (summed in the order found) instead of one per
+/// contribution: a path of depth 32 found 5–10, and the host's classification and
+/// fixed-point sums per deposit were 4% of a Cornell box render.
 #[inline]
-fn deposit(film: &mut Film, x: u32, y: u32, contributions: &SampleContributions) {
+fn deposit(film: &mut Film, x: u32, y: u32, contributions: &SampleContributions, layers: bool) {
     // Box filter: the sample belongs to the pixel it was drawn in (depositing at the
     // jittered position could round into the next pixel).
     let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
-    if contributions.is_valid() {
+    if !contributions.is_valid() {
+        film.deposit(cx, cy, 0, Rgb::splat(f32::NAN));
+    } else if layers {
         for &(layer, value) in &contributions.entries {
             film.deposit(cx, cy, layer, value);
         }
     } else {
-        film.deposit(cx, cy, 0, Rgb::splat(f32::NAN));
+        film.deposit(cx, cy, 0, contributions.total());
     }
 }
 
