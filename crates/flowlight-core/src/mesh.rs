@@ -26,7 +26,7 @@
 //! Virtual triangle ids: instance `i` shows triangles `first_virtual .. first_virtual +
 //! triangle_count` of its stored range (`flowlight_scene`'s module docs, "Instancing").
 
-use crate::geometry::{barycentric_error, gamma, Ray, SurfaceHit};
+use crate::geometry::{barycentric_error, gamma, Ray, SurfaceHit, TriangleHit};
 use crate::material::{Material, Texture};
 use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
 
@@ -44,6 +44,21 @@ pub struct CompactHit {
     /// Index into the scene's instances of the placement hit, or `u32::MAX` when unknown (a
     /// scene without instancing); only a shortcut for [`MeshView::locate`].
     pub instance: u32,
+}
+
+/// A single-ray query's hit as a compact hit, its instance left unknown (`u32::MAX`: the
+/// surface code locates it, [`MeshView::locate`]).
+impl From<TriangleHit> for CompactHit {
+    #[inline(always)]
+    fn from(h: TriangleHit) -> CompactHit {
+        CompactHit {
+            t: h.t,
+            prim: h.prim,
+            b1: h.b1,
+            b2: h.b2,
+            instance: u32::MAX,
+        }
+    }
 }
 
 impl CompactHit {

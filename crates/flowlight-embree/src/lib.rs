@@ -498,18 +498,6 @@ fn triangle_hit(rh: abi::RTCRayHit) -> TriangleHit {
     }
 }
 
-/// A flat scene's hit as a compact hit (instance unknown).
-#[inline(always)]
-fn compact_hit(h: TriangleHit) -> CompactHit {
-    CompactHit {
-        t: h.t,
-        prim: h.prim,
-        b1: h.b1,
-        b2: h.b2,
-        instance: u32::MAX,
-    }
-}
-
 /// The hit of an instanced scene's ray/hit record (one instancing level).
 #[inline]
 fn instance_hit(rh: abi::RTCRayHit) -> InstanceHit {
@@ -733,7 +721,7 @@ impl EmbreeScene {
                     *hit = self
                         .dev
                         .closest_hit_in_mode(self.scene, ray, None)
-                        .map_or(CompactHit::MISS, |rh| compact_hit(triangle_hit(rh)));
+                        .map_or(CompactHit::MISS, |rh| CompactHit::from(triangle_hit(rh)));
                 }
             }
         })
@@ -1282,7 +1270,7 @@ mod tests {
             s.occluded_batch(&rays, &mut blocked);
             let (mut n_hit, mut n_blocked) = (0, 0);
             for (i, ray) in rays.iter().enumerate() {
-                let want = s.intersect(ray).map_or(CompactHit::MISS, compact_hit);
+                let want = s.intersect(ray).map_or(CompactHit::MISS, CompactHit::from);
                 assert_eq!(bits(hits[i]), bits(want), "{packets:?}, ray {i}: {ray:?}");
                 assert_eq!(
                     blocked[i],

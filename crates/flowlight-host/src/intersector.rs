@@ -26,7 +26,9 @@ pub trait Intersector: Send + Sync {
     fn intersect_batch(&self, rays: &[Ray], hits: &mut [CompactHit]) {
         self.batch(&mut || {
             for (ray, out) in rays.iter().zip(hits.iter_mut()) {
-                *out = self.intersect(ray).map_or(CompactHit::MISS, compact);
+                *out = self
+                    .intersect(ray)
+                    .map_or(CompactHit::MISS, CompactHit::from);
             }
         });
     }
@@ -45,20 +47,6 @@ pub trait Intersector: Send + Sync {
     /// around every single ray the two MXCSR writes cost about a tenth of the dragon's render.
     fn batch(&self, queries: &mut dyn FnMut()) {
         queries()
-    }
-}
-
-/// A triangle hit as a compact hit (the instance left to [`MeshView::locate`]).
-///
-/// [`MeshView::locate`]: flowlight_core::mesh::MeshView::locate
-#[inline(always)]
-fn compact(h: TriangleHit) -> CompactHit {
-    CompactHit {
-        t: h.t,
-        prim: h.prim,
-        b1: h.b1,
-        b2: h.b2,
-        instance: u32::MAX,
     }
 }
 
@@ -282,7 +270,9 @@ impl Intersector for EmbreeIntersector {
             EmbreeIntersector::Flat(s) => s.intersect_batch(rays, hits),
             EmbreeIntersector::Instanced { .. } => self.batch(&mut || {
                 for (ray, out) in rays.iter().zip(hits.iter_mut()) {
-                    *out = self.intersect(ray).map_or(CompactHit::MISS, compact);
+                    *out = self
+                        .intersect(ray)
+                        .map_or(CompactHit::MISS, CompactHit::from);
                 }
             }),
         }
@@ -462,7 +452,7 @@ impl<'a> UnitTracer<'a> {
         let this = &*self;
         this.intersector.batch(&mut || {
             for (ray, out) in rays.iter().zip(hits.iter_mut()) {
-                *out = this.closest(ray).map_or(CompactHit::MISS, compact);
+                *out = this.closest(ray).map_or(CompactHit::MISS, CompactHit::from);
             }
         });
     }

@@ -312,7 +312,7 @@ fn classify_takes_the_floor_and_drops_what_is_off_the_film() {
             let got = classify(&d, W, W, &mut counts);
             let (fx, fy) = (x.floor(), y.floor());
             let on = fx >= 0.0 && fy >= 0.0 && fx < W as f32 && fy < W as f32;
-            let want = on.then(|| (fx as u32, fy as u32));
+            let want = on.then_some((fx as u32, fy as u32));
             assert_eq!(got, want, "({x}, {y})");
             assert_eq!(counts.stray, u64::from(!on), "({x}, {y})");
         }
