@@ -712,7 +712,7 @@ impl EmbreeScene {
         assert_eq!(rays.len(), hits.len(), "one hit per ray");
         with_query_mode(|| {
             if self.packets {
-                let mut p = Box::new(Self::empty_packet());
+                let mut p = Self::empty_packet();
                 for (rays, hits) in rays.chunks(16).zip(hits.chunks_mut(16)) {
                     self.intersect16(&mut p, rays, hits);
                 }
@@ -733,7 +733,7 @@ impl EmbreeScene {
         assert_eq!(rays.len(), blocked.len(), "one answer per ray");
         with_query_mode(|| {
             if self.packets {
-                let mut p = Box::new(Self::empty_packet().ray);
+                let mut p = Self::empty_packet().ray;
                 for (rays, blocked) in rays.chunks(16).zip(blocked.chunks_mut(16)) {
                     self.occluded16(&mut p, rays, blocked);
                 }
