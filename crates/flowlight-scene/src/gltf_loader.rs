@@ -12,8 +12,11 @@
 //!   `MemAvailable`).
 //! - Only triangle primitives are loaded: TRIANGLES as they are, TRIANGLE_STRIP and
 //!   TRIANGLE_FAN converted to lists; points and lines are skipped with a warning and counted.
-//! - Primitives without NORMAL get flat per-face normals by duplicating their vertices (the glTF
-//!   spec asks for flat normals then).
+//! - Primitives without NORMAL are flat shaded (the glTF spec asks for flat normals then):
+//!   their vertices stay shared, with zero normals, so the surface code takes each
+//!   triangle's geometric normal as its shading normal. Only a flat primitive whose
+//!   material has a normal map (per-corner tangents) gets its vertices duplicated per
+//!   triangle, with the face normal at each corner.
 //! - Only the materials and images that loaded primitives use are converted and decoded; an
 //!   image used by several textures is decoded once and shared.
 //! - Vertex attributes: TEXCOORD_0 and TEXCOORD_1, COLOR_0 (VEC3 or VEC4, float or
@@ -790,50 +793,53 @@ impl Loader<'_> {
         };
         let color_at = |v: usize| colors.as_ref().map_or([1.0; 4], |c| c[v]);
 
-        let base = self.scene.positions.len();
         let flat = world_normals.is_none();
+        // A flat primitive keeps its vertices shared with zero normals: the interpolated
+        // normal vanishes and `MeshView::surface_hit` takes the geometric normal, the face
+        // normal the spec asks for. For a scan of shared vertices that is a sixth of the
+        // vertex memory of duplicating them (the Stanford dragon: 437k vertices instead of
+        // 2.6M, no normals to read at a hit). Normal mapping needs a tangent frame per corner
+        // of a triangle, so a flat, normal-mapped primitive is unwelded, as before.
+        let unweld = flat && corner_tangents.is_some();
         if flat {
             self.scene.stats.flat_shaded_primitives += 1;
-        } else {
-            let sc = &mut self.scene;
-            sc.positions.extend_from_slice(&wp);
-            sc.normals.extend(world_normals.iter().flatten());
-            sc.uvs.extend((0..n).map(|v| uv_at(&uvs, v)));
-            sc.uvs1.extend((0..n).map(|v| uv_at(&uvs1, v)));
-            sc.colors.extend((0..n).map(color_at));
-            let mut tv = vec![[0.0f32; 4]; n];
-            if let Some(ct) = &corner_tangents {
-                for (k, t) in tris.iter().enumerate() {
-                    for j in 0..3 {
-                        tv[t[j] as usize] = ct[3 * k + j];
-                    }
-                }
-            }
-            sc.tangents.extend(tv);
         }
-        for (k, &t) in tris.iter().enumerate() {
-            let stats = &mut self.scene.stats;
-            let [a, b, c] = t.map(|i| i as usize);
-            let dropped = if a == b || b == c || a == c {
-                stats.dropped_repeated_index += 1;
-                true
-            } else if !(wp[a].is_finite() && wp[b].is_finite() && wp[c].is_finite()) {
-                stats.dropped_non_finite += 1;
-                true
-            } else if triangle_normal(wp[a], wp[b], wp[c]).is_none()
-                || (triangle_area(wp[a], wp[b], wp[c]) as f32) <= 0.0
-            {
-                stats.dropped_zero_area += 1;
-                true
-            } else {
-                false
-            };
-            if dropped {
-                stats.degenerate_dropped += 1;
-                stats.dropped_emitters += emissive as usize;
-                continue;
-            }
-            if flat {
+        // Which triangles are kept; the dropped ones are counted.
+        let kept: Vec<bool> = tris
+            .iter()
+            .map(|&t| {
+                let stats = &mut self.scene.stats;
+                let [a, b, c] = t.map(|i| i as usize);
+                let dropped = if a == b || b == c || a == c {
+                    stats.dropped_repeated_index += 1;
+                    true
+                } else if !(wp[a].is_finite() && wp[b].is_finite() && wp[c].is_finite()) {
+                    stats.dropped_non_finite += 1;
+                    true
+                } else if triangle_normal(wp[a], wp[b], wp[c]).is_none()
+                    || (triangle_area(wp[a], wp[b], wp[c]) as f32) <= 0.0
+                {
+                    stats.dropped_zero_area += 1;
+                    true
+                } else {
+                    false
+                };
+                if dropped {
+                    stats.degenerate_dropped += 1;
+                    stats.dropped_emitters += emissive as usize;
+                }
+                !dropped
+            })
+            .collect();
+        let kept_triangles = || {
+            tris.iter()
+                .enumerate()
+                .filter(|&(k, _)| kept[k])
+                .map(|(k, &t)| (k, t))
+        };
+        if unweld {
+            for (k, t) in kept_triangles() {
+                let [a, b, c] = t.map(|i| i as usize);
                 let face_n = triangle_normal(wp[a], wp[b], wp[c]).unwrap_or(Vec3::Z);
                 let sc = &mut self.scene;
                 let first = sc.positions.len() as u32;
@@ -850,10 +856,41 @@ impl Loader<'_> {
                     );
                 }
                 sc.triangles.push([first, first + 1, first + 2]);
-            } else {
-                self.scene.triangles.push(t.map(|i| i + base as u32));
+                sc.triangle_material.push(mat_index);
             }
-            self.scene.triangle_material.push(mat_index);
+            return Ok(());
+        }
+        // Shared vertices: those of kept triangles, in the file's order (a vertex that only
+        // dropped triangles use may be non-finite, and takes no memory).
+        let mut tv = vec![[0.0f32; 4]; n];
+        if let Some(ct) = &corner_tangents {
+            for (k, t) in tris.iter().enumerate() {
+                for j in 0..3 {
+                    tv[t[j] as usize] = ct[3 * k + j];
+                }
+            }
+        }
+        let mut used = vec![false; n];
+        for (_, t) in kept_triangles() {
+            for i in t {
+                used[i as usize] = true;
+            }
+        }
+        let sc = &mut self.scene;
+        let mut remap = vec![u32::MAX; n];
+        for v in (0..n).filter(|&v| used[v]) {
+            remap[v] = sc.positions.len() as u32;
+            sc.positions.push(wp[v]);
+            sc.normals
+                .push(world_normals.as_ref().map_or(Vec3::ZERO, |ns| ns[v]));
+            sc.uvs.push(uv_at(&uvs, v));
+            sc.uvs1.push(uv_at(&uvs1, v));
+            sc.colors.push(color_at(v));
+            sc.tangents.push(tv[v]);
+        }
+        for (_, t) in kept_triangles() {
+            sc.triangles.push(t.map(|i| remap[i as usize]));
+            sc.triangle_material.push(mat_index);
         }
         Ok(())
     }

@@ -128,8 +128,10 @@ pub struct LoadStats {
 /// A scene ready to render: meshes placed once in world space, meshes placed several times
 /// once in local space with their [`MeshInstance`]s (module docs).
 ///
-/// Normals: when a primitive has no NORMAL attribute, it gets flat per-face normals (as the
-/// glTF spec requires), by duplicating its vertices per triangle.
+/// Normals: when a primitive has no NORMAL attribute it is flat shaded (as the glTF spec
+/// requires): its vertices stay shared with zero normals, and the surface code takes each
+/// triangle's geometric normal instead (a normal-mapped one has its vertices duplicated per
+/// triangle, carrying the face normal).
 #[derive(Clone, Debug, Default)]
 pub struct Scene {
     pub positions: Vec<Vec3>,

@@ -4,6 +4,7 @@
 mod common;
 
 use common::*;
+use flowlight_core::geometry::Ray;
 use flowlight_scene::source::GltfSource;
 use flowlight_scene::{load_gltf, Scene, SceneError};
 use glam::{Vec2, Vec3};
@@ -704,4 +705,46 @@ fn gpu_instancing_with_mismatched_counts_is_an_error_naming_the_node() {
         e.contains("node 0") && e.contains("EXT_mesh_gpu_instancing") && e.contains("counts"),
         "{e}"
     );
+}
+
+// Primitives without NORMAL
+
+/// A primitive without NORMAL is flat shaded with its vertices still shared: the loader
+/// stores the grid's 25 vertices once (not 3 per triangle) with zero normals, and a hit's
+/// shading normal is its triangle's geometric normal, the face normal the spec asks for.
+/// Vertices that no kept triangle uses are not stored.
+#[test]
+fn flat_primitives_keep_shared_vertices_and_shade_with_the_face_normal() {
+    let (mut pos, _, mut idx) = grid();
+    // A NaN vertex that only a dropped triangle uses is not stored.
+    pos.push([f32::NAN, 0.0, 0.0]);
+    idx.extend_from_slice(&[0, 1, 25]);
+    let json = embedded_gltf(&pos, &idx, "", "");
+    let s = load(&write("flat-shared", &json)).unwrap();
+    assert_eq!(s.stats.flat_shaded_primitives, 1);
+    assert_eq!(s.stats.dropped_non_finite, 1);
+    assert_eq!(s.triangles.len(), 32);
+    assert_eq!(
+        s.positions.len(),
+        25,
+        "vertices are not duplicated per triangle"
+    );
+    assert!(s.positions.iter().all(|p| p.is_finite()));
+    assert_eq!(s.normals.len(), 25);
+    assert!(s.normals.iter().all(|&n| n == Vec3::ZERO));
+    for prim in 0..32u32 {
+        let [p0, p1, p2] = s.world_triangle(prim);
+        let face = (p1 - p0).cross(p2 - p0).normalize();
+        for &(b1, b2) in &[(0.2f32, 0.3f32), (0.6, 0.1), (0.05, 0.9)] {
+            let target = p0 * (1.0 - b1 - b2) + p1 * b1 + p2 * b2;
+            let ray = Ray::new(target + face, -face, f32::INFINITY);
+            let h = s.surface_hit(&ray, 1.0, prim, b1, b2);
+            assert_eq!(
+                h.ns, h.ng,
+                "{prim}: the shading normal is the geometric one"
+            );
+            assert!((h.ng - face).length() < 1e-6, "{prim}: {} vs {face}", h.ng);
+            assert!((h.p - target).length() < 1e-6);
+        }
+    }
 }
