@@ -453,6 +453,15 @@ impl Packets {
         }
     }
 
+    /// `FLOWLIGHT_EMBREE_PACKETS` (`auto` | `always` | `never`), [`Packets::Auto`] when unset:
+    /// renders and the benchmarks read it.
+    pub fn from_env() -> Result<Packets, String> {
+        match std::env::var("FLOWLIGHT_EMBREE_PACKETS") {
+            Ok(p) => Packets::parse(&p).map_err(|e| format!("FLOWLIGHT_EMBREE_PACKETS: {e}")),
+            Err(_) => Ok(Packets::Auto),
+        }
+    }
+
     pub fn parse(s: &str) -> Result<Packets, String> {
         match s {
             "auto" => Ok(Packets::Auto),
@@ -480,9 +489,7 @@ impl SceneOptions {
                 _ => return Err(format!("FLOWLIGHT_EMBREE_ROBUST={r:?}: expected 0 or 1")),
             };
         }
-        if let Ok(p) = std::env::var("FLOWLIGHT_EMBREE_PACKETS") {
-            o.packets = Packets::parse(&p).map_err(|e| format!("FLOWLIGHT_EMBREE_PACKETS: {e}"))?;
-        }
+        o.packets = Packets::from_env()?;
         Ok(o)
     }
 }

@@ -146,6 +146,7 @@ impl Session {
             robust: config.robust,
             quality: flowlight_embree::BuildQuality::parse(&config.build_quality)
                 .map_err(|e| format!("{}: render.build_quality: {e}", config.path.display()))?,
+            packets: flowlight_embree::Packets::from_env()?,
             ..Default::default()
         };
         let (intersector, build_time) = build_intersector_with(config.intersector, &scene, options)
