@@ -683,3 +683,33 @@ fn item8_scenes_beyond_f32_range_warn_with_the_scale() {
         }
     }
 }
+
+// The packet policy's environment variable: a value it does not know is one error line
+// naming the variable, before anything renders or is written.
+#[test]
+fn unknown_embree_packet_policy_is_refused_by_name() {
+    let c = case("packets", "", "plugin = \"mcpt\"", "exr = \"a.exr\"");
+    let o = flowlight()
+        .arg("render")
+        .arg(&c.config)
+        .arg("-q")
+        .env("FLOWLIGHT_EMBREE_PACKETS", "sometimes")
+        .output()
+        .unwrap();
+    let line = one_error_line(&o);
+    assert!(
+        line.contains("FLOWLIGHT_EMBREE_PACKETS") && line.contains("auto, always or never"),
+        "{line}"
+    );
+    assert!(!c.dir.join("a.exr").exists(), "nothing is written");
+    for ok in ["auto", "always", "never"] {
+        let o = flowlight()
+            .arg("render")
+            .arg(&c.config)
+            .arg("-q")
+            .env("FLOWLIGHT_EMBREE_PACKETS", ok)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{ok}: {}", stderr(&o));
+    }
+}
