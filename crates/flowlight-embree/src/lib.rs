@@ -353,6 +353,72 @@ impl Device {
         r.tfar == f32::NEG_INFINITY
     }
 
+    /// The closest hits of `rays` in `scene`, handed to `emit(i, hit)` in order, in one FP
+    /// mode switch: 16 at a time through `rtcIntersect16` when `packets`, else one by one
+    /// through `rtcIntersect1`. Both give the same hits bit for bit (the tests). A flat
+    /// scene's hits carry Embree's invalid instance id.
+    fn closest_batch(
+        &self,
+        scene: RTCScene,
+        packets: bool,
+        rays: &[Ray],
+        mut emit: impl FnMut(usize, Option<InstanceHit>),
+    ) {
+        with_query_mode(|| {
+            if !packets {
+                for (i, ray) in rays.iter().enumerate() {
+                    emit(
+                        i,
+                        self.closest_hit_in_mode(scene, ray, None).map(instance_hit),
+                    );
+                }
+                return;
+            }
+            let mut p = empty_packet();
+            for (c, chunk) in rays.chunks(16).enumerate() {
+                let valid = load16(&mut p.ray, chunk);
+                p.hit.geom_id = [u32::MAX; 16];
+                // SAFETY: a committed scene; the 4.4 `RTCRayHit16` layout (checked in `abi`),
+                // 64-byte aligned, as is the valid mask; NULL arguments (the defaults, as for
+                // the single-ray call).
+                unsafe { (self.api.intersect16)(&valid, scene, &mut p, std::ptr::null_mut()) };
+                for k in 0..chunk.len() {
+                    let hit = (p.hit.geom_id[k] != u32::MAX).then_some(InstanceHit {
+                        t: p.ray.tfar[k],
+                        instance: p.hit.inst_id[0][k],
+                        prim: p.hit.prim_id[k],
+                        b1: p.hit.u[k],
+                        b2: p.hit.v[k],
+                    });
+                    emit(16 * c + k, hit);
+                }
+            }
+        })
+    }
+
+    /// Whether each of `rays` is blocked in `scene` (`blocked[i]` 1 or 0), in one FP mode
+    /// switch, by packets or single rays as [`Device::closest_batch`].
+    fn occluded_batch(&self, scene: RTCScene, packets: bool, rays: &[Ray], blocked: &mut [u8]) {
+        assert_eq!(rays.len(), blocked.len(), "one answer per ray");
+        with_query_mode(|| {
+            if !packets {
+                for (ray, b) in rays.iter().zip(blocked.iter_mut()) {
+                    *b = u8::from(self.any_hit_in_mode(scene, ray, None));
+                }
+                return;
+            }
+            let mut ray = empty_packet().ray;
+            for (chunk, blocked) in rays.chunks(16).zip(blocked.chunks_mut(16)) {
+                let valid = load16(&mut ray, chunk);
+                // SAFETY: as in `closest_batch`; Embree sets a blocked lane's tfar to -inf.
+                unsafe { (self.api.occluded16)(&valid, scene, &mut ray, std::ptr::null_mut()) };
+                for (k, b) in blocked.iter_mut().enumerate() {
+                    *b = u8::from(ray.tfar[k] == f32::NEG_INFINITY);
+                }
+            }
+        })
+    }
+
     fn check(&self, what: &str) -> Result<(), String> {
         // SAFETY: a valid device; the error code is per thread.
         let e = unsafe { (self.api.get_device_error)(self.handle) };
@@ -504,6 +570,57 @@ fn triangle_hit(rh: abi::RTCRayHit) -> TriangleHit {
         b1: rh.hit.u,
         b2: rh.hit.v,
     }
+}
+
+/// A packet with every lane inactive-looking (Embree reads only the valid lanes).
+fn empty_packet() -> abi::RTCRayHit16 {
+    abi::RTCRayHit16 {
+        ray: abi::RTCRay16 {
+            org_x: [0.0; 16],
+            org_y: [0.0; 16],
+            org_z: [0.0; 16],
+            tnear: [0.0; 16],
+            dir_x: [0.0; 16],
+            dir_y: [0.0; 16],
+            dir_z: [1.0; 16],
+            time: [0.0; 16],
+            tfar: [-0.0; 16],
+            mask: [u32::MAX; 16],
+            id: [0; 16],
+            flags: [0; 16],
+        },
+        hit: abi::RTCHit16 {
+            ng_x: [0.0; 16],
+            ng_y: [0.0; 16],
+            ng_z: [0.0; 16],
+            u: [0.0; 16],
+            v: [0.0; 16],
+            prim_id: [u32::MAX; 16],
+            geom_id: [u32::MAX; 16],
+            inst_id: [[u32::MAX; 16]],
+            inst_prim_id: [[u32::MAX; 16]],
+        },
+    }
+}
+
+/// Fills the first `rays.len()` (≤ 16) lanes of `ray` and returns their valid mask.
+#[inline(always)]
+fn load16(ray: &mut abi::RTCRay16, rays: &[Ray]) -> abi::Valid16 {
+    debug_assert!(rays.len() <= 16);
+    let mut valid = abi::Valid16([0; 16]);
+    for (k, r) in rays.iter().enumerate() {
+        let r = EmbreeScene::rtc_ray(r);
+        valid.0[k] = -1;
+        ray.org_x[k] = r.org_x;
+        ray.org_y[k] = r.org_y;
+        ray.org_z[k] = r.org_z;
+        ray.tnear[k] = r.tnear;
+        ray.dir_x[k] = r.dir_x;
+        ray.dir_y[k] = r.dir_y;
+        ray.dir_z[k] = r.dir_z;
+        ray.tfar[k] = r.tfar;
+    }
+    valid
 }
 
 /// The hit of an instanced scene's ray/hit record (one instancing level).
@@ -718,125 +835,24 @@ impl EmbreeScene {
     /// one through `rtcIntersect1` ([`SceneOptions::packets`]).
     pub fn intersect_batch(&self, rays: &[Ray], hits: &mut [CompactHit]) {
         assert_eq!(rays.len(), hits.len(), "one hit per ray");
-        with_query_mode(|| {
-            if self.packets {
-                let mut p = Self::empty_packet();
-                for (rays, hits) in rays.chunks(16).zip(hits.chunks_mut(16)) {
-                    self.intersect16(&mut p, rays, hits);
-                }
-            } else {
-                for (ray, hit) in rays.iter().zip(hits.iter_mut()) {
-                    *hit = self
-                        .dev
-                        .closest_hit_in_mode(self.scene, ray, None)
-                        .map_or(CompactHit::MISS, |rh| CompactHit::from(triangle_hit(rh)));
-                }
-            }
-        })
+        self.dev
+            .closest_batch(self.scene, self.packets, rays, |i, h| {
+                hits[i] = h.map_or(CompactHit::MISS, |h| {
+                    CompactHit::from(TriangleHit {
+                        t: h.t,
+                        prim: h.prim,
+                        b1: h.b1,
+                        b2: h.b2,
+                    })
+                });
+            });
     }
 
     /// Shadow rays of a batch: `blocked[i]` is 1 where [`EmbreeScene::occluded`] of
     /// `rays[i]` holds, else 0; packets or single rays as [`EmbreeScene::intersect_batch`].
     pub fn occluded_batch(&self, rays: &[Ray], blocked: &mut [u8]) {
-        assert_eq!(rays.len(), blocked.len(), "one answer per ray");
-        with_query_mode(|| {
-            if self.packets {
-                let mut p = Self::empty_packet().ray;
-                for (rays, blocked) in rays.chunks(16).zip(blocked.chunks_mut(16)) {
-                    self.occluded16(&mut p, rays, blocked);
-                }
-            } else {
-                for (ray, b) in rays.iter().zip(blocked.iter_mut()) {
-                    *b = u8::from(self.dev.any_hit_in_mode(self.scene, ray, None));
-                }
-            }
-        })
-    }
-
-    /// A packet with every lane inactive-looking (Embree reads only the valid lanes).
-    fn empty_packet() -> abi::RTCRayHit16 {
-        abi::RTCRayHit16 {
-            ray: abi::RTCRay16 {
-                org_x: [0.0; 16],
-                org_y: [0.0; 16],
-                org_z: [0.0; 16],
-                tnear: [0.0; 16],
-                dir_x: [0.0; 16],
-                dir_y: [0.0; 16],
-                dir_z: [1.0; 16],
-                time: [0.0; 16],
-                tfar: [-0.0; 16],
-                mask: [u32::MAX; 16],
-                id: [0; 16],
-                flags: [0; 16],
-            },
-            hit: abi::RTCHit16 {
-                ng_x: [0.0; 16],
-                ng_y: [0.0; 16],
-                ng_z: [0.0; 16],
-                u: [0.0; 16],
-                v: [0.0; 16],
-                prim_id: [u32::MAX; 16],
-                geom_id: [u32::MAX; 16],
-                inst_id: [[u32::MAX; 16]],
-                inst_prim_id: [[u32::MAX; 16]],
-            },
-        }
-    }
-
-    /// Fills the first `rays.len()` (≤ 16) lanes of `ray` and returns their valid mask.
-    #[inline(always)]
-    fn load16(ray: &mut abi::RTCRay16, rays: &[Ray]) -> abi::Valid16 {
-        debug_assert!(rays.len() <= 16);
-        let mut valid = abi::Valid16([0; 16]);
-        for (k, r) in rays.iter().enumerate() {
-            let r = Self::rtc_ray(r);
-            valid.0[k] = -1;
-            ray.org_x[k] = r.org_x;
-            ray.org_y[k] = r.org_y;
-            ray.org_z[k] = r.org_z;
-            ray.tnear[k] = r.tnear;
-            ray.dir_x[k] = r.dir_x;
-            ray.dir_y[k] = r.dir_y;
-            ray.dir_z[k] = r.dir_z;
-            ray.tfar[k] = r.tfar;
-        }
-        valid
-    }
-
-    /// One `rtcIntersect16` call on up to 16 rays, in the caller's FP mode.
-    #[inline]
-    fn intersect16(&self, p: &mut abi::RTCRayHit16, rays: &[Ray], hits: &mut [CompactHit]) {
-        let valid = Self::load16(&mut p.ray, rays);
-        p.hit.geom_id = [u32::MAX; 16];
-        // SAFETY: a committed scene; the 4.4 `RTCRayHit16` layout (checked in `abi`),
-        // 64-byte aligned, as is the valid mask; NULL arguments (the defaults, as for the
-        // single-ray call).
-        unsafe { (self.dev.api.intersect16)(&valid, self.scene, p, std::ptr::null_mut()) };
-        for (k, h) in hits.iter_mut().enumerate() {
-            *h = if p.hit.geom_id[k] != u32::MAX {
-                CompactHit {
-                    t: p.ray.tfar[k],
-                    prim: p.hit.prim_id[k],
-                    b1: p.hit.u[k],
-                    b2: p.hit.v[k],
-                    instance: u32::MAX,
-                }
-            } else {
-                CompactHit::MISS
-            };
-        }
-    }
-
-    /// One `rtcOccluded16` call on up to 16 rays, in the caller's FP mode.
-    #[inline]
-    fn occluded16(&self, ray: &mut abi::RTCRay16, rays: &[Ray], blocked: &mut [u8]) {
-        let valid = Self::load16(ray, rays);
-        // SAFETY: as in `intersect16`; Embree sets a blocked lane's tfar to -inf.
-        unsafe { (self.dev.api.occluded16)(&valid, self.scene, ray, std::ptr::null_mut()) };
-        for (k, b) in blocked.iter_mut().enumerate() {
-            *b = u8::from(ray.tfar[k] == f32::NEG_INFINITY);
-        }
+        self.dev
+            .occluded_batch(self.scene, self.packets, rays, blocked);
     }
 
     /// Raw `rtcIntersect1` into caller memory, for the ABI test: `buf` must be at least
@@ -868,6 +884,8 @@ pub struct EmbreeInstancedScene {
     /// Kept alive while the top scene refers to them.
     meshes: Vec<EmbreeScene>,
     instances: usize,
+    /// Batches go through 16-lane packets ([`Packets::resolve`] of the stored triangles).
+    packets: bool,
 }
 
 // SAFETY: as for `EmbreeScene`: committed scenes are read-only.
@@ -908,6 +926,9 @@ impl EmbreeInstancedScene {
             let out = EmbreeInstancedScene {
                 dev,
                 top,
+                packets: options
+                    .packets
+                    .resolve(built.iter().map(|m| m.triangles).sum()),
                 meshes: built,
                 instances: instances.len(),
             };
@@ -958,6 +979,26 @@ impl EmbreeInstancedScene {
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<InstanceHit> {
         self.dev.closest_hit(self.top, ray, None).map(instance_hit)
+    }
+
+    /// Whether batches go through 16-lane packets: [`SceneOptions::packets`] for the
+    /// triangles stored (each mesh once).
+    pub fn uses_packets(&self) -> bool {
+        self.packets
+    }
+
+    /// Closest hits of a batch: `emit(i, hit)` with `rays[i]`'s hit exactly as
+    /// [`EmbreeInstancedScene::intersect`] finds it, in order, in one FP mode switch, by
+    /// packets or single rays as [`EmbreeScene::intersect_batch`].
+    pub fn intersect_batch(&self, rays: &[Ray], emit: impl FnMut(usize, Option<InstanceHit>)) {
+        self.dev.closest_batch(self.top, self.packets, rays, emit);
+    }
+
+    /// Shadow rays of a batch: `blocked[i]` is 1 where [`EmbreeInstancedScene::occluded`]
+    /// of `rays[i]` holds, else 0.
+    pub fn occluded_batch(&self, rays: &[Ray], blocked: &mut [u8]) {
+        self.dev
+            .occluded_batch(self.top, self.packets, rays, blocked);
     }
 
     /// Whether anything lies at `0 < t < ray.t_max`.

@@ -263,28 +263,28 @@ impl Intersector for EmbreeIntersector {
     fn batch(&self, queries: &mut dyn FnMut()) {
         flowlight_embree::with_query_mode(queries)
     }
-    /// A flat scene's own batch call: packets for small scenes, else single rays, with the
-    /// FP mode set once ([`flowlight_embree::EmbreeScene::intersect_batch`]).
+    /// The scene's own batch call: packets for small scenes (flat or instanced), else single
+    /// rays, with the FP mode set once ([`flowlight_embree::EmbreeScene::intersect_batch`]).
     fn intersect_batch(&self, rays: &[Ray], hits: &mut [CompactHit]) {
         match self {
             EmbreeIntersector::Flat(s) => s.intersect_batch(rays, hits),
-            EmbreeIntersector::Instanced { .. } => self.batch(&mut || {
-                for (ray, out) in rays.iter().zip(hits.iter_mut()) {
-                    *out = self
-                        .intersect(ray)
-                        .map_or(CompactHit::MISS, CompactHit::from);
-                }
-            }),
+            EmbreeIntersector::Instanced {
+                scene,
+                first_virtual,
+            } => {
+                assert_eq!(rays.len(), hits.len(), "one hit per ray");
+                scene.intersect_batch(rays, |i, h| {
+                    hits[i] = h.map_or(CompactHit::MISS, |h| {
+                        CompactHit::from(virtual_hit(first_virtual, h))
+                    });
+                });
+            }
         }
     }
     fn occluded_batch(&self, rays: &[Ray], blocked: &mut [u8]) {
         match self {
             EmbreeIntersector::Flat(s) => s.occluded_batch(rays, blocked),
-            EmbreeIntersector::Instanced { .. } => self.batch(&mut || {
-                for (ray, out) in rays.iter().zip(blocked.iter_mut()) {
-                    *out = u8::from(self.occluded(ray));
-                }
-            }),
+            EmbreeIntersector::Instanced { scene, .. } => scene.occluded_batch(rays, blocked),
         }
     }
     #[inline]
