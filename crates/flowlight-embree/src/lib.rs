@@ -489,9 +489,9 @@ impl Default for SceneOptions {
     }
 }
 
-/// Whether a flat scene answers batches of rays with Embree's 16-lane packet traversal
-/// (`rtcIntersect16` / `rtcOccluded16`) or one `rtcIntersect1` / `rtcOccluded1` per ray.
-/// Both give the same hits bit for bit (the tests below); only the speed differs.
+/// Whether a scene (flat or instanced) answers batches of rays with Embree's 16-lane packet
+/// traversal (`rtcIntersect16` / `rtcOccluded16`) or one `rtcIntersect1` / `rtcOccluded1`
+/// per ray. Both give the same hits bit for bit (the tests); only the speed differs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Packets {
     /// Packets for scenes of at most [`PACKET_MAX_TRIANGLES`] triangles, single rays above.
@@ -532,8 +532,8 @@ impl Packets {
     pub fn parse(s: &str) -> Result<Packets, String> {
         match s {
             "auto" => Ok(Packets::Auto),
-            "always" | "1" => Ok(Packets::Always),
-            "never" | "0" => Ok(Packets::Never),
+            "always" => Ok(Packets::Always),
+            "never" => Ok(Packets::Never),
             _ => Err(format!("{s:?}: expected auto, always or never")),
         }
     }
@@ -1344,7 +1344,8 @@ mod tests {
         assert!(Packets::Always.resolve(10_000_000));
         assert!(!Packets::Never.resolve(1));
         assert_eq!(Packets::parse("auto"), Ok(Packets::Auto));
-        assert_eq!(Packets::parse("1"), Ok(Packets::Always));
+        assert_eq!(Packets::parse("always"), Ok(Packets::Always));
+        assert!(Packets::parse("1").is_err(), "no undocumented aliases");
         assert_eq!(Packets::parse("never"), Ok(Packets::Never));
         assert!(Packets::parse("sometimes")
             .unwrap_err()

@@ -222,7 +222,7 @@ impl<'a> Scene<'a> {
     /// The BSDF at a hit (textures and vertex colour applied; the hit's shading normal is
     /// already normal-mapped by the host): borrowed from the scene's table where the
     /// material's BSDF is the same at every point, built otherwise. Borrowing saves a copy of
-    /// the ~430-byte `Bsdf` per vertex, which was 2.4% of a Cornell box render (`memmove`
+    /// the 456-byte `Bsdf` per vertex, which was 2.4% of a Cornell box render (`memmove`
     /// under the tracer's vertex, perf).
     #[inline]
     pub fn bsdf(&self, hit: &SurfaceHit) -> Cow<'a, Bsdf> {

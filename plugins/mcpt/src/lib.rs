@@ -236,8 +236,9 @@ impl Mcpt {
 /// Deposits one sample's contributions in pixel (`x`, `y`), or one invalid deposit when any
 /// is not finite and non-negative. Without lighting layers the host only needs their sum,
 /// so the sample makes one deposit (summed in the order found) instead of one per
-/// contribution: a path of depth 32 found 5–10, and the host's classification and
-/// fixed-point sums per deposit were 4% of a Cornell box render.
+/// contribution. The host's classification and fixed-point sums per deposit were 4% of a
+/// Cornell box render (perf); its deposit path ran 43.2M instructions before and 13.8M
+/// after (callgrind, 256², 1 spp, depth 32).
 #[inline]
 fn deposit(film: &mut Film, x: u32, y: u32, contributions: &SampleContributions, layers: bool) {
     // Box filter: the sample belongs to the pixel it was drawn in (depositing at the
