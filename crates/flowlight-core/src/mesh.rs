@@ -158,8 +158,14 @@ impl MeshInstance {
     }
 }
 
-/// The scene's vertex and triangle buffers, borrowed. Per-vertex arrays may be empty when no
-/// primitive has the attribute (`uvs1`, `colors`, `tangents`).
+/// The scene's vertex and triangle buffers, borrowed. Per-vertex arrays other than
+/// `positions` may be empty when no primitive has the attribute (`normals`, `uvs`, `uvs1`,
+/// `colors`, `tangents`): a hit then reads nothing of them.
+///
+/// `triangle_emitter` is read only where the triangle's material is emissive
+/// ([`Material::is_emissive`]), so every emitter triangle must have an emissive material (the
+/// loader makes emitters of emissive triangles only): a hit on a scan reads its index row and
+/// material, not a third per-triangle line.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct MeshView<'a> {
     pub positions: &'a [Vec3],
@@ -262,15 +268,15 @@ impl<'a> MeshView<'a> {
     }
 
     /// Asks the cache for the first lines [`MeshView::surface_hit`] reads of a hit on `prim`:
-    /// its stored triangle's index row and material. Step one of two; a hint, a no-op off
-    /// x86-64. On an 871k-triangle scan those loads miss the cache, and in a batch of hits
-    /// one after another each miss would wait for the last (docs/performance.md).
+    /// its stored triangle's index row and material (its emitter rank only matters on
+    /// emissive materials, few triangles, and is not asked for). Step one of two; a hint, a
+    /// no-op off x86-64. On an 871k-triangle scan those loads miss the cache, and in a batch
+    /// of hits one after another each miss would wait for the last (docs/performance.md).
     #[inline]
     pub fn prefetch_triangle(&self, prim: u32, instance: u32) {
         let (_, tri) = self.locate_hit(prim, instance);
         prefetch(self.triangles.get(tri));
         prefetch(self.triangle_material.get(tri));
-        prefetch(self.triangle_emitter.get(tri));
     }
 
     /// Step two of [`MeshView::prefetch_triangle`], once its lines have had time to arrive:
@@ -340,11 +346,17 @@ impl<'a> MeshView<'a> {
             p_error *= 1.0 + 4.0 * f32::EPSILON;
         }
         let ng = triangle_normal(p0, p1, p2).unwrap_or(Vec3::Z);
-        let normal = |i: usize| match placed.instance {
-            None => self.normals[i],
-            Some(m) => (m.normal_matrix * self.normals[i]).normalize_or_zero(),
+        // No vertex normals in the scene: the interpolation vanishes, as it does on a flat
+        // primitive's zero normals, and n_s is n_g.
+        let n = if self.normals.is_empty() {
+            Vec3::ZERO
+        } else {
+            let normal = |i: usize| match placed.instance {
+                None => self.normals[i],
+                Some(m) => (m.normal_matrix * self.normals[i]).normalize_or_zero(),
+            };
+            normal(i0) * b[0] + normal(i1) * b[1] + normal(i2) * b[2]
         };
-        let n = normal(i0) * b[0] + normal(i1) * b[1] + normal(i2) * b[2];
         let (uv, color) = self.attributes_of(placed.idx, b);
         let material = self.triangle_material[tri];
         let mut ns = n.normalize_or_zero();
@@ -368,7 +380,12 @@ impl<'a> MeshView<'a> {
                 ns = -ns;
             }
         }
-        let rank = self.triangle_emitter[tri];
+        // Only emissive materials have emitter triangles (the type's docs); a view without a
+        // material table (a mesh built by hand) reads the rank of every hit.
+        let rank = match self.materials.get(material as usize) {
+            Some(m) if !m.is_emissive() => -1,
+            _ => self.triangle_emitter[tri],
+        };
         let emitter = match (placed.instance, rank) {
             (Some(m), r) if r >= 0 => m.first_emitter as i32 + r,
             _ => rank,

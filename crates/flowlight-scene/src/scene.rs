@@ -135,8 +135,10 @@ pub struct LoadStats {
 #[derive(Clone, Debug, Default)]
 pub struct Scene {
     pub positions: Vec<Vec3>,
+    /// Vertex normals (zero where a primitive is flat shaded); empty when no primitive has
+    /// any, as in a scan without NORMAL: the surface code then takes the geometric normal.
     pub normals: Vec<Vec3>,
-    /// TEXCOORD_0 per vertex (0 where a primitive has none).
+    /// TEXCOORD_0 per vertex (0 where a primitive has none); empty when no primitive has it.
     pub uvs: Vec<Vec2>,
     /// TEXCOORD_1 per vertex; empty when no primitive has a second set.
     pub uvs1: Vec<Vec2>,

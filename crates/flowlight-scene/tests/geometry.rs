@@ -730,8 +730,9 @@ fn flat_primitives_keep_shared_vertices_and_shade_with_the_face_normal() {
         "vertices are not duplicated per triangle"
     );
     assert!(s.positions.iter().all(|p| p.is_finite()));
-    assert_eq!(s.normals.len(), 25);
-    assert!(s.normals.iter().all(|&n| n == Vec3::ZERO));
+    // No primitive has NORMAL or TEXCOORD_0: neither is stored (a hit reads neither).
+    assert!(s.normals.is_empty());
+    assert!(s.uvs.is_empty());
     for prim in 0..32u32 {
         let [p0, p1, p2] = s.world_triangle(prim);
         let face = (p1 - p0).cross(p2 - p0).normalize();
@@ -747,4 +748,55 @@ fn flat_primitives_keep_shared_vertices_and_shade_with_the_face_normal() {
             assert!((h.p - target).length() < 1e-6);
         }
     }
+}
+
+/// A scene with a flat and a smooth primitive keeps normals for every vertex: zero for the
+/// flat one's (its hits take the face normal), the file's for the smooth one's. Without
+/// TEXCOORD_0 anywhere, no texture coordinates are stored.
+#[test]
+fn a_flat_primitive_beside_a_smooth_one_keeps_zero_normals() {
+    let (pos, nrm, idx) = grid();
+    let mut bytes = mesh_bytes(&pos, &idx);
+    let normals_at = bytes.len();
+    for n in &nrm {
+        for c in n {
+            bytes.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    let (np, ni) = (pos.len(), idx.len());
+    let json = format!(
+        r#"{{
+  "asset": {{"version": "2.0"}},
+  "scene": 0,
+  "scenes": [{{"nodes": [0]}}],
+  "nodes": [{{"mesh": 0}}],
+  "meshes": [{{"primitives": [
+    {{"attributes": {{"POSITION": 0}}, "indices": 1}},
+    {{"attributes": {{"POSITION": 0, "NORMAL": 2}}, "indices": 1}}]}}],
+  "accessors": [
+    {{"bufferView": 0, "componentType": 5126, "count": {np}, "type": "VEC3"}},
+    {{"bufferView": 1, "componentType": 5125, "count": {ni}, "type": "SCALAR"}},
+    {{"bufferView": 2, "componentType": 5126, "count": {np}, "type": "VEC3"}}
+  ],
+  "bufferViews": [
+    {{"buffer": 0, "byteOffset": 0, "byteLength": {pb}}},
+    {{"buffer": 0, "byteOffset": {pb}, "byteLength": {ib}}},
+    {{"buffer": 0, "byteOffset": {normals_at}, "byteLength": {pb}}}
+  ],
+  "buffers": [{{"uri": "data:application/octet-stream;base64,{data}", "byteLength": {total}}}]
+}}"#,
+        pb = np * 12,
+        ib = ni * 4,
+        total = bytes.len(),
+        data = base64(&bytes),
+    );
+    let s = load(&write("flat-beside-smooth", &json)).unwrap();
+    assert_eq!(s.positions.len(), 2 * np);
+    assert_eq!(s.normals.len(), 2 * np);
+    assert!(s.normals[..np].iter().all(|&n| n == Vec3::ZERO));
+    for (k, n) in nrm.iter().enumerate() {
+        let want = Vec3::from_array(*n).normalize();
+        assert!((s.normals[np + k] - want).length() < 1e-6, "{k}");
+    }
+    assert!(s.uvs.is_empty());
 }

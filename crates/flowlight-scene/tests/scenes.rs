@@ -30,8 +30,16 @@ fn every_scene_in_the_scenes_folder_loads() {
                     assert!(!s.triangles.is_empty(), "{}", f.display());
                     assert_eq!(s.triangles.len(), s.triangle_material.len());
                     assert_eq!(s.triangles.len(), s.triangle_emitter.len());
-                    assert_eq!(s.positions.len(), s.normals.len());
-                    assert_eq!(s.positions.len(), s.uvs.len());
+                    // Surface data reads a triangle's emitter rank only where its material
+                    // is emissive (`MeshView`'s docs): no emitter may hide elsewhere.
+                    for (t, &r) in s.triangle_emitter.iter().enumerate() {
+                        let m = &s.materials[s.triangle_material[t] as usize];
+                        assert!(r < 0 || m.is_emissive(), "{}: {t}", f.display());
+                    }
+                    // Normals and TEXCOORD_0: one per vertex, or none in the scene.
+                    for len in [s.normals.len(), s.uvs.len()] {
+                        assert!(len == 0 || len == s.positions.len(), "{}", f.display());
+                    }
                     loaded += 1;
                 }
                 Some("toml") => {

@@ -20,7 +20,7 @@ use std::ffi::c_void;
 
 /// Bumped whenever any type or function table in this module changes incompatibly; every
 /// version and what changed is listed in the repository's `CHANGELOG.md`.
-pub const ABI_VERSION: u32 = 4;
+pub const ABI_VERSION: u32 = 5;
 /// Version of the SDK crate compiled into this binary.
 pub const SDK_VERSION: &str = env!("CARGO_PKG_VERSION");
 /// `rustc --version` of the compiler that built this binary.
@@ -169,17 +169,20 @@ pub struct SceneView {
 }
 
 /// The scene's vertex and triangle buffers as the host stores them
-/// (`flowlight_core::mesh::MeshView` is the plugin's safe view). Per-vertex arrays have
-/// `vertex_count` entries or, for the optional ones (`uvs1`, `colors`, `tangents`), 0 when
-/// no primitive has the attribute (their pointer may then be dangling or null); the three
-/// per-triangle arrays have `triangle_count` entries each.
+/// (`flowlight_core::mesh::MeshView` is the plugin's safe view). `positions` has
+/// `vertex_count` entries; each optional per-vertex array (`normals`, `uvs`, `uvs1`,
+/// `colors`, `tangents`) has its own count, `vertex_count` or 0 when no primitive has the
+/// attribute (its pointer may then be dangling or null); the three per-triangle arrays have
+/// `triangle_count` entries each.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct MeshTables {
     pub positions: *const Vec3,
-    pub normals: *const Vec3,
-    pub uvs: *const glam::Vec2,
     pub vertex_count: usize,
+    pub normals: *const Vec3,
+    pub normals_count: usize,
+    pub uvs: *const glam::Vec2,
+    pub uvs_count: usize,
     pub uvs1: *const glam::Vec2,
     pub uvs1_count: usize,
     pub colors: *const [f32; 4],
@@ -199,9 +202,11 @@ impl MeshTables {
     /// No geometry (a scene view built by hand for tests of the shading code).
     pub const EMPTY: MeshTables = MeshTables {
         positions: std::ptr::null(),
-        normals: std::ptr::null(),
-        uvs: std::ptr::null(),
         vertex_count: 0,
+        normals: std::ptr::null(),
+        normals_count: 0,
+        uvs: std::ptr::null(),
+        uvs_count: 0,
         uvs1: std::ptr::null(),
         uvs1_count: 0,
         colors: std::ptr::null(),

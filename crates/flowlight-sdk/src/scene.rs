@@ -94,8 +94,8 @@ impl<'a> Scene<'a> {
             let m = &v.mesh;
             let mesh = MeshView {
                 positions: slice(m.positions, m.vertex_count),
-                normals: slice(m.normals, m.vertex_count),
-                uvs: slice(m.uvs, m.vertex_count),
+                normals: slice(m.normals, m.normals_count),
+                uvs: slice(m.uvs, m.uvs_count),
                 uvs1: slice(m.uvs1, m.uvs1_count),
                 colors: slice(m.colors, m.colors_count),
                 tangents: slice(m.tangents, m.tangents_count),
@@ -243,9 +243,11 @@ impl<'a> Scene<'a> {
 pub fn mesh_tables(m: &MeshView) -> MeshTables {
     MeshTables {
         positions: m.positions.as_ptr(),
-        normals: m.normals.as_ptr(),
-        uvs: m.uvs.as_ptr(),
         vertex_count: m.positions.len(),
+        normals: m.normals.as_ptr(),
+        normals_count: m.normals.len(),
+        uvs: m.uvs.as_ptr(),
+        uvs_count: m.uvs.len(),
         uvs1: m.uvs1.as_ptr(),
         uvs1_count: m.uvs1.len(),
         colors: m.colors.as_ptr(),
