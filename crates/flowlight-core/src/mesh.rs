@@ -638,7 +638,7 @@ mod tests {
             for _ in 0..200 {
                 let (q0, q1, q2) = (v(), v(), v());
                 let [p0, p1, p2] = [q0, q1, q2].map(|q| q * scale);
-                let d = |a: Vec3, b: Vec3| (a.as_dvec3() - b.as_dvec3());
+                let d = |a: Vec3, b: Vec3| a.as_dvec3() - b.as_dvec3();
                 let c = d(p1, p0).cross(d(p2, p0));
                 if c.length() <= 1e-3 * d(p1, p0).length() * d(p2, p0).length() {
                     continue; // nearly degenerate: the f32 edges' own rounding dominates
