@@ -96,8 +96,23 @@ impl Emitter {
     /// emission there, or the stored mean when the material table does not have it.
     #[inline]
     pub fn emission_at(&self, b: [f32; 3], materials: &[Material], textures: &[Texture]) -> Rgb {
+        self.emission_at_with(|| b, materials, textures)
+    }
+
+    /// [`Emitter::emission_at`] with the barycentrics computed only where they matter: a
+    /// material without an emissive texture emits its factor everywhere (what
+    /// [`Material::emission_at`] returns for it), so neither the point's barycentrics nor
+    /// its texture coordinates are computed for it.
+    #[inline]
+    pub fn emission_at_with(
+        &self,
+        b: impl FnOnce() -> [f32; 3],
+        materials: &[Material],
+        textures: &[Texture],
+    ) -> Rgb {
         match materials.get(self.material as usize) {
-            Some(m) => m.emission_at(self.uv_at(b), textures),
+            Some(m) if m.emissive_texture.is_some() => m.emission_at(self.uv_at(b()), textures),
+            Some(m) => m.emission,
             None => self.radiance,
         }
     }
@@ -414,7 +429,7 @@ impl<'a> Lights<'a> {
     pub fn emitted(&self, i: usize, p: Vec3, w: Vec3) -> Rgb {
         match self.emitters.get(i) {
             Some(e) if e.faces(w) => {
-                e.emission_at(e.barycentrics(p), self.materials, self.textures)
+                e.emission_at_with(|| e.barycentrics(p), self.materials, self.textures)
             }
             _ => Rgb::ZERO,
         }
@@ -526,6 +541,57 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(e.emission_at(b, &[m], &[]), Rgb::new(1.0, 2.0, 3.0));
+    }
+
+    /// What a hit on an emitter sees: the material's emission at the point's texture
+    /// coordinates where it has an emissive texture (here black on the left half of the
+    /// triangle's u range, white on the right), its factor everywhere where it has none, and
+    /// the stored mean where the material table lacks it.
+    #[test]
+    fn emitted_radiance_reads_the_emissive_texture_only_where_there_is_one() {
+        use crate::material::{Filter, TexelFormat, TextureRef, Wrap};
+        let mut e = tri(1.0, 1.0);
+        e.material = 0;
+        e.radiance = Rgb::splat(7.0);
+        let texels = [0u8, 255];
+        let t = Texture {
+            width: 2,
+            height: 1,
+            channels: 1,
+            format: TexelFormat::U8,
+            wrap_s: Wrap::ClampToEdge,
+            wrap_t: Wrap::ClampToEdge,
+            filter: Filter::Nearest,
+            texels: texels.as_ptr(),
+        };
+        let textured = Material {
+            emission: Rgb::splat(4.0),
+            emissive_texture: TextureRef::new(0, 0),
+            ..Default::default()
+        };
+        let plain = Material {
+            emission: Rgb::splat(4.0),
+            ..Default::default()
+        };
+        let (left, right) = (Vec3::new(0.1, 0.2, 0.0), Vec3::new(0.7, 0.1, 0.0));
+        for (materials, want_left, want_right) in [
+            (vec![textured], Rgb::ZERO, Rgb::splat(4.0)),
+            (vec![plain], Rgb::splat(4.0), Rgb::splat(4.0)),
+            (vec![], Rgb::splat(7.0), Rgb::splat(7.0)),
+        ] {
+            let lights = Lights {
+                emitters: std::slice::from_ref(&e),
+                punctual: &[],
+                environment: Environment::none(),
+                power_cdf: &[1.0],
+                materials: &materials,
+                textures: std::slice::from_ref(&t),
+            };
+            assert_eq!(lights.emitted(0, left, Vec3::Z), want_left);
+            assert_eq!(lights.emitted(0, right, Vec3::Z), want_right);
+            let b = e.barycentrics(right);
+            assert_eq!(e.emission_at(b, &materials, &[t]), want_right);
+        }
     }
 
     #[test]
