@@ -346,20 +346,19 @@ impl<'a> MeshView<'a> {
             p_error *= 1.0 + 4.0 * f32::EPSILON;
         }
         let ng = triangle_normal(p0, p1, p2).unwrap_or(Vec3::Z);
-        // No vertex normals in the scene: the interpolation vanishes, as it does on a flat
-        // primitive's zero normals, and n_s is n_g.
-        let n = if self.normals.is_empty() {
+        let (uv, color) = self.attributes_of(placed.idx, b);
+        let material = self.triangle_material[tri];
+        // No vertex normals in the scene: the interpolation would vanish, as it does on a
+        // flat primitive's zero normals, and n_s is n_g (without normalising a zero vector).
+        let mut ns = if self.normals.is_empty() {
             Vec3::ZERO
         } else {
             let normal = |i: usize| match placed.instance {
                 None => self.normals[i],
                 Some(m) => (m.normal_matrix * self.normals[i]).normalize_or_zero(),
             };
-            normal(i0) * b[0] + normal(i1) * b[1] + normal(i2) * b[2]
+            (normal(i0) * b[0] + normal(i1) * b[1] + normal(i2) * b[2]).normalize_or_zero()
         };
-        let (uv, color) = self.attributes_of(placed.idx, b);
-        let material = self.triangle_material[tri];
-        let mut ns = n.normalize_or_zero();
         if ns == Vec3::ZERO || !ns.is_finite() {
             ns = ng;
         } else {
