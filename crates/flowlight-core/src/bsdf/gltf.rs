@@ -75,7 +75,7 @@
 
 use super::albedo::{average, schlick_albedo, schlick_albedo_pair, schlick_average};
 use super::microfacet::{reflect, Ggx};
-use super::{BsdfSample, Dielectric, OrenNayar, DELTA_ALPHA};
+use super::{BsdfSample, Dielectric, Lambert, OrenNayar, DELTA_ALPHA};
 use crate::path::NodeType;
 use crate::sampling::{cosine_hemisphere_pdf, two_sided_cosine, two_sided_cosine_pdf};
 use crate::Rgb;
@@ -263,6 +263,27 @@ impl GltfLobe {
             GltfLobeKind::Refraction => self.dielectric.is_delta(),
             _ => self.alpha < DELTA_ALPHA,
         }
+    }
+
+    /// This lobe as a [`Lambert`] component with the same values bit for bit, where it is a
+    /// plain diffuse base: unit scale, no coat, no dielectric layer above it (f0 = f90 = 0,
+    /// so the energy coupling is exactly `diffuse_norm`, here 1) and Lambert's factors
+    /// (σ = 0: A = 1, B = 0). Its value (1/π · A) · tint · 1 · 1 is then tint · 1/π, what
+    /// `Lambert::eval` computes, and both sample the same cosine lobe with the same density.
+    pub fn as_lambert(&self) -> Option<Lambert> {
+        let sh = &self.shared;
+        let plain = self.kind == GltfLobeKind::Diffuse
+            && self.scale == 1.0
+            && sh.coat <= 0.0
+            && sh.diel_f0 == 0.0
+            && sh.diel_f90 == 0.0
+            && !sh.alpha.is_nan()
+            && sh.diffuse_norm == 1.0
+            && self.diffuse.albedo == Rgb::ONE
+            && self.diffuse.a == 1.0
+            && self.diffuse.b == 0.0
+            && self.albedo == self.f0.max_component().clamp(0.0, 1.0);
+        plain.then_some(Lambert { albedo: self.f0 })
     }
 
     /// GGX α deciding the class (Λα / Λβ); `None` for the diffuse base.

@@ -274,9 +274,19 @@ impl Bsdf {
     }
 
     /// A mixture of glTF lobes with their weights (as [`gltf::lobes`] returns them).
+    ///
+    /// A lone plain diffuse base ([`GltfLobe::as_lambert`]: no specular layer, coat or
+    /// transmission left, σ = 0, as in a material with `KHR_materials_specular` factor 0 like
+    /// the Cornell box's) becomes a [`Lambert`] component, which gives the same values bit
+    /// for bit without the glTF lobe's coupling and coat checks at every evaluation.
     pub fn from_gltf_lobes(lobes: &[(GltfLobe, f32)]) -> Bsdf {
         if lobes.is_empty() {
             return Bsdf::single(Component::Lambert(Lambert { albedo: Rgb::ZERO }));
+        }
+        if let [(lobe, w)] = lobes {
+            if let Some(lambert) = lobe.as_lambert().filter(|_| *w == 1.0) {
+                return Bsdf::single(Component::Lambert(lambert));
+            }
         }
         let mut bsdf = Bsdf {
             components: [None; MAX_COMPONENTS],
@@ -968,6 +978,83 @@ mod tests {
         }
         // The comparisons saw real values, not only the zeros of the early exits.
         assert!(nonzero.0 > 100_000 && nonzero.1 > 100_000, "{nonzero:?}");
+    }
+
+    /// A glTF material whose only lobe is a plain diffuse base (specular factor 0, no coat,
+    /// no transmission, σ = 0) is built as one Lambert component, and it gives what the glTF
+    /// lobe gives, bit for bit: values, densities, samples, albedo. A specular layer, a coat,
+    /// transmission or σ > 0 keep the glTF mixture.
+    #[test]
+    fn a_plain_gltf_diffuse_base_is_a_lambert_component_with_the_same_values() {
+        let plain = GltfParams {
+            base: Rgb::new(0.9, 0.6, 0.3),
+            metallic: 0.0,
+            roughness: 0.5,
+            ior: 1.5,
+            specular: 0.0,
+            specular_color: Rgb::ONE,
+            transmission: 0.0,
+            volumetric: false,
+            clearcoat: 0.0,
+            clearcoat_roughness: 0.0,
+            oren_nayar_sigma: 0.0,
+        };
+        let (lobes, n) = gltf::lobes(&plain);
+        assert_eq!(n, 1);
+        let lambert = Bsdf::from_gltf_lobes(&lobes[..n]);
+        assert!(matches!(lambert.component(0), Component::Lambert(_)));
+        assert_eq!(lambert.components().count(), 1);
+        let glt = Bsdf::single(Component::Gltf(lobes[0].0));
+        assert!(same_float(lambert.albedo(), glt.albedo()));
+        for (wo, wi) in direction_pairs(3000, 91) {
+            let ((f, p), (gf, gp)) = (lambert.eval_pdf(wo, wi), glt.eval_pdf(wo, wi));
+            assert!(same_rgb(f, gf) && same_float(p, gp), "{wo:?} {wi:?}");
+            assert!(same_rgb(lambert.eval(wo, wi), glt.eval(wo, wi)));
+            assert!(same_float(lambert.pdf(wo, wi), glt.pdf(wo, wi)));
+        }
+        let mut r = Rng::new(92, 0);
+        let mut sampled = 0;
+        for wo in test_directions_both_sides() {
+            for _ in 0..300 {
+                let (uc, u) = (r.uniform(), r.uniform2());
+                match (lambert.sample(wo, uc, u), glt.sample(wo, uc, u)) {
+                    (Some(a), Some(b)) => {
+                        assert_eq!(a.wi, b.wi);
+                        assert!(same_rgb(a.f, b.f) && same_float(a.pdf, b.pdf));
+                        assert_eq!((a.node, a.delta, a.eta), (b.node, b.delta, b.eta));
+                        sampled += 1;
+                    }
+                    (None, None) => {}
+                    (a, b) => panic!("{wo:?}: {a:?} against {b:?}"),
+                }
+            }
+        }
+        assert!(sampled > 1000, "{sampled}");
+        for other in [
+            GltfParams {
+                specular: 0.5,
+                ..plain
+            },
+            GltfParams {
+                oren_nayar_sigma: 0.3,
+                ..plain
+            },
+            GltfParams {
+                clearcoat: 0.5,
+                ..plain
+            },
+            GltfParams {
+                transmission: 0.5,
+                ..plain
+            },
+        ] {
+            let (lobes, n) = gltf::lobes(&other);
+            let b = Bsdf::from_gltf_lobes(&lobes[..n]);
+            assert!(
+                b.components().all(|(c, _)| matches!(c, Component::Gltf(_))),
+                "{other:?}"
+            );
+        }
     }
 
     /// The summary a mixture keeps (albedo, whether a light can be connected) is the walk
