@@ -775,22 +775,6 @@ mod tests {
     use crate::rng::Rng;
     use std::f64::consts::PI;
 
-    fn params() -> GltfParams {
-        GltfParams {
-            base: Rgb::ONE,
-            metallic: 0.0,
-            roughness: 0.5,
-            ior: 1.5,
-            specular: 1.0,
-            specular_color: Rgb::ONE,
-            transmission: 0.0,
-            volumetric: false,
-            clearcoat: 0.0,
-            clearcoat_roughness: 0.0,
-            oren_nayar_sigma: 0.0,
-        }
-    }
-
     /// Each lobe alone (scale 1), as a component.
     fn lobe_components(p: &GltfParams) -> Vec<(GltfLobeKind, Component)> {
         let (ls, n) = lobes(p);
@@ -873,7 +857,7 @@ mod tests {
                 metallic: m,
                 roughness: rough,
                 ior,
-                ..params()
+                ..gltf_params()
             };
             let spec = lobe_components(&p)
                 .into_iter()
@@ -998,7 +982,7 @@ mod tests {
                 let p = GltfParams {
                     roughness: rough,
                     ior,
-                    ..params()
+                    ..gltf_params()
                 };
                 let (ls, n) = lobes(&p);
                 let b = Bsdf::from_gltf_lobes(&ls[..n]);
@@ -1056,7 +1040,7 @@ mod tests {
             let p = GltfParams {
                 metallic: 1.0,
                 roughness: rough,
-                ..params()
+                ..gltf_params()
             };
             let (ls, n) = lobes(&p);
             assert_eq!(n, 1);
@@ -1081,26 +1065,26 @@ mod tests {
             GltfParams {
                 base: b,
                 roughness: 0.4,
-                ..params()
+                ..gltf_params()
             },
             GltfParams {
                 base: b,
                 metallic: 0.5,
                 roughness: 0.25,
-                ..params()
+                ..gltf_params()
             },
             GltfParams {
                 base: b,
                 roughness: 0.5,
                 clearcoat: 1.0,
                 clearcoat_roughness: 0.3,
-                ..params()
+                ..gltf_params()
             },
             GltfParams {
                 base: b,
                 roughness: 0.45,
                 transmission: 0.7,
-                ..params()
+                ..gltf_params()
             },
             GltfParams {
                 base: b,
@@ -1108,7 +1092,7 @@ mod tests {
                 transmission: 0.7,
                 volumetric: true,
                 ior: 1.33,
-                ..params()
+                ..gltf_params()
             },
             GltfParams {
                 base: b,
@@ -1116,13 +1100,13 @@ mod tests {
                 specular: 0.7,
                 specular_color: Rgb::new(2.0, 1.0, 0.5),
                 ior: 1.8,
-                ..params()
+                ..gltf_params()
             },
             GltfParams {
                 base: b,
                 roughness: 0.5,
                 oren_nayar_sigma: 0.5,
-                ..params()
+                ..gltf_params()
             },
         ]
     }
@@ -1283,7 +1267,7 @@ mod tests {
             roughness: 0.0,
             clearcoat: 1.0,
             transmission: 0.5,
-            ..params()
+            ..gltf_params()
         };
         let (ls, n) = lobes(&p);
         let kinds: Vec<_> = ls[..n]

@@ -988,16 +988,8 @@ mod tests {
     fn a_plain_gltf_diffuse_base_is_a_lambert_component_with_the_same_values() {
         let plain = GltfParams {
             base: Rgb::new(0.9, 0.6, 0.3),
-            metallic: 0.0,
-            roughness: 0.5,
-            ior: 1.5,
             specular: 0.0,
-            specular_color: Rgb::ONE,
-            transmission: 0.0,
-            volumetric: false,
-            clearcoat: 0.0,
-            clearcoat_roughness: 0.0,
-            oren_nayar_sigma: 0.0,
+            ..gltf_params()
         };
         let (lobes, n) = gltf::lobes(&plain);
         assert_eq!(n, 1);

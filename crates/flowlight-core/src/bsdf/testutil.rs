@@ -1,11 +1,29 @@
 //! Shared checks for the BSDF tests: sample/eval consistency, stratified numerical integration
 //! over the sphere, importance-sampled albedo and reciprocity.
 
-use super::{Bsdf, BsdfSample, Component};
+use super::{Bsdf, BsdfSample, Component, GltfParams};
 use crate::rng::Rng;
 use crate::sampling::uniform_sphere;
 use crate::Rgb;
 use glam::{Vec2, Vec3};
+
+/// A white glTF dielectric of roughness 0.5 and ior 1.5 with a full specular layer, nothing
+/// else: the base the glTF tests vary.
+pub fn gltf_params() -> GltfParams {
+    GltfParams {
+        base: Rgb::ONE,
+        metallic: 0.0,
+        roughness: 0.5,
+        ior: 1.5,
+        specular: 1.0,
+        specular_color: Rgb::ONE,
+        transmission: 0.0,
+        volumetric: false,
+        clearcoat: 0.0,
+        clearcoat_roughness: 0.0,
+        oren_nayar_sigma: 0.0,
+    }
+}
 
 /// What the checks need from a component or a whole mixture.
 pub trait Model {
