@@ -181,6 +181,13 @@ pub struct MeshView<'a> {
     pub instances: &'a [MeshInstance],
     pub materials: &'a [Material],
     pub textures: &'a [Texture],
+    /// A promise that every virtual triangle id is its stored triangle's index under the
+    /// identity (what [`MeshView::ids_are_stored`] checks), so [`MeshView::locate`] needs no
+    /// search; `false` means unknown, and the search is made. A flattened scene of several
+    /// meshes (the dragon on its floor under its lamp: three identity instances) would
+    /// otherwise search the instances three times per hit: twice for the prefetch hints and
+    /// once for the surface data.
+    pub stored_ids: bool,
 }
 
 /// A stored triangle placed in world space, as the flattening loader would have stored it.
@@ -202,6 +209,9 @@ impl<'a> MeshView<'a> {
     /// the stored triangle. A binary search over the instances, none for a scene with one.
     #[inline]
     pub fn locate(&self, prim: u32) -> (Option<&'a MeshInstance>, usize) {
+        if self.stored_ids {
+            return (None, prim as usize);
+        }
         let inst = match self.instances.len() {
             0 => return (None, prim as usize),
             1 => &self.instances[0],
@@ -214,6 +224,25 @@ impl<'a> MeshView<'a> {
             }
         };
         Self::in_instance(inst, prim)
+    }
+
+    /// Whether the instances make every virtual triangle id its stored index, placed by the
+    /// identity: none at all, or identity placements only, the first from id 0, each showing
+    /// its stored triangles at their own ids. Then [`MeshView::locate`]'s search finds, for
+    /// any `prim`, an identity instance with `first_triangle == first_virtual ≤ prim`, and
+    /// so gives `(None, prim)`: what [`MeshView::stored_ids`] returns without searching.
+    pub fn ids_are_stored(instances: &[MeshInstance]) -> bool {
+        instances.first().is_none_or(|i| i.first_virtual == 0)
+            && instances
+                .iter()
+                .all(|i| i.identity && i.first_triangle == i.first_virtual)
+    }
+
+    /// This view with [`MeshView::stored_ids`] set where [`MeshView::ids_are_stored`] holds
+    /// (a scan of the instances: once per view, not per hit).
+    pub fn with_stored_ids_checked(mut self) -> Self {
+        self.stored_ids = Self::ids_are_stored(self.instances);
+        self
     }
 
     #[inline]
@@ -285,11 +314,22 @@ impl<'a> MeshView<'a> {
     #[inline]
     pub fn prefetch_vertices(&self, prim: u32, instance: u32) {
         let (_, tri) = self.locate_hit(prim, instance);
-        if let Some(idx) = self.triangles.get(tri) {
-            for &i in idx {
-                let i = i as usize;
-                prefetch(self.positions.get(i));
+        let Some(idx) = self.triangles.get(tri) else {
+            return;
+        };
+        let idx = idx.map(|i| i as usize);
+        // Positions always; the other arrays only where the scene has them (a scan has
+        // normals at most), each test once per triangle rather than once per vertex.
+        for i in idx {
+            prefetch(self.positions.get(i));
+        }
+        if !self.normals.is_empty() {
+            for i in idx {
                 prefetch(self.normals.get(i));
+            }
+        }
+        if !(self.uvs.is_empty() && self.uvs1.is_empty() && self.colors.is_empty()) {
+            for i in idx {
                 prefetch(self.uvs.get(i));
                 prefetch(self.uvs1.get(i));
                 prefetch(self.colors.get(i));
@@ -616,6 +656,7 @@ mod tests {
             instances: &[],
             materials: &[],
             textures: &[],
+            stored_ids: false,
         };
         for prim in [0, 1, 2, 3, 1000, u32::MAX - 1, u32::MAX] {
             for instance in [0, 5, u32::MAX] {
@@ -664,5 +705,48 @@ mod tests {
             triangle_normal(Vec3::ZERO, Vec3::X * 1e-30, Vec3::Y * 1e-30),
             Some(Vec3::Z)
         );
+    }
+
+    /// The promise of `stored_ids` is kept exactly where the search would give the same
+    /// answer: identity placements of stored triangles at their own ids, from id 0. Every
+    /// prim (also past the last triangle) then locates as the search locates it; offset or
+    /// transformed placements, or a first instance not at id 0, are refused.
+    #[test]
+    fn stored_ids_locate_as_the_search_does() {
+        let range = |first_triangle, triangle_count| MeshRange {
+            first_triangle,
+            triangle_count,
+        };
+        let flat = [
+            MeshInstance::identity(0, range(0, 5), 0, 0),
+            MeshInstance::identity(1, range(5, 2), 5, 0),
+            MeshInstance::identity(2, range(7, 3), 7, 1),
+        ];
+        let moved = Mat4::from_translation(Vec3::X);
+        let refused: [&[MeshInstance]; 3] = [
+            // The same mesh shown again at virtual ids past the stored triangles.
+            &[
+                MeshInstance::identity(0, range(0, 5), 0, 0),
+                MeshInstance::identity(0, range(0, 5), 5, 0),
+            ],
+            &[MeshInstance::placed(0, range(0, 5), moved, 0, 0).unwrap()],
+            &[MeshInstance::identity(0, range(0, 5), 2, 0)],
+        ];
+        assert!(MeshView::ids_are_stored(&[]));
+        assert!(MeshView::ids_are_stored(&flat));
+        for instances in refused {
+            assert!(!MeshView::ids_are_stored(instances));
+        }
+        let search = MeshView {
+            instances: &flat,
+            ..MeshView::default()
+        };
+        let promised = search.with_stored_ids_checked();
+        assert!(promised.stored_ids && !search.stored_ids);
+        for prim in [0, 4, 5, 6, 7, 9, 10, 1000, u32::MAX] {
+            let (a, ta) = search.locate(prim);
+            let (b, tb) = promised.locate(prim);
+            assert_eq!((a.is_none(), ta), (b.is_none(), tb), "prim {prim}");
+        }
     }
 }

@@ -229,6 +229,8 @@ impl Scene {
             instances: &self.instances,
             materials: &self.materials,
             textures: &self.texture_table,
+            // Unknown: checking would scan the instances at every call.
+            stored_ids: false,
         }
     }
 

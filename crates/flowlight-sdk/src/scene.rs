@@ -105,7 +105,9 @@ impl<'a> Scene<'a> {
                 instances: slice(m.instances, m.instance_count),
                 materials,
                 textures,
-            };
+                stored_ids: false,
+            }
+            .with_stored_ids_checked();
             Scene {
                 camera: v.camera,
                 materials,
