@@ -203,6 +203,18 @@ impl SurfaceHit {
         let len = d.length();
         Ray::new(o, d / len, len * (1.0 - 1e-4))
     }
+
+    /// [`SurfaceHit::spawn_ray_to`] for a visibility test only: the same two offset ends,
+    /// but the direction is their difference, not normalised, and `t_max` is in its units
+    /// (1 − 10⁻⁴: the same point short of the target). Ray queries take any direction
+    /// length; the square root and division of the normalisation sat on the light
+    /// connection's chain of dependent operations.
+    #[inline]
+    pub fn shadow_ray_to(&self, target: Vec3, target_error: Vec3, target_ng: Vec3) -> Ray {
+        let o = offset_ray_origin(self.p, self.p_error, self.ng, target - self.p);
+        let t = offset_ray_origin(target, target_error, target_ng, o - target);
+        Ray::new(o, t - o, 1.0 - 1e-4)
+    }
 }
 
 /// An orthonormal frame whose `z` axis is a given unit vector (Duff et al. 2017).
@@ -303,6 +315,40 @@ mod tests {
             assert!(down.y < 0.0, "scale {scale}");
             // The offset is tiny relative to the scene.
             assert!(up.y < 1e-5 * scale, "scale {scale}: {}", up.y);
+        }
+    }
+
+    /// A shadow ray for a visibility test leaves from the same offset origin as the
+    /// normalised one and stops at the same point short of the target (to float rounding),
+    /// at any scale: only the direction's length and `t_max`'s unit differ.
+    #[test]
+    fn shadow_ray_ends_where_the_normalised_ray_ends() {
+        let mut r = crate::rng::Rng::new(41, 0);
+        for scale in [1e-3f32, 1.0, 1e3, 1e5] {
+            for _ in 0..200 {
+                let mut v = || Vec3::new(r.uniform(), r.uniform(), r.uniform()) - 0.5;
+                let hit = SurfaceHit {
+                    t: 1.0,
+                    p: v() * scale,
+                    p_error: v().abs() * scale * 1e-6,
+                    ng: v().normalize(),
+                    ns: Vec3::Z,
+                    uv: Vec2::ZERO,
+                    uv1: Vec2::ZERO,
+                    color: [1.0; 4],
+                    prim: 0,
+                    material: 0,
+                    emitter: -1,
+                };
+                let (target, target_error, target_ng) =
+                    (v() * scale * 4.0, v().abs() * scale * 1e-6, v().normalize());
+                let a = hit.spawn_ray_to(target, target_error, target_ng);
+                let b = hit.shadow_ray_to(target, target_error, target_ng);
+                assert_eq!(a.origin, b.origin);
+                let (ea, eb) = (a.at(a.t_max), b.at(b.t_max));
+                assert!((ea - eb).length() <= 1e-5 * scale, "{ea} vs {eb}");
+                assert!(a.dir.dot(b.dir) > 0.0 && (b.dir.normalize() - a.dir).length() < 1e-5);
+            }
         }
     }
 }

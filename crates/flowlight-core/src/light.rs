@@ -373,12 +373,13 @@ impl<'a> Lights<'a> {
                         return None;
                     }
                     let radiance = e.emission_at(ls.bary, self.materials, self.textures);
-                    let geometry = cos_light / dist2;
+                    // The density from the area density and dist²/cos directly, not through
+                    // `geometry`: two divisions side by side instead of one after the other.
                     Some(Incident {
                         wi,
                         radiance,
-                        geometry,
-                        pdf: ls.pdf / geometry,
+                        geometry: cos_light / dist2,
+                        pdf: ls.pdf * dist2 / cos_light,
                         delta: false,
                         target,
                     })

@@ -125,6 +125,23 @@ pub fn power_heuristic(pdf_a: f32, pdf_b: f32) -> f32 {
     }
 }
 
+/// [`power_heuristic`]`(pdf_a, pdf_b) / pdf_a`, the factor a next-event estimate multiplies
+/// by, with one division instead of two: a/(a² + b²). The same special cases: 1/pdf_a where
+/// pdf_a² overflows (weight 1), 0 where both densities are 0.
+#[inline]
+pub fn power_heuristic_over(pdf_a: f32, pdf_b: f32) -> f32 {
+    let a = pdf_a * pdf_a;
+    let b = pdf_b * pdf_b;
+    if a.is_infinite() {
+        return 1.0 / pdf_a;
+    }
+    if a + b == 0.0 {
+        0.0
+    } else {
+        pdf_a / (a + b)
+    }
+}
+
 /// Samples an index from a cumulative distribution `cdf` (non-decreasing, last entry 1).
 /// Returns the index and its probability.
 #[inline]
@@ -247,5 +264,30 @@ mod tests {
             assert!(b.iter().all(|&x| (-1e-6..=1.0 + 1e-6).contains(&x)));
             assert!((b[0] + b[1] + b[2] - 1.0).abs() < 1e-5);
         }
+    }
+
+    /// The one-division factor is the power heuristic divided by the first density, within
+    /// float rounding, with the same special cases (an overflowing square: weight 1; both
+    /// densities 0: 0).
+    #[test]
+    fn power_heuristic_over_is_the_weight_over_the_density() {
+        let mut r = Rng::new(17, 0);
+        for _ in 0..10_000 {
+            let a = (r.uniform() * 40.0 - 20.0).exp2();
+            let b = if r.uniform() < 0.1 {
+                0.0
+            } else {
+                (r.uniform() * 40.0 - 20.0).exp2()
+            };
+            let want = power_heuristic(a, b) / a;
+            let got = power_heuristic_over(a, b);
+            assert!(
+                (got - want).abs() <= 4.0 * f32::EPSILON * want,
+                "{a} {b}: {got} vs {want}"
+            );
+        }
+        assert_eq!(power_heuristic_over(f32::INFINITY, 1.0), 0.0);
+        assert_eq!(power_heuristic_over(1e30, 1.0), 1e-30);
+        assert_eq!(power_heuristic_over(0.0, 0.0), 0.0);
     }
 }

@@ -108,10 +108,10 @@ pub fn trace<S: SampleStream>(
             rng.seek(physical, SLOT_LIGHT);
             if let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) {
                 if let Some(conn) = connect_light(scene, tracer, &hit, &shading, &ls) {
-                    if let Some((f, w)) = connection_bsdf(&bsdf, shading.wo, &conn) {
+                    if let Some((f, w_over_pdf)) = connection_bsdf(&bsdf, shading.wo, &conn) {
                         out.add(
                             depth,
-                            beta * f * conn.radiance * (conn.wi_local.z.abs() * w / conn.pdf),
+                            beta * f * conn.radiance * (conn.wi_local.z.abs() * w_over_pdf),
                         );
                     }
                 }
@@ -362,9 +362,9 @@ fn vertex<S: SampleStream>(
         rng.seek(path.physical, SLOT_LIGHT);
         if let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) {
             if let Some((conn, ray)) = light_connection(scene, hit, &shading, &ls) {
-                if let Some((f, w)) = connection_bsdf(&bsdf, shading.wo, &conn) {
+                if let Some((f, w_over_pdf)) = connection_bsdf(&bsdf, shading.wo, &conn) {
                     let value =
-                        path.beta * f * conn.radiance * (conn.wi_local.z.abs() * w / conn.pdf);
+                        path.beta * f * conn.radiance * (conn.wi_local.z.abs() * w_over_pdf);
                     if !value.is_black() {
                         shadow_rays.push(ray);
                         shadow = Some((depth, value));

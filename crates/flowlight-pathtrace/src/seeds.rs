@@ -732,7 +732,7 @@ impl<S: SampleStream> Tree<S> {
             rng.seek(self.physical, SLOT_LIGHT);
             if let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) {
                 if let Some((conn, ray)) = light_connection(scene, hit, &shading, &ls) {
-                    if let Some((f, w)) = connection_bsdf(&bsdf, shading.wo, &conn) {
+                    if let Some((f, w_over_pdf)) = connection_bsdf(&bsdf, shading.wo, &conn) {
                         // The light's own density in the target's measure: area density on an
                         // area light, else what next-event estimation divides by.
                         let p_light = if ls.kind == LightKind::Area {
@@ -741,7 +741,9 @@ impl<S: SampleStream> Tree<S> {
                             conn.pdf
                         };
                         let estimate =
-                            self.beta * f * conn.radiance * (conn.wi_local.z.abs() * w / conn.pdf);
+                            self.beta * f * conn.radiance * (conn.wi_local.z.abs() * w_over_pdf);
+                        // The weight itself, for the seed (≤ 1 although the product rounds).
+                        let w = (w_over_pdf * conn.pdf).min(1.0);
                         if !estimate.is_black() {
                             let class = connection_class(
                                 out.split.as_deref(),

@@ -3,7 +3,7 @@
 use flowlight_core::bsdf::Bsdf;
 use flowlight_core::geometry::{Frame, Ray, SurfaceHit};
 use flowlight_core::light::{LightSample, ShadowTarget};
-use flowlight_core::sampling::power_heuristic;
+use flowlight_core::sampling::power_heuristic_over;
 use flowlight_core::Rgb;
 use flowlight_sdk::{Scene, Tracer};
 use glam::Vec3;
@@ -46,19 +46,22 @@ pub(crate) struct Connection {
 }
 
 /// The BSDF value f at a light connection from a vertex with outgoing direction `wo` (local)
-/// and the connection's MIS weight against that vertex's BSDF sample (power heuristic);
-/// `None` where f is black. A delta light cannot be hit by the BSDF sample: weight 1, no
-/// density needed. Otherwise f and the density come from one [`Bsdf::eval_pdf`] pass, which
-/// gives `eval` and `pdf` bit for bit. The one place the samplers weight a connection, so the
-/// path-at-a-time and wavefront tracers agree by construction.
+/// and the factor the estimate multiplies by: the connection's MIS weight against that
+/// vertex's BSDF sample (power heuristic) divided by the connection's density, in one
+/// division ([`power_heuristic_over`]); `None` where f is black. The estimate is
+/// β · f · L · |cos θ_i| · factor. A delta light cannot be hit by the BSDF sample: weight 1,
+/// factor 1/pdf, no BSDF density needed. Otherwise f and the density come from one
+/// [`Bsdf::eval_pdf`] pass, which gives `eval` and `pdf` bit for bit. The one place the
+/// samplers weight a connection, so the path-at-a-time and wavefront tracers agree by
+/// construction.
 #[inline]
 pub(crate) fn connection_bsdf(bsdf: &Bsdf, wo: Vec3, conn: &Connection) -> Option<(Rgb, f32)> {
     if conn.delta {
         let f = bsdf.eval(wo, conn.wi_local);
-        return (!f.is_black()).then_some((f, 1.0));
+        return (!f.is_black()).then(|| (f, 1.0 / conn.pdf));
     }
     let (f, pdf) = bsdf.eval_pdf(wo, conn.wi_local);
-    (!f.is_black()).then(|| (f, power_heuristic(conn.pdf, pdf)))
+    (!f.is_black()).then(|| (f, power_heuristic_over(conn.pdf, pdf)))
 }
 
 /// Turns a light sample into a connection from `hit` if it carries light and is visible.
@@ -92,7 +95,7 @@ pub(crate) fn light_connection(
         return None;
     }
     let ray = match inc.target {
-        ShadowTarget::Point { p, p_error, n } => hit.spawn_ray_to(p, p_error, n),
+        ShadowTarget::Point { p, p_error, n } => hit.shadow_ray_to(p, p_error, n),
         ShadowTarget::Infinity => hit.spawn_ray(inc.wi),
     };
     let conn = Connection {
