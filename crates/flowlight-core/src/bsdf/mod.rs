@@ -397,6 +397,10 @@ impl Bsdf {
     /// the sums are made in the same order from the same start (`eval` folds from zero,
     /// `pdf`'s `Iterator::sum` from −0.0), so images do not change.
     pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        if let Some(lambert) = self.lone_lambert() {
+            // The walk's 0 + f·1 and −0 + p·1 (see `sample`'s lone Lambert).
+            return lambert.eval_pdf(wo, wi);
+        }
         let mut coat = CoatAttenuation::default();
         let mut f = Rgb::ZERO;
         let mut pdf = -0.0f32;
