@@ -1097,8 +1097,8 @@ mod tests {
         assert!(deltas > 0, "some all-Dirac mixture was checked");
     }
 
-    /// A lone Lambert component samples without the mixture walk, and gives what the walk
-    /// gives bit for bit: the walk is taken by the same Lambert beside a second, black
+    /// A lone Lambert component samples and evaluates without the mixture walk, and gives
+    /// what the walk gives bit for bit: the walk is taken by the same Lambert beside a second, black
     /// component of weight 0 (which adds +0 to the value and the density), also at
     /// directions so close to the surface that wo.z · wi.z underflows to zero (refused by
     /// both).
@@ -1155,6 +1155,10 @@ mod tests {
             sampled > 1000 && refused > 0,
             "{sampled} sampled, {refused} refused"
         );
+        for (wo, wi) in direction_pairs(3000, 94) {
+            let ((f, p), (wf, wp)) = (lone.eval_pdf(wo, wi), walk.eval_pdf(wo, wi));
+            assert!(same_rgb(f, wf) && same_float(p, wp), "{wo:?} {wi:?}");
+        }
     }
 
     /// A non-Dirac sample of a mixture carries `eval` and `pdf` at its direction bit for bit,
