@@ -2,8 +2,9 @@
 //! of the Embree intersector (one `rtcIntersect1` / `rtcOccluded1` per ray, and 16-lane
 //! packets), the host's BVH intersector (the 8-wide `flowlight_bvh::Bvh`) and the binary
 //! `flowlight_bvh::BinaryBvh` on closed meshes of ~10k, ~100k and ~1M triangles, with 1 and
-//! 2 threads. Every backend is called as the host calls it: batches of [`BATCH`] rays
-//! through [`Intersector::intersect_batch`] / [`Intersector::occluded_batch`]. Prints a
+//! 2 threads (`FLOWLIGHT_BENCH_THREADS=1,2,16` for other counts). Every backend is called as
+//! the host calls it: batches of [`BATCH`] rays through [`Intersector::intersect_batch`] /
+//! [`Intersector::occluded_batch`]. Prints a
 //! Markdown table (docs/performance.md holds the last one): medians over
 //! `FLOWLIGHT_BENCH_REPEAT` rounds (default 5) with the range, and each backend's ratio to
 //! Embree. Within a round the backends run one after the other on the same rays, so a ratio
@@ -209,6 +210,10 @@ fn main() {
     let sizes: Vec<usize> = env("FLOWLIGHT_BENCH_SIZES")
         .map(|s| s.split(',').map(|x| x.trim().parse().unwrap()).collect())
         .unwrap_or(vec![10_000, 100_000, 1_000_000]);
+    // Thread counts to time each backend at (a many-core machine shows how each scales).
+    let thread_counts: Vec<usize> = env("FLOWLIGHT_BENCH_THREADS")
+        .map(|s| s.split(',').map(|x| x.trim().parse().unwrap()).collect())
+        .unwrap_or(vec![1, 2]);
     let rays = rays(nrays);
     match flowlight_embree::device() {
         Ok(d) => eprintln!("Embree {} from {}", d.version_string(), d.library),
@@ -225,19 +230,19 @@ fn main() {
         // [backend] -> build times; [backend][threads] -> closest, any per round.
         let mut names = Vec::new();
         let mut builds: Vec<Vec<f64>> = Vec::new();
-        let mut closest: Vec<[Vec<f64>; 2]> = Vec::new();
-        let mut any: Vec<[Vec<f64>; 2]> = Vec::new();
+        let mut closest: Vec<Vec<Vec<f64>>> = Vec::new();
+        let mut any: Vec<Vec<Vec<f64>>> = Vec::new();
         for round in 0..repeat {
             let (backends, times) = build_all(&scene, &tris);
             if round == 0 {
                 names = backends.iter().map(|b| b.name).collect();
                 builds = vec![Vec::new(); names.len()];
-                closest = vec![[Vec::new(), Vec::new()]; names.len()];
-                any = vec![[Vec::new(), Vec::new()]; names.len()];
+                closest = vec![vec![Vec::new(); thread_counts.len()]; names.len()];
+                any = vec![vec![Vec::new(); thread_counts.len()]; names.len()];
             }
             for (k, b) in backends.iter().enumerate() {
                 builds[k].push(times[k]);
-                for (ti, threads) in [1, 2].into_iter().enumerate() {
+                for (ti, &threads) in thread_counts.iter().enumerate() {
                     closest[k][ti].push(throughput(&rays, threads, &*b.closest));
                     any[k][ti].push(throughput(&rays, threads, &*b.any));
                 }
@@ -251,14 +256,14 @@ fn main() {
             })
         };
         for k in 0..names.len() {
-            for ti in 0..2 {
+            for (ti, threads) in thread_counts.iter().enumerate() {
                 println!(
                     "| {} | {} | {} | {} | {} | {} | {} | {} | {} |",
                     tris.len(),
                     names[k],
                     cell(&builds[k], 4),
                     ratio(&builds[k], embree.map(|e| &builds[e])),
-                    ti + 1,
+                    threads,
                     cell(&closest[k][ti], 2),
                     ratio(&closest[k][ti], embree.map(|e| &closest[e][ti])),
                     cell(&any[k][ti], 2),
