@@ -88,6 +88,58 @@ fn mcpt_gives_the_same_bits_in_every_style() {
     }
 }
 
+/// A tile-local integrator's passes (1, 2, 4, 8, 16, … samples) run as one round whose
+/// units the threads take in pass order (render.rs): a thread that finishes the last unit of
+/// a pass it can take goes on to the next pass instead of waiting for the pass's slowest
+/// tile. The first unit to finish holds its thread until another thread has finished a unit
+/// of a later pass; with a barrier between passes that never happens (the bounded wait then
+/// fails the test instead of hanging it). The accounting and the bits are those of the
+/// pass-by-pass schedule: 40 spp are passes of 1, 2, 4, 8, 16 and 9 samples, every pixel has
+/// all 40, and one thread gives the same exact sums.
+#[test]
+fn mcpt_passes_run_without_a_barrier_between_them() {
+    use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+    use std::time::{Duration, Instant};
+    let mut s = common::session_at("cornell-box/cornell-box.toml", 40, 40, 40, &[]);
+    s.options.tile_size = 16; // 3 × 3 tiles of at most 16² pixels
+    let one_thread = render_with(&mut s, None, 1, 0);
+    s.options.threads = 2;
+    let first_pass = 40 * 40; // pixel samples of the 1-sample pass
+    let held = AtomicBool::new(false);
+    let most = AtomicU64::new(0);
+    let overlapped = AtomicBool::new(false);
+    let stop = AtomicBool::new(false);
+    let out = s
+        .render(&stop, &|p| {
+            most.fetch_max(p.pixel_samples, Ordering::SeqCst);
+            if held.swap(true, Ordering::SeqCst) {
+                return;
+            }
+            // This thread's unit is done but the thread stays in it until the other thread
+            // has finished a unit beyond the first pass (or 30 s have gone by).
+            let t = Instant::now();
+            while t.elapsed() < Duration::from_secs(30) {
+                if most.load(Ordering::SeqCst) > first_pass {
+                    overlapped.store(true, Ordering::SeqCst);
+                    return;
+                }
+                std::thread::sleep(Duration::from_millis(1));
+            }
+        })
+        .unwrap();
+    assert!(out.error.is_none());
+    assert!(
+        overlapped.load(Ordering::SeqCst),
+        "no unit of a later pass finished while a first-pass unit's thread was held: the passes wait for each other"
+    );
+    let st = &out.stats;
+    assert_eq!(st.full_passes, 6);
+    assert_eq!(st.units, 6 * 9);
+    assert_eq!(st.pixel_samples, 40 * 40 * 40);
+    assert!(out.frame.samples().iter().all(|&n| n == 40));
+    assert!(exact_sums(&out.frame) == exact_sums(&one_thread));
+}
+
 #[test]
 fn the_host_chooses_blasting_for_path_tracing_and_caching_for_chains() {
     let mut s = common::session_at("cornell-box/cornell-box.toml", 16, 16, 1, &[]);

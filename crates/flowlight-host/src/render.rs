@@ -1,6 +1,12 @@
 //! The scheduler: splits the image into tiles and passes of samples, runs the work units on
 //! the host's one rayon pool, merges finished tiles, and stops cleanly when asked.
 //!
+//! A flanged integrator's passes run one after another (a pass's tile order and a cut
+//! pass's normalisation, below, are per pass). A tile-local integrator's passes run as one
+//! round whose units the threads take in pass order, so no thread waits at a pass boundary
+//! for the pass's slowest tile (on 16 cores that wait was 7–12% of an MCPT render's thread
+//! time: docs/performance.md).
+//!
 //! # Time budgets and partial passes
 //!
 //! A render with a time budget `T` starts no work unit after `T` (the clock starts before the
@@ -223,6 +229,11 @@ pub const MAX_THREADS_PER_CORE: usize = 4;
 /// with 8×8 units than with 4×4 ones; a later fixed-spp check found no measurable difference
 /// between 8×8 and 64×64 units, so the gain over 4×4 is unconfirmed.
 pub const FLANGED_TIME_TILE: u32 = 8;
+
+/// Passes a tile-local integrator's round holds under a time budget (without one, a round
+/// holds every pass): units past the deadline are skipped, so a round only bounds how many
+/// unit slots a stopped render walks through.
+pub const TIMED_PASSES_PER_ROUND: usize = 16;
 
 /// The pool size for `requested` threads (0: one per core), clamped to
 /// [`MAX_THREADS_PER_CORE`] × the cores with a warning.
@@ -487,10 +498,36 @@ pub fn render(
         {
             break;
         }
-        let count = pass_spp.min(remaining);
+        // The passes of this round, as (first sample, samples): a flanged integrator's pass is
+        // a round of its own (its tile order and a cut's normalisation are per pass). A
+        // tile-local integrator's passes run as one round whose units the threads take in
+        // pass order: no thread waits at a pass boundary for the pass's slowest tile (the
+        // wait that grows with threads: docs/performance.md, "Thread scaling").
+        let passes_per_round = if !tiled {
+            1
+        } else if opts.time.is_some() {
+            TIMED_PASSES_PER_ROUND
+        } else {
+            usize::MAX
+        };
+        let mut passes: Vec<(u32, u32)> = Vec::new();
+        let mut left = remaining;
+        while left > 0 && passes.len() < passes_per_round {
+            let count = pass_spp.min(left);
+            passes.push((sample_begin + (remaining - left), count));
+            left -= count;
+            // Short passes first for a quick first look at every tile, then longer ones to
+            // amortise scheduling. Deposits of a flanged unit land in its neighbours too: a
+            // pass stopped half-way would leave them normalised by their own (smaller) sample
+            // counts, so such integrators keep one-sample passes and a stop costs at most that
+            // imbalance.
+            if tiled {
+                pass_spp = (pass_spp * 2).min(16);
+            }
+        }
         let skipped = AtomicBool::new(false);
-        let pass_done = AtomicU64::new(0);
-        let pass_units = AtomicU64::new(0);
+        let round_done = AtomicU64::new(0);
+        let pass_units: Vec<AtomicU64> = passes.iter().map(|_| AtomicU64::new(0)).collect();
         // Flanged passes take their tiles in a random order, so that a cut keeps a uniformly
         // random subset (module documentation); tile-local ones in scan order.
         let order = if tiled {
@@ -499,7 +536,8 @@ pub fn render(
             tile_order(tiles.len(), opts.seed, passes_done)
         };
         let next = AtomicUsize::new(0);
-        (0..tiles.len()).into_par_iter().for_each(|_| {
+        let round_units = tiles.len() * passes.len();
+        (0..round_units).into_par_iter().for_each(|_| {
             // The budget and Ctrl-C stop every integrator between units: no unit starts after
             // the deadline; the units in flight finish.
             let now = Instant::now();
@@ -510,9 +548,11 @@ pub fn render(
                 skipped.store(true, Ordering::Relaxed);
                 return;
             }
-            // One fetch per closure call and as many calls as tiles: always in range. The
-            // units that start are the first ones of `order`.
-            let (x0, y0, x1, y1) = tiles[order[next.fetch_add(1, Ordering::Relaxed)]];
+            // One fetch per closure call and as many calls as units: always in range. The
+            // units that start are the first ones of the round, pass by pass in `order`.
+            let k = next.fetch_add(1, Ordering::Relaxed);
+            let (pass, (sample_begin, count)) = (k / tiles.len(), passes[k / tiles.len()]);
+            let (x0, y0, x1, y1) = tiles[order[k % tiles.len()]];
             last_start.fetch_max(
                 (now - start).as_nanos().min(u64::MAX as u128 - 1) as u64 + 1,
                 Ordering::Relaxed,
@@ -588,10 +628,10 @@ pub fn render(
                 flowlight_sdk::stats::merge(specs, &mut merged_stats.lock().unwrap(), &unit_stats);
             }
             units.fetch_add(1, Ordering::Relaxed);
-            pass_units.fetch_add(1, Ordering::Relaxed);
+            pass_units[pass].fetch_add(1, Ordering::Relaxed);
             let pixels = (x1 - x0) as u64 * (y1 - y0) as u64;
             let d = pixels * count as u64;
-            let p = pass_done.fetch_add(d, Ordering::Relaxed) + d;
+            let p = round_done.fetch_add(d, Ordering::Relaxed) + d;
             progress(&Progress {
                 pixel_samples: done.load(Ordering::Relaxed) + p,
                 planned,
@@ -599,33 +639,29 @@ pub fn render(
                 budget: opts.time,
             });
         });
-        let pass_samples = pass_done.load(Ordering::Relaxed);
         let whole = !skipped.load(Ordering::Relaxed);
         if !tiled {
             // Whole or cut, the pass is in the image; a cut one counts m/n of its samples.
+            let count = passes[0].1;
             if whole {
                 uniform_spp += count as f64;
             } else {
                 let cut = PartialPass {
-                    finished: pass_units.load(Ordering::Relaxed) as u32,
+                    finished: pass_units[0].load(Ordering::Relaxed) as u32,
                     tiles: tiles.len() as u32,
                 };
                 uniform_spp += count as f64 * cut.fraction();
                 partial_pass = Some(cut);
             }
         }
-        done.fetch_add(pass_samples, Ordering::Relaxed);
-        if whole {
-            passes_done += 1;
-        }
-        sample_begin += count;
-        // Short passes first for a quick preview, then longer ones to amortise scheduling.
-        // Deposits of a flanged unit land in its neighbours too: a pass stopped half-way
-        // would leave them normalised by their own (smaller) sample counts, so such
-        // integrators keep one-sample passes and a stop costs at most that imbalance.
-        if tiled {
-            pass_spp = (pass_spp * 2).min(16);
-        }
+        done.fetch_add(round_done.load(Ordering::Relaxed), Ordering::Relaxed);
+        // A pass is whole when every one of its units finished (units start in order, so a
+        // stop cuts one pass and leaves the later ones empty).
+        passes_done += pass_units
+            .iter()
+            .filter(|u| u.load(Ordering::Relaxed) == tiles.len() as u64)
+            .count() as u32;
+        sample_begin += passes.iter().map(|&(_, count)| count).sum::<u32>();
     });
 
     // Buffering and Caching flush what the threads still hold (a failed unit's partial
