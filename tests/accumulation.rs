@@ -140,6 +140,21 @@ fn mcpt_passes_run_without_a_barrier_between_them() {
     assert!(exact_sums(&out.frame) == exact_sums(&one_thread));
 }
 
+/// More passes than one round holds (`PASSES_PER_ROUND`): 17,000 spp on a 2 × 2 image are
+/// passes of 1, 2, 4, 8, 1061 × 16 and 9 samples, 1066 in all, in two rounds; every pass and
+/// every sample is accounted for once.
+#[test]
+fn mcpt_passes_beyond_one_round_are_all_counted() {
+    let s = common::session_at("cornell-box/cornell-box.toml", 2, 2, 17_000, &[]);
+    const { assert!(1066 > flowlight_host::render::PASSES_PER_ROUND) };
+    let out = common::render(&s);
+    let st = &out.stats;
+    assert_eq!(st.full_passes, 1066);
+    assert_eq!(st.units, 1066);
+    assert_eq!(st.pixel_samples, 4 * 17_000);
+    assert!(out.frame.samples().iter().all(|&n| n == 17_000));
+}
+
 #[test]
 fn the_host_chooses_blasting_for_path_tracing_and_caching_for_chains() {
     let mut s = common::session_at("cornell-box/cornell-box.toml", 16, 16, 1, &[]);

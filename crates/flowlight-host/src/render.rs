@@ -3,8 +3,8 @@
 //!
 //! A flanged integrator's passes run one after another (a pass's tile order and a cut
 //! pass's normalisation, below, are per pass). A tile-local integrator's passes run as one
-//! round whose units the threads take in pass order, so no thread waits at a pass boundary
-//! for the pass's slowest tile (on 16 cores that wait was 7–12% of an MCPT render's thread
+//! round ([`PASSES_PER_ROUND`] passes at most) whose units the threads take in pass order,
+//! so no thread waits at a pass boundary for the pass's slowest tile (on 16 cores that wait was 7–12% of an MCPT render's thread
 //! time: docs/performance.md).
 //!
 //! # Time budgets and partial passes
@@ -230,10 +230,15 @@ pub const MAX_THREADS_PER_CORE: usize = 4;
 /// between 8×8 and 64×64 units, so the gain over 4×4 is unconfirmed.
 pub const FLANGED_TIME_TILE: u32 = 8;
 
-/// Passes a tile-local integrator's round holds under a time budget (without one, a round
-/// holds every pass): units past the deadline are skipped, so a round only bounds how many
-/// unit slots a stopped render walks through.
+/// Passes a tile-local integrator's round holds under a time budget: units past the
+/// deadline are skipped, so a round only bounds how many unit slots a stopped render walks
+/// through.
 pub const TIMED_PASSES_PER_ROUND: usize = 16;
+
+/// Passes a tile-local integrator's round holds without a time budget: every pass of any
+/// usual render (1024 passes are over 16k samples per pixel), while a huge `spp` does not
+/// make the round's per-pass counters huge (one barrier per 1024 passes costs nothing).
+pub const PASSES_PER_ROUND: usize = 1024;
 
 /// The pool size for `requested` threads (0: one per core), clamped to
 /// [`MAX_THREADS_PER_CORE`] × the cores with a warning.
@@ -508,7 +513,7 @@ pub fn render(
         } else if opts.time.is_some() {
             TIMED_PASSES_PER_ROUND
         } else {
-            usize::MAX
+            PASSES_PER_ROUND
         };
         let mut passes: Vec<(u32, u32)> = Vec::new();
         let mut left = remaining;
