@@ -4,8 +4,8 @@
 //! A flanged integrator's passes run one after another (a pass's tile order and a cut
 //! pass's normalisation, below, are per pass). A tile-local integrator's passes run as one
 //! round ([`PASSES_PER_ROUND`] passes at most) whose units the threads take in pass order,
-//! so no thread waits at a pass boundary for the pass's slowest tile (on 16 cores that wait was 7–12% of an MCPT render's thread
-//! time: docs/performance.md).
+//! so no thread waits at a pass boundary for the pass's slowest tile (on 16 cores that wait
+//! was 7–12% of an MCPT render's thread time: docs/performance.md).
 //!
 //! # Time budgets and partial passes
 //!
@@ -503,11 +503,8 @@ pub fn render(
         {
             break;
         }
-        // The passes of this round, as (first sample, samples): a flanged integrator's pass is
-        // a round of its own (its tile order and a cut's normalisation are per pass). A
-        // tile-local integrator's passes run as one round whose units the threads take in
-        // pass order: no thread waits at a pass boundary for the pass's slowest tile (the
-        // wait that grows with threads: docs/performance.md, "Thread scaling").
+        // The passes of this round, as (first sample, samples): one for a flanged integrator,
+        // a run of them for a tile-local one (module documentation).
         let passes_per_round = if !tiled {
             1
         } else if opts.time.is_some() {
@@ -516,11 +513,11 @@ pub fn render(
             PASSES_PER_ROUND
         };
         let mut passes: Vec<(u32, u32)> = Vec::new();
-        let mut left = remaining;
-        while left > 0 && passes.len() < passes_per_round {
-            let count = pass_spp.min(left);
-            passes.push((sample_begin + (remaining - left), count));
-            left -= count;
+        let round_end = sample_begin.saturating_add(remaining);
+        while sample_begin < round_end && passes.len() < passes_per_round {
+            let count = pass_spp.min(round_end - sample_begin);
+            passes.push((sample_begin, count));
+            sample_begin += count;
             // Short passes first for a quick first look at every tile, then longer ones to
             // amortise scheduling. Deposits of a flanged unit land in its neighbours too: a
             // pass stopped half-way would leave them normalised by their own (smaller) sample
@@ -556,7 +553,8 @@ pub fn render(
             // One fetch per closure call and as many calls as units: always in range. The
             // units that start are the first ones of the round, pass by pass in `order`.
             let k = next.fetch_add(1, Ordering::Relaxed);
-            let (pass, (sample_begin, count)) = (k / tiles.len(), passes[k / tiles.len()]);
+            let pass = k / tiles.len();
+            let (sample_begin, count) = passes[pass];
             let (x0, y0, x1, y1) = tiles[order[k % tiles.len()]];
             last_start.fetch_max(
                 (now - start).as_nanos().min(u64::MAX as u128 - 1) as u64 + 1,
@@ -666,7 +664,6 @@ pub fn render(
             .iter()
             .filter(|u| u.load(Ordering::Relaxed) == tiles.len() as u64)
             .count() as u32;
-        sample_begin += passes.iter().map(|&(_, count)| count).sum::<u32>();
     });
 
     // Buffering and Caching flush what the threads still hold (a failed unit's partial
