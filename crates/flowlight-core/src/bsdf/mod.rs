@@ -243,6 +243,9 @@ pub struct Bsdf {
     /// vertex, and walking the mixture for them was 2% of a Cornell box render (callgrind).
     albedo: f32,
     non_delta: bool,
+    /// Whether the components are a [`gltf::OpaquePair`] (kept by [`Bsdf::summarise`]), which
+    /// `eval_pdf` and `sample` take without the walk.
+    opaque_pair: bool,
 }
 
 impl Bsdf {
@@ -293,6 +296,7 @@ impl Bsdf {
             count: 0,
             albedo: 0.0,
             non_delta: false,
+            opaque_pair: false,
         };
         for &(l, w) in lobes.iter().take(MAX_COMPONENTS) {
             bsdf.components[bsdf.count] = Some((Component::Gltf(l), w));
@@ -310,6 +314,7 @@ impl Bsdf {
             .clamp(0.0, 1.0);
         let non_delta = self.components().any(|(c, _)| !c.is_delta());
         self.non_delta = non_delta;
+        self.opaque_pair = self.two_gltf_lobes().is_some_and(|p| p.holds());
         self
     }
 
@@ -334,6 +339,7 @@ impl Bsdf {
             count: 1,
             albedo: 0.0,
             non_delta: false,
+            opaque_pair: false,
         }
         .summarise()
     }
@@ -401,6 +407,15 @@ impl Bsdf {
             // The walk's 0 + f·1 and −0 + p·1 (see `sample`'s lone Lambert).
             return lambert.eval_pdf(wo, wi);
         }
+        if let Some(pair) = self.opaque_pair() {
+            return pair.eval_pdf(wo, wi);
+        }
+        self.eval_pdf_by_walk(wo, wi)
+    }
+
+    /// [`Bsdf::eval_pdf`] over the components one by one (every mixture but the lone Lambert
+    /// and the opaque pair, which give the same bits without it).
+    fn eval_pdf_by_walk(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
         let mut coat = CoatAttenuation::default();
         let mut f = Rgb::ZERO;
         let mut pdf = -0.0f32;
@@ -458,6 +473,15 @@ impl Bsdf {
             let s = lambert.sample(wo, u)?;
             return (wo.z * s.wi.z > 0.0).then_some(s);
         }
+        if let Some(pair) = self.opaque_pair() {
+            return pair.sample(wo, u_component, u);
+        }
+        self.sample_by_walk(wo, u_component, u)
+    }
+
+    /// [`Bsdf::sample`] through the components (every mixture but the lone Lambert and the
+    /// opaque pair, which give the same bits without it).
+    fn sample_by_walk(&self, wo: Vec3, u_component: f32, u: Vec2) -> Option<BsdfSample> {
         // `lo`, the weights before i summed in order, is the sum the walk had reached.
         let (i, p, lo) = self.choose(u_component);
         let uc = if p > 0.0 {
@@ -490,6 +514,36 @@ impl Bsdf {
             Some((Component::Lambert(l), w)) if self.count == 1 && *w == 1.0 => Some(l),
             _ => None,
         }
+    }
+
+    /// The two components as an [`gltf::OpaquePair`] where both are glTF lobes, whatever
+    /// their kinds ([`gltf::OpaquePair::holds`] checks those).
+    #[inline]
+    fn two_gltf_lobes(&self) -> Option<gltf::OpaquePair<'_>> {
+        if self.count != 2 {
+            return None;
+        }
+        match (&self.components[0], &self.components[1]) {
+            (Some((Component::Gltf(spec), ws)), Some((Component::Gltf(diffuse), wd))) => {
+                Some(gltf::OpaquePair {
+                    spec,
+                    spec_weight: *ws,
+                    diffuse,
+                    diffuse_weight: *wd,
+                })
+            }
+            _ => None,
+        }
+    }
+
+    /// The components as a [`gltf::OpaquePair`] where [`Bsdf::summarise`] found them one
+    /// (every constructor and mutator ends with it, so the kinds are not checked again here).
+    #[inline]
+    fn opaque_pair(&self) -> Option<gltf::OpaquePair<'_>> {
+        if !self.opaque_pair {
+            return None;
+        }
+        self.two_gltf_lobes()
     }
 
     /// True when some component is not a Dirac lobe, i.e. a light can be connected explicitly.
@@ -1117,6 +1171,7 @@ mod tests {
             count: 2,
             albedo: 0.0,
             non_delta: false,
+            opaque_pair: false,
         }
         .summarise();
         assert!(walk.lone_lambert().is_none());
@@ -1158,6 +1213,108 @@ mod tests {
         for (wo, wi) in direction_pairs(3000, 94) {
             let ((f, p), (wf, wp)) = (lone.eval_pdf(wo, wi), walk.eval_pdf(wo, wi));
             assert!(same_rgb(f, wf) && same_float(p, wp), "{wo:?} {wi:?}");
+        }
+    }
+
+    /// A metallic-roughness material without coat or transmission (roughness > 0) is an
+    /// opaque pair, sampled and evaluated without the walk, and the pair gives what the walk
+    /// gives bit for bit: directions, values, densities, kinds and refusals, at random
+    /// numbers, at numbers on the lobe boundary and the hemisphere's rim, and at directions
+    /// so close to the surface that wo.z · wi.z underflows. A Dirac specular layer, a coat or
+    /// transmission keep the walk.
+    #[test]
+    fn an_opaque_pair_samples_and_evaluates_as_the_walk_does() {
+        let d = Material::default();
+        let pairs_of = [
+            Material {
+                roughness: 0.5,
+                ..d
+            },
+            Material {
+                roughness: 1.0,
+                ..d
+            },
+            // α = 0.0025: a narrow lobe, but not a Dirac one.
+            Material {
+                roughness: 0.05,
+                metallic: 0.7,
+                ..d
+            },
+            Material {
+                roughness: 0.6,
+                specular: 0.7,
+                specular_color: Rgb::new(2.0, 1.0, 0.5),
+                ior: 1.8,
+                diffuse_model: DiffuseModel::OrenNayar,
+                oren_nayar_sigma: 0.5,
+                ..d
+            },
+        ];
+        let grazing = [
+            Vec3::new(1.0, 0.0, 1e-30),
+            Vec3::new(0.0, -1.0, -1e-30),
+            Vec3::new(1.0, 0.0, 0.0),
+        ];
+        let mut r = Rng::new(95, 0);
+        let (mut sampled, mut refused, mut specular) = (0, 0, 0);
+        for m in pairs_of {
+            let b = Bsdf::from_material(&m, Rgb::new(0.9, 0.6, 0.3));
+            assert!(b.opaque_pair().is_some(), "{m:?}");
+            let spec_weight = b.components[0].unwrap().1;
+            for wo in test_directions_both_sides().into_iter().chain(grazing) {
+                for k in 0..400 {
+                    let u = match k {
+                        0 => Vec2::new(ONE_MINUS_EPSILON, 0.3),
+                        1 => Vec2::new(1.0 - 1e-7, 0.7),
+                        _ => r.uniform2(),
+                    };
+                    let uc = match k {
+                        2 => spec_weight,
+                        3 => f32::from_bits(spec_weight.to_bits() - 1),
+                        _ => r.uniform(),
+                    };
+                    match (b.sample(wo, uc, u), b.sample_by_walk(wo, uc, u)) {
+                        (Some(a), Some(w)) => {
+                            assert_eq!(a.wi, w.wi);
+                            assert!(
+                                same_rgb(a.f, w.f) && same_float(a.pdf, w.pdf),
+                                "{m:?} {wo:?} {uc} {u:?}: {a:?} vs {w:?}"
+                            );
+                            assert_eq!((a.node, a.delta, a.eta), (w.node, w.delta, w.eta));
+                            sampled += 1;
+                            specular += (a.node == NodeType::GlossyReflection) as usize;
+                        }
+                        (None, None) => refused += 1,
+                        (a, w) => panic!("{m:?} {wo:?} {uc} {u:?}: pair {a:?}, walk {w:?}"),
+                    }
+                }
+            }
+            for (wo, wi) in direction_pairs(3000, 96) {
+                let ((f, p), (wf, wp)) = (b.eval_pdf(wo, wi), b.eval_pdf_by_walk(wo, wi));
+                assert!(same_rgb(f, wf) && same_float(p, wp), "{m:?} {wo:?} {wi:?}");
+            }
+        }
+        assert!(
+            sampled > 10_000 && specular > 1000 && refused > 0,
+            "{sampled} sampled ({specular} specular), {refused} refused"
+        );
+        for m in [
+            Material {
+                roughness: 0.0,
+                ..d
+            },
+            Material {
+                clearcoat: 0.5,
+                ..d
+            },
+            Material {
+                transmission: 0.5,
+                ..d
+            },
+            Material { metallic: 1.0, ..d },
+        ] {
+            let b = Bsdf::from_material(&m, Rgb::new(0.9, 0.6, 0.3));
+            assert!(b.opaque_pair().is_none(), "{m:?}");
         }
     }
 
