@@ -204,10 +204,23 @@ plugin = "mcpt"
     }
 }
 
-/// The wavefront sampler against the path-at-a-time one, sample by sample, bit for bit.
+/// The wavefront sampler against the path-at-a-time one, sample by sample, bit for bit: with
+/// every BSDF built per hit, and with the untextured materials' BSDFs from the scene's table
+/// (as plugins see them), whose light connections the wavefront evaluates only after their
+/// shadow rays.
 fn wavefront_matches(s: &Session, what: &str) {
     // SAFETY: the session keeps the view's data alive while `scene` is used.
     let scene = unsafe { Scene::from_view(s.instance.view()) };
+    wavefront_matches_in(s, &scene, &format!("{what}, BSDFs per hit"));
+    let mut tabled = scene;
+    // SAFETY: `_table` outlives `tabled`, the only scene that points at it.
+    let _table = unsafe { tabled.attach_constant_bsdfs() };
+    assert!(tabled.material_bsdfs.iter().any(Option::is_some), "{what}");
+    wavefront_matches_in(s, &tabled, &format!("{what}, table BSDFs"));
+}
+
+fn wavefront_matches_in(s: &Session, scene: &Scene, what: &str) {
+    let scene = *scene;
     let mut ut = UnitTracer::new(&s.scene, s.intersector.as_ref());
     let table = ut.table();
     let tracer = Tracer::new(&table);
@@ -254,5 +267,11 @@ fn wavefront_gives_each_sample_the_path_at_a_time_contributions() {
     wavefront_matches(
         &session("glass-caustic/glass-caustic.toml", 1, &[]),
         "glass",
+    );
+    // Textured materials (a BSDF built per hit, its connections evaluated before the shadow
+    // ray) beside untextured glTF ones (table BSDFs, evaluated after it).
+    wavefront_matches(
+        &session("blender-showcase/showcase.toml", 1, &[]),
+        "showcase",
     );
 }

@@ -11,7 +11,9 @@
 //! (in the white furnace of albedo ½ at N = 1: 1.245 instead of 1.5).
 
 use crate::settings::PathSettings;
-use crate::shading::{connect_light, connection_bsdf, light_connection, side_consistent, Shading};
+use crate::shading::{
+    connect_light, connection_value, light_connection, side_consistent, Connection, Shading,
+};
 use crate::SampleContributions;
 use flowlight_core::bsdf::volume;
 use flowlight_core::geometry::{Ray, SurfaceHit};
@@ -23,6 +25,7 @@ use flowlight_core::sampling::power_heuristic;
 use flowlight_core::Rgb;
 use flowlight_sdk::{Scene, Tracer};
 use glam::{Vec2, Vec3};
+use std::borrow::Cow;
 
 /// Traces one entangled path tree through raster position `raster`, adding each contribution
 /// to `out` with its lighting layer. `rng` is any [`SampleStream`]: independent numbers
@@ -108,11 +111,8 @@ pub fn trace<S: SampleStream>(
             rng.seek(physical, SLOT_LIGHT);
             if let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) {
                 if let Some(conn) = connect_light(scene, tracer, &hit, &shading, &ls) {
-                    if let Some((f, w_over_pdf)) = connection_bsdf(&bsdf, shading.wo, &conn) {
-                        out.add(
-                            depth,
-                            beta * f * conn.radiance * (conn.wi_local.z.abs() * w_over_pdf),
-                        );
+                    if let Some(value) = connection_value(beta, &bsdf, shading.wo, &conn) {
+                        out.add(depth, value);
                     }
                 }
             }
@@ -188,9 +188,36 @@ pub struct Wavefront<S = Rng> {
     rays: Vec<Ray>,
     hits: Vec<CompactHit>,
     shadow_rays: Vec<Ray>,
-    /// Per shadow ray: its path and the contribution it carries when unblocked.
-    shadow_owner: Vec<(u32, u32, Rgb)>,
+    /// Per shadow ray: what it adds to which path when unblocked.
+    shadow_owner: Vec<ShadowOwner>,
     blocked: Vec<u8>,
+}
+
+/// The light connection behind a shadow ray of a [`Wavefront`]: the path and layer it adds
+/// to, and its contribution, or what that needs where it is evaluated once the ray is known
+/// to be unblocked.
+#[derive(Clone, Copy, Debug)]
+struct ShadowOwner {
+    path: u32,
+    layer: u32,
+    pending: PendingConnection,
+}
+
+#[derive(Clone, Copy, Debug)]
+enum PendingConnection {
+    /// Evaluated at the vertex: its BSDF was built for the hit (textures, vertex colour) and
+    /// is not kept.
+    Value(Rgb),
+    /// The vertex's BSDF is its material's entry in the scene's table
+    /// ([`Scene::constant_bsdf`]): evaluated after the shadow ray, and only if unblocked.
+    /// Half of the dragon's shadow rays are blocked (`dragon.toml`), and the BSDF value and
+    /// density with the MIS weight cost about as much as a BSDF sample.
+    Deferred {
+        material: u32,
+        beta: Rgb,
+        wo: Vec3,
+        conn: Connection,
+    },
 }
 
 impl<S> Default for Wavefront<S> {
@@ -217,8 +244,11 @@ impl<S> Default for Wavefront<S> {
 /// operations as [`trace`] (its shadow ray is traced before its next extension ray, as there;
 /// shading uses [`Scene::surface`] on the compact hit, the host's own surface code), so
 /// `out[i]` equals what [`trace`] gives for the same start, bit for bit, and so does the
-/// image whatever the batch size. One difference that changes no pixel: a light connection
-/// whose contribution is black is not traced.
+/// image whatever the batch size. Like [`trace`], a connection from a vertex whose BSDF is
+/// its material's table entry is evaluated only once its shadow ray is known to be
+/// unblocked. Differences that change no pixel: a connection that the BSDF's sides say is
+/// black ([`flowlight_core::bsdf::Bsdf::is_zero_between`]) is not traced, and one from a
+/// vertex whose BSDF is built for the hit is evaluated first and not traced where black.
 pub fn trace_wavefront<S: SampleStream + Clone>(
     scene: &Scene,
     tracer: &Tracer,
@@ -267,8 +297,12 @@ pub fn trace_wavefront<S: SampleStream + Clone>(
             let going = if compact.is_hit() {
                 let hit = scene.surface(&path.ray, &compact);
                 let (going, shadow) = vertex(scene, settings, path, &hit, o, &mut wf.shadow_rays);
-                if let Some((layer, value)) = shadow {
-                    wf.shadow_owner.push((i, layer, value));
+                if let Some((layer, pending)) = shadow {
+                    wf.shadow_owner.push(ShadowOwner {
+                        path: i,
+                        layer,
+                        pending,
+                    });
                 }
                 going
             } else {
@@ -283,10 +317,27 @@ pub fn trace_wavefront<S: SampleStream + Clone>(
         wf.active.truncate(kept);
         if !wf.shadow_rays.is_empty() {
             tracer.occluded_batch(&wf.shadow_rays, &mut wf.blocked);
-            for (&(i, layer, value), &b) in wf.shadow_owner.iter().zip(&wf.blocked) {
-                if b == 0 {
-                    out[i as usize].add(layer, value);
+            for (owner, &b) in wf.shadow_owner.iter().zip(&wf.blocked) {
+                if b != 0 {
+                    continue;
                 }
+                let value = match owner.pending {
+                    PendingConnection::Value(value) => value,
+                    PendingConnection::Deferred {
+                        material,
+                        beta,
+                        wo,
+                        conn,
+                    } => {
+                        // The table entry `scene.bsdf` borrowed at the vertex.
+                        let bsdf = scene.constant_bsdf(material, [1.0; 4]);
+                        match bsdf.and_then(|b| connection_value(beta, b, wo, &conn)) {
+                            Some(value) if !value.is_black() => value,
+                            _ => continue,
+                        }
+                    }
+                };
+                out[owner.path as usize].add(owner.layer, value);
             }
         }
     }
@@ -308,7 +359,7 @@ fn escape<S>(scene: &Scene, path: &PathState<S>, out: &mut SampleContributions) 
 
 /// [`trace`]'s loop body at a hit, with the light connection's shadow ray pushed onto
 /// `shadow_rays` instead of traced. Returns whether the path goes on (with `path.ray`) and
-/// the (layer, contribution) of the shadow ray pushed, if one was.
+/// the (layer, connection) of the shadow ray pushed, if one was.
 #[inline]
 fn vertex<S: SampleStream>(
     scene: &Scene,
@@ -317,7 +368,7 @@ fn vertex<S: SampleStream>(
     hit: &SurfaceHit,
     out: &mut SampleContributions,
     shadow_rays: &mut Vec<Ray>,
-) -> (bool, Option<(u32, Rgb)>) {
+) -> (bool, Option<(u32, PendingConnection)>) {
     if let Some(sigma) = path.inside.take() {
         path.beta *= volume::transmittance(sigma, hit.t);
     }
@@ -362,13 +413,21 @@ fn vertex<S: SampleStream>(
         rng.seek(path.physical, SLOT_LIGHT);
         if let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) {
             if let Some((conn, ray)) = light_connection(scene, hit, &shading, &ls) {
-                if let Some((f, w_over_pdf)) = connection_bsdf(&bsdf, shading.wo, &conn) {
-                    let value =
-                        path.beta * f * conn.radiance * (conn.wi_local.z.abs() * w_over_pdf);
-                    if !value.is_black() {
-                        shadow_rays.push(ray);
-                        shadow = Some((depth, value));
-                    }
+                let pending = match &bsdf {
+                    _ if bsdf.is_zero_between(shading.wo, conn.wi_local) => None,
+                    Cow::Borrowed(_) => Some(PendingConnection::Deferred {
+                        material: hit.material,
+                        beta: path.beta,
+                        wo: shading.wo,
+                        conn,
+                    }),
+                    Cow::Owned(b) => connection_value(path.beta, b, shading.wo, &conn)
+                        .filter(|value| !value.is_black())
+                        .map(PendingConnection::Value),
+                };
+                if let Some(pending) = pending {
+                    shadow_rays.push(ray);
+                    shadow = Some((depth, pending));
                 }
             }
         }

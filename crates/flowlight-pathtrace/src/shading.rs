@@ -33,6 +33,7 @@ pub(crate) fn side_consistent(hit: &SurfaceHit, w_world: Vec3, w_local: Vec3) ->
 }
 
 /// An unoccluded light sample as seen from a hit.
+#[derive(Clone, Copy, Debug)]
 pub(crate) struct Connection {
     pub wi_local: Vec3,
     /// Radiance arriving along −wi (area, environment), I/d² (point, spot) or the irradiance
@@ -62,6 +63,15 @@ pub(crate) fn connection_bsdf(bsdf: &Bsdf, wo: Vec3, conn: &Connection) -> Optio
     }
     let (f, pdf) = bsdf.eval_pdf(wo, conn.wi_local);
     (!f.is_black()).then(|| (f, power_heuristic_over(conn.pdf, pdf)))
+}
+
+/// The contribution β · f · L · |cos θ_i| · (MIS weight / density) of an unoccluded
+/// connection ([`connection_bsdf`]); `None` where f is black. One expression for the
+/// samplers that evaluate it before the shadow ray and those that evaluate it after.
+#[inline]
+pub(crate) fn connection_value(beta: Rgb, bsdf: &Bsdf, wo: Vec3, conn: &Connection) -> Option<Rgb> {
+    let (f, w_over_pdf) = connection_bsdf(bsdf, wo, conn)?;
+    Some(beta * f * conn.radiance * (conn.wi_local.z.abs() * w_over_pdf))
 }
 
 /// Turns a light sample into a connection from `hit` if it carries light and is visible.

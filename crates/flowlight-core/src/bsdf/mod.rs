@@ -206,6 +206,21 @@ impl Component {
         }
     }
 
+    /// True for the components that only reflect: their value and density are zero wherever
+    /// ω_o and ω_i are not strictly on one side of the surface (each tests the sides before
+    /// anything else). The dielectric and the glTF transmission lobes are the others.
+    #[inline]
+    pub fn reflects_only(&self) -> bool {
+        match self {
+            Component::Lambert(_) | Component::OrenNayar(_) | Component::Conductor(_) => true,
+            Component::Dielectric(_) => false,
+            Component::Gltf(c) => matches!(
+                c.kind,
+                GltfLobeKind::Coat | GltfLobeKind::Specular | GltfLobeKind::Diffuse
+            ),
+        }
+    }
+
     /// Λα for Dirac and narrow glossy lobes (α < [`NARROW_GLOSSY_ALPHA`]), Λβ otherwise.
     #[inline]
     pub fn class(&self) -> NodeClass {
@@ -246,6 +261,8 @@ pub struct Bsdf {
     /// Whether the components are a [`gltf::OpaquePair`] (kept by [`Bsdf::summarise`]), which
     /// `eval_pdf` and `sample` take without the walk.
     opaque_pair: bool,
+    /// Whether every component only reflects ([`Component::reflects_only`]).
+    reflects_only: bool,
 }
 
 impl Bsdf {
@@ -297,6 +314,7 @@ impl Bsdf {
             albedo: 0.0,
             non_delta: false,
             opaque_pair: false,
+            reflects_only: false,
         };
         for &(l, w) in lobes.iter().take(MAX_COMPONENTS) {
             bsdf.components[bsdf.count] = Some((Component::Gltf(l), w));
@@ -315,6 +333,8 @@ impl Bsdf {
         let non_delta = self.components().any(|(c, _)| !c.is_delta());
         self.non_delta = non_delta;
         self.opaque_pair = self.two_gltf_lobes().is_some_and(|p| p.holds());
+        let reflects_only = self.components().all(|(c, _)| c.reflects_only());
+        self.reflects_only = reflects_only;
         self
     }
 
@@ -340,6 +360,7 @@ impl Bsdf {
             albedo: 0.0,
             non_delta: false,
             opaque_pair: false,
+            reflects_only: false,
         }
         .summarise()
     }
@@ -544,6 +565,17 @@ impl Bsdf {
             return None;
         }
         self.two_gltf_lobes()
+    }
+
+    /// True where the value and density at (`wo`, `wi`) are surely zero from the signs of the
+    /// two cosines alone: no component transmits and the directions are not strictly on one
+    /// side of the surface (a zero cosine counts as another side; a NaN one does not, since
+    /// the components' own side tests let NaN through). Then [`Bsdf::eval_pdf`] returns
+    /// zeros, so a light connection there can be dropped before it is evaluated or traced.
+    /// False says nothing: the BSDF may still be zero.
+    #[inline]
+    pub fn is_zero_between(&self, wo: Vec3, wi: Vec3) -> bool {
+        self.reflects_only && ((wo.z <= 0.0 && wi.z >= 0.0) || (wo.z >= 0.0 && wi.z <= 0.0))
     }
 
     /// True when some component is not a Dirac lobe, i.e. a light can be connected explicitly.
@@ -1004,7 +1036,8 @@ mod tests {
             ));
             b.components[3] = Some((Component::Lambert(Lambert { albedo: tint }), 0.1));
             b.count = 4;
-            out.push(b);
+            // The summary (albedo, Dirac, pair, reflection only) of the mixture as built.
+            out.push(b.summarise());
         }
         out
     }
@@ -1172,6 +1205,7 @@ mod tests {
             albedo: 0.0,
             non_delta: false,
             opaque_pair: false,
+            reflects_only: false,
         }
         .summarise();
         assert!(walk.lone_lambert().is_none());
@@ -1316,6 +1350,57 @@ mod tests {
             let b = Bsdf::from_material(&m, Rgb::new(0.9, 0.6, 0.3));
             assert!(b.opaque_pair().is_none(), "{m:?}");
         }
+    }
+
+    /// Where `is_zero_between` says so, every mixture is zero (value, density and their
+    /// one-pass form): at random pairs on both sides, pairs with a zero cosine (±0) and
+    /// grazing pairs. It says so for a fair share of the pairs of the reflection-only
+    /// mixtures, never for a mixture that transmits, and never with a NaN cosine.
+    #[test]
+    fn a_bsdf_is_zero_where_is_zero_between_says_so() {
+        let mut pairs = direction_pairs(3000, 97);
+        for z in [0.0, -0.0, 1e-30, -1e-30] {
+            for w in [dir(0.6, 1.1), flip(dir(1.2, 2.0))] {
+                pairs.push((Vec3::new(0.8, 0.6, z), w));
+                pairs.push((w, Vec3::new(0.6, -0.8, z)));
+            }
+        }
+        let nan = Vec3::new(0.0, 0.0, f32::NAN);
+        let (mut reflecting, mut transmitting) = (0, 0);
+        for b in every_mixture() {
+            let transmits = b.components().any(|(c, _)| {
+                matches!(c, Component::Dielectric(_))
+                    || matches!(c, Component::Gltf(l) if matches!(
+                        l.kind,
+                        GltfLobeKind::ThinTransmission | GltfLobeKind::Refraction
+                    ))
+            });
+            let mut zero = 0;
+            for &(wo, wi) in &pairs {
+                if !b.is_zero_between(wo, wi) {
+                    continue;
+                }
+                zero += 1;
+                let (f, p) = b.eval_pdf(wo, wi);
+                assert!(
+                    f.is_black() && p == 0.0 && b.eval(wo, wi).is_black() && b.pdf(wo, wi) == 0.0,
+                    "{b:?} at {wo:?} {wi:?}: ({f:?}, {p})"
+                );
+            }
+            assert!(!b.is_zero_between(nan, dir(0.6, 1.1)));
+            assert!(!b.is_zero_between(dir(0.6, 1.1), nan));
+            if transmits {
+                assert_eq!(zero, 0, "{b:?} transmits");
+                transmitting += 1;
+            } else {
+                assert!(zero > 1000, "{b:?}: {zero} pairs");
+                reflecting += 1;
+            }
+        }
+        assert!(
+            reflecting > 10 && transmitting > 5,
+            "{reflecting} {transmitting}"
+        );
     }
 
     /// A non-Dirac sample of a mixture carries `eval` and `pdf` at its direction bit for bit,
