@@ -412,7 +412,7 @@ fn vertex<S: SampleStream>(
     if bsdf.has_non_delta() {
         rng.seek(path.physical, SLOT_LIGHT);
         if let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) {
-            if let Some((conn, ray)) = light_connection(scene, hit, &shading, &ls) {
+            if let Some((conn, shadow_ray)) = light_connection(scene, hit, &shading, &ls) {
                 let pending = match &bsdf {
                     _ if bsdf.is_zero_between(shading.wo, conn.wi_local) => None,
                     Cow::Borrowed(_) => Some(PendingConnection::Deferred {
@@ -426,7 +426,7 @@ fn vertex<S: SampleStream>(
                         .map(PendingConnection::Value),
                 };
                 if let Some(pending) = pending {
-                    shadow_rays.push(ray);
+                    shadow_rays.push(shadow_ray.ray(hit));
                     shadow = Some((depth, pending));
                 }
             }

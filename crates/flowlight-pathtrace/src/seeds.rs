@@ -731,7 +731,7 @@ impl<S: SampleStream> Tree<S> {
         if bsdf.has_non_delta() {
             rng.seek(self.physical, SLOT_LIGHT);
             if let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) {
-                if let Some((conn, ray)) = light_connection(scene, hit, &shading, &ls) {
+                if let Some((conn, shadow)) = light_connection(scene, hit, &shading, &ls) {
                     if let Some((f, w_over_pdf)) = connection_bsdf(&bsdf, shading.wo, &conn) {
                         // The light's own density in the target's measure: area density on an
                         // area light, else what next-event estimation divides by.
@@ -768,7 +768,7 @@ impl<S: SampleStream> Tree<S> {
                                 out.push(count + 1, seed);
                             }
                             pending = Some(PendingConnection {
-                                ray,
+                                ray: shadow.ray(hit),
                                 stored: class.is_some(),
                                 layer: self.depth,
                                 estimate,

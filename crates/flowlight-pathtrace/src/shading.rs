@@ -83,8 +83,27 @@ pub(crate) fn connect_light(
     shading: &Shading,
     ls: &LightSample,
 ) -> Option<Connection> {
-    let (conn, ray) = light_connection(scene, hit, shading, ls)?;
-    (!tracer.occluded(&ray)).then_some(conn)
+    let (conn, shadow) = light_connection(scene, hit, shading, ls)?;
+    (!tracer.occluded(&shadow.ray(hit))).then_some(conn)
+}
+
+/// Where a connection's shadow ray goes, built only for the connections that are traced
+/// ([`ShadowRay::ray`]): its two offset ends are a tenth of a light connection's own work.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ShadowRay {
+    target: ShadowTarget,
+    wi: Vec3,
+}
+
+impl ShadowRay {
+    /// The ray from `hit`, the point the connection was made from.
+    #[inline]
+    pub fn ray(&self, hit: &SurfaceHit) -> Ray {
+        match self.target {
+            ShadowTarget::Point { p, p_error, n } => hit.shadow_ray_to(p, p_error, n),
+            ShadowTarget::Infinity => hit.spawn_ray(self.wi),
+        }
+    }
 }
 
 /// [`connect_light`] without the visibility test: the connection and the shadow ray that
@@ -95,7 +114,7 @@ pub(crate) fn light_connection(
     hit: &SurfaceHit,
     shading: &Shading,
     ls: &LightSample,
-) -> Option<(Connection, Ray)> {
+) -> Option<(Connection, ShadowRay)> {
     let inc = scene.lights.incident(ls, hit.p)?;
     if inc.radiance.is_black() || !(inc.pdf > 0.0 && inc.pdf.is_finite()) {
         return None;
@@ -104,9 +123,9 @@ pub(crate) fn light_connection(
     if !side_consistent(hit, inc.wi, wi_local) {
         return None;
     }
-    let ray = match inc.target {
-        ShadowTarget::Point { p, p_error, n } => hit.shadow_ray_to(p, p_error, n),
-        ShadowTarget::Infinity => hit.spawn_ray(inc.wi),
+    let shadow = ShadowRay {
+        target: inc.target,
+        wi: inc.wi,
     };
     let conn = Connection {
         wi_local,
@@ -114,5 +133,5 @@ pub(crate) fn light_connection(
         pdf: inc.pdf,
         delta: inc.delta,
     };
-    Some((conn, ray))
+    Some((conn, shadow))
 }
