@@ -209,7 +209,7 @@ impl SurfaceHit {
     /// (1 − 10⁻⁴: the same point short of the target). Ray queries take any direction
     /// length; the square root and division of the normalisation sat on the light
     /// connection's chain of dependent operations.
-    #[inline]
+    #[inline(always)]
     pub fn shadow_ray_to(&self, target: Vec3, target_error: Vec3, target_ng: Vec3) -> Ray {
         let o = offset_ray_origin(self.p, self.p_error, self.ng, target - self.p);
         let t = offset_ray_origin(target, target_error, target_ng, o - target);

@@ -296,15 +296,8 @@ pub fn trace_wavefront<S: SampleStream + Clone>(
             scene.prefetch_surfaces(&wf.hits, k);
             let going = if compact.is_hit() {
                 let hit = scene.surface(&path.ray, &compact);
-                let (going, shadow) = vertex(scene, settings, path, &hit, o, &mut wf.shadow_rays);
-                if let Some((layer, pending)) = shadow {
-                    wf.shadow_owner.push(ShadowOwner {
-                        path: i,
-                        layer,
-                        pending,
-                    });
-                }
-                going
+                let shadows = (&mut wf.shadow_rays, &mut wf.shadow_owner);
+                vertex(scene, settings, path, i, &hit, o, shadows)
             } else {
                 escape(scene, path, o);
                 false
@@ -357,18 +350,20 @@ fn escape<S>(scene: &Scene, path: &PathState<S>, out: &mut SampleContributions) 
     }
 }
 
-/// [`trace`]'s loop body at a hit, with the light connection's shadow ray pushed onto
-/// `shadow_rays` instead of traced. Returns whether the path goes on (with `path.ray`) and
-/// the (layer, connection) of the shadow ray pushed, if one was.
+/// [`trace`]'s loop body at a hit of path `index`, with the light connection's shadow ray
+/// and its [`ShadowOwner`] pushed onto `shadows` instead of traced (in place: a connection
+/// returned through the caller's stack was reloaded wider than it was stored, a stall on
+/// every connection). Returns whether the path goes on (with `path.ray`).
 #[inline]
 fn vertex<S: SampleStream>(
     scene: &Scene,
     settings: &PathSettings,
     path: &mut PathState<S>,
+    index: u32,
     hit: &SurfaceHit,
     out: &mut SampleContributions,
-    shadow_rays: &mut Vec<Ray>,
-) -> (bool, Option<(u32, PendingConnection)>) {
+    (shadow_rays, shadow_owner): (&mut Vec<Ray>, &mut Vec<ShadowOwner>),
+) -> bool {
     if let Some(sigma) = path.inside.take() {
         path.beta *= volume::transmittance(sigma, hit.t);
     }
@@ -391,7 +386,7 @@ fn vertex<S: SampleStream>(
         }
     }
     if path.last {
-        return (false, None);
+        return false;
     }
     let bsdf = scene.bsdf(hit);
     let next_depth = if path.depth == 0 && bsdf.is_delta() {
@@ -400,7 +395,7 @@ fn vertex<S: SampleStream>(
         path.depth + 1
     };
     if next_depth > settings.path_depth {
-        return (false, None);
+        return false;
     }
     path.depth = next_depth;
     path.physical += 1;
@@ -408,7 +403,6 @@ fn vertex<S: SampleStream>(
     let shading = Shading::new(hit, wo_world);
     let rng = &mut path.rng;
 
-    let mut shadow = None;
     if bsdf.has_non_delta() {
         rng.seek(path.physical, SLOT_LIGHT);
         if let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) {
@@ -427,7 +421,11 @@ fn vertex<S: SampleStream>(
                 };
                 if let Some(pending) = pending {
                     shadow_rays.push(shadow_ray.ray(hit));
-                    shadow = Some((depth, pending));
+                    shadow_owner.push(ShadowOwner {
+                        path: index,
+                        layer: depth,
+                        pending,
+                    });
                 }
             }
         }
@@ -448,21 +446,21 @@ fn vertex<S: SampleStream>(
     if !path.last && t > 0.0 {
         rng.seek(path.physical, SLOT_ROULETTE);
         if rng.uniform() < t {
-            return (false, shadow);
+            return false;
         }
         path.beta /= 1.0 - t;
     }
     rng.seek(path.physical, SLOT_BSDF);
     let Some(s) = bsdf.sample(shading.wo, rng.uniform(), rng.uniform2()) else {
-        return (false, shadow);
+        return false;
     };
     let wi_world = shading.frame.to_world(s.wi);
     if !side_consistent(hit, wi_world, s.wi) {
-        return (false, shadow);
+        return false;
     }
     path.beta *= s.f * (s.wi.z.abs() / s.pdf);
     if path.beta.is_black() {
-        return (false, shadow);
+        return false;
     }
     path.eta2 *= s.eta * s.eta;
     path.prev_delta = s.delta;
@@ -470,5 +468,5 @@ fn vertex<S: SampleStream>(
     path.prev_p = hit.p;
     path.inside = volume::entered(scene.material(hit), hit.ng, wi_world);
     path.ray = hit.spawn_ray(wi_world);
-    (true, shadow)
+    true
 }

@@ -97,7 +97,7 @@ pub(crate) struct ShadowRay {
 
 impl ShadowRay {
     /// The ray from `hit`, the point the connection was made from.
-    #[inline]
+    #[inline(always)]
     pub fn ray(&self, hit: &SurfaceHit) -> Ray {
         match self.target {
             ShadowTarget::Point { p, p_error, n } => hit.shadow_ray_to(p, p_error, n),
