@@ -483,6 +483,7 @@ impl Bsdf {
     /// The mixture's f and pdf come from one pass ([`Bsdf::eval_pdf`]) that takes the chosen
     /// component's own terms from the sample where they are provably the same; f and pdf are
     /// bit for bit `eval(wo, s.wi)` and `pdf(wo, s.wi)`.
+    #[inline(always)]
     pub fn sample(&self, wo: Vec3, u_component: f32, u: Vec2) -> Option<BsdfSample> {
         if let Some(lambert) = self.lone_lambert() {
             // The walk below, for one Lambert component of weight 1, returns this sample
@@ -494,6 +495,15 @@ impl Bsdf {
             let s = lambert.sample(wo, u)?;
             return (wo.z * s.wi.z > 0.0).then_some(s);
         }
+        self.sample_mixture(wo, u_component, u)
+    }
+
+    /// [`Bsdf::sample`] of every mixture but the lone Lambert, out of line: `sample` itself is
+    /// inlined into its callers so that a Lambert sample stays in registers (returned through
+    /// memory, its direction was reloaded wider than it was stored, a store-forwarding stall
+    /// at every diffuse vertex), and this keeps the glTF code out of them.
+    #[inline(never)]
+    fn sample_mixture(&self, wo: Vec3, u_component: f32, u: Vec2) -> Option<BsdfSample> {
         if let Some(pair) = self.opaque_pair() {
             return pair.sample(wo, u_component, u);
         }
