@@ -54,9 +54,13 @@ pub(crate) struct Connection {
 /// factor 1/pdf, no BSDF density needed. Otherwise f and the density come from one
 /// [`Bsdf::eval_pdf`] pass, which gives `eval` and `pdf` bit for bit. The one place the
 /// samplers weight a connection, so the path-at-a-time and wavefront tracers agree by
-/// construction.
+/// construction. Where [`Bsdf::is_zero_between`] says f is zero, it is `None` without an
+/// evaluation (the evaluation's answer too).
 #[inline]
 pub(crate) fn connection_bsdf(bsdf: &Bsdf, wo: Vec3, conn: &Connection) -> Option<(Rgb, f32)> {
+    if bsdf.is_zero_between(wo, conn.wi_local) {
+        return None;
+    }
     if conn.delta {
         let f = bsdf.eval(wo, conn.wi_local);
         return (!f.is_black()).then(|| (f, 1.0 / conn.pdf));
