@@ -1194,6 +1194,47 @@ mod tests {
         assert!(deltas > 0, "some all-Dirac mixture was checked");
     }
 
+    /// Directions so close to the surface that wo.z · wi.z underflows to zero, and one in it.
+    const GRAZING: [Vec3; 3] = [
+        Vec3::new(1.0, 0.0, 1e-30),
+        Vec3::new(0.0, -1.0, -1e-30),
+        Vec3::new(1.0, 0.0, 0.0),
+    ];
+
+    /// The direction numbers of draw `k` of a loop: near 1 for the first two (cos θ_i close to
+    /// 0 at the hemisphere's rim), random after.
+    fn rim_or_random(k: usize, r: &mut Rng) -> Vec2 {
+        match k {
+            0 => Vec2::new(ONE_MINUS_EPSILON, 0.3),
+            1 => Vec2::new(1.0 - 1e-7, 0.7),
+            _ => r.uniform2(),
+        }
+    }
+
+    /// Asserts that two ways of sampling gave one sample bit for bit (direction, value,
+    /// density, kind) or both refused; true where they drew one.
+    fn same_sample(
+        a: Option<BsdfSample>,
+        b: Option<BsdfSample>,
+        context: impl Fn() -> String,
+    ) -> bool {
+        match (a, b) {
+            (Some(a), Some(b)) => {
+                assert!(
+                    a.wi == b.wi
+                        && same_rgb(a.f, b.f)
+                        && same_float(a.pdf, b.pdf)
+                        && (a.node, a.delta, a.eta) == (b.node, b.delta, b.eta),
+                    "{}: {a:?} vs {b:?}",
+                    context()
+                );
+                true
+            }
+            (None, None) => false,
+            (a, b) => panic!("{}: {a:?} vs {b:?}", context()),
+        }
+    }
+
     /// A lone Lambert component samples and evaluates without the mixture walk, and gives
     /// what the walk gives bit for bit: the walk is taken by the same Lambert beside a second, black
     /// component of weight 0 (which adds +0 to the value and the density), also at
@@ -1219,34 +1260,16 @@ mod tests {
         }
         .summarise();
         assert!(walk.lone_lambert().is_none());
-        let grazing = [
-            Vec3::new(1.0, 0.0, 1e-30),
-            Vec3::new(0.0, -1.0, -1e-30),
-            Vec3::new(1.0, 0.0, 0.0),
-        ];
         let mut r = Rng::new(93, 0);
         let (mut sampled, mut refused) = (0, 0);
-        for wo in test_directions_both_sides().into_iter().chain(grazing) {
+        for wo in test_directions_both_sides().into_iter().chain(GRAZING) {
             for k in 0..300 {
-                // Near-0 and near-1 numbers too: cos θ_i close to 0 at the hemisphere's rim.
-                let u = match k {
-                    0 => Vec2::new(ONE_MINUS_EPSILON, 0.3),
-                    1 => Vec2::new(1.0 - 1e-7, 0.7),
-                    _ => r.uniform2(),
-                };
+                let u = rim_or_random(k, &mut r);
                 let uc = r.uniform();
-                match (lone.sample(wo, uc, u), walk.sample(wo, uc, u)) {
-                    (Some(a), Some(b)) => {
-                        assert_eq!(a.wi, b.wi);
-                        assert!(
-                            same_rgb(a.f, b.f) && same_float(a.pdf, b.pdf),
-                            "{wo:?} {u:?}"
-                        );
-                        assert_eq!((a.node, a.delta, a.eta), (b.node, b.delta, b.eta));
-                        sampled += 1;
-                    }
-                    (None, None) => refused += 1,
-                    (a, b) => panic!("{wo:?} {u:?}: lone {a:?}, walk {b:?}"),
+                let (a, b) = (lone.sample(wo, uc, u), walk.sample(wo, uc, u));
+                match same_sample(a, b, || format!("lone against walk at {wo:?} {u:?}")) {
+                    true => sampled += 1,
+                    false => refused += 1,
                 }
             }
         }
@@ -1294,42 +1317,27 @@ mod tests {
                 ..d
             },
         ];
-        let grazing = [
-            Vec3::new(1.0, 0.0, 1e-30),
-            Vec3::new(0.0, -1.0, -1e-30),
-            Vec3::new(1.0, 0.0, 0.0),
-        ];
         let mut r = Rng::new(95, 0);
         let (mut sampled, mut refused, mut specular) = (0, 0, 0);
         for m in pairs_of {
             let b = Bsdf::from_material(&m, Rgb::new(0.9, 0.6, 0.3));
             assert!(b.opaque_pair().is_some(), "{m:?}");
             let spec_weight = b.components[0].unwrap().1;
-            for wo in test_directions_both_sides().into_iter().chain(grazing) {
+            for wo in test_directions_both_sides().into_iter().chain(GRAZING) {
                 for k in 0..400 {
-                    let u = match k {
-                        0 => Vec2::new(ONE_MINUS_EPSILON, 0.3),
-                        1 => Vec2::new(1.0 - 1e-7, 0.7),
-                        _ => r.uniform2(),
-                    };
+                    let u = rim_or_random(k, &mut r);
                     let uc = match k {
                         2 => spec_weight,
                         3 => f32::from_bits(spec_weight.to_bits() - 1),
                         _ => r.uniform(),
                     };
-                    match (b.sample(wo, uc, u), b.sample_by_walk(wo, uc, u)) {
-                        (Some(a), Some(w)) => {
-                            assert_eq!(a.wi, w.wi);
-                            assert!(
-                                same_rgb(a.f, w.f) && same_float(a.pdf, w.pdf),
-                                "{m:?} {wo:?} {uc} {u:?}: {a:?} vs {w:?}"
-                            );
-                            assert_eq!((a.node, a.delta, a.eta), (w.node, w.delta, w.eta));
-                            sampled += 1;
-                            specular += (a.node == NodeType::GlossyReflection) as usize;
-                        }
-                        (None, None) => refused += 1,
-                        (a, w) => panic!("{m:?} {wo:?} {uc} {u:?}: pair {a:?}, walk {w:?}"),
+                    let (a, w) = (b.sample(wo, uc, u), b.sample_by_walk(wo, uc, u));
+                    specular += a.is_some_and(|a| a.node == NodeType::GlossyReflection) as usize;
+                    match same_sample(a, w, || {
+                        format!("pair against walk, {m:?} {wo:?} {uc} {u:?}")
+                    }) {
+                        true => sampled += 1,
+                        false => refused += 1,
                     }
                 }
             }
