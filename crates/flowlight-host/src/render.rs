@@ -240,6 +240,34 @@ pub const TIMED_PASSES_PER_ROUND: usize = 16;
 /// make the round's per-pass counters huge (one barrier per 1024 passes costs nothing).
 pub const PASSES_PER_ROUND: usize = 1024;
 
+/// The passes of one round, as (first sample, samples), from sample `begin` towards `end`:
+/// at most `most` of them, the first of `pass_spp` samples. Returns them with the sample and
+/// the pass size the next round starts from.
+///
+/// Short passes first for a quick first look at every tile, then longer ones to amortise
+/// scheduling: a tile-local integrator's passes double up to 16 samples. Deposits of a
+/// flanged unit land in its neighbours too: a pass stopped half-way would leave them
+/// normalised by their own (smaller) sample counts, so such integrators (`tiled` false) keep
+/// one-sample passes and a stop costs at most that imbalance.
+fn round_passes(
+    mut begin: u32,
+    end: u32,
+    mut pass_spp: u32,
+    most: usize,
+    tiled: bool,
+) -> (Vec<(u32, u32)>, u32, u32) {
+    let mut passes = Vec::new();
+    while begin < end && passes.len() < most {
+        let count = pass_spp.min(end - begin);
+        passes.push((begin, count));
+        begin += count;
+        if tiled {
+            pass_spp = (pass_spp * 2).min(16);
+        }
+    }
+    (passes, begin, pass_spp)
+}
+
 /// The pool size for `requested` threads (0: one per core), clamped to
 /// [`MAX_THREADS_PER_CORE`] × the cores with a warning.
 ///
@@ -512,21 +540,10 @@ pub fn render(
         } else {
             PASSES_PER_ROUND
         };
-        let mut passes: Vec<(u32, u32)> = Vec::new();
         let round_end = sample_begin.saturating_add(remaining);
-        while sample_begin < round_end && passes.len() < passes_per_round {
-            let count = pass_spp.min(round_end - sample_begin);
-            passes.push((sample_begin, count));
-            sample_begin += count;
-            // Short passes first for a quick first look at every tile, then longer ones to
-            // amortise scheduling. Deposits of a flanged unit land in its neighbours too: a
-            // pass stopped half-way would leave them normalised by their own (smaller) sample
-            // counts, so such integrators keep one-sample passes and a stop costs at most that
-            // imbalance.
-            if tiled {
-                pass_spp = (pass_spp * 2).min(16);
-            }
-        }
+        let passes;
+        (passes, sample_begin, pass_spp) =
+            round_passes(sample_begin, round_end, pass_spp, passes_per_round, tiled);
         let skipped = AtomicBool::new(false);
         let round_done = AtomicU64::new(0);
         let pass_units: Vec<AtomicU64> = passes.iter().map(|_| AtomicU64::new(0)).collect();
@@ -733,6 +750,32 @@ pub fn render(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// 17,000 samples of a tile-local integrator are passes of 1, 2, 4, 8, then 16 samples
+    /// and a last one of 9: 1066 passes, so two rounds of at most [`PASSES_PER_ROUND`]. A
+    /// flanged integrator's passes stay at one sample each; an empty range has no pass.
+    #[test]
+    fn rounds_split_the_passes_and_continue_where_the_last_stopped() {
+        let (first, next, spp) = round_passes(0, 17_000, 1, PASSES_PER_ROUND, true);
+        assert_eq!(first.len(), PASSES_PER_ROUND);
+        assert_eq!(first[..5], [(0, 1), (1, 2), (3, 4), (7, 8), (15, 16)]);
+        assert_eq!((next, spp), (15 + 16 * 1020, 16));
+        let (second, end, _) = round_passes(next, 17_000, spp, PASSES_PER_ROUND, true);
+        assert_eq!(second.len(), 1066 - PASSES_PER_ROUND);
+        assert_eq!(second.first(), Some(&(next, 16)));
+        assert_eq!(second.last(), Some(&(16_991, 9)));
+        assert_eq!(end, 17_000);
+        // Contiguous and complete: every sample once.
+        let all: Vec<_> = first.iter().chain(&second).collect();
+        assert!(all.windows(2).all(|w| w[0].0 + w[0].1 == w[1].0));
+        assert_eq!(all.iter().map(|p| p.1).sum::<u32>(), 17_000);
+
+        let (flanged, next, spp) = round_passes(5, 8, 1, 16, false);
+        assert_eq!((flanged, next, spp), (vec![(5, 1), (6, 1), (7, 1)], 8, 1));
+        let (one, _, _) = round_passes(0, 100, 1, 1, false);
+        assert_eq!(one, [(0, 1)]);
+        assert!(round_passes(9, 9, 4, 16, true).0.is_empty());
+    }
 
     #[test]
     fn frame_bytes_counts_frame_and_output_buffers_without_overflow() {
