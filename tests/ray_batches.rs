@@ -261,6 +261,66 @@ fn wavefront_matches_in(s: &Session, scene: &Scene, what: &str) {
     }
 }
 
+/// Skipping the light sample where every light is behind a reflection-only surface
+/// (`Scene::lights_behind`) changes no contribution: the wavefront with the scene's light
+/// bound against the same wavefront without it, sample by sample, bit for bit, in the room
+/// lit from behind a partition, where the bound does skip at many camera hits.
+#[test]
+fn skipping_lights_behind_a_surface_changes_no_contribution() {
+    let s = session("indirect-room/indirect-room.toml", 1, &[]);
+    // SAFETY: the session keeps the view's data alive while the scenes are used.
+    let mut scene = unsafe { Scene::from_view(s.instance.view()) };
+    // SAFETY: `_table` outlives `scene` and `blind`, the scenes that point at it.
+    let _table = unsafe { scene.attach_constant_bsdfs() };
+    assert!(scene.light_bound.is_some());
+    let blind = Scene {
+        light_bound: None,
+        ..scene
+    };
+    let mut ut = UnitTracer::new(&s.scene, s.intersector.as_ref());
+    let table = ut.table();
+    let tracer = Tracer::new(&table);
+    let settings = PathSettings::from_params(&Params::from_slice(&[])).unwrap();
+    let n = 20_000;
+    let (w, h) = (s.camera.width as f32, s.camera.height as f32);
+    let mut starts = Vec::new();
+    let mut skipped = 0;
+    for i in 0..n {
+        let mut rng = Rng::new(Rng::hash(&[11, i as u64]), 0);
+        let raster = rng.uniform2() * Vec2::new(w, h);
+        let ray = scene.camera.generate_ray(raster);
+        if let Some(hit) = tracer.intersect(&ray) {
+            let wo_z = (-ray.dir).dot(hit.ns);
+            let bsdf = scene.bsdf(&hit);
+            skipped += (bsdf.reflects_only() && scene.lights_behind(hit.p, hit.ns, wo_z)) as usize;
+        }
+        starts.push((rng, raster));
+    }
+    assert!(
+        skipped > n / 20,
+        "{skipped} camera hits with every light behind"
+    );
+    let mut wf = entangled::Wavefront::default();
+    let trace = |scene: &Scene, wf: &mut entangled::Wavefront| {
+        let mut out = vec![SampleContributions::default(); n];
+        entangled::trace_wavefront(scene, &tracer, &settings, &starts, wf, &mut out);
+        out.iter()
+            .map(|c| {
+                c.entries
+                    .iter()
+                    .map(|(l, v)| (*l, v.r.to_bits(), v.g.to_bits(), v.b.to_bits()))
+                    .collect::<Vec<_>>()
+            })
+            .collect::<Vec<_>>()
+    };
+    let (with, without) = (trace(&scene, &mut wf), trace(&blind, &mut wf));
+    let lit = with.iter().filter(|c| !c.is_empty()).count();
+    assert!(lit > n / 20, "{lit} lit samples");
+    for (i, (a, b)) in with.iter().zip(&without).enumerate() {
+        assert_eq!(a, b, "sample {i}");
+    }
+}
+
 #[test]
 fn wavefront_gives_each_sample_the_path_at_a_time_contributions() {
     wavefront_matches(&session("cornell-box/cornell-box.toml", 1, &[]), "cornell");

@@ -85,7 +85,9 @@ pub fn scene() -> Scene<'static> {
         bounds_max: Vec3::splat(3.0),
         mesh: Default::default(),
         material_bsdfs: &[],
+        light_bound: None,
     }
+    .with_light_bound()
 }
 
 /// A floor vertex at `p` (normal +Y) scattered diffusely.

@@ -36,6 +36,31 @@ pub struct Scene<'a> {
     /// hit) until the plugin glue attaches the table it owns; the result is the same bit for
     /// bit either way.
     pub material_bsdfs: &'a [Option<Bsdf>],
+    /// A sphere (centre, radius) holding every point an area light can be sampled at, where
+    /// every light is an area emitter ([`light_bound`]); `None` where a punctual light or an
+    /// environment can light a point from any side, and in scenes built by hand.
+    /// [`Scene::lights_behind`] reads it.
+    pub light_bound: Option<(Vec3, f32)>,
+}
+
+/// The sphere of [`Scene::light_bound`] for these lights: the emitters' vertices' bounding
+/// box's centre and the largest distance from it to a vertex, widened past the rounding of
+/// a sampled point (a barycentric combination of the vertices). `None` without emitters or
+/// with a punctual light or an environment.
+pub fn light_bound(lights: &Lights) -> Option<(Vec3, f32)> {
+    if lights.emitters.is_empty() || !lights.punctual.is_empty() || lights.environment.is_present()
+    {
+        return None;
+    }
+    let points = || lights.emitters.iter().flat_map(|e| [e.p0, e.p1, e.p2]);
+    let (lo, hi) = points().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
+        (lo.min(p), hi.max(p))
+    });
+    let centre = (lo + hi) * 0.5;
+    let radius = points().map(|p| p.distance(centre)).fold(0.0f32, f32::max);
+    let scale = lo.abs().max(hi.abs()).max_element();
+    let radius = radius * (1.0 + 1e-4) + 16.0 * f32::EPSILON * scale;
+    (centre.is_finite() && radius.is_finite()).then_some((centre, radius))
 }
 
 /// The BSDF of each material whose BSDF is the same at every hit without vertex colour: one
@@ -124,8 +149,45 @@ impl<'a> Scene<'a> {
                 bounds_max: v.bounds_max,
                 mesh,
                 material_bsdfs: &[],
+                light_bound: None,
             }
+            .with_light_bound()
         }
+    }
+
+    /// This scene with [`Scene::light_bound`] computed from its lights (one pass over the
+    /// emitters).
+    pub fn with_light_bound(mut self) -> Self {
+        self.light_bound = light_bound(&self.lights);
+        self
+    }
+
+    /// True where no light sample can reach the side of the surface at `p` that the outgoing
+    /// direction is on (`wo_z`, its cosine with the shading normal `ns`): every light is an
+    /// area emitter inside [`Scene::light_bound`] and that sphere lies wholly on the other side
+    /// of the plane through `p`, by a margin far above the rounding of a connection's
+    /// direction. Then every connection from `p` has ω_o and ω_i on two sides, where a BSDF
+    /// that only reflects is zero ([`flowlight_core::bsdf::Bsdf::is_zero_between`]): a
+    /// sampler can skip the light sample (drawing its numbers all the same) and lose nothing.
+    /// False where `wo_z` is 0 or NaN, or without a bound.
+    #[inline]
+    pub fn lights_behind(&self, p: Vec3, ns: Vec3, wo_z: f32) -> bool {
+        let Some((centre, radius)) = self.light_bound else {
+            return false;
+        };
+        let side = if wo_z > 0.0 {
+            1.0
+        } else if wo_z < 0.0 {
+            -1.0
+        } else {
+            return false;
+        };
+        let to_centre = centre - p;
+        // A thousandth of the distance (|x| ≤ 2 max |xᵢ|) plus the rounding of p and of a
+        // sampled point's coordinates.
+        let margin = 1e-3 * (2.0 * to_centre.abs().max_element() + radius)
+            + 16.0 * f32::EPSILON * (p.abs().max_element() + centre.abs().max_element() + radius);
+        side * to_centre.dot(ns) + radius < -margin
     }
 
     /// Builds the view a host passes across the boundary for these tables.
@@ -268,9 +330,100 @@ pub fn mesh_tables(m: &MeshView) -> MeshTables {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use flowlight_core::light::Environment;
     use flowlight_core::material::{TexelFormat, TextureRef, Wrap};
     use flowlight_core::rng::Rng;
+    use flowlight_core::sampling::uniform_sphere;
     use flowlight_core::Rgb;
+
+    fn emitter(p0: Vec3, p1: Vec3, p2: Vec3) -> Emitter {
+        let n = (p1 - p0).cross(p2 - p0);
+        Emitter {
+            p0,
+            p1,
+            p2,
+            n: n.normalize(),
+            area: 0.5 * n.length(),
+            radiance: Rgb::ONE,
+            double_sided: 1,
+            prim: 0,
+            material: u32::MAX,
+            uv0: [Vec2::ZERO; 3],
+            uv1: [Vec2::ZERO; 3],
+        }
+    }
+
+    /// Where `lights_behind` says every light is behind, every sampled light point is
+    /// strictly on the other side of the shading plane from ω_o, as the connection computes
+    /// it (its direction in the shading frame), so a reflection-only BSDF is zero there: at
+    /// random points, normals and sides around a small lamp and a large one far from the
+    /// origin. It says so often, and never with ω_o in the plane, for a lamp in front, or
+    /// with a punctual light or an environment in the scene.
+    #[test]
+    fn lights_behind_means_every_light_point_is_across_the_surface() {
+        let mut r = Rng::new(3, 0);
+        for (offset, size) in [(Vec3::ZERO, 0.2), (Vec3::new(3000.0, -500.0, 40.0), 50.0)] {
+            let es = [
+                emitter(offset, offset + Vec3::X * size, offset + Vec3::Z * size),
+                emitter(
+                    offset + Vec3::X * size,
+                    offset + Vec3::new(size, 0.0, size),
+                    offset + Vec3::Z * size,
+                ),
+            ];
+            let cdf = [0.5, 1.0];
+            let lights = Lights::area_only(&es, &cdf);
+            let bound = light_bound(&lights).unwrap();
+            let scene = Scene {
+                camera: Camera::look_along(Vec3::Z, -Vec3::Z, Vec3::Y, 60.0, 4, 4),
+                materials: &[],
+                textures: &[],
+                lights,
+                bounds_min: Vec3::ZERO,
+                bounds_max: Vec3::ONE,
+                mesh: MeshView::default(),
+                material_bsdfs: &[],
+                light_bound: Some(bound),
+            };
+            let (mut behind, mut checked) = (0, 0);
+            for _ in 0..20_000 {
+                let p = offset + uniform_sphere(r.uniform2()) * (size * 4.0 * r.uniform());
+                let ns = uniform_sphere(r.uniform2());
+                let wo_z = r.uniform() - 0.5;
+                if !scene.lights_behind(p, ns, wo_z) {
+                    continue;
+                }
+                behind += 1;
+                let frame = flowlight_core::geometry::Frame::from_z(ns);
+                for _ in 0..20 {
+                    let ls = scene.lights.sample(r.uniform(), r.uniform2()).unwrap();
+                    let inc = scene.lights.incident(&ls, p);
+                    let Some(inc) = inc else { continue };
+                    let wi_z = frame.to_local(inc.wi).z;
+                    assert!(wo_z * wi_z < 0.0, "p {p:?} ns {ns:?} wo {wo_z}: wi {wi_z}");
+                    checked += 1;
+                }
+            }
+            assert!(behind > 2000 && checked > 10_000, "{behind} {checked}");
+            // ω_o in the plane, or NaN: not decided by the sides.
+            let below = offset - Vec3::Y * size;
+            assert!(scene.lights_behind(below, -Vec3::Y, 0.5));
+            assert!(!scene.lights_behind(below, -Vec3::Y, -0.5));
+            assert!(!scene.lights_behind(below, -Vec3::Y, 0.0));
+            assert!(!scene.lights_behind(below, -Vec3::Y, f32::NAN));
+            // A lamp in the plane of the point is not behind it.
+            assert!(!scene.lights_behind(offset - Vec3::X * size, Vec3::Y, 0.5));
+        }
+        let es = [emitter(Vec3::ZERO, Vec3::X, Vec3::Z)];
+        let point = [PunctualLight::point(Vec3::Y, Rgb::ONE)];
+        let mut lights = Lights::area_only(&es, &[0.5, 1.0]);
+        lights.punctual = &point;
+        assert_eq!(light_bound(&lights), None);
+        let mut lights = Lights::area_only(&es, &[0.5, 1.0]);
+        lights.environment = Environment::constant(Rgb::ONE);
+        assert_eq!(light_bound(&lights), None);
+        assert_eq!(light_bound(&Lights::area_only(&[], &[])), None);
+    }
 
     /// The cached BSDF of an untextured material is the per-hit BSDF bit for bit (values,
     /// densities and samples over random directions); a material with a texture that enters the

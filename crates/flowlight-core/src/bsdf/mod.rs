@@ -577,6 +577,13 @@ impl Bsdf {
         self.two_gltf_lobes()
     }
 
+    /// True when no component transmits ([`Component::reflects_only`]): the value and
+    /// density are zero wherever ω_o and ω_i are not strictly on one side.
+    #[inline]
+    pub fn reflects_only(&self) -> bool {
+        self.reflects_only
+    }
+
     /// True where the value and density at (`wo`, `wi`) are surely zero from the signs of the
     /// two cosines alone: no component transmits and the directions are not strictly on one
     /// side of the surface (a zero cosine counts as another side; a NaN one does not, since
