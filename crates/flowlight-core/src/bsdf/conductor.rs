@@ -10,7 +10,7 @@
 //!
 //! Two-sided: for `wo.z < 0` both directions are mirrored through the surface (z negated).
 
-use super::microfacet::{reflect, Ggx};
+use super::microfacet::Ggx;
 use super::{BsdfSample, DELTA_ALPHA};
 use crate::path::NodeType;
 use crate::Rgb;
@@ -137,16 +137,7 @@ impl Conductor {
             });
         }
         let ggx = self.ggx();
-        let wm = ggx.sample_wm(wo, u);
-        let d = wo.dot(wm);
-        if d <= 0.0 {
-            return None;
-        }
-        let wi = reflect(wo, wm).normalize();
-        if wi.z <= 0.0 {
-            return None;
-        }
-        let pdf = ggx.pdf_wm(wo, wm) / (4.0 * d);
+        let (wi, wm, d, pdf) = ggx.sample_reflection(wo, u)?;
         if pdf.is_nan() || pdf <= 0.0 {
             return None;
         }

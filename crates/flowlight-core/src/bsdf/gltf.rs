@@ -74,7 +74,7 @@
 //! applied on both faces alike.
 
 use super::albedo::{average, schlick_albedo, schlick_albedo_pair, schlick_average};
-use super::microfacet::{reflect, Ggx};
+use super::microfacet::Ggx;
 use super::{BsdfSample, Dielectric, Lambert, OrenNayar, DELTA_ALPHA};
 use crate::path::NodeType;
 use crate::sampling::{cosine_hemisphere_pdf, two_sided_cosine, two_sided_cosine_pdf};
@@ -612,17 +612,8 @@ impl GltfLobe {
         let (wr, c, pdf, delta) = if self.is_delta() {
             (Vec3::new(-up.x, -up.y, up.z), up.z, 1.0, true)
         } else {
-            let ggx = Ggx::new(self.alpha);
-            let wm = ggx.sample_wm(up, u);
-            let c = up.dot(wm);
-            if c <= 0.0 {
-                return None;
-            }
-            let wr = reflect(up, wm).normalize();
-            if wr.z <= 0.0 {
-                return None;
-            }
-            (wr, c, ggx.pdf_wm(up, wm) / (4.0 * c), false)
+            let (wr, _, c, pdf) = Ggx::new(self.alpha).sample_reflection(up, u)?;
+            (wr, c, pdf, false)
         };
         Some((back(if thin { flip(wr) } else { wr }), c, pdf, delta))
     }

@@ -99,6 +99,24 @@ impl Ggx {
         (d, g2, pdf_wm)
     }
 
+    /// A reflection of upper-hemisphere `wo` through a visible normal sampled with `u`:
+    /// (ω_i, the normal ω_m, ω_o·ω_m, the density of ω_i, D_vis(ω_m) / (4 ω_o·ω_m)); `None`
+    /// where the normal faces away from ω_o or the reflection leaves below the surface. The
+    /// sampling of every GGX reflection lobe (conductor, glTF specular and coat).
+    #[inline]
+    pub fn sample_reflection(&self, wo: Vec3, u: Vec2) -> Option<(Vec3, Vec3, f32, f32)> {
+        let wm = self.sample_wm(wo, u);
+        let c = wo.dot(wm);
+        if c <= 0.0 {
+            return None;
+        }
+        let wi = reflect(wo, wm).normalize();
+        if wi.z <= 0.0 {
+            return None;
+        }
+        Some((wi, wm, c, self.pdf_wm(wo, wm) / (4.0 * c)))
+    }
+
     /// Samples a visible normal (always z ≥ 0) for `wo` (Heitz 2018, listing 1).
     #[inline]
     pub fn sample_wm(&self, wo: Vec3, u: Vec2) -> Vec3 {
