@@ -12,13 +12,13 @@
 
 use crate::settings::PathSettings;
 use crate::shading::{
-    connect_light, connection_value, light_connection, side_consistent, Connection, Shading,
+    connect_light, connection_value, light_connection, light_sample, side_consistent, Connection,
+    Shading,
 };
 use crate::SampleContributions;
 use flowlight_core::bsdf::volume;
-use flowlight_core::bsdf::Bsdf;
 use flowlight_core::geometry::{Ray, SurfaceHit};
-use flowlight_core::light::{area_to_solid_angle, LightSample};
+use flowlight_core::light::area_to_solid_angle;
 use flowlight_core::mesh::CompactHit;
 use flowlight_core::rng::Rng;
 use flowlight_core::sampler::{SampleStream, SLOT_BSDF, SLOT_LIGHT, SLOT_ROULETTE};
@@ -163,26 +163,6 @@ pub fn trace<S: SampleStream>(
         inside = volume::entered(scene.material(&hit), hit.ng, wi_world);
         ray = hit.spawn_ray(wi_world);
     }
-}
-
-/// The vertex's light sample from its numbers, or `None` without one. Where every light is
-/// behind the surface for a BSDF that only reflects ([`Scene::lights_behind`]), every
-/// connection would be dropped as zero, so none is sampled: the same contributions and the
-/// same numbers drawn (the caller draws them either way), without the light sample and its
-/// geometry. On `dragon.toml`, back-lit, that is the dragon's far side.
-#[inline]
-fn light_sample(
-    scene: &Scene,
-    bsdf: &Bsdf,
-    hit: &SurfaceHit,
-    shading: &Shading,
-    u_light: f32,
-    u_point: Vec2,
-) -> Option<LightSample> {
-    if bsdf.reflects_only() && scene.lights_behind(hit.p, hit.ns, shading.wo.z) {
-        return None;
-    }
-    scene.lights.sample(u_light, u_point)
 }
 
 /// The state of one path of a [`Wavefront`] between two bounces: exactly the locals of

@@ -57,7 +57,7 @@
 //! shadow ray instead of tracing it.
 
 use crate::settings::PathSettings;
-use crate::shading::{connection_bsdf, light_connection, side_consistent, Shading};
+use crate::shading::{connection_bsdf, light_connection, light_sample, side_consistent, Shading};
 use crate::untangled::{environment_vertex, light_vertex};
 use crate::SampleContributions;
 use flowlight_core::bsdf::{volume, Bsdf};
@@ -730,7 +730,8 @@ impl<S: SampleStream> Tree<S> {
         let mut pending = None;
         if bsdf.has_non_delta() {
             rng.seek(self.physical, SLOT_LIGHT);
-            if let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) {
+            let (u_light, u_point) = (rng.uniform(), rng.uniform2());
+            if let Some(ls) = light_sample(scene, &bsdf, hit, &shading, u_light, u_point) {
                 if let Some((conn, shadow)) = light_connection(scene, hit, &shading, &ls) {
                     if let Some((f, w_over_pdf)) = connection_bsdf(&bsdf, shading.wo, &conn) {
                         // The light's own density in the target's measure: area density on an

@@ -6,7 +6,7 @@ use flowlight_core::light::{LightSample, ShadowTarget};
 use flowlight_core::sampling::power_heuristic_over;
 use flowlight_core::Rgb;
 use flowlight_sdk::{Scene, Tracer};
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 /// The shading frame at a hit and the outgoing direction in it.
 pub(crate) struct Shading {
@@ -22,6 +22,28 @@ impl Shading {
             frame,
         }
     }
+}
+
+/// A vertex's light sample from its numbers, or `None` without one. Where every light is
+/// behind the surface for a BSDF that only reflects ([`Scene::lights_behind`]), every
+/// connection would be zero ([`Bsdf::is_zero_between`]), so none is sampled: the same
+/// contributions and, since the caller draws the numbers either way, the same numbers after
+/// it, without the light sample and its geometry. On `dragon.toml`, back-lit, that is the
+/// dragon's far side. The light sample of every sampler whose connection from a
+/// reflection-only vertex adds nothing where it is zero (MCPT, ERPT's seeds).
+#[inline]
+pub(crate) fn light_sample(
+    scene: &Scene,
+    bsdf: &Bsdf,
+    hit: &SurfaceHit,
+    shading: &Shading,
+    u_light: f32,
+    u_point: Vec2,
+) -> Option<LightSample> {
+    if bsdf.reflects_only() && scene.lights_behind(hit.p, hit.ns, shading.wo.z) {
+        return None;
+    }
+    scene.lights.sample(u_light, u_point)
 }
 
 /// Rejects directions whose side of the shading normal differs from their side of the
