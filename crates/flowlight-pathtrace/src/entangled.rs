@@ -212,8 +212,9 @@ enum PendingConnection {
     Value(Rgb),
     /// The vertex's BSDF is its material's entry in the scene's table
     /// ([`Scene::constant_bsdf`]): evaluated after the shadow ray, and only if unblocked.
-    /// Half of the dragon's shadow rays are blocked (`dragon.toml`), and the BSDF value and
-    /// density with the MIS weight cost about as much as a BSDF sample.
+    /// Half of the dragon's shadow rays are blocked (`dragon.toml`), and on it the BSDF
+    /// value and density cost about half a BSDF sample (callgrind: 340 instructions per
+    /// `Bsdf::eval_pdf` against 650 per `Bsdf::sample`).
     Deferred {
         material: u32,
         beta: Rgb,

@@ -114,7 +114,9 @@ pub(crate) fn connect_light(
 }
 
 /// Where a connection's shadow ray goes, built only for the connections that are traced
-/// ([`ShadowRay::ray`]): its two offset ends are a tenth of a light connection's own work.
+/// ([`ShadowRay::ray`]): its two offset ends (`SurfaceHit::shadow_ray_to`, 3.6% of a
+/// Cornell box render against 7.4% for the rest of the light connection, perf) are wasted on
+/// a connection then dropped.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct ShadowRay {
     target: ShadowTarget,
