@@ -924,6 +924,14 @@ mod tests {
     /// Oren–Nayar, KHR_materials_specular (coloured, and 0), η = 1; both transport modes.
     fn every_gltf_mixture() -> Vec<Bsdf> {
         let d = Material::default();
+        // KHR_materials_specular, coloured, and an unusual η.
+        let coloured = Material {
+            roughness: 0.6,
+            specular: 0.7,
+            specular_color: Rgb::new(2.0, 1.0, 0.5),
+            ior: 1.8,
+            ..d
+        };
         let materials = [
             d,
             Material {
@@ -1013,17 +1021,22 @@ mod tests {
                 oren_nayar_sigma: 0.8,
                 ..d
             },
-            Material {
-                roughness: 0.6,
-                specular: 0.7,
-                specular_color: Rgb::new(2.0, 1.0, 0.5),
-                ior: 1.8,
-                ..d
-            },
+            coloured,
             Material {
                 roughness: 0.3,
                 ior: 1.0,
                 ..d
+            },
+            // α = 0.0025: a narrow lobe, but not a Dirac one.
+            Material {
+                roughness: 0.05,
+                metallic: 0.7,
+                ..d
+            },
+            Material {
+                diffuse_model: DiffuseModel::OrenNayar,
+                oren_nayar_sigma: 0.5,
+                ..coloured
             },
             // No dielectric layer (the Lambertian Cornell box): a lone diffuse lobe.
             Material { specular: 0.0, ..d },
@@ -1298,37 +1311,16 @@ mod tests {
     /// transmission keep the walk.
     #[test]
     fn an_opaque_pair_samples_and_evaluates_as_the_walk_does() {
-        let d = Material::default();
-        let pairs_of = [
-            Material {
-                roughness: 0.5,
-                ..d
-            },
-            Material {
-                roughness: 1.0,
-                ..d
-            },
-            // α = 0.0025: a narrow lobe, but not a Dirac one.
-            Material {
-                roughness: 0.05,
-                metallic: 0.7,
-                ..d
-            },
-            Material {
-                roughness: 0.6,
-                specular: 0.7,
-                specular_color: Rgb::new(2.0, 1.0, 0.5),
-                ior: 1.8,
-                diffuse_model: DiffuseModel::OrenNayar,
-                oren_nayar_sigma: 0.5,
-                ..d
-            },
-        ];
+        // Every opaque pair among the glTF mixtures: rough and narrow, dielectric and metal,
+        // coloured specular, Oren–Nayar base, both transport modes.
+        let pairs: Vec<Bsdf> = every_gltf_mixture()
+            .into_iter()
+            .filter(|b| b.opaque_pair().is_some())
+            .collect();
+        assert!(pairs.len() >= 12, "{} pairs", pairs.len());
         let mut r = Rng::new(95, 0);
         let (mut sampled, mut refused, mut specular) = (0, 0, 0);
-        for m in pairs_of {
-            let b = Bsdf::from_material(&m, Rgb::new(0.9, 0.6, 0.3));
-            assert!(b.opaque_pair().is_some(), "{m:?}");
+        for b in pairs {
             let spec_weight = b.components[0].unwrap().1;
             for wo in test_directions_both_sides().into_iter().chain(GRAZING) {
                 for k in 0..400 {
@@ -1341,7 +1333,7 @@ mod tests {
                     let (a, w) = (b.sample(wo, uc, u), b.sample_by_walk(wo, uc, u));
                     specular += a.is_some_and(|a| a.node == NodeType::GlossyReflection) as usize;
                     match same_sample(a, w, || {
-                        format!("pair against walk, {m:?} {wo:?} {uc} {u:?}")
+                        format!("pair against walk, {b:?} {wo:?} {uc} {u:?}")
                     }) {
                         true => sampled += 1,
                         false => refused += 1,
@@ -1350,13 +1342,14 @@ mod tests {
             }
             for (wo, wi) in direction_pairs(3000, 96) {
                 let ((f, p), (wf, wp)) = (b.eval_pdf(wo, wi), b.eval_pdf_by_walk(wo, wi));
-                assert!(same_rgb(f, wf) && same_float(p, wp), "{m:?} {wo:?} {wi:?}");
+                assert!(same_rgb(f, wf) && same_float(p, wp), "{b:?} {wo:?} {wi:?}");
             }
         }
         assert!(
             sampled > 10_000 && specular > 1000 && refused > 0,
             "{sampled} sampled ({specular} specular), {refused} refused"
         );
+        let d = Material::default();
         for m in [
             Material {
                 roughness: 0.0,
