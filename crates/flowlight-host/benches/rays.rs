@@ -206,13 +206,15 @@ fn main() {
         .and_then(|s| s.parse().ok())
         .unwrap_or(5)
         .max(1);
-    let sizes: Vec<usize> = env("FLOWLIGHT_BENCH_SIZES")
-        .map(|s| s.split(',').map(|x| x.trim().parse().unwrap()).collect())
-        .unwrap_or(vec![10_000, 100_000, 1_000_000]);
+    // A comma-separated list of counts, or `default`.
+    let counts = |k: &str, default: Vec<usize>| -> Vec<usize> {
+        env(k)
+            .map(|s| s.split(',').map(|x| x.trim().parse().unwrap()).collect())
+            .unwrap_or(default)
+    };
+    let sizes = counts("FLOWLIGHT_BENCH_SIZES", vec![10_000, 100_000, 1_000_000]);
     // Thread counts to time each backend at (a many-core machine shows how each scales).
-    let thread_counts: Vec<usize> = env("FLOWLIGHT_BENCH_THREADS")
-        .map(|s| s.split(',').map(|x| x.trim().parse().unwrap()).collect())
-        .unwrap_or(vec![1, 2]);
+    let thread_counts = counts("FLOWLIGHT_BENCH_THREADS", vec![1, 2]);
     let rays = rays(nrays);
     match flowlight_embree::device() {
         Ok(d) => eprintln!("Embree {} from {}", d.version_string(), d.library),
