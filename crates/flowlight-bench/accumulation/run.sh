@@ -30,20 +30,16 @@ mkdir -p "$out"
 mode=${1:-memory}
 shift || true
 
+. crates/flowlight-bench/scripts/render-config.sh
+
 # A copy of scenes/cornell-box/BASE.toml (default erpt) with the scene path made absolute,
-# `[render]` size and spp replaced and no outputs: config NAME WIDTH HEIGHT SPP [BASE].
-# Integrator parameters are given to `render` as --set KEY=VALUE.
+# `[render]` size and spp (and tile size, with TILE set) replaced and no outputs:
+# config NAME WIDTH HEIGHT SPP [BASE]. Integrator parameters are given to `render` as
+# --set KEY=VALUE.
 config() {
     local name=$1 w=$2 h=$3 spp=$4 base=${5:-erpt}
-    DIR=$PWD/scenes/cornell-box W=$w H=$h SPP=$spp TILE=${TILE:-} awk '
-        /^\[/ { render = ($0 ~ /^\[render\]/) }
-        /^scene = "/ { sub(/^scene = "/, "scene = \"" ENVIRON["DIR"] "/") }
-        render && /^width = / { $0 = "width = " ENVIRON["W"] }
-        render && /^height = / { $0 = "height = " ENVIRON["H"] }
-        render && /^spp = / { $0 = "spp = " ENVIRON["SPP"] }
-        render && /^tile_size = / && ENVIRON["TILE"] != "" { $0 = "tile_size = " ENVIRON["TILE"] }
-        /^(exr|png) = / { next }
-        { print }' "scenes/cornell-box/$base.toml" >"$out/$name.toml"
+    render_config "scenes/cornell-box/$base.toml" "$out/$name.toml" \
+        "width=$w" "height=$h" "spp=$spp" ${TILE:+"tile_size=$TILE"}
     echo "$out/$name.toml"
 }
 

@@ -16,6 +16,7 @@ bin=${FLOWLIGHT_BIN:-target/release/flowlight}
 [ -x "$bin" ] || { echo "build first: cargo build --release --workspace" >&2; exit 1; }
 scene=$PWD/scenes/stanford-dragon
 [ -f "$scene/dragon.gltf" ] || { echo "fetch the dragon first: bash .ci/setup" >&2; exit 1; }
+. crates/flowlight-bench/scripts/render-config.sh
 out=${OUT_DIR:-$(mktemp -d)}
 mkdir -p "$out"
 spp=${1:-128}
@@ -28,11 +29,7 @@ echo "|---|---:|---:|---:|---:|---:|"
 for intersector in embree bvh; do
     cfg=$out/dragon-$intersector.toml
     # The scene's config with an absolute scene path, this intersector and no outputs.
-    DIR=$scene I=$intersector awk '
-        /^scene = "/ { sub(/^scene = "/, "scene = \"" ENVIRON["DIR"] "/") }
-        /^intersector = / { $0 = "intersector = \"" ENVIRON["I"] "\"" }
-        /^(exr|png) = / { next }
-        { print }' "$scene/dragon.toml" >"$cfg"
+    render_config "$scene/dragon.toml" "$cfg" "intersector=\"$intersector\""
     t1=
     for n in $threads; do
         [ "$n" -le "$cores" ] || continue
