@@ -74,7 +74,7 @@ fn untangled_equi() {
 }
 #[test]
 fn untangled_expo() {
-    check("untangled", "expo", 6, 2048);
+    check("untangled", "expo", 6, 3072);
 }
 
 // Shallow path-space depths: the deepest layer is a large share of the image there

@@ -36,14 +36,15 @@ pub trait SampleStream {
 }
 
 /// The numbers a path vertex draws, in order, as dimension slots of [`SampleStream::seek`]:
-/// the light choice (one number) and point on the light (a pair) ...
+/// the light sample (one pair: the light's choice and the point on it,
+/// [`crate::light::Lights::sample`]) ...
 pub const SLOT_LIGHT: u32 = 0;
 /// ... the roulette (one number) ...
-pub const SLOT_ROULETTE: u32 = 2;
+pub const SLOT_ROULETTE: u32 = 1;
 /// ... and the BSDF's component (one number) and direction (a pair).
-pub const SLOT_BSDF: u32 = 3;
+pub const SLOT_BSDF: u32 = 2;
 /// Slots reserved per vertex. The camera's raster position is dimension 0.
-pub const DIMS_PER_VERTEX: u32 = 5;
+pub const DIMS_PER_VERTEX: u32 = 4;
 
 impl SampleStream for Rng {
     #[inline]

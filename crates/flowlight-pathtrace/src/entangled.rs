@@ -110,8 +110,8 @@ pub fn trace<S: SampleStream>(
 
         if bsdf.has_non_delta() {
             rng.seek(physical, SLOT_LIGHT);
-            let (u_light, u_point) = (rng.uniform(), rng.uniform2());
-            if let Some(ls) = light_sample(scene, &bsdf, &hit, &shading, u_light, u_point) {
+            let u_light = rng.uniform2();
+            if let Some(ls) = light_sample(scene, &bsdf, &hit, &shading, u_light) {
                 if let Some(conn) = connect_light(scene, tracer, &hit, &shading, &ls) {
                     if let Some(value) = connection_value(beta, &bsdf, shading.wo, &conn) {
                         out.add(depth, value);
@@ -408,8 +408,8 @@ fn vertex<S: SampleStream>(
 
     if bsdf.has_non_delta() {
         rng.seek(path.physical, SLOT_LIGHT);
-        let (u_light, u_point) = (rng.uniform(), rng.uniform2());
-        if let Some(ls) = light_sample(scene, &bsdf, hit, &shading, u_light, u_point) {
+        let u_light = rng.uniform2();
+        if let Some(ls) = light_sample(scene, &bsdf, hit, &shading, u_light) {
             if let Some((conn, shadow_ray)) = light_connection(scene, hit, &shading, &ls) {
                 let pending = match &bsdf {
                     _ if bsdf.is_zero_between(shading.wo, conn.wi_local) => None,

@@ -730,8 +730,8 @@ impl<S: SampleStream> Tree<S> {
         let mut pending = None;
         if bsdf.has_non_delta() {
             rng.seek(self.physical, SLOT_LIGHT);
-            let (u_light, u_point) = (rng.uniform(), rng.uniform2());
-            if let Some(ls) = light_sample(scene, &bsdf, hit, &shading, u_light, u_point) {
+            let u_light = rng.uniform2();
+            if let Some(ls) = light_sample(scene, &bsdf, hit, &shading, u_light) {
                 if let Some((conn, shadow)) = light_connection(scene, hit, &shading, &ls) {
                     if let Some((f, w_over_pdf)) = connection_bsdf(&bsdf, shading.wo, &conn) {
                         // The light's own density in the target's measure: area density on an

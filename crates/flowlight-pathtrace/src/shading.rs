@@ -37,13 +37,12 @@ pub(crate) fn light_sample(
     bsdf: &Bsdf,
     hit: &SurfaceHit,
     shading: &Shading,
-    u_light: f32,
-    u_point: Vec2,
+    u: Vec2,
 ) -> Option<LightSample> {
     if bsdf.reflects_only() && scene.lights_behind(hit.p, hit.ns, shading.wo.z) {
         return None;
     }
-    scene.lights.sample(u_light, u_point)
+    scene.lights.sample_from_pair(u)
 }
 
 /// Rejects directions whose side of the shading normal differs from their side of the

@@ -216,7 +216,7 @@ pub fn trace<S: SampleStream>(
                 .connection_probability(depth, component.albedo());
             if rng.uniform() < t {
                 // Explicit path: connect this vertex to a point on a light.
-                let Some(ls) = scene.lights.sample(rng.uniform(), rng.uniform2()) else {
+                let Some(ls) = scene.lights.sample_from_pair(rng.uniform2()) else {
                     return none;
                 };
                 let Some(conn) = connect_light(scene, tracer, &hit, &shading, &ls) else {

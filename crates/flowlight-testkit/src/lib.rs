@@ -36,7 +36,7 @@
 //! At least [`MIN_VALID`] proposals must be valid with a ratio above 0 (a strategy that
 //! always misses, or only proposes moves it cannot reverse, passes nothing). Then **unbiasedness in the furnace**: ERPT with this strategy alone renders
 //! the white furnace (a closed sphere of albedo ½ emitting 1, seen from inside, path-space
-//! depth N = 8), whose every pixel is 2·(1 − 0.5⁹) exactly; over four independent renders
+//! depth N = 8), whose every pixel is 2·(1 − 0.5⁹) exactly; over eight independent renders
 //! the image mean and each 8×8 region's mean must be within 4.5 standard errors of it
 //! ([`check_furnace`] says why the regions matter).
 //!
@@ -289,7 +289,10 @@ pub fn check_furnace(
 ) -> Result<(f64, f64, f64), String> {
     let depth = 8;
     let expected = 2.0 * (1.0 - 0.5f64.powi(depth + 1));
-    let runs = 4;
+    // Four runs were too few for the heavy tail of ERPT's region means: after a change of
+    // the seeds' random stream, one region of `bxdf-extension` came out at z = 4.7 (2.12
+    // against 2.00) from four seeds that were all high, and at z = 2.8 with twelve.
+    let runs = 8;
     let mut per_run: Vec<[f64; 16]> = Vec::new();
     for r in 0..runs {
         let mut s = erpt_session(

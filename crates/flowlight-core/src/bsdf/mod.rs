@@ -45,8 +45,7 @@ pub const DELTA_ALPHA: f32 = 1e-3;
 pub const NARROW_GLOSSY_ALPHA: f32 = 0.05;
 /// Most components a [`Bsdf`] holds (glTF: coat, specular, diffuse, transmission).
 pub const MAX_COMPONENTS: usize = 4;
-/// Largest f32 below one.
-const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
+use crate::sampling::ONE_MINUS_EPSILON;
 
 /// One sampled direction.
 #[derive(Clone, Copy, Debug)]
