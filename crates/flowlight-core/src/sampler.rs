@@ -41,7 +41,8 @@ pub trait SampleStream {
 pub const SLOT_LIGHT: u32 = 0;
 /// ... the roulette (one number) ...
 pub const SLOT_ROULETTE: u32 = 1;
-/// ... and the BSDF's component (one number) and direction (a pair).
+/// ... and the BSDF's: a lobe's own discrete choice (one number: a dielectric's reflect or
+/// refract) and the component and direction (a pair, [`crate::bsdf::Bsdf::sample`]).
 pub const SLOT_BSDF: u32 = 2;
 /// Slots reserved per vertex. The camera's raster position is dimension 0.
 pub const DIMS_PER_VERTEX: u32 = 4;

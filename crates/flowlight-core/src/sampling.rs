@@ -164,13 +164,20 @@ pub fn sample_cdf(cdf: &[f32], u: f32) -> (usize, f32) {
 #[inline]
 pub fn sample_cdf_remapped(cdf: &[f32], u: f32) -> (usize, f32, f32) {
     let (i, p) = sample_cdf(cdf, u);
-    if p <= 0.0 {
-        return (i, p, 0.0);
-    }
     let lo = if i == 0 { 0.0 } else { cdf[i - 1] };
-    // Rounding can reach 1 (and a `u` past a last entry < 1 would pass it): clamp below.
-    let remapped = ((u - lo) / p).clamp(0.0, ONE_MINUS_EPSILON);
-    (i, p, remapped)
+    (i, p, rescaled(u, lo, p))
+}
+
+/// `u` rescaled from the interval [`lo`, `lo` + `p`) it fell in to [0, 1): (u − lo)/p, or 0
+/// for an empty interval. Rounding can reach 1 (and a `u` past a last entry < 1 would pass
+/// it), so the result is clamped below 1.
+#[inline]
+pub fn rescaled(u: f32, lo: f32, p: f32) -> f32 {
+    if p > 0.0 {
+        ((u - lo) / p).clamp(0.0, ONE_MINUS_EPSILON)
+    } else {
+        0.0
+    }
 }
 
 /// The largest `f32` below 1.

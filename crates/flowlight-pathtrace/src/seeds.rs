@@ -803,11 +803,13 @@ impl<S: SampleStream> Tree<S> {
         }
 
         rng.seek(self.physical, SLOT_BSDF);
-        let u_component = rng.uniform();
-        let Some(s) = bsdf.sample(shading.wo, u_component, rng.uniform2()) else {
+        let u_lobe = rng.uniform();
+        let u = rng.uniform2();
+        let Some(s) = bsdf.sample(shading.wo, u_lobe, u) else {
             return (false, pending);
         };
-        let (component, _) = bsdf.choose_component(u_component);
+        // `Bsdf::sample` chooses the component with the pair's first number.
+        let (component, _) = bsdf.choose_component(u.x);
         if let Some(v) = out.vertices.last_mut() {
             v.node = s.node;
             v.component = component as u8;

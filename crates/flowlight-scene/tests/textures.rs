@@ -533,9 +533,13 @@ fn bsdf(r: &ResolvedMaterial) -> Bsdf {
 
 /// Energy that light arriving along the normal (ω_o = +z) leaves with, above and below the
 /// surface: E[f |cos θ_i| / pdf] over stratified samples of the mixture (component choice
-/// × 2D direction). Exact for Dirac lobes, which is all these tests use where they compare.
+/// and direction × a lobe's own discrete choice × the direction's second number). Exact for
+/// Dirac lobes, which is all these tests use where they compare.
 fn scattered(b: &Bsdf) -> (Rgb, Rgb) {
-    // Component choice in 4096 strata: a lobe of weight w is chosen w ± 1/4096 of the time.
+    // The pair's first number, which chooses the component, in 4096 strata: a lobe of
+    // weight w is chosen w ± 1/4096 of the time. The lobe's own number (a dielectric's
+    // reflect/refract choice) goes through all 4096 strata too for each `i`, in an order
+    // (c · 1597 mod 4096, 1597 odd) that pairs it with every part of the first number.
     const N: usize = 4096;
     const M: usize = 4;
     // Summed in f64: 2¹⁶ f32 additions would drift by ~10⁻⁴ relative.
@@ -543,8 +547,8 @@ fn scattered(b: &Bsdf) -> (Rgb, Rgb) {
     for c in 0..N {
         for i in 0..M {
             for j in 0..M {
-                let uc = (c as f32 + 0.5) / N as f32;
-                let u = Vec2::new((i as f32 + 0.5) / M as f32, (j as f32 + 0.5) / M as f32);
+                let uc = ((c * 1597 + i * (N / M)) % N) as f32 / N as f32 + 0.5 / N as f32;
+                let u = Vec2::new((c as f32 + 0.5) / N as f32, (j as f32 + 0.5) / M as f32);
                 if let Some(s) = b.sample(Vec3::Z, uc, u) {
                     let w = (s.f * (s.wi.z.abs() / s.pdf)).to_array();
                     let sum = if s.wi.z > 0.0 { &mut up } else { &mut down };

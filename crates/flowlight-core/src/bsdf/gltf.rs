@@ -77,7 +77,7 @@ use super::albedo::{average, schlick_albedo, schlick_albedo_pair, schlick_averag
 use super::microfacet::Ggx;
 use super::{BsdfSample, Dielectric, Lambert, OrenNayar, DELTA_ALPHA};
 use crate::path::NodeType;
-use crate::sampling::{cosine_hemisphere_pdf, two_sided_cosine, two_sided_cosine_pdf};
+use crate::sampling::{cosine_hemisphere_pdf, rescaled, two_sided_cosine, two_sided_cosine_pdf};
 use crate::Rgb;
 use glam::{Vec2, Vec3};
 
@@ -702,17 +702,24 @@ impl<'a> OpaquePair<'a> {
         self.mix(self.spec_eval_pdf(wo, wi), diffuse)
     }
 
-    /// [`super::Bsdf::sample`] of the pair: the lobe chosen by `u_component` as the walk
-    /// chooses it (the specular lobe below its weight), its direction sampled with `u`, and
-    /// the mixture's value and density there. Neither lobe takes a discrete number, so the
-    /// walk's rescaled remainder of `u_component` is not computed.
+    /// [`super::Bsdf::sample`] of the pair: the lobe chosen by `u.x` as the walk chooses it
+    /// (the specular lobe below its weight), its direction sampled with `u.x` rescaled as the
+    /// walk rescales it and `u.y`, and the mixture's value and density there. Neither lobe
+    /// takes a discrete number, so `u_component` is not used.
     #[inline]
-    pub fn sample(&self, wo: Vec3, u_component: f32, u: Vec2) -> Option<BsdfSample> {
+    pub fn sample(&self, wo: Vec3, _u_component: f32, u: Vec2) -> Option<BsdfSample> {
         if wo.z == 0.0 {
             return None;
         }
         // The walk's running sum after the first weight is 0 + w₀.
-        let s = if u_component < 0.0 + self.spec_weight {
+        let spec_end = 0.0 + self.spec_weight;
+        let specular = u.x < spec_end;
+        let u = if specular {
+            Vec2::new(rescaled(u.x, 0.0, self.spec_weight), u.y)
+        } else {
+            Vec2::new(rescaled(u.x, spec_end, self.diffuse_weight), u.y)
+        };
+        let s = if specular {
             // The walk's lobe sample computes the lobe's value there, which the mixture's
             // evaluation computes again; only its direction and density are needed here.
             let (wi, _, pdf_wi, _) = self.spec.sample_ggx_direction(wo, u)?;
