@@ -510,7 +510,7 @@ pub fn area_to_solid_angle(pdf_area: f32, p_ref: Vec3, p_light: Vec3, n_light: V
 mod tests {
     use super::*;
     use crate::rng::Rng;
-    use crate::sampling::build_cdf;
+    use crate::sampling::{build_cdf, jittered_moments};
 
     fn tri(s: f32, l: f32) -> Emitter {
         Emitter {
@@ -574,26 +574,12 @@ mod tests {
             let inc = lights.incident(&s.unwrap(), p_ref).unwrap();
             (inc.radiance.r * (-inc.wi.z).max(0.0) / inc.pdf) as f64
         };
-        let mut r = Rng::new(11, 3);
-        let (rounds, n) = (400, 8);
-        // Per estimator: sum and sum of squares of the round means.
-        let mut moments = [[0.0f64; 2]; 2];
-        for _ in 0..rounds {
-            let mut means = [0.0f64; 2];
-            for j in 0..n * n {
-                let u = Vec2::new(
-                    ((j % n) as f32 + r.uniform()) / n as f32,
-                    ((j / n) as f32 + r.uniform()) / n as f32,
-                );
-                means[0] += irradiance(lights.sample_from_pair(u)) / (n * n) as f64;
-                means[1] += irradiance(lights.sample(r.uniform(), u)) / (n * n) as f64;
-            }
-            for (m, mean) in moments.iter_mut().zip(means) {
-                m[0] += mean / rounds as f64;
-                m[1] += mean * mean / rounds as f64;
-            }
-        }
-        let [pair, separate] = moments.map(|[m, m2]| (m, m2 - m * m));
+        let [pair, separate] = jittered_moments(&mut Rng::new(11, 3), 400, 8, |u, r| {
+            [
+                irradiance(lights.sample_from_pair(u)),
+                irradiance(lights.sample(r.uniform(), u)),
+            ]
+        });
         assert!(
             (pair.0 / separate.0 - 1.0).abs() < 0.03,
             "{pair:?} {separate:?}"

@@ -205,6 +205,39 @@ pub fn build_cdf(weights: &[f32]) -> Option<Vec<f32>> {
     Some(out)
 }
 
+/// Test support for the "one pair keeps its strata" tests: the mean and variance, over
+/// `rounds` rounds, of two estimators' averages over a pixel's `n` × `n` jittered pairs.
+/// `estimates(u, r)` gives both estimators' values at pair `u`, drawing any further numbers
+/// it needs from `r`.
+#[cfg(test)]
+pub(crate) fn jittered_moments(
+    r: &mut crate::rng::Rng,
+    rounds: usize,
+    n: usize,
+    mut estimates: impl FnMut(Vec2, &mut crate::rng::Rng) -> [f64; 2],
+) -> [(f64, f64); 2] {
+    // Per estimator: mean and mean square of the round averages.
+    let mut moments = [[0.0f64; 2]; 2];
+    for _ in 0..rounds {
+        let mut sums = [0.0f64; 2];
+        for j in 0..n * n {
+            let u = Vec2::new(
+                ((j % n) as f32 + r.uniform()) / n as f32,
+                ((j / n) as f32 + r.uniform()) / n as f32,
+            );
+            for (sum, e) in sums.iter_mut().zip(estimates(u, r)) {
+                *sum += e;
+            }
+        }
+        for (m, sum) in moments.iter_mut().zip(sums) {
+            let mean = sum / (n * n) as f64;
+            m[0] += mean / rounds as f64;
+            m[1] += mean * mean / rounds as f64;
+        }
+    }
+    moments.map(|[m, m2]| (m, m2 - m * m))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -612,7 +612,7 @@ mod tests {
     use super::testutil::*;
     use super::*;
     use crate::rng::Rng;
-    use crate::sampling::ONE_MINUS_EPSILON;
+    use crate::sampling::{jittered_moments, ONE_MINUS_EPSILON};
 
     fn weights(b: &Bsdf) -> Vec<f32> {
         b.components().map(|(_, w)| w).collect()
@@ -1246,31 +1246,17 @@ mod tests {
         let weight = |s: Option<BsdfSample>| {
             s.map_or(0.0, |s| (s.f.luminance() * s.wi.z.abs() / s.pdf) as f64)
         };
-        let mut r = Rng::new(21, 4);
-        let (rounds, n) = (1000, 8);
-        let mut moments = [[0.0f64; 2]; 2];
-        for _ in 0..rounds {
-            let mut means = [0.0f64; 2];
-            for j in 0..n * n {
-                let u = Vec2::new(
-                    ((j % n) as f32 + r.uniform()) / n as f32,
-                    ((j / n) as f32 + r.uniform()) / n as f32,
-                );
-                means[0] += weight(b.sample(wo, 0.5, u));
-                let separate = if r.uniform() < w_spec {
-                    Vec2::new(u.x * w_spec, u.y)
-                } else {
-                    Vec2::new(w_spec + u.x * w_diffuse, u.y)
-                };
-                means[1] += weight(b.sample(wo, 0.5, separate));
-            }
-            for (m, mean) in moments.iter_mut().zip(means) {
-                let mean = mean / (n * n) as f64;
-                m[0] += mean / rounds as f64;
-                m[1] += mean * mean / rounds as f64;
-            }
-        }
-        let [pair, separate] = moments.map(|[m, m2]| (m, m2 - m * m));
+        let [pair, separate] = jittered_moments(&mut Rng::new(21, 4), 1000, 8, |u, r| {
+            let separate = if r.uniform() < w_spec {
+                Vec2::new(u.x * w_spec, u.y)
+            } else {
+                Vec2::new(w_spec + u.x * w_diffuse, u.y)
+            };
+            [
+                weight(b.sample(wo, 0.5, u)),
+                weight(b.sample(wo, 0.5, separate)),
+            ]
+        });
         assert!(
             (pair.0 / separate.0 - 1.0).abs() < 0.02,
             "{pair:?} {separate:?}"
