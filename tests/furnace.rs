@@ -193,6 +193,60 @@ fn throughput_layers_match_the_analytic_furnace_layers() {
     }
 }
 
+// Paths split into branches at their first lighting vertex (`branches`): the vertex's light
+// connection is weighed against k BSDF samples (multi-sample MIS) and each branch carries
+// 1/k of the weight, so a wrong weight or a lost branch shows at every depth, most at N = 1,
+// where the split vertex's emission-only BSDF samples carry a third of the image. With the
+// roulette from the first vertex both the split vertex's roulette and the branches' (whose β
+// holds the 1/k the roulette multiplies back out) are exercised.
+macro_rules! branched {
+    ($($name:ident: $termination:literal, $depth:literal, $branches:literal, $rr_depth:literal;)*) => {
+        $(#[test]
+        fn $name() {
+            let extra = [
+                ("branches", toml::Value::Integer($branches)),
+                ("rr_depth", toml::Value::Integer($rr_depth)),
+            ];
+            check_with("entangled", $termination, $depth, 64, &extra);
+        })*
+    };
+}
+
+branched! {
+    entangled_branches_depth1: "throughput", 1, 3, 5;
+    entangled_branches_depth2: "throughput", 2, 2, 5;
+    entangled_branches_depth8: "throughput", 8, 4, 5;
+    entangled_branches_roulette_from_first_vertex: "throughput", 8, 3, 1;
+    entangled_branches_bxdf: "bxdf", 8, 2, 5;
+}
+
+/// `branches` out of range, or with the untangled variant (one light connection per path,
+/// nothing to split), is refused with the parameter's name.
+#[test]
+fn bad_branches_are_named() {
+    use flowlight_host::session::{Overrides, Session};
+    for (params, shown) in [
+        (vec![("branches", toml::Value::Integer(0))], "got 0"),
+        (vec![("branches", toml::Value::Integer(65))], "got 65"),
+        (
+            vec![
+                ("branches", toml::Value::Integer(2)),
+                ("variant", "untangled".into()),
+            ],
+            "entangled",
+        ),
+    ] {
+        let ov = Overrides {
+            params: common::toml_params(&params),
+            ..Default::default()
+        };
+        let err = Session::prepare(&common::scene_config("furnace/furnace.toml"), &ov)
+            .err()
+            .unwrap_or_else(|| panic!("{params:?} accepted"));
+        assert!(err.contains("branches") && err.contains(shown), "{err}");
+    }
+}
+
 /// Out-of-range roulette settings are refused with the parameter's name and value.
 #[test]
 fn bad_roulette_settings_are_named() {

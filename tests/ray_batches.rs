@@ -219,12 +219,25 @@ fn wavefront_matches(s: &Session, what: &str) {
     wavefront_matches_in(s, &tabled, &format!("{what}, table BSDFs"));
 }
 
+/// Unsplit paths, and paths split into three branches at their first lighting vertex (whose
+/// contributions the wavefront merges after the first branch's, in branch order).
 fn wavefront_matches_in(s: &Session, scene: &Scene, what: &str) {
+    let defaults = PathSettings::from_params(&Params::from_slice(&[])).unwrap();
+    for branches in [1, 3] {
+        let settings = PathSettings {
+            branches,
+            ..defaults.clone()
+        };
+        wavefront_matches_with(s, scene, &settings, &format!("{what}, {branches} branches"));
+    }
+}
+
+fn wavefront_matches_with(s: &Session, scene: &Scene, settings: &PathSettings, what: &str) {
     let scene = *scene;
     let mut ut = UnitTracer::new(&s.scene, s.intersector.as_ref());
     let table = ut.table();
     let tracer = Tracer::new(&table);
-    let settings = PathSettings::from_params(&Params::from_slice(&[])).unwrap();
+    let settings = settings.clone();
     let n = 1500;
     let mut starts = Vec::new();
     for i in 0..n {

@@ -24,6 +24,12 @@ impl Rng {
         r
     }
 
+    /// An independent generator derived from this one's state and `j` (this one is not
+    /// advanced): the `j`-th branch of a path split into several (MCPT's `branches`).
+    pub fn branch(&self, j: u64) -> Rng {
+        Rng::new(Rng::hash(&[self.state, self.inc, j]), 2)
+    }
+
     /// Mixes several integers into a seed (SplitMix64 finaliser), for per-unit generators.
     pub fn hash(values: &[u64]) -> u64 {
         let mut h = 0x9E37_79B9_7F4A_7C15u64;

@@ -158,6 +158,19 @@ impl SobolSampler {
         }
     }
 
+    /// Branch `j` of `k` of this sample (MCPT's `branches`): the same pixel and dimension,
+    /// sample index i·k + j in place of i. Over the first 2^m samples of a pixel the
+    /// branches are the indices 0 … 2^m·k − 1, so with k a power of two they are stratified
+    /// together (2^m·k strata) in every dimension from here on. Indices wrap past 2^32.
+    pub fn branch(&self, j: u32, k: u32) -> SobolSampler {
+        let index = self.index_reversed.reverse_bits();
+        SobolSampler {
+            index_reversed: index.wrapping_mul(k).wrapping_add(j).reverse_bits(),
+            seed: self.seed,
+            dim: self.dim,
+        }
+    }
+
     /// The dimension the next call will use.
     pub fn dimension(&self) -> u32 {
         self.dim
@@ -286,6 +299,45 @@ mod tests {
                 let mut sorted = cells.clone();
                 sorted.sort_unstable();
                 assert!(sorted.iter().enumerate().all(|(k, &l)| l == k as u32));
+            }
+        }
+    }
+
+    /// The k branches of a pixel's first 2^m samples, k a power of two, are 2^m·k samples
+    /// of their own: pairs a (0, m + log₂k, 2)-net in every dimension from the split on, and
+    /// the branch keeps the sample's pixel and dimension. A branch index taken from the
+    /// unbranched index (i + j, or i·k + j without the reversal) fails it.
+    #[test]
+    fn branches_of_a_pixels_samples_are_stratified_together() {
+        for pixel in 0..4u64 {
+            let seed = Rng::hash(&[7, pixel]);
+            for (m, k) in [(0u32, 2u32), (2, 2), (3, 4), (5, 4), (4, 8)] {
+                let mut samples: Vec<SobolSampler> =
+                    (0..1u32 << m).map(|i| SobolSampler::new(seed, i)).collect();
+                for s in &mut samples {
+                    s.seek(1, 0);
+                    s.uniform2(); // the trunk's light pair at vertex 1
+                }
+                let branches: Vec<SobolSampler> = samples
+                    .iter()
+                    .flat_map(|s| (0..k).map(move |j| s.branch(j, k)))
+                    .collect();
+                assert!(branches
+                    .iter()
+                    .all(|b| b.dim == samples[0].dim && b.seed == samples[0].seed));
+                let total = m + k.trailing_zeros();
+                for dim in samples[0].dim..samples[0].dim + 6 {
+                    let pts: Vec<(u32, u32)> = branches
+                        .iter()
+                        .map(|b| {
+                            let mut b = b.clone();
+                            b.dim = dim;
+                            let p = b.uniform2();
+                            (bits(p.x), bits(p.y))
+                        })
+                        .collect();
+                    assert!(is_net(&pts, total), "pixel {pixel} m {m} k {k} dim {dim}");
+                }
             }
         }
     }

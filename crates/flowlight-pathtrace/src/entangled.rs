@@ -9,14 +9,18 @@
 //! the vertex's BSDF sample is still traced, for emission only: its light connection was
 //! weighted against that sample, so without it layer N would lose the BSDF-sampled share
 //! (in the white furnace of albedo ½ at N = 1: 1.245 instead of 1.5).
+//!
+//! With `branches` = k > 1 (MCPT's parameter; [`PathSettings::branches`]) a camera path
+//! splits at its first lighting vertex into k branches of weight 1/k, its light connection
+//! there weighed against the k BSDF samples (multi-sample MIS): docs/mcpt.md, "Branches".
 
+use crate::sampler::BranchStream;
 use crate::settings::PathSettings;
 use crate::shading::{
-    connect_light, connection_value, light_connection, light_sample, side_consistent, Connection,
-    Shading,
+    connection_value, light_connection, light_sample, side_consistent, Connection, Shading,
 };
 use crate::SampleContributions;
-use flowlight_core::bsdf::volume;
+use flowlight_core::bsdf::{volume, Bsdf};
 use flowlight_core::geometry::{Ray, SurfaceHit};
 use flowlight_core::light::area_to_solid_angle;
 use flowlight_core::mesh::CompactHit;
@@ -29,9 +33,13 @@ use glam::{Vec2, Vec3};
 use std::borrow::Cow;
 
 /// Traces one entangled path tree through raster position `raster`, adding each contribution
-/// to `out` with its lighting layer. `rng` is any [`SampleStream`]: independent numbers
-/// ([`Rng`]) or a pixel's stratified samples ([`flowlight_core::sobol::SobolSampler`]).
-pub fn trace<S: SampleStream>(
+/// to `out` with its lighting layer. `rng` is any [`BranchStream`]: independent numbers
+/// ([`Rng`]) or a pixel's stratified samples ([`flowlight_core::sobol::SobolSampler`]); the
+/// path draws from a copy of it. One path at a time, one host call per ray: the same vertex
+/// code as [`trace_wavefront`], with each shadow ray traced as soon as its vertex is done
+/// (before the next extension ray, as the wavefront's order also gives), so the two give the
+/// same contributions in the same order, bit for bit.
+pub fn trace<S: BranchStream>(
     scene: &Scene,
     tracer: &Tracer,
     settings: &PathSettings,
@@ -39,153 +47,121 @@ pub fn trace<S: SampleStream>(
     raster: Vec2,
     out: &mut SampleContributions,
 ) {
-    let mut ray = scene.camera.generate_ray(raster);
-    let mut beta = Rgb::ONE;
-    // σ_a of the absorbing volume the current ray runs through, if any.
-    let mut inside: Option<Rgb> = None;
-    let mut depth = 0u32;
-    let mut physical = 0u32;
-    let mut prev_delta = true; // the pinhole eye is a Dirac: no MIS for the first hit
-    let mut prev_pdf = 0.0f32;
-    let mut prev_p = ray.origin;
-    // Product of η'² over the refractions so far: undoes their 1/η'² radiance scaling in β
-    // for the throughput roulette (termination.rs), so a path inside glass is not cut more
-    // often than one outside.
-    let mut eta2 = 1.0f32;
-
-    let mut last = false; // the previous vertex was the path's last: emission only
-    loop {
-        let Some(hit) = tracer.intersect(&ray) else {
-            // Escaped: the environment, MIS-weighted against its light sample.
-            let le = scene.lights.environment_radiance(ray.dir);
-            if !le.is_black() {
-                let w = if prev_delta {
-                    1.0
-                } else {
-                    power_heuristic(prev_pdf, scene.lights.pdf_environment(ray.dir))
-                };
-                out.add(depth, beta * le * w);
-            }
-            return;
-        };
-        // Beer–Lambert absorption when the segment ran inside a volumetric material.
-        if let Some(sigma) = inside.take() {
-            beta *= volume::transmittance(sigma, hit.t);
-        }
-        let wo_world = -ray.dir;
-
-        if hit.emitter >= 0 {
-            let le = scene.lights.emitted(hit.emitter as usize, hit.p, wo_world);
-            if !le.is_black() {
-                let w = if prev_delta {
-                    1.0
-                } else {
-                    let pdf_light = area_to_solid_angle(
-                        scene.lights.pdf_area(hit.emitter as usize),
-                        prev_p,
-                        hit.p,
-                        hit.ng,
-                    );
-                    power_heuristic(prev_pdf, pdf_light)
-                };
-                out.add(depth, beta * le * w);
-            }
-        }
-        if last {
-            return;
-        }
-
-        let bsdf = scene.bsdf(&hit);
-        let next_depth = if depth == 0 && bsdf.is_delta() {
-            0
-        } else {
-            depth + 1
-        };
-        if next_depth > settings.path_depth {
-            return;
-        }
-        depth = next_depth;
-        physical += 1;
-        let shading = Shading::new(&hit, wo_world);
-
-        if bsdf.has_non_delta() {
-            rng.seek(physical, SLOT_LIGHT);
-            let u_light = rng.uniform2();
-            if let Some(ls) = light_sample(scene, &bsdf, &hit, &shading, u_light) {
-                if let Some(conn) = connect_light(scene, tracer, &hit, &shading, &ls) {
-                    if let Some(value) = connection_value(beta, &bsdf, shading.wo, &conn) {
-                        out.add(depth, value);
-                    }
-                }
-            }
-        }
-
-        // The light sample above was MIS-weighted against a BSDF sample of the same vertex, so
-        // that BSDF sample must be traced whenever it can be drawn, also when the path cannot
-        // go on (T_k = 1 at the deepest layer, or the physical depth cap): then the extension
-        // only looks for emission (which belongs to this vertex's layer, Dirac lobes included)
-        // and the path ends there. A random stop (T_k < 1) is fine: survivors are divided by
-        // 1 − T_k.
-        let t = if depth > 0 {
-            let beta_max = beta.max_component() * eta2;
-            let albedo = bsdf.albedo();
-            settings
-                .termination
-                .probability_with_throughput(depth, albedo, beta_max)
-        } else {
-            0.0
-        };
-        last = t >= 1.0 || physical >= settings.max_ray_depth;
-        if !last && t > 0.0 {
-            rng.seek(physical, SLOT_ROULETTE);
-            if rng.uniform() < t {
-                return;
-            }
-            beta /= 1.0 - t;
-        }
-
-        rng.seek(physical, SLOT_BSDF);
-        let Some(s) = bsdf.sample(shading.wo, rng.uniform(), rng.uniform2()) else {
-            return;
-        };
-        let wi_world = shading.frame.to_world(s.wi);
-        if !side_consistent(&hit, wi_world, s.wi) {
-            return;
-        }
-        beta *= s.f * (s.wi.z.abs() / s.pdf);
-        if beta.is_black() {
-            return;
-        }
-        eta2 *= s.eta * s.eta;
-        prev_delta = s.delta;
-        prev_pdf = s.pdf;
-        prev_p = hit.p;
-        inside = volume::entered(scene.material(&hit), hit.ng, wi_world);
-        ray = hit.spawn_ray(wi_world);
+    let mut path = PathState::start(rng.clone(), scene.camera.generate_ray(raster));
+    let mut shadows = (Vec::new(), Vec::new());
+    let mut branches = Vec::new();
+    walk(
+        scene,
+        tracer,
+        settings,
+        &mut path,
+        out,
+        &mut shadows,
+        &mut branches,
+    );
+    // The other branches, in order, after the first: the order the wavefront merges them in.
+    // A path splits once, at its first lighting vertex, so branches do not split again.
+    let mut none = Vec::new();
+    for mut branch in branches {
+        walk(
+            scene,
+            tracer,
+            settings,
+            &mut branch,
+            out,
+            &mut shadows,
+            &mut none,
+        );
+        debug_assert!(none.is_empty());
     }
 }
 
-/// The state of one path of a [`Wavefront`] between two bounces: exactly the locals of
-/// [`trace`]'s loop.
+/// [`trace`]'s loop for one path (or branch) until it ends.
+fn walk<S: BranchStream>(
+    scene: &Scene,
+    tracer: &Tracer,
+    settings: &PathSettings,
+    path: &mut PathState<S>,
+    out: &mut SampleContributions,
+    (shadow_rays, shadow_owner): &mut (Vec<Ray>, Vec<ShadowOwner>),
+    branches: &mut Vec<PathState<S>>,
+) {
+    loop {
+        let going = match tracer.intersect(&path.ray) {
+            Some(hit) => {
+                let shadows = (&mut *shadow_rays, &mut *shadow_owner);
+                vertex(scene, settings, path, 0, &hit, out, shadows, branches)
+            }
+            None => {
+                escape(scene, path, out);
+                false
+            }
+        };
+        if let (Some(ray), Some(owner)) = (shadow_rays.pop(), shadow_owner.pop()) {
+            if !tracer.occluded(&ray) {
+                if let Some(value) = unblocked_value(scene, &owner.pending) {
+                    out.add(owner.layer, value);
+                }
+            }
+        }
+        if !going {
+            return;
+        }
+    }
+}
+
+/// The state of one path of a [`Wavefront`] between two bounces (or of [`trace`]'s path).
 #[derive(Clone, Debug)]
 struct PathState<S> {
     rng: S,
     ray: Ray,
     beta: Rgb,
+    /// σ_a of the absorbing volume the current ray runs through, if any.
     inside: Option<Rgb>,
     depth: u32,
     physical: u32,
     prev_delta: bool,
+    /// The density of the BSDF sample that made the current ray, times the number of
+    /// branches drawn at its vertex (the multi-sample MIS weight's n·p).
     prev_pdf: f32,
     prev_p: Vec3,
+    /// Product of η'² over the refractions so far: undoes their 1/η'² radiance scaling in β
+    /// for the throughput roulette (termination.rs), so a path inside glass is not cut more
+    /// often than one outside.
     eta2: f32,
+    /// The number of branches the path split into (1 before and without a split): β holds
+    /// their 1/k, which the throughput roulette multiplies back out, so that a branch is
+    /// cut as often as an unsplit path with the same light to carry.
+    branches: f32,
+    /// The previous vertex was the path's last: emission only.
     last: bool,
+}
+
+impl<S> PathState<S> {
+    fn start(rng: S, ray: Ray) -> Self {
+        PathState {
+            rng,
+            ray,
+            beta: Rgb::ONE,
+            inside: None,
+            depth: 0,
+            physical: 0,
+            prev_delta: true, // the pinhole eye is a Dirac: no MIS for the first hit
+            prev_pdf: 0.0,
+            prev_p: ray.origin,
+            eta2: 1.0,
+            branches: 1.0,
+            last: false,
+        }
+    }
 }
 
 /// Reusable buffers of [`trace_wavefront`] (one per work unit, so no allocation per path).
 pub struct Wavefront<S = Rng> {
+    /// The wave's paths: first one per start (each start's first branch), then the other
+    /// branches in the order they split off.
     paths: Vec<PathState<S>>,
-    /// Indices of the paths still going, in their original order.
+    /// Indices of the paths still going.
     active: Vec<u32>,
     rays: Vec<Ray>,
     hits: Vec<CompactHit>,
@@ -193,6 +169,14 @@ pub struct Wavefront<S = Rng> {
     /// Per shadow ray: what it adds to which path when unblocked.
     shadow_owner: Vec<ShadowOwner>,
     blocked: Vec<u8>,
+    /// Branches split off in the current bounce, and their starts, before they join `paths`.
+    spawned: Vec<PathState<S>>,
+    spawned_start: Vec<u32>,
+    /// Per path past the starts' own: its start and its contributions (the first
+    /// `branch_count` entries are this wave's).
+    branch_start: Vec<u32>,
+    branch_out: Vec<SampleContributions>,
+    branch_count: usize,
 }
 
 /// The light connection behind a shadow ray of a [`Wavefront`]: the path and layer it adds
@@ -223,6 +207,25 @@ enum PendingConnection {
     },
 }
 
+/// The contribution of a connection whose shadow ray is unblocked (`None` where black).
+#[inline]
+fn unblocked_value(scene: &Scene, pending: &PendingConnection) -> Option<Rgb> {
+    match *pending {
+        PendingConnection::Value(value) => Some(value),
+        PendingConnection::Deferred {
+            material,
+            beta,
+            wo,
+            conn,
+        } => {
+            // The table entry `scene.bsdf` borrowed at the vertex.
+            let bsdf = scene.constant_bsdf(material, [1.0; 4]);
+            bsdf.and_then(|b| connection_value(beta, b, wo, &conn))
+                .filter(|value| !value.is_black())
+        }
+    }
+}
+
 impl<S> Default for Wavefront<S> {
     fn default() -> Self {
         Wavefront {
@@ -233,6 +236,11 @@ impl<S> Default for Wavefront<S> {
             shadow_rays: Vec::new(),
             shadow_owner: Vec::new(),
             blocked: Vec::new(),
+            spawned: Vec::new(),
+            spawned_start: Vec::new(),
+            branch_start: Vec::new(),
+            branch_out: Vec::new(),
+            branch_count: 0,
         }
     }
 }
@@ -243,16 +251,21 @@ impl<S> Default for Wavefront<S> {
 /// `starts[i]` = (its generator, its raster position) and adds its contributions to `out[i]`
 /// (cleared first).
 ///
+/// With `settings.branches` = k > 1 a path splits into k branches at its first lighting
+/// vertex (docs/mcpt.md, "Branches"); each branch is a path of its own in the wave from there on, and its
+/// contributions are appended to its start's after those of the first branch, in branch
+/// order.
+///
 /// Each path draws the same random numbers in the same order and makes the same float
 /// operations as [`trace`] (its shadow ray is traced before its next extension ray, as there;
 /// shading uses [`Scene::surface`] on the compact hit, the host's own surface code), so
 /// `out[i]` equals what [`trace`] gives for the same start, bit for bit, and so does the
-/// image whatever the batch size. Like [`trace`], a connection from a vertex whose BSDF is
-/// its material's table entry is evaluated only once its shadow ray is known to be
-/// unblocked. Differences that change no pixel: a connection that the BSDF's sides say is
-/// black ([`flowlight_core::bsdf::Bsdf::is_zero_between`]) is not traced, and one from a
-/// vertex whose BSDF is built for the hit is evaluated first and not traced where black.
-pub fn trace_wavefront<S: SampleStream + Clone>(
+/// image whatever the batch size. A connection from a vertex whose BSDF is its material's
+/// table entry is evaluated only once its shadow ray is known to be unblocked. Differences
+/// that change no pixel: a connection that the BSDF's sides say is black
+/// ([`flowlight_core::bsdf::Bsdf::is_zero_between`]) is not traced, and one from a vertex
+/// whose BSDF is built for the hit is evaluated first and not traced where black.
+pub fn trace_wavefront<S: BranchStream>(
     scene: &Scene,
     tracer: &Tracer,
     settings: &PathSettings,
@@ -261,23 +274,13 @@ pub fn trace_wavefront<S: SampleStream + Clone>(
     out: &mut [SampleContributions],
 ) {
     debug_assert_eq!(starts.len(), out.len());
+    let n = starts.len();
     wf.paths.clear();
     wf.active.clear();
+    wf.branch_count = 0;
     for (i, (rng, raster)) in starts.iter().enumerate() {
         let ray = scene.camera.generate_ray(*raster);
-        wf.paths.push(PathState {
-            rng: rng.clone(),
-            ray,
-            beta: Rgb::ONE,
-            inside: None,
-            depth: 0,
-            physical: 0,
-            prev_delta: true,
-            prev_pdf: 0.0,
-            prev_p: ray.origin,
-            eta2: 1.0,
-            last: false,
-        });
+        wf.paths.push(PathState::start(rng.clone(), ray));
         wf.active.push(i as u32);
         out[i].clear();
     }
@@ -295,12 +298,15 @@ pub fn trace_wavefront<S: SampleStream + Clone>(
             let i = wf.active[k];
             let path = &mut wf.paths[i as usize];
             let compact = wf.hits[k];
-            let o = &mut out[i as usize];
+            let o = contributions_of(i as usize, n, out, &mut wf.branch_out);
             scene.prefetch_surfaces(&wf.hits, k);
             let going = if compact.is_hit() {
                 let hit = scene.surface(&path.ray, &compact);
                 let shadows = (&mut wf.shadow_rays, &mut wf.shadow_owner);
-                vertex(scene, settings, path, i, &hit, o, shadows)
+                let going = vertex(scene, settings, path, i, &hit, o, shadows, &mut wf.spawned);
+                // Only a start's own path splits (once), so a branch's start is `i`.
+                wf.spawned_start.resize(wf.spawned.len(), i);
+                going
             } else {
                 escape(scene, path, o);
                 false
@@ -311,35 +317,61 @@ pub fn trace_wavefront<S: SampleStream + Clone>(
             }
         }
         wf.active.truncate(kept);
+        // Branches split off this bounce join the wave for the next one.
+        for (branch, start) in wf.spawned.drain(..).zip(wf.spawned_start.drain(..)) {
+            debug_assert!((start as usize) < n);
+            let b = wf.branch_count;
+            wf.active.push(wf.paths.len() as u32);
+            wf.paths.push(branch);
+            if b < wf.branch_out.len() {
+                wf.branch_out[b].clear();
+                wf.branch_start[b] = start;
+            } else {
+                wf.branch_out.push(SampleContributions::default());
+                wf.branch_start.push(start);
+            }
+            wf.branch_count += 1;
+        }
         if !wf.shadow_rays.is_empty() {
             tracer.occluded_batch(&wf.shadow_rays, &mut wf.blocked);
             for (owner, &b) in wf.shadow_owner.iter().zip(&wf.blocked) {
                 if b != 0 {
                     continue;
                 }
-                let value = match owner.pending {
-                    PendingConnection::Value(value) => value,
-                    PendingConnection::Deferred {
-                        material,
-                        beta,
-                        wo,
-                        conn,
-                    } => {
-                        // The table entry `scene.bsdf` borrowed at the vertex.
-                        let bsdf = scene.constant_bsdf(material, [1.0; 4]);
-                        match bsdf.and_then(|b| connection_value(beta, b, wo, &conn)) {
-                            Some(value) if !value.is_black() => value,
-                            _ => continue,
-                        }
-                    }
-                };
-                out[owner.path as usize].add(owner.layer, value);
+                if let Some(value) = unblocked_value(scene, &owner.pending) {
+                    contributions_of(owner.path as usize, n, out, &mut wf.branch_out)
+                        .add(owner.layer, value);
+                }
             }
         }
     }
+    // Each start's other branches after its first, in branch order (a start's branches
+    // split off together, so they are consecutive here).
+    for b in 0..wf.branch_count {
+        let start = wf.branch_start[b] as usize;
+        out[start]
+            .entries
+            .extend_from_slice(&wf.branch_out[b].entries);
+    }
 }
 
-/// [`trace`]'s escape branch: the environment, MIS-weighted against its light sample.
+/// The contributions path `p` of a wave with `n` starts adds to: its start's own for a
+/// start's first branch, else the branch's until the wave ends.
+#[inline(always)]
+fn contributions_of<'a>(
+    p: usize,
+    n: usize,
+    out: &'a mut [SampleContributions],
+    branch_out: &'a mut [SampleContributions],
+) -> &'a mut SampleContributions {
+    if p < n {
+        &mut out[p]
+    } else {
+        &mut branch_out[p - n]
+    }
+}
+
+/// The escape branch: the environment, MIS-weighted against its light sample.
 #[inline]
 fn escape<S>(scene: &Scene, path: &PathState<S>, out: &mut SampleContributions) {
     let le = scene.lights.environment_radiance(path.ray.dir);
@@ -353,12 +385,23 @@ fn escape<S>(scene: &Scene, path: &PathState<S>, out: &mut SampleContributions) 
     }
 }
 
-/// [`trace`]'s loop body at a hit of path `index`, with the light connection's shadow ray
-/// and its [`ShadowOwner`] pushed onto `shadows` instead of traced (in place: a connection
-/// returned through the caller's stack was reloaded wider than it was stored, a stall on
-/// every connection). Returns whether the path goes on (with `path.ray`).
+/// The work at a hit of path `index`: its emission (MIS-weighted against the light sample
+/// of the vertex before), the light connection, whose shadow ray and [`ShadowOwner`] are
+/// pushed onto `shadows` instead of traced (in place: a connection returned through the
+/// caller's stack was reloaded wider than it was stored, a stall on every connection), the
+/// termination and the BSDF sample ([`extend`]). Returns whether the path goes on (with
+/// `path.ray`).
+///
+/// **Branches.** With `settings.branches` = k > 1, at the path's first lighting vertex
+/// (depth 1, reached once) the path splits: it goes on as branch 0 and pushes branches
+/// 1 … k−1 that survive their own roulette and BSDF sample onto `branches`. Each branch
+/// carries β/k and draws from `path.rng.branch(j, k)` from the roulette on; the vertex's
+/// emission and light connection are shared. The connection is weighed against k BSDF
+/// samples and each branch's next-vertex emission against k·p_bsdf (Veach's multi-sample
+/// MIS, power heuristic with sample counts 1 and k), so the estimate stays unbiased.
+#[allow(clippy::too_many_arguments)]
 #[inline]
-fn vertex<S: SampleStream>(
+fn vertex<S: BranchStream>(
     scene: &Scene,
     settings: &PathSettings,
     path: &mut PathState<S>,
@@ -366,7 +409,9 @@ fn vertex<S: SampleStream>(
     hit: &SurfaceHit,
     out: &mut SampleContributions,
     (shadow_rays, shadow_owner): (&mut Vec<Ray>, &mut Vec<ShadowOwner>),
+    branches: &mut Vec<PathState<S>>,
 ) -> bool {
+    // Beer–Lambert absorption when the segment ran inside a volumetric material.
     if let Some(sigma) = path.inside.take() {
         path.beta *= volume::transmittance(sigma, hit.t);
     }
@@ -403,14 +448,17 @@ fn vertex<S: SampleStream>(
     path.depth = next_depth;
     path.physical += 1;
     let depth = path.depth;
+    let split = depth == 1 && settings.branches > 1;
+    let bsdf_samples = if split { settings.branches as f32 } else { 1.0 };
     let shading = Shading::new(hit, wo_world);
-    let rng = &mut path.rng;
 
     if bsdf.has_non_delta() {
+        let rng = &mut path.rng;
         rng.seek(path.physical, SLOT_LIGHT);
         let u_light = rng.uniform2();
         if let Some(ls) = light_sample(scene, &bsdf, hit, &shading, u_light) {
-            if let Some((conn, shadow_ray)) = light_connection(scene, hit, &shading, &ls) {
+            if let Some((mut conn, shadow_ray)) = light_connection(scene, hit, &shading, &ls) {
+                conn.bsdf_samples = bsdf_samples;
                 let pending = match &bsdf {
                     _ if bsdf.is_zero_between(shading.wo, conn.wi_local) => None,
                     Cow::Borrowed(_) => Some(PendingConnection::Deferred {
@@ -437,16 +485,53 @@ fn vertex<S: SampleStream>(
 
     // From here on the path may end; its shadow ray (already pushed) counts either way.
     let t = if depth > 0 {
-        // The same decision as the path-at-a-time `trace` (same stream, same throughput).
         settings.termination.probability_with_throughput(
             depth,
             bsdf.albedo(),
-            path.beta.max_component() * path.eta2,
+            path.beta.max_component() * path.eta2 * path.branches,
         )
     } else {
         0.0
     };
+    // The light sample above was MIS-weighted against a BSDF sample of the same vertex, so
+    // that BSDF sample must be traced whenever it can be drawn, also when the path cannot
+    // go on (T_k = 1 at the deepest layer, or the physical depth cap): then the extension
+    // only looks for emission (which belongs to this vertex's layer, Dirac lobes included)
+    // and the path ends there. A random stop (T_k < 1) is fine: survivors are divided by
+    // 1 − T_k.
     path.last = t >= 1.0 || path.physical >= settings.max_ray_depth;
+    if split {
+        let k = settings.branches;
+        let trunk = path.rng.clone();
+        path.beta /= bsdf_samples;
+        path.branches = bsdf_samples;
+        for j in 1..k {
+            let mut branch = path.clone();
+            branch.rng = trunk.branch(j, k);
+            if extend(scene, &mut branch, hit, &bsdf, &shading, t, bsdf_samples) {
+                branches.push(branch);
+            }
+        }
+        path.rng = trunk.branch(0, k);
+    }
+    extend(scene, path, hit, &bsdf, &shading, t, bsdf_samples)
+}
+
+/// The rest of a vertex for one path (or branch): the roulette with stop probability `t`
+/// (none where the path is at its last vertex) and the BSDF sample, which sets the next ray.
+/// `bsdf_samples`: how many BSDF samples the vertex draws (the branches), the factor of the
+/// density the next vertex weighs its emission with. Returns whether the path goes on.
+#[inline]
+fn extend<S: SampleStream>(
+    scene: &Scene,
+    path: &mut PathState<S>,
+    hit: &SurfaceHit,
+    bsdf: &Bsdf,
+    shading: &Shading,
+    t: f32,
+    bsdf_samples: f32,
+) -> bool {
+    let rng = &mut path.rng;
     if !path.last && t > 0.0 {
         rng.seek(path.physical, SLOT_ROULETTE);
         if rng.uniform() < t {
@@ -468,7 +553,7 @@ fn vertex<S: SampleStream>(
     }
     path.eta2 *= s.eta * s.eta;
     path.prev_delta = s.delta;
-    path.prev_pdf = s.pdf;
+    path.prev_pdf = s.pdf * bsdf_samples;
     path.prev_p = hit.p;
     path.inside = volume::entered(scene.material(hit), hit.ng, wi_world);
     path.ray = hit.spawn_ray(wi_world);

@@ -38,8 +38,32 @@ impl SamplerKind {
     }
 }
 
+/// A sample's numbers that split into independent branches: a path traced on as `k`
+/// branches from a vertex (MCPT's `branches`) draws branch `j`'s numbers from
+/// `branch(j, k)` from there on.
+pub trait BranchStream: SampleStream + Clone {
+    fn branch(&self, j: u32, k: u32) -> Self;
+}
+
+impl BranchStream for Rng {
+    /// A fresh PCG32 stream from this one's state and `j`.
+    #[inline]
+    fn branch(&self, j: u32, _k: u32) -> Self {
+        Rng::branch(self, j as u64)
+    }
+}
+
+impl BranchStream for SobolSampler {
+    /// Sample index i·k + j ([`SobolSampler::branch`]): the branches of a pixel's samples
+    /// stratify together.
+    #[inline]
+    fn branch(&self, j: u32, k: u32) -> Self {
+        SobolSampler::branch(self, j, k)
+    }
+}
+
 /// The random numbers of one pixel sample.
-pub trait PixelSampler: SampleStream + Clone {
+pub trait PixelSampler: BranchStream {
     /// The numbers of sample `s` of pixel (`x`, `y`) of a render with seed `seed`.
     fn for_sample(seed: u64, x: u32, y: u32, s: u32) -> Self;
 }

@@ -24,6 +24,39 @@ pub struct PathSettings {
     /// GGX α below which the untangled sampler treats a glossy lobe as Λα (no light
     /// connection there; light is found only by hitting it). MCPT's `narrow_glossy_alpha`.
     pub narrow_glossy_alpha: f32,
+    /// Entangled only: a camera path goes on as this many branches from its first lighting
+    /// vertex (MCPT's `branches`, [`branches_from_params`]; 1 = no split, what
+    /// [`PathSettings::from_params`] sets). See [`crate::entangled::trace_wavefront`].
+    pub branches: u32,
+}
+
+/// The largest `branches`.
+pub const MAX_BRANCHES: u32 = 64;
+
+/// MCPT's default `branches` for entangled paths.
+pub const DEFAULT_BRANCHES: u32 = 1;
+
+/// MCPT's `branches` parameter for paths of `variant`: [`DEFAULT_BRANCHES`] for entangled
+/// ones, 1 (no split) for untangled ones, which refuse any other value. Only MCPT declares
+/// it: ERPT's seeds and its path-traced part stay single paths
+/// ([`PathSettings::from_params`] sets 1).
+pub fn branches_from_params(p: &Params, variant: Variant) -> Result<u32, String> {
+    let default = match variant {
+        Variant::Entangled => DEFAULT_BRANCHES,
+        Variant::Untangled => 1,
+    };
+    let branches = p.int("branches", default as i64)?;
+    if !(1..=MAX_BRANCHES as i64).contains(&branches) {
+        return Err(format!(
+            "parameter 'branches' must be in 1..={MAX_BRANCHES}, got {branches}"
+        ));
+    }
+    if branches > 1 && variant == Variant::Untangled {
+        return Err(format!(
+            "parameter 'branches' = {branches} needs variant = \"entangled\" (an untangled path has one light connection; it is not split)"
+        ));
+    }
+    Ok(branches as u32)
 }
 
 /// Parameters every path-sampling plugin accepts (user documentation in each plugin header).
@@ -82,6 +115,7 @@ impl PathSettings {
         }
         Ok(PathSettings {
             variant,
+            branches: 1,
             narrow_glossy_alpha: narrow_glossy_alpha as f32,
             path_depth: path_depth as u32,
             max_ray_depth: max_ray_depth as u32,
