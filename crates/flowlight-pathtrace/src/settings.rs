@@ -33,8 +33,9 @@ pub struct PathSettings {
 /// The largest `branches`.
 pub const MAX_BRANCHES: u32 = 64;
 
-/// MCPT's default `branches` for entangled paths.
-pub const DEFAULT_BRANCHES: u32 = 1;
+/// MCPT's default `branches` for entangled paths: the most efficient of 1, 2 and 4 on the
+/// benchmark suite (`scenes/suite-branches.toml`; docs/performance.md, "Sixteenth session").
+pub const DEFAULT_BRANCHES: u32 = 4;
 
 /// MCPT's `branches` parameter for paths of `variant`: [`DEFAULT_BRANCHES`] for entangled
 /// ones, 1 (no split) for untangled ones, which refuse any other value. Only MCPT declares

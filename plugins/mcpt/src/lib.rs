@@ -21,7 +21,7 @@
 //! | `narrow_glossy_alpha` | float | 0.05 | untangled only: a glossy lobe with GGX α below it is Λα — no light connection there, light is found only by hitting it. A small lamp seen in a surface of roughness 0.2 (α = 0.04) is then nearly black; set 0 to connect at every non-Dirac vertex. Entangled MCPT connects at every non-Dirac vertex regardless |
 //! | `wavefront` | int | 256 | entangled only: paths traced together, as batches of camera, extension and shadow rays handed to the host in one call each (ABI 4); 0 traces one path at a time with one host call per ray. The image is the same bit for bit either way; only the speed differs |
 //! | `sampler` | string | `"sobol"` | entangled only (untangled: `"independent"`, and `"sobol"` is refused): where each pixel sample's random numbers come from: `"sobol"`, Sobol' points of a per-dimension shuffled (Owen-scrambled) index, digitally shifted (randomised quasi-Monte Carlo: the samples of a pixel are stratified against each other in every dimension, at every power of two of samples per pixel; unbiased); `"independent"`, a PCG32 stream per sample |
-//! | `branches` | int | 1 | entangled only: a camera path goes on as this many branches (1..=64) from its first lighting vertex, each with 1/k of the weight and its own numbers (splitting, as a production renderer's diffuse samples per camera sample); the vertex's light connection is shared and weighted against the k BSDF samples (multi-sample MIS). The camera ray, first hit and its light connection are paid once for k indirect paths. With `sampler = "sobol"` and k a power of two the branches of a pixel's samples are stratified together |
+//! | `branches` | int | 4 (untangled: 1) | entangled only: a camera path goes on as this many branches (1..=64) from its first lighting vertex, each with 1/k of the weight and its own numbers (splitting, as a production renderer's diffuse samples per camera sample); the vertex's light connection is shared and weighted against the k BSDF samples (multi-sample MIS). The camera ray, first hit and its light connection are paid once for k indirect paths. With `sampler = "sobol"` and k a power of two the branches of a pixel's samples are stratified together |
 //! | `layers` | bool | false | also write lighting layers 0..=N (layer k = paths of virtual length k+1) as EXR layers `layer0`…; they sum to the image |
 //!
 //! Each pixel sample's numbers depend only on (seed, pixel, sample index) — a PCG32 stream
@@ -85,7 +85,7 @@ const PARAMS: [ParamSpec; 11] = {
         param(
             "branches",
             ParamKind::Int,
-            "1",
+            "4",
             "entangled only: branches a camera path splits into at its first lighting vertex, each with 1/k of the weight (1..=64; 1 = no split; untangled: 1)",
         ),
         param(
