@@ -400,7 +400,7 @@ fn escape<S>(scene: &Scene, path: &PathState<S>, out: &mut SampleContributions) 
 /// samples and each branch's next-vertex emission against k·p_bsdf (Veach's multi-sample
 /// MIS, power heuristic with sample counts 1 and k), so the estimate stays unbiased.
 #[allow(clippy::too_many_arguments)]
-#[inline]
+#[inline(always)]
 fn vertex<S: BranchStream>(
     scene: &Scene,
     settings: &PathSettings,
@@ -521,7 +521,7 @@ fn vertex<S: BranchStream>(
 /// (none where the path is at its last vertex) and the BSDF sample, which sets the next ray.
 /// `bsdf_samples`: how many BSDF samples the vertex draws (the branches), the factor of the
 /// density the next vertex weighs its emission with. Returns whether the path goes on.
-#[inline]
+#[inline(always)]
 fn extend<S: SampleStream>(
     scene: &Scene,
     path: &mut PathState<S>,
