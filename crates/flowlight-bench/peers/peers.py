@@ -449,10 +449,10 @@ def main():
     os.makedirs(a.out, exist_ok=True)
     # The label names the termination in use: the user's --set, else the plugin's default.
     sets = dict(s.split("=", 1) for s in a.set if "=" in s)
-    for key in ("sampler", "termination"):
+    for key in ("sampler", "termination", "branches"):
         if key not in sets:
             text = run([a.flowlight, "plugins"])
-            m = re.search(rf"^mcpt \(Integrator\).*?^\s+{key}\s+string\s+default \"(\w+)\"", text, re.M | re.S)
+            m = re.search(rf"^mcpt \(Integrator\).*?^\s+{key}\s+(?:string|integer)\s+default \"?(\w+)\"?", text, re.M | re.S)
             sets = {key: (m.group(1) if m else "?") + " (default)", **sets}
     fl_label = "Flowlight MCPT (entangled, " + ", ".join(f"{k} {v}" for k, v in sets.items()) + ")"
     rev = subprocess.run(["git", "-C", ROOT, "describe", "--always", "--dirty"], capture_output=True, text=True).stdout.strip()
