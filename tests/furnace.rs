@@ -193,12 +193,13 @@ fn throughput_layers_match_the_analytic_furnace_layers() {
     }
 }
 
-// Paths split into branches at their first lighting vertex (`branches`): the vertex's light
-// connection is weighed against k BSDF samples (multi-sample MIS) and each branch carries
-// 1/k of the weight, so a wrong weight or a lost branch shows at every depth, most at N = 1,
-// where the split vertex's emission-only BSDF samples carry a third of the image. With the
-// roulette from the first vertex both the split vertex's roulette and the branches' (whose β
-// holds the 1/k the roulette multiplies back out) are exercised.
+// Paths split into branches at their first lighting vertex (`branches`): each branch carries
+// 1/k of the weight into its own light connection there and its own BSDF sample, so a
+// connection or branch with the wrong weight, or a lost branch, shows at every depth (all
+// five fail when the split vertex's connections carry 2/k), most at N = 1, where the split
+// vertex's connections and emission-only BSDF samples are the image but for the emitter
+// seen directly. With the roulette from the first vertex both the split vertex's roulette
+// and the branches' (whose β holds the 1/k the roulette multiplies back out) are exercised.
 macro_rules! branched {
     ($($name:ident: $termination:literal, $depth:literal, $branches:literal, $rr_depth:literal;)*) => {
         $(#[test]

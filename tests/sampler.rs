@@ -55,8 +55,7 @@ fn sobol_is_unbiased_through_glass() {
 /// Paths split into branches (`branches`), with Sobol' numbers (k = 4: the branches of a
 /// pixel's samples are stratified together) and with independent ones (k = 3), region by
 /// region against an unsplit independent reference: a branch merged into the wrong sample
-/// or a wrong multi-sample MIS weight at the split vertex biases regions (the furnace, being
-/// uniform, sees only the second). 64 camera samples, as the samplers' own checks above: the
+/// biases regions, which the furnace, being uniform, cannot see. 64 camera samples, as the samplers' own checks above: the
 /// image mean's noise is the lamp's edge pixels', which branches do not reduce.
 #[test]
 fn branches_are_unbiased_on_the_cornell_box_and_through_glass() {

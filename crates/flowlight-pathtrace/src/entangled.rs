@@ -11,8 +11,8 @@
 //! (in the white furnace of albedo ½ at N = 1: 1.245 instead of 1.5).
 //!
 //! With `branches` = k > 1 (MCPT's parameter; [`PathSettings::branches`]) a camera path
-//! splits at its first lighting vertex into k branches of weight 1/k, its light connection
-//! there weighed against the k BSDF samples (multi-sample MIS): docs/mcpt.md, "Branches".
+//! splits at its first lighting vertex into k branches of weight 1/k, each with its own
+//! light connection there and its own BSDF sample: docs/mcpt.md, "Branches".
 
 use crate::sampler::BranchStream;
 use crate::settings::PathSettings;
@@ -108,7 +108,8 @@ fn walk<S: BranchStream>(
                 false
             }
         };
-        if let (Some(ray), Some(owner)) = (shadow_rays.pop(), shadow_owner.pop()) {
+        // The vertex's connections (one, or one per branch at a split), in order.
+        for (ray, owner) in shadow_rays.drain(..).zip(shadow_owner.drain(..)) {
             if !tracer.occluded(&ray) {
                 if let Some(value) = unblocked_value(scene, &owner.pending) {
                     out.add(owner.layer, value);
@@ -132,8 +133,6 @@ struct PathState<S> {
     depth: u32,
     physical: u32,
     prev_delta: bool,
-    /// The density of the BSDF sample that made the current ray, times the number of
-    /// branches drawn at its vertex (the multi-sample MIS weight's n·p).
     prev_pdf: f32,
     prev_p: Vec3,
     /// Product of η'² over the refractions so far: undoes their 1/η'² radiance scaling in β
@@ -406,10 +405,12 @@ fn escape<S>(scene: &Scene, path: &PathState<S>, out: &mut SampleContributions) 
 /// **Branches.** With `settings.branches` = k > 1, at the path's first lighting vertex
 /// (depth 1, reached once) the path splits: it goes on as branch 0 and pushes branches
 /// 1 … k−1 that survive their own roulette and BSDF sample onto `branches`. Each branch
-/// carries β/k and draws from `path.rng.branch(j, k)` from the roulette on; the vertex's
-/// emission and light connection are shared. The connection is weighed against k BSDF
-/// samples and each branch's next-vertex emission against k·p_bsdf (Veach's multi-sample
-/// MIS, power heuristic with sample counts 1 and k), so the estimate stays unbiased.
+/// carries β/k and draws from `path.rng.branch(j, k)` from this vertex's light sample on:
+/// the camera ray, the hit, its emission and its BSDF are shared, the light connection
+/// (pushed by this path for every branch, in branch order) and the rest are not. Each
+/// branch is the unsplit estimator from here on with its own numbers, its connection and
+/// its BSDF sample weighed against each other as in an unsplit path, so the mean of the k
+/// is unbiased.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn vertex<S: BranchStream>(
@@ -460,41 +461,9 @@ fn vertex<S: BranchStream>(
     path.physical += 1;
     let depth = path.depth;
     let split = depth == 1 && settings.branches > 1;
-    let bsdf_samples = if split { settings.branches as f32 } else { 1.0 };
     let shading = Shading::new(hit, wo_world);
-
-    if bsdf.has_non_delta() {
-        let rng = &mut path.rng;
-        rng.seek(path.physical, SLOT_LIGHT);
-        let u_light = rng.uniform2();
-        if let Some(ls) = light_sample(scene, &bsdf, hit, &shading, u_light) {
-            if let Some((mut conn, shadow_ray)) = light_connection(scene, hit, &shading, &ls) {
-                conn.bsdf_samples = bsdf_samples;
-                let pending = match &bsdf {
-                    _ if bsdf.is_zero_between(shading.wo, conn.wi_local) => None,
-                    Cow::Borrowed(_) => Some(PendingConnection::Deferred {
-                        material: hit.material,
-                        beta: path.beta,
-                        wo: shading.wo,
-                        conn,
-                    }),
-                    Cow::Owned(b) => connection_value(path.beta, b, shading.wo, &conn)
-                        .filter(|value| !value.is_black())
-                        .map(PendingConnection::Value),
-                };
-                if let Some(pending) = pending {
-                    shadow_rays.push(shadow_ray.ray(hit));
-                    shadow_owner.push(ShadowOwner {
-                        path: index,
-                        layer: depth,
-                        pending,
-                    });
-                }
-            }
-        }
-    }
-
-    // From here on the path may end; its shadow ray (already pushed) counts either way.
+    // The termination probability of the vertex (the same for every branch of a split:
+    // β·k with β/k).
     let t = if depth > 0 {
         settings.termination.probability_with_throughput(
             depth,
@@ -504,34 +473,121 @@ fn vertex<S: BranchStream>(
     } else {
         0.0
     };
-    // The light sample above was MIS-weighted against a BSDF sample of the same vertex, so
+    // The light sample below was MIS-weighted against a BSDF sample of the same vertex, so
     // that BSDF sample must be traced whenever it can be drawn, also when the path cannot
     // go on (T_k = 1 at the deepest layer, or the physical depth cap): then the extension
     // only looks for emission (which belongs to this vertex's layer, Dirac lobes included)
     // and the path ends there. A random stop (T_k < 1) is fine: survivors are divided by
     // 1 − T_k.
     path.last = t >= 1.0 || path.physical >= settings.max_ray_depth;
-    if split {
-        let k = settings.branches;
-        let trunk = path.rng.clone();
-        path.beta /= bsdf_samples;
-        path.branches = bsdf_samples;
-        for j in 1..k {
+    if !split {
+        let shadows = (&mut *shadow_rays, &mut *shadow_owner);
+        let rng = &mut path.rng;
+        connect(
+            scene,
+            &bsdf,
+            hit,
+            &shading,
+            rng,
+            path.physical,
+            path.beta,
+            depth,
+            index,
+            shadows,
+        );
+        // From here on the path may end; its shadow ray (already pushed) counts either way.
+        return extend(scene, path, hit, &bsdf, &shading, t);
+    }
+    // A split: k branches, each with β/k, its own numbers from here on (`trunk.branch(j,
+    // k)`), its own light connection here and its own roulette and BSDF sample. Every
+    // connection is pushed by this path, in branch order, so the sample's contributions
+    // come in the same order from the walk and the wave.
+    let k = settings.branches;
+    let trunk = path.rng.clone();
+    path.beta /= k as f32;
+    path.branches = k as f32;
+    for j in 0..k {
+        let mut rng = trunk.branch(j, k);
+        let shadows = (&mut *shadow_rays, &mut *shadow_owner);
+        connect(
+            scene,
+            &bsdf,
+            hit,
+            &shading,
+            &mut rng,
+            path.physical,
+            path.beta,
+            depth,
+            index,
+            shadows,
+        );
+        if j == 0 {
+            path.rng = rng;
+        } else {
             let mut branch = path.clone();
-            branch.rng = trunk.branch(j, k);
-            if extend(scene, &mut branch, hit, &bsdf, &shading, t, bsdf_samples) {
+            branch.rng = rng;
+            if extend(scene, &mut branch, hit, &bsdf, &shading, t) {
                 branches.push(branch);
             }
         }
-        path.rng = trunk.branch(0, k);
     }
-    extend(scene, path, hit, &bsdf, &shading, t, bsdf_samples)
+    extend(scene, path, hit, &bsdf, &shading, t)
+}
+
+/// The light connection of a vertex: a light sample from `rng`'s numbers, its shadow ray
+/// and [`ShadowOwner`] pushed onto `shadows` where it may carry light. `bsdf` stays a `Cow`:
+/// its variant says whether it is the material's table entry (evaluated after the shadow
+/// ray) or built for the hit (evaluated now).
+#[allow(clippy::too_many_arguments, clippy::ptr_arg)]
+#[inline(always)]
+fn connect<S: SampleStream>(
+    scene: &Scene,
+    bsdf: &Cow<'_, Bsdf>,
+    hit: &SurfaceHit,
+    shading: &Shading,
+    rng: &mut S,
+    physical: u32,
+    beta: Rgb,
+    depth: u32,
+    index: u32,
+    (shadow_rays, shadow_owner): (&mut Vec<Ray>, &mut Vec<ShadowOwner>),
+) {
+    if !bsdf.has_non_delta() {
+        return;
+    }
+    rng.seek(physical, SLOT_LIGHT);
+    let u_light = rng.uniform2();
+    let Some(ls) = light_sample(scene, bsdf, hit, shading, u_light) else {
+        return;
+    };
+    let Some((conn, shadow_ray)) = light_connection(scene, hit, shading, &ls) else {
+        return;
+    };
+    let pending = match bsdf {
+        _ if bsdf.is_zero_between(shading.wo, conn.wi_local) => None,
+        Cow::Borrowed(_) => Some(PendingConnection::Deferred {
+            material: hit.material,
+            beta,
+            wo: shading.wo,
+            conn,
+        }),
+        Cow::Owned(b) => connection_value(beta, b, shading.wo, &conn)
+            .filter(|value| !value.is_black())
+            .map(PendingConnection::Value),
+    };
+    if let Some(pending) = pending {
+        shadow_rays.push(shadow_ray.ray(hit));
+        shadow_owner.push(ShadowOwner {
+            path: index,
+            layer: depth,
+            pending,
+        });
+    }
 }
 
 /// The rest of a vertex for one path (or branch): the roulette with stop probability `t`
 /// (none where the path is at its last vertex) and the BSDF sample, which sets the next ray.
-/// `bsdf_samples`: how many BSDF samples the vertex draws (the branches), the factor of the
-/// density the next vertex weighs its emission with. Returns whether the path goes on.
+/// Returns whether the path goes on.
 #[inline(always)]
 fn extend<S: SampleStream>(
     scene: &Scene,
@@ -540,7 +596,6 @@ fn extend<S: SampleStream>(
     bsdf: &Bsdf,
     shading: &Shading,
     t: f32,
-    bsdf_samples: f32,
 ) -> bool {
     let rng = &mut path.rng;
     if !path.last && t > 0.0 {
@@ -564,7 +619,7 @@ fn extend<S: SampleStream>(
     }
     path.eta2 *= s.eta * s.eta;
     path.prev_delta = s.delta;
-    path.prev_pdf = s.pdf * bsdf_samples;
+    path.prev_pdf = s.pdf;
     path.prev_p = hit.p;
     path.inside = volume::entered(scene.material(hit), hit.ng, wi_world);
     path.ray = hit.spawn_ray(wi_world);

@@ -65,10 +65,6 @@ pub(crate) struct Connection {
     pub pdf: f32,
     /// A delta light: no BSDF sample can reach it, so no MIS weight.
     pub delta: bool,
-    /// How many BSDF samples the vertex draws against this one light sample: 1, or k where
-    /// the path splits into k branches there. Multi-sample MIS (Veach 1997, §9.2): the
-    /// power heuristic weighs the connection against k·p_bsdf.
-    pub bsdf_samples: f32,
 }
 
 /// The BSDF value f at a light connection from a vertex with outgoing direction `wo` (local)
@@ -91,7 +87,7 @@ pub(crate) fn connection_bsdf(bsdf: &Bsdf, wo: Vec3, conn: &Connection) -> Optio
         return (!f.is_black()).then(|| (f, 1.0 / conn.pdf));
     }
     let (f, pdf) = bsdf.eval_pdf(wo, conn.wi_local);
-    (!f.is_black()).then(|| (f, power_heuristic_over(conn.pdf, pdf * conn.bsdf_samples)))
+    (!f.is_black()).then(|| (f, power_heuristic_over(conn.pdf, pdf)))
 }
 
 /// The contribution β · f · L · |cos θ_i| · (MIS weight / density) of an unoccluded
@@ -163,7 +159,6 @@ pub(crate) fn light_connection(
         radiance: inc.radiance,
         pdf: inc.pdf,
         delta: inc.delta,
-        bsdf_samples: 1.0,
     };
     Some((conn, shadow))
 }
