@@ -462,8 +462,9 @@ fn vertex<S: BranchStream>(
     let depth = path.depth;
     let split = depth == 1 && settings.branches > 1;
     let shading = Shading::new(hit, wo_world);
-    // The termination probability of the vertex (the same for every branch of a split:
-    // β·k with β/k).
+    // The termination probability of the vertex, before any split here, so the same for
+    // every branch of one. At a branch's later vertices β holds the split's 1/k and
+    // `path.branches` = k multiplies it back out.
     let t = if depth > 0 {
         settings.termination.probability_with_throughput(
             depth,
