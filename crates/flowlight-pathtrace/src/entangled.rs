@@ -139,10 +139,6 @@ struct PathState<S> {
     /// for the throughput roulette (termination.rs), so a path inside glass is not cut more
     /// often than one outside.
     eta2: f32,
-    /// The number of branches the path split into (1 before and without a split): β holds
-    /// their 1/k, which the throughput roulette multiplies back out, so that a branch is
-    /// cut as often as an unsplit path with the same light to carry.
-    branches: f32,
     /// The previous vertex was the path's last: emission only.
     last: bool,
 }
@@ -160,7 +156,6 @@ impl<S> PathState<S> {
             prev_pdf: 0.0,
             prev_p: ray.origin,
             eta2: 1.0,
-            branches: 1.0,
             last: false,
         }
     }
@@ -463,13 +458,19 @@ fn vertex<S: BranchStream>(
     let split = depth == 1 && settings.branches > 1;
     let shading = Shading::new(hit, wo_world);
     // The termination probability of the vertex, before any split here, so the same for
-    // every branch of one. At a branch's later vertices β holds the split's 1/k and
-    // `path.branches` = k multiplies it back out.
+    // every branch of one. Past depth 1 a path has split (every path splits there when
+    // k > 1), so β holds the split's 1/k, which the roulette multiplies back out: a branch
+    // is cut as often as an unsplit path with the same light to carry.
+    let split_weight = if depth > 1 {
+        settings.branches as f32
+    } else {
+        1.0
+    };
     let t = if depth > 0 {
         settings.termination.probability_with_throughput(
             depth,
             bsdf.albedo(),
-            path.beta.max_component() * path.eta2 * path.branches,
+            path.beta.max_component() * path.eta2 * split_weight,
         )
     } else {
         0.0
@@ -506,7 +507,6 @@ fn vertex<S: BranchStream>(
     let k = settings.branches;
     let trunk = path.rng.clone();
     path.beta /= k as f32;
-    path.branches = k as f32;
     for j in 0..k {
         let mut rng = trunk.branch(j, k);
         let shadows = (&mut *shadow_rays, &mut *shadow_owner);
