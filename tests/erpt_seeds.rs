@@ -68,7 +68,7 @@ fn check_seed_estimates(config: &str, session: flowlight_host::session::Session)
             &scene,
             &tracer,
             &settings,
-            &mut Rng::new(stream, 0),
+            &Rng::new(stream, 0),
             raster,
             &mut contributions,
         );

@@ -254,9 +254,8 @@ fn wavefront_matches_with(s: &Session, scene: &Scene, settings: &PathSettings, w
         }
         let mut nonzero = 0;
         for (i, (rng, raster)) in starts.iter().enumerate() {
-            let mut rng = rng.clone();
             let mut want = SampleContributions::default();
-            entangled::trace(&scene, &tracer, &settings, &mut rng, *raster, &mut want);
+            entangled::trace(&scene, &tracer, &settings, rng, *raster, &mut want);
             let bits = |c: &SampleContributions| {
                 c.entries
                     .iter()

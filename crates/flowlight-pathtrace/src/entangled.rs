@@ -35,7 +35,7 @@ use std::borrow::Cow;
 /// Traces one entangled path tree through raster position `raster`, adding each contribution
 /// to `out` with its lighting layer. `rng` is any [`BranchStream`]: independent numbers
 /// ([`Rng`]) or a pixel's stratified samples ([`flowlight_core::sobol::SobolSampler`]); the
-/// path draws from a copy of it. One path at a time, one host call per ray: the same vertex
+/// path draws from a copy of it, so it is left as it was. One path at a time, one host call per ray: the same vertex
 /// code as [`trace_wavefront`], with each shadow ray traced as soon as its vertex is done
 /// (before the next extension ray, as the wavefront's order also gives), so the two give the
 /// same contributions in the same order, bit for bit.
@@ -43,7 +43,7 @@ pub fn trace<S: BranchStream>(
     scene: &Scene,
     tracer: &Tracer,
     settings: &PathSettings,
-    rng: &mut S,
+    rng: &S,
     raster: Vec2,
     out: &mut SampleContributions,
 ) {
@@ -82,7 +82,8 @@ pub fn trace<S: BranchStream>(
 }
 
 thread_local! {
-    /// [`trace`]'s shadow ray and its owner between a vertex and its test (at most one).
+    /// [`trace`]'s shadow rays and their owners between a vertex and their tests (one per
+    /// connection: one, or one per branch at a split).
     static SHADOWS: std::cell::RefCell<(Vec<Ray>, Vec<ShadowOwner>)> =
         const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
 }
@@ -482,21 +483,16 @@ fn vertex<S: BranchStream>(
     // and the path ends there. A random stop (T_k < 1) is fine: survivors are divided by
     // 1 − T_k.
     path.last = t >= 1.0 || path.physical >= settings.max_ray_depth;
-    if !split {
+    // The vertex's light connection with a path's (or branch's) numbers and throughput.
+    let physical = path.physical;
+    let mut connect_here = |rng: &mut S, beta: Rgb| {
         let shadows = (&mut *shadow_rays, &mut *shadow_owner);
-        let rng = &mut path.rng;
         connect(
-            scene,
-            &bsdf,
-            hit,
-            &shading,
-            rng,
-            path.physical,
-            path.beta,
-            depth,
-            index,
-            shadows,
+            scene, &bsdf, hit, &shading, rng, physical, beta, depth, index, shadows,
         );
+    };
+    if !split {
+        connect_here(&mut path.rng, path.beta);
         // From here on the path may end; its shadow ray (already pushed) counts either way.
         return extend(scene, path, hit, &bsdf, &shading, t);
     }
@@ -509,19 +505,7 @@ fn vertex<S: BranchStream>(
     path.beta /= k as f32;
     for j in 0..k {
         let mut rng = trunk.branch(j, k);
-        let shadows = (&mut *shadow_rays, &mut *shadow_owner);
-        connect(
-            scene,
-            &bsdf,
-            hit,
-            &shading,
-            &mut rng,
-            path.physical,
-            path.beta,
-            depth,
-            index,
-            shadows,
-        );
+        connect_here(&mut rng, path.beta);
         if j == 0 {
             path.rng = rng;
         } else {

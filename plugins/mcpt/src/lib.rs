@@ -178,7 +178,7 @@ impl Mcpt {
                             &self.scene,
                             tracer,
                             &self.settings,
-                            &mut rng,
+                            &rng,
                             raster,
                             &mut contributions,
                         ),
