@@ -147,10 +147,17 @@ pub fn power_heuristic_over(pdf_a: f32, pdf_b: f32) -> f32 {
 /// Returns the index and its probability.
 #[inline]
 pub fn sample_cdf(cdf: &[f32], u: f32) -> (usize, f32) {
+    let (i, p, _) = sample_cdf_with_start(cdf, u);
+    (i, p)
+}
+
+/// [`sample_cdf`] with the chosen entry's interval start F(i−1).
+#[inline]
+fn sample_cdf_with_start(cdf: &[f32], u: f32) -> (usize, f32, f32) {
     debug_assert!(!cdf.is_empty());
     let i = cdf.partition_point(|&c| c <= u).min(cdf.len() - 1);
     let lo = if i == 0 { 0.0 } else { cdf[i - 1] };
-    (i, cdf[i] - lo)
+    (i, cdf[i] - lo, lo)
 }
 
 /// [`sample_cdf`] that also returns `u` rescaled into [0, 1) within the chosen entry's
@@ -163,8 +170,7 @@ pub fn sample_cdf(cdf: &[f32], u: f32) -> (usize, f32) {
 /// can spare out of `f32`'s 24.
 #[inline]
 pub fn sample_cdf_remapped(cdf: &[f32], u: f32) -> (usize, f32, f32) {
-    let (i, p) = sample_cdf(cdf, u);
-    let lo = if i == 0 { 0.0 } else { cdf[i - 1] };
+    let (i, p, lo) = sample_cdf_with_start(cdf, u);
     (i, p, rescaled(u, lo, p))
 }
 
@@ -303,7 +309,7 @@ mod tests {
             r * Vec2::new(t.cos(), t.sin())
         };
         let mut r = Rng::new(5, 0);
-        let edges = [0.0, 0.5, 1.0 - f32::EPSILON / 2.0, 0.25, 0.75];
+        let edges = [0.0, 0.5, ONE_MINUS_EPSILON, 0.25, 0.75];
         let grid = edges
             .iter()
             .flat_map(|&a| edges.iter().map(move |&b| Vec2::new(a, b)));

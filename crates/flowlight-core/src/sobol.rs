@@ -245,6 +245,19 @@ mod tests {
         (u * (1u64 << 32) as f32) as u32
     }
 
+    /// Each sampler's pair in dimension `dim`, as 32-bit fractions.
+    fn pairs_at(samplers: &[SobolSampler], dim: u32) -> Vec<(u32, u32)> {
+        samplers
+            .iter()
+            .map(|s| {
+                let mut s = s.clone();
+                s.dim = dim;
+                let p = s.uniform2();
+                (bits(p.x), bits(p.y))
+            })
+            .collect()
+    }
+
     #[test]
     fn unscrambled_dimensions_zero_and_one_are_nets() {
         for m in 0..=12 {
@@ -327,15 +340,7 @@ mod tests {
                     .all(|b| b.dim == samples[0].dim && b.seed == samples[0].seed));
                 let total = m + k.trailing_zeros();
                 for dim in samples[0].dim..samples[0].dim + 6 {
-                    let pts: Vec<(u32, u32)> = branches
-                        .iter()
-                        .map(|b| {
-                            let mut b = b.clone();
-                            b.dim = dim;
-                            let p = b.uniform2();
-                            (bits(p.x), bits(p.y))
-                        })
-                        .collect();
+                    let pts = pairs_at(&branches, dim);
                     assert!(is_net(&pts, total), "pixel {pixel} m {m} k {k} dim {dim}");
                 }
             }
@@ -352,15 +357,7 @@ mod tests {
                     (0..n).map(|i| SobolSampler::new(seed, i)).collect();
                 for dim in 0..12 {
                     // Pairs: (0, m, 2)-nets.
-                    let pts: Vec<(u32, u32)> = samples
-                        .iter()
-                        .map(|s| {
-                            let mut s = s.clone();
-                            s.dim = dim;
-                            let p = s.uniform2();
-                            (bits(p.x), bits(p.y))
-                        })
-                        .collect();
+                    let pts = pairs_at(&samples, dim);
                     assert!(is_net(&pts, m), "pixel {pixel} m {m} dim {dim}");
                     // Single numbers: one per stratum of 1/2^m.
                     let mut strata: Vec<u32> = samples

@@ -35,6 +35,7 @@ pub use oren_nayar::OrenNayar;
 
 use crate::material::{DiffuseModel, Material};
 use crate::path::{NodeClass, NodeType};
+use crate::sampling::rescaled;
 use crate::Rgb;
 use glam::{Vec2, Vec3};
 use gltf::CoatAttenuation;
@@ -45,7 +46,6 @@ pub const DELTA_ALPHA: f32 = 1e-3;
 pub const NARROW_GLOSSY_ALPHA: f32 = 0.05;
 /// Most components a [`Bsdf`] holds (glTF: coat, specular, diffuse, transmission).
 pub const MAX_COMPONENTS: usize = 4;
-use crate::sampling::rescaled;
 
 /// One sampled direction.
 #[derive(Clone, Copy, Debug)]
@@ -1221,8 +1221,6 @@ mod tests {
         Vec3::new(1.0, 0.0, 0.0),
     ];
 
-    /// The direction numbers of draw `k` of a loop: near 1 for the first two (cos θ_i close to
-    /// 0 at the hemisphere's rim), random after.
     /// The pair's first number chooses the lobe and, rescaled, samples it: a pixel's 64
     /// jittered pairs (8 × 8 strata) estimate a glossy-on-diffuse pair's albedo with about
     /// 1.7 times less variance than with a separate, randomly paired choice number (emulated by
@@ -1267,6 +1265,8 @@ mod tests {
         );
     }
 
+    /// The direction numbers of draw `k` of a loop: near 1 for the first two (cos θ_i close to
+    /// 0 at the hemisphere's rim), random after.
     fn rim_or_random(k: usize, r: &mut Rng) -> Vec2 {
         match k {
             0 => Vec2::new(ONE_MINUS_EPSILON, 0.3),
