@@ -20,7 +20,7 @@ use crate::shading::{
     connection_value, light_connection, light_sample, side_consistent, Connection, Shading,
 };
 use crate::SampleContributions;
-use flowlight_core::bsdf::{volume, Bsdf};
+use flowlight_core::bsdf::{volume, Bsdf, BsdfAt, OutgoingTerms};
 use flowlight_core::geometry::{Ray, SurfaceHit};
 use flowlight_core::light::area_to_solid_angle;
 use flowlight_core::mesh::CompactHit;
@@ -209,6 +209,8 @@ enum PendingConnection {
         material: u32,
         beta: Rgb,
         wo: Vec3,
+        /// The vertex's [`Bsdf::at`] terms, so the evaluation does not compute them again.
+        terms: OutgoingTerms,
         conn: Connection,
     },
 }
@@ -222,11 +224,12 @@ fn unblocked_value(scene: &Scene, pending: &PendingConnection) -> Option<Rgb> {
             material,
             beta,
             wo,
+            terms,
             conn,
         } => {
             // The table entry `scene.bsdf` borrowed at the vertex.
             let bsdf = scene.constant_bsdf(material, [1.0; 4]);
-            bsdf.and_then(|b| connection_value(beta, b, wo, &conn))
+            bsdf.and_then(|b| connection_value(beta, &b.at_with(wo, terms), &conn))
                 .filter(|value| !value.is_black())
         }
     }
@@ -483,18 +486,20 @@ fn vertex<S: BranchStream>(
     // and the path ends there. A random stop (T_k < 1) is fine: survivors are divided by
     // 1 − T_k.
     path.last = t >= 1.0 || path.physical >= settings.max_ray_depth;
+    // What the connections' evaluations and the BSDF samples at ω_o share, once.
+    let at = bsdf.at(shading.wo);
     // The vertex's light connection with a path's (or branch's) numbers and throughput.
     let physical = path.physical;
     let mut connect_here = |rng: &mut S, beta: Rgb| {
         let shadows = (&mut *shadow_rays, &mut *shadow_owner);
         connect(
-            scene, &bsdf, hit, &shading, rng, physical, beta, depth, index, shadows,
+            scene, &bsdf, &at, hit, &shading, rng, physical, beta, depth, index, shadows,
         );
     };
     if !split {
         connect_here(&mut path.rng, path.beta);
         // From here on the path may end; its shadow ray (already pushed) counts either way.
-        return extend(scene, path, hit, &bsdf, &shading, t);
+        return extend(scene, path, hit, &at, &shading, t);
     }
     // A split: k branches, each with β/k, its own numbers from here on (`trunk.branch(j,
     // k)`), its own light connection here and its own roulette and BSDF sample. Every
@@ -511,23 +516,24 @@ fn vertex<S: BranchStream>(
         } else {
             let mut branch = path.clone();
             branch.rng = rng;
-            if extend(scene, &mut branch, hit, &bsdf, &shading, t) {
+            if extend(scene, &mut branch, hit, &at, &shading, t) {
                 branches.push(branch);
             }
         }
     }
-    extend(scene, path, hit, &bsdf, &shading, t)
+    extend(scene, path, hit, &at, &shading, t)
 }
 
 /// The light connection of a vertex: a light sample from `rng`'s numbers, its shadow ray
 /// and [`ShadowOwner`] pushed onto `shadows` where it may carry light. `bsdf` stays a `Cow`:
 /// its variant says whether it is the material's table entry (evaluated after the shadow
-/// ray) or built for the hit (evaluated now).
+/// ray) or built for the hit (evaluated now); `at` is it at ω_o.
 #[allow(clippy::too_many_arguments, clippy::ptr_arg)]
 #[inline(always)]
 fn connect<S: SampleStream>(
     scene: &Scene,
     bsdf: &Cow<'_, Bsdf>,
+    at: &BsdfAt,
     hit: &SurfaceHit,
     shading: &Shading,
     rng: &mut S,
@@ -549,14 +555,15 @@ fn connect<S: SampleStream>(
         return;
     };
     let pending = match bsdf {
-        _ if bsdf.is_zero_between(shading.wo, conn.wi_local) => None,
+        _ if at.is_zero_between(conn.wi_local) => None,
         Cow::Borrowed(_) => Some(PendingConnection::Deferred {
             material: hit.material,
             beta,
             wo: shading.wo,
+            terms: at.terms(),
             conn,
         }),
-        Cow::Owned(b) => connection_value(beta, b, shading.wo, &conn)
+        Cow::Owned(_) => connection_value(beta, at, &conn)
             .filter(|value| !value.is_black())
             .map(PendingConnection::Value),
     };
@@ -578,7 +585,7 @@ fn extend<S: SampleStream>(
     scene: &Scene,
     path: &mut PathState<S>,
     hit: &SurfaceHit,
-    bsdf: &Bsdf,
+    bsdf: &BsdfAt,
     shading: &Shading,
     t: f32,
 ) -> bool {
@@ -591,7 +598,7 @@ fn extend<S: SampleStream>(
         path.beta /= 1.0 - t;
     }
     rng.seek(path.physical, SLOT_BSDF);
-    let Some(s) = bsdf.sample(shading.wo, rng.uniform(), rng.uniform2()) else {
+    let Some(s) = bsdf.sample(rng.uniform(), rng.uniform2()) else {
         return false;
     };
     let wi_world = shading.frame.to_world(s.wi);

@@ -733,7 +733,7 @@ impl<S: SampleStream> Tree<S> {
             let u_light = rng.uniform2();
             if let Some(ls) = light_sample(scene, &bsdf, hit, &shading, u_light) {
                 if let Some((conn, shadow)) = light_connection(scene, hit, &shading, &ls) {
-                    if let Some((f, w_over_pdf)) = connection_bsdf(&bsdf, shading.wo, &conn) {
+                    if let Some((f, w_over_pdf)) = connection_bsdf(&bsdf.at(shading.wo), &conn) {
                         // The light's own density in the target's measure: area density on an
                         // area light, else what next-event estimation divides by.
                         let p_light = if ls.kind == LightKind::Area {

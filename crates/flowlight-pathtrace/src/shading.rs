@@ -1,6 +1,6 @@
 //! Per-vertex shading helpers shared by both samplers.
 
-use flowlight_core::bsdf::Bsdf;
+use flowlight_core::bsdf::{Bsdf, BsdfAt};
 use flowlight_core::geometry::{Frame, Ray, SurfaceHit};
 use flowlight_core::light::{LightSample, ShadowTarget};
 use flowlight_core::sampling::power_heuristic_over;
@@ -67,8 +67,8 @@ pub(crate) struct Connection {
     pub delta: bool,
 }
 
-/// The BSDF value f at a light connection from a vertex with outgoing direction `wo` (local)
-/// and the factor the estimate multiplies by: the connection's MIS weight against that
+/// The BSDF value f at a light connection from a vertex, `bsdf` at its outgoing direction
+/// ([`Bsdf::at`]), and the factor the estimate multiplies by: the connection's MIS weight against that
 /// vertex's BSDF sample (power heuristic) divided by the connection's density, in one
 /// division ([`power_heuristic_over`]); `None` where f is black. The estimate is
 /// β · f · L · |cos θ_i| · factor. A delta light cannot be hit by the BSDF sample: weight 1,
@@ -78,15 +78,15 @@ pub(crate) struct Connection {
 /// construction. Where [`Bsdf::is_zero_between`] says f is zero, it is `None` without an
 /// evaluation (the evaluation's answer too).
 #[inline]
-pub(crate) fn connection_bsdf(bsdf: &Bsdf, wo: Vec3, conn: &Connection) -> Option<(Rgb, f32)> {
-    if bsdf.is_zero_between(wo, conn.wi_local) {
+pub(crate) fn connection_bsdf(bsdf: &BsdfAt, conn: &Connection) -> Option<(Rgb, f32)> {
+    if bsdf.is_zero_between(conn.wi_local) {
         return None;
     }
     if conn.delta {
-        let f = bsdf.eval(wo, conn.wi_local);
+        let f = bsdf.eval(conn.wi_local);
         return (!f.is_black()).then(|| (f, 1.0 / conn.pdf));
     }
-    let (f, pdf) = bsdf.eval_pdf(wo, conn.wi_local);
+    let (f, pdf) = bsdf.eval_pdf(conn.wi_local);
     (!f.is_black()).then(|| (f, power_heuristic_over(conn.pdf, pdf)))
 }
 
@@ -94,8 +94,8 @@ pub(crate) fn connection_bsdf(bsdf: &Bsdf, wo: Vec3, conn: &Connection) -> Optio
 /// connection ([`connection_bsdf`]); `None` where f is black. One expression for the
 /// samplers that evaluate it before the shadow ray and those that evaluate it after.
 #[inline]
-pub(crate) fn connection_value(beta: Rgb, bsdf: &Bsdf, wo: Vec3, conn: &Connection) -> Option<Rgb> {
-    let (f, w_over_pdf) = connection_bsdf(bsdf, wo, conn)?;
+pub(crate) fn connection_value(beta: Rgb, bsdf: &BsdfAt, conn: &Connection) -> Option<Rgb> {
+    let (f, w_over_pdf) = connection_bsdf(bsdf, conn)?;
     Some(beta * f * conn.radiance * (conn.wi_local.z.abs() * w_over_pdf))
 }
 

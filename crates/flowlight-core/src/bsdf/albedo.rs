@@ -195,6 +195,34 @@ pub fn directional_pair(alpha: f32, mu_a: f32, mu_b: f32) -> ((f32, f32), (f32, 
     )
 }
 
+/// A roughness's coordinate on the tables' roughness axis (its cell and the fraction across
+/// it; a square root to find), for a caller that looks up many cosines at one roughness.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Roughness {
+    cell: u32,
+    fraction: f32,
+}
+
+impl Roughness {
+    #[inline]
+    pub fn new(alpha: f32) -> Roughness {
+        let (i, s) = roughness_coord(alpha);
+        Roughness {
+            cell: i as u32,
+            fraction: s,
+        }
+    }
+}
+
+/// [`schlick_albedo`] at the roughness coordinate `r` ([`Roughness::new`] of its α); the
+/// same value, bit for bit.
+#[inline]
+pub fn schlick_albedo_at(f0: f32, f90: f32, r: Roughness, mu: f32) -> f32 {
+    let t = tables();
+    let (e1, e5) = lookup(t, (r.cell as usize, r.fraction), mu_coord(t, mu));
+    f0 * (e1 - e5) + f90 * e5
+}
+
 /// Hemispherical averages (Ē₁, Ē₅) = 2 ∫₀¹ (E₁, E₅)(μ) μ dμ of [`directional`], exactly.
 #[inline]
 pub fn average(alpha: f32) -> (f32, f32) {

@@ -73,7 +73,9 @@
 //! energy: 9 % at roughness 0.5 and 68 % at roughness 1, near normal view); transmission and coat attenuation are
 //! applied on both faces alike.
 
-use super::albedo::{average, schlick_albedo, schlick_albedo_pair, schlick_average};
+use super::albedo::{
+    average, schlick_albedo, schlick_albedo_at, schlick_albedo_pair, schlick_average, Roughness,
+};
 use super::microfacet::Ggx;
 use super::{BsdfSample, Dielectric, Lambert, OrenNayar, DELTA_ALPHA};
 use crate::path::NodeType;
@@ -151,11 +153,41 @@ impl GltfShared {
     /// 1/(1 − Ē_d), the value the lookups give, bit for bit.
     #[inline]
     fn diffuse_coupling(&self, mu_o: f32, mu_i: f32) -> f32 {
-        if self.diel_f0 == 0.0 && self.diel_f90 == 0.0 && !self.alpha.is_nan() {
+        if self.without_layer() {
             return self.diffuse_norm;
         }
         let (eo, ei) = schlick_albedo_pair(self.diel_f0, self.diel_f90, self.alpha, mu_o, mu_i);
         (1.0 - eo).max(0.0) * (1.0 - ei).max(0.0) * self.diffuse_norm
+    }
+
+    /// Whether [`GltfShared::diffuse_coupling`] skips its lookups (no dielectric layer).
+    #[inline]
+    fn without_layer(&self) -> bool {
+        self.diel_f0 == 0.0 && self.diel_f90 == 0.0 && !self.alpha.is_nan()
+    }
+
+    /// The ω_o terms of [`GltfShared::diffuse_coupling`]: the factor 1 − E_d(μ_o) (1 where
+    /// the coupling has no lookups) and the roughness coordinate of the lookups.
+    #[inline]
+    fn outgoing_coupling(&self, mu_o: f32) -> (f32, Roughness) {
+        let rough = Roughness::new(self.alpha);
+        if self.without_layer() {
+            return (1.0, rough);
+        }
+        let eo = schlick_albedo_at(self.diel_f0, self.diel_f90, rough, mu_o);
+        ((1.0 - eo).max(0.0), rough)
+    }
+
+    /// [`GltfShared::diffuse_coupling`] from the ω_o terms in `at`: the same value, bit for
+    /// bit, since a lookup of the pair equals the lookup alone
+    /// ([`super::albedo::directional_pair`]) and the product is taken in the same order.
+    #[inline]
+    fn diffuse_coupling_with(&self, at: &PairOutgoing, mu_i: f32) -> f32 {
+        if self.without_layer() {
+            return self.diffuse_norm;
+        }
+        let ei = schlick_albedo_at(self.diel_f0, self.diel_f90, at.rough, mu_i);
+        at.base_o * (1.0 - ei).max(0.0) * self.diffuse_norm
     }
 
     /// Max-channel dielectric Schlick Fresnel at cos = `c`.
@@ -344,8 +376,23 @@ impl GltfLobe {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return None;
         }
+        self.ggx_reflection_pdf_with(Ggx::new(self.alpha).lambda(wo), wo, wi)
+    }
+
+    /// [`GltfLobe::ggx_reflection_pdf`] with Λ(ω_o) given ([`Ggx::lambda`] of `wo`), for
+    /// upper-hemisphere `wo`; the same results, bit for bit.
+    #[inline]
+    fn ggx_reflection_pdf_with(
+        &self,
+        lambda_o: f32,
+        wo: Vec3,
+        wi: Vec3,
+    ) -> Option<(f32, f32, f32)> {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return None;
+        }
         let wm = (wo + wi).try_normalize()?;
-        let (d, g2, pdf_wm) = Ggx::new(self.alpha).d_g2_pdf_wm(wo, wi, wm);
+        let (d, g2, pdf_wm) = Ggx::new(self.alpha).d_g2_pdf_wm_with(lambda_o, wo, wi, wm);
         let c = wo.dot(wm);
         let pdf = if c <= 0.0 { 0.0 } else { pdf_wm / (4.0 * c) };
         Some((d * g2 / (4.0 * wo.z * wi.z), c, pdf))
@@ -399,11 +446,21 @@ impl GltfLobe {
     /// The diffuse base's raw value (energy-coupled Oren–Nayar or Lambert).
     #[inline]
     fn raw_diffuse(&self, wo: Vec3, wi: Vec3) -> Rgb {
+        self.raw_diffuse_with(None, wo, wi)
+    }
+
+    /// [`GltfLobe::raw_diffuse`], with the ω_o terms of the coupling where the caller has
+    /// them ([`PairOutgoing`]); the same value, bit for bit.
+    #[inline(always)]
+    fn raw_diffuse_with(&self, at: Option<&PairOutgoing>, wo: Vec3, wi: Vec3) -> Rgb {
         let sh = &self.shared;
         if wo.z * wi.z <= 0.0 || sh.diffuse_norm <= 0.0 {
             return Rgb::ZERO;
         }
-        let k = sh.diffuse_coupling(wo.z, wi.z);
+        let k = match at {
+            Some(at) => sh.diffuse_coupling_with(at, wi.z),
+            None => sh.diffuse_coupling(wo.z, wi.z),
+        };
         self.diffuse.eval(wo, wi) * self.f0 * k
     }
 
@@ -648,13 +705,26 @@ impl<'a> OpaquePair<'a> {
             && self.diffuse.shared.coat <= 0.0
     }
 
+    /// What every evaluation of the pair at `wo` computes alike, for
+    /// [`OpaquePair::eval_pdf_with`] and [`OpaquePair::sample_with`] at that `wo`.
+    #[inline]
+    pub fn outgoing(&self, wo: Vec3) -> PairOutgoing {
+        let (base_o, rough) = self.diffuse.shared.outgoing_coupling(wo.z);
+        PairOutgoing {
+            // Λ depends on squares only, so Λ(ω_o) is also Λ of the upper-frame ω_o.
+            lambda_o: Ggx::new(self.spec.alpha).lambda(wo),
+            base_o,
+            rough,
+        }
+    }
+
     /// The specular lobe's (eval, pdf): [`GltfLobe::eval_pdf_with`] for a non-Dirac specular
     /// lobe without coat, whose attenuation is 1 (so its factor is `scale · 1 = scale`).
     #[inline]
-    fn spec_eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+    fn spec_eval_pdf(&self, at: &PairOutgoing, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
         let l = self.spec;
         let (wo, wi) = to_upper(wo, wi);
-        let (f, pdf) = match l.ggx_reflection_pdf(wo, wi) {
+        let (f, pdf) = match l.ggx_reflection_pdf_with(at.lambda_o, wo, wi) {
             Some((s, c, pdf)) => (schlick_f0_f90(l.f0, l.f90, c) * s, pdf),
             None => return (Rgb::ZERO, 0.0),
         };
@@ -667,8 +737,8 @@ impl<'a> OpaquePair<'a> {
     /// The diffuse base's value at a pair on one side (`wo.z · wi.z > 0`), finished as
     /// [`GltfLobe::finish`] does without a coat.
     #[inline]
-    fn diffuse_value(&self, wo: Vec3, wi: Vec3) -> Rgb {
-        let f = self.diffuse.raw_diffuse(wo, wi);
+    fn diffuse_value(&self, at: &PairOutgoing, wo: Vec3, wi: Vec3) -> Rgb {
+        let f = self.diffuse.raw_diffuse_with(Some(at), wo, wi);
         if f.is_black() {
             return f;
         }
@@ -691,15 +761,21 @@ impl<'a> OpaquePair<'a> {
     /// [`super::Bsdf::eval_pdf`] of the pair.
     #[inline]
     pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        self.eval_pdf_with(&self.outgoing(wo), wo, wi)
+    }
+
+    /// [`OpaquePair::eval_pdf`] with `at` = [`OpaquePair::outgoing`]`(wo)`.
+    #[inline]
+    pub fn eval_pdf_with(&self, at: &PairOutgoing, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
         let diffuse = if wo.z * wi.z <= 0.0 {
             (Rgb::ZERO, 0.0)
         } else {
             (
-                self.diffuse_value(wo, wi),
+                self.diffuse_value(at, wo, wi),
                 cosine_hemisphere_pdf(wi.z.abs()),
             )
         };
-        self.mix(self.spec_eval_pdf(wo, wi), diffuse)
+        self.mix(self.spec_eval_pdf(at, wo, wi), diffuse)
     }
 
     /// [`super::Bsdf::sample`] of the pair: the lobe chosen by `u.x` as the walk chooses it
@@ -707,7 +783,19 @@ impl<'a> OpaquePair<'a> {
     /// walk rescales it and `u.y`, and the mixture's value and density there. Neither lobe
     /// takes a discrete number, so `u_component` is not used.
     #[inline]
-    pub fn sample(&self, wo: Vec3, _u_component: f32, u: Vec2) -> Option<BsdfSample> {
+    pub fn sample(&self, wo: Vec3, u_component: f32, u: Vec2) -> Option<BsdfSample> {
+        self.sample_with(&self.outgoing(wo), wo, u_component, u)
+    }
+
+    /// [`OpaquePair::sample`] with `at` = [`OpaquePair::outgoing`]`(wo)`.
+    #[inline]
+    pub fn sample_with(
+        &self,
+        at: &PairOutgoing,
+        wo: Vec3,
+        _u_component: f32,
+        u: Vec2,
+    ) -> Option<BsdfSample> {
         if wo.z == 0.0 {
             return None;
         }
@@ -726,7 +814,7 @@ impl<'a> OpaquePair<'a> {
             if !(pdf_wi > 0.0 && pdf_wi.is_finite()) {
                 return None;
             }
-            let (f, pdf) = self.eval_pdf(wo, wi);
+            let (f, pdf) = self.eval_pdf_with(at, wo, wi);
             BsdfSample {
                 wi,
                 f,
@@ -742,11 +830,11 @@ impl<'a> OpaquePair<'a> {
             // The walk takes the chosen diffuse lobe's terms from the sample where the pair
             // is on one side, and evaluates it (to zero) elsewhere.
             let diffuse = if wo.z * wi.z > 0.0 {
-                (self.diffuse_value(wo, wi), pdf_wi)
+                (self.diffuse_value(at, wo, wi), pdf_wi)
             } else {
                 (Rgb::ZERO, 0.0)
             };
-            let (f, pdf) = self.mix(self.spec_eval_pdf(wo, wi), diffuse);
+            let (f, pdf) = self.mix(self.spec_eval_pdf(at, wo, wi), diffuse);
             BsdfSample {
                 wi,
                 f,
@@ -758,6 +846,20 @@ impl<'a> OpaquePair<'a> {
         };
         (s.pdf > 0.0).then_some(s)
     }
+}
+
+/// The terms of an [`OpaquePair`]'s evaluations that depend on ω_o alone: the specular
+/// lobe's Smith Λ(ω_o) (a square root and a division), the diffuse coupling's factor
+/// 1 − E_d(μ_o) (a lookup in each of two albedo tables) and the roughness coordinate of
+/// those lookups (a square root), which the lookups at μ_i share. A path vertex evaluates its BSDF at one ω_o for
+/// its light connection and its BSDF sample, and for every branch of a split
+/// ([`super::Bsdf::at`]), so they are computed once per vertex instead of once per call.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PairOutgoing {
+    lambda_o: f32,
+    base_o: f32,
+    /// The base roughness's coordinate in the albedo tables, for the lookups at μ_i.
+    rough: Roughness,
 }
 
 /// The glTF material's parameters, sanitised (factors in [0, 1], finite).

@@ -247,6 +247,59 @@ impl Component {
     }
 }
 
+/// A [`Bsdf`] at one outgoing direction ([`Bsdf::at`]): its evaluations and samples there,
+/// sharing what depends on ω_o alone.
+#[derive(Clone, Copy, Debug)]
+pub struct BsdfAt<'a> {
+    bsdf: &'a Bsdf,
+    wo: Vec3,
+    terms: OutgoingTerms,
+}
+
+/// What a [`BsdfAt`] computed from ω_o alone, kept without its borrow for
+/// [`Bsdf::at_with`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct OutgoingTerms(Option<gltf::PairOutgoing>);
+
+impl BsdfAt<'_> {
+    /// The outgoing direction (local).
+    #[inline]
+    pub fn wo(&self) -> Vec3 {
+        self.wo
+    }
+
+    /// What was computed from ω_o, for [`Bsdf::at_with`].
+    #[inline]
+    pub fn terms(&self) -> OutgoingTerms {
+        self.terms
+    }
+
+    /// [`Bsdf::is_zero_between`] ω_o and `wi`.
+    #[inline]
+    pub fn is_zero_between(&self, wi: Vec3) -> bool {
+        self.bsdf.is_zero_between(self.wo, wi)
+    }
+
+    /// [`Bsdf::eval`] at (ω_o, `wi`).
+    #[inline]
+    pub fn eval(&self, wi: Vec3) -> Rgb {
+        self.bsdf.eval(self.wo, wi)
+    }
+
+    /// [`Bsdf::eval_pdf`] at (ω_o, `wi`).
+    #[inline]
+    pub fn eval_pdf(&self, wi: Vec3) -> (Rgb, f32) {
+        self.bsdf.eval_pdf_from(self.wo, self.terms.0.as_ref(), wi)
+    }
+
+    /// [`Bsdf::sample`] at ω_o.
+    #[inline(always)]
+    pub fn sample(&self, u_component: f32, u: Vec2) -> Option<BsdfSample> {
+        self.bsdf
+            .sample_from(self.wo, self.terms.0.as_ref(), u_component, u)
+    }
+}
+
 /// A material's BSDF: a weighted mixture of components. Weights sum to one.
 #[derive(Clone, Copy, Debug)]
 pub struct Bsdf {
@@ -424,14 +477,57 @@ impl Bsdf {
     /// the sums are made in the same order from the same start (`eval` folds from zero,
     /// `pdf`'s `Iterator::sum` from −0.0), so images do not change.
     pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
+        self.eval_pdf_from(wo, None, wi)
+    }
+
+    /// [`Bsdf::eval_pdf`] with the opaque pair's ω_o terms where the caller has them
+    /// ([`BsdfAt`]); the same results, bit for bit.
+    #[inline]
+    fn eval_pdf_from(&self, wo: Vec3, at: Option<&gltf::PairOutgoing>, wi: Vec3) -> (Rgb, f32) {
         if let Some(lambert) = self.lone_lambert() {
             // The walk's 0 + f·1 and −0 + p·1 (see `sample`'s lone Lambert).
             return lambert.eval_pdf(wo, wi);
         }
         if let Some(pair) = self.opaque_pair() {
-            return pair.eval_pdf(wo, wi);
+            return match at {
+                Some(at) => pair.eval_pdf_with(at, wo, wi),
+                None => pair.eval_pdf(wo, wi),
+            };
         }
         self.eval_pdf_by_walk(wo, wi)
+    }
+
+    /// This BSDF at one outgoing direction `wo`, for a caller that evaluates or samples it
+    /// there more than once (a path vertex: its light connection and BSDF sample, and each
+    /// branch's where the path splits). What the evaluations at `wo` share is computed here
+    /// once: for the glTF opaque pair ([`gltf::PairOutgoing`]) the specular lobe's Λ(ω_o)
+    /// and the diffuse coupling's albedo lookup at μ_o, which otherwise every
+    /// [`Bsdf::eval_pdf`] and [`Bsdf::sample`] computes again. Every result equals those
+    /// calls' at `wo`, bit for bit.
+    #[inline]
+    pub fn at(&self, wo: Vec3) -> BsdfAt<'_> {
+        BsdfAt {
+            bsdf: self,
+            wo,
+            terms: OutgoingTerms(self.opaque_pair().map(|pair| pair.outgoing(wo))),
+        }
+    }
+
+    /// [`Bsdf::at`] from terms kept from an earlier `at` of this BSDF at this `wo`
+    /// ([`BsdfAt::terms`]), for an evaluation made once the borrow has ended (a light
+    /// connection evaluated after its shadow ray). Terms of another BSDF or direction give
+    /// wrong values; terms of another kind of BSDF are ignored.
+    #[inline]
+    pub fn at_with(&self, wo: Vec3, terms: OutgoingTerms) -> BsdfAt<'_> {
+        let terms = match terms.0 {
+            Some(_) if self.opaque_pair => terms,
+            _ => OutgoingTerms(self.opaque_pair().map(|pair| pair.outgoing(wo))),
+        };
+        BsdfAt {
+            bsdf: self,
+            wo,
+            terms,
+        }
     }
 
     /// [`Bsdf::eval_pdf`] over the components one by one (every mixture but the lone Lambert
@@ -488,6 +584,19 @@ impl Bsdf {
     /// bit for bit `eval(wo, s.wi)` and `pdf(wo, s.wi)`.
     #[inline(always)]
     pub fn sample(&self, wo: Vec3, u_component: f32, u: Vec2) -> Option<BsdfSample> {
+        self.sample_from(wo, None, u_component, u)
+    }
+
+    /// [`Bsdf::sample`] with the opaque pair's ω_o terms where the caller has them
+    /// ([`BsdfAt`]); the same sample, bit for bit.
+    #[inline(always)]
+    fn sample_from(
+        &self,
+        wo: Vec3,
+        at: Option<&gltf::PairOutgoing>,
+        u_component: f32,
+        u: Vec2,
+    ) -> Option<BsdfSample> {
         if let Some(lambert) = self.lone_lambert() {
             // The walk below, for one Lambert component of weight 1, returns this sample
             // itself: its value and density are `eval`'s and `pdf`'s where ω_o and ω_i are on
@@ -498,7 +607,7 @@ impl Bsdf {
             let s = lambert.sample(wo, u)?;
             return (wo.z * s.wi.z > 0.0).then_some(s);
         }
-        self.sample_mixture(wo, u_component, u)
+        self.sample_mixture(wo, at, u_component, u)
     }
 
     /// [`Bsdf::sample`] of every mixture but the lone Lambert, out of line: `sample` itself is
@@ -506,9 +615,18 @@ impl Bsdf {
     /// memory, its direction was reloaded wider than it was stored, a store-forwarding stall
     /// at every diffuse vertex), and this keeps the glTF code out of them.
     #[inline(never)]
-    fn sample_mixture(&self, wo: Vec3, u_component: f32, u: Vec2) -> Option<BsdfSample> {
+    fn sample_mixture(
+        &self,
+        wo: Vec3,
+        at: Option<&gltf::PairOutgoing>,
+        u_component: f32,
+        u: Vec2,
+    ) -> Option<BsdfSample> {
         if let Some(pair) = self.opaque_pair() {
-            return pair.sample(wo, u_component, u);
+            return match at {
+                Some(at) => pair.sample_with(at, wo, u_component, u),
+                None => pair.sample(wo, u_component, u),
+            };
         }
         self.sample_by_walk(wo, u_component, u)
     }
@@ -1414,6 +1532,65 @@ mod tests {
             let b = Bsdf::from_material(&m, Rgb::new(0.9, 0.6, 0.3));
             assert!(b.opaque_pair().is_none(), "{m:?}");
         }
+    }
+
+    /// A BSDF at one ω_o ([`Bsdf::at`]) samples and evaluates as the BSDF itself does at
+    /// that ω_o, bit for bit, for every glTF mixture (opaque pairs, whose ω_o terms it
+    /// computes once, and the rest); so does one rebuilt from its terms ([`Bsdf::at_with`]),
+    /// and one given terms of another kind of BSDF, which it ignores.
+    #[test]
+    fn a_bsdf_at_one_direction_gives_what_its_calls_give() {
+        let mixtures = every_gltf_mixture();
+        let pairs = mixtures
+            .iter()
+            .filter(|b| b.opaque_pair().is_some())
+            .count();
+        assert!(
+            pairs >= 12 && mixtures.len() > pairs,
+            "{pairs} of {}",
+            mixtures.len()
+        );
+        let pair_terms = mixtures
+            .iter()
+            .find(|b| b.opaque_pair().is_some())
+            .unwrap()
+            .at(dir(0.4, 0.3))
+            .terms();
+        let mut r = Rng::new(98, 0);
+        let mut sampled = 0;
+        for b in &mixtures {
+            for wo in test_directions_both_sides().into_iter().chain(GRAZING) {
+                let at = b.at(wo);
+                assert_eq!(at.terms().0.is_some(), b.opaque_pair().is_some());
+                let kept = b.at_with(wo, at.terms());
+                // Terms of a pair given to another kind, none given to a pair: recomputed.
+                let other = b.at_with(
+                    wo,
+                    if at.terms().0.is_some() {
+                        OutgoingTerms::default()
+                    } else {
+                        pair_terms
+                    },
+                );
+                for k in 0..40 {
+                    let u = rim_or_random(k, &mut r);
+                    let uc = r.uniform();
+                    let want = b.sample(wo, uc, u);
+                    for got in [at.sample(uc, u), kept.sample(uc, u), other.sample(uc, u)] {
+                        sampled +=
+                            same_sample(got, want, || format!("{b:?} {wo:?} {u:?}")) as usize;
+                    }
+                }
+            }
+            for (wo, wi) in direction_pairs(500, 99) {
+                let (f, p) = b.eval_pdf(wo, wi);
+                let (af, ap) = b.at(wo).eval_pdf(wi);
+                assert!(same_rgb(af, f) && same_float(ap, p), "{b:?} {wo:?} {wi:?}");
+                assert!(same_rgb(b.at(wo).eval(wi), b.eval(wo, wi)));
+                assert_eq!(b.at(wo).is_zero_between(wi), b.is_zero_between(wo, wi));
+            }
+        }
+        assert!(sampled > 10_000, "{sampled} sampled");
     }
 
     /// Where `is_zero_between` says so, every mixture is zero (value, density and their
