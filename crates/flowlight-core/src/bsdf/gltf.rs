@@ -858,7 +858,7 @@ impl<'a> OpaquePair<'a> {
 /// its light connection and its BSDF sample, and for every branch of a split
 /// ([`super::Bsdf::at`]), so they are computed once per vertex instead of once per call.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PairOutgoing {
+pub(crate) struct PairOutgoing {
     lambda_o: f32,
     base_o: f32,
     /// The base roughness's coordinate in the albedo tables, for the lookups at μ_i.

@@ -500,7 +500,7 @@ impl Bsdf {
     /// This BSDF at one outgoing direction `wo`, for a caller that evaluates or samples it
     /// there more than once (a path vertex: its light connection and BSDF sample, and each
     /// branch's where the path splits). What the evaluations at `wo` share is computed here
-    /// once: for the glTF opaque pair ([`gltf::PairOutgoing`]) the specular lobe's Λ(ω_o)
+    /// once: for the glTF opaque pair (`gltf::PairOutgoing`) the specular lobe's Λ(ω_o)
     /// and the diffuse coupling's albedo lookup at μ_o, which otherwise every
     /// [`Bsdf::eval_pdf`] and [`Bsdf::sample`] computes again. Every result equals those
     /// calls' at `wo`, bit for bit.
