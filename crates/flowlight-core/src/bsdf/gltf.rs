@@ -373,6 +373,7 @@ impl GltfLobe {
     /// (the density is 0 there too).
     #[inline]
     fn ggx_reflection_pdf(&self, wo: Vec3, wi: Vec3) -> Option<(f32, f32, f32)> {
+        // The `_with` form's own side test, first, so that a refused pair skips Λ's sqrt.
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return None;
         }
@@ -761,13 +762,7 @@ impl<'a> OpaquePair<'a> {
         (f, pdf)
     }
 
-    /// [`super::Bsdf::eval_pdf`] of the pair.
-    #[inline]
-    pub fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
-        self.eval_pdf_with(&self.outgoing(wo), wo, wi)
-    }
-
-    /// [`OpaquePair::eval_pdf`] with `at` = [`OpaquePair::outgoing`]`(wo)`.
+    /// [`super::Bsdf::eval_pdf`] of the pair, with `at` = [`OpaquePair::outgoing`]`(wo)`.
     #[inline]
     pub fn eval_pdf_with(&self, at: &PairOutgoing, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
         let diffuse = if wo.z * wi.z <= 0.0 {
@@ -784,13 +779,8 @@ impl<'a> OpaquePair<'a> {
     /// [`super::Bsdf::sample`] of the pair: the lobe chosen by `u.x` as the walk chooses it
     /// (the specular lobe below its weight), its direction sampled with `u.x` rescaled as the
     /// walk rescales it and `u.y`, and the mixture's value and density there. Neither lobe
-    /// takes a discrete number, so `u_component` is not used.
-    #[inline]
-    pub fn sample(&self, wo: Vec3, u_component: f32, u: Vec2) -> Option<BsdfSample> {
-        self.sample_with(&self.outgoing(wo), wo, u_component, u)
-    }
-
-    /// [`OpaquePair::sample`] with `at` = [`OpaquePair::outgoing`]`(wo)`.
+    /// takes a discrete number, so `u_component` is not used. `at` is
+    /// [`OpaquePair::outgoing`]`(wo)`.
     #[inline]
     pub fn sample_with(
         &self,

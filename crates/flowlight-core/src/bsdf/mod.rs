@@ -262,12 +262,6 @@ pub struct BsdfAt<'a> {
 pub struct OutgoingTerms(Option<gltf::PairOutgoing>);
 
 impl BsdfAt<'_> {
-    /// The outgoing direction (local).
-    #[inline]
-    pub fn wo(&self) -> Vec3 {
-        self.wo
-    }
-
     /// What was computed from ω_o, for [`Bsdf::at_with`].
     #[inline]
     pub fn terms(&self) -> OutgoingTerms {
@@ -297,6 +291,19 @@ impl BsdfAt<'_> {
     pub fn sample(&self, u_component: f32, u: Vec2) -> Option<BsdfSample> {
         self.bsdf
             .sample_from(self.wo, self.terms.0.as_ref(), u_component, u)
+    }
+}
+
+/// The opaque pair's ω_o terms: the caller's ([`BsdfAt`]) where it has them, else computed.
+#[inline(always)]
+fn pair_terms(
+    pair: &gltf::OpaquePair,
+    at: Option<&gltf::PairOutgoing>,
+    wo: Vec3,
+) -> gltf::PairOutgoing {
+    match at {
+        Some(at) => *at,
+        None => pair.outgoing(wo),
     }
 }
 
@@ -489,10 +496,7 @@ impl Bsdf {
             return lambert.eval_pdf(wo, wi);
         }
         if let Some(pair) = self.opaque_pair() {
-            return match at {
-                Some(at) => pair.eval_pdf_with(at, wo, wi),
-                None => pair.eval_pdf(wo, wi),
-            };
+            return pair.eval_pdf_with(&pair_terms(&pair, at, wo), wo, wi);
         }
         self.eval_pdf_by_walk(wo, wi)
     }
@@ -519,14 +523,13 @@ impl Bsdf {
     /// wrong values; terms of another kind of BSDF are ignored.
     #[inline]
     pub fn at_with(&self, wo: Vec3, terms: OutgoingTerms) -> BsdfAt<'_> {
-        let terms = match terms.0 {
-            Some(_) if self.opaque_pair => terms,
-            _ => OutgoingTerms(self.opaque_pair().map(|pair| pair.outgoing(wo))),
-        };
-        BsdfAt {
-            bsdf: self,
-            wo,
-            terms,
+        match terms.0 {
+            Some(_) if self.opaque_pair => BsdfAt {
+                bsdf: self,
+                wo,
+                terms,
+            },
+            _ => self.at(wo),
         }
     }
 
@@ -623,10 +626,7 @@ impl Bsdf {
         u: Vec2,
     ) -> Option<BsdfSample> {
         if let Some(pair) = self.opaque_pair() {
-            return match at {
-                Some(at) => pair.sample_with(at, wo, u_component, u),
-                None => pair.sample(wo, u_component, u),
-            };
+            return pair.sample_with(&pair_terms(&pair, at, wo), wo, u_component, u);
         }
         self.sample_by_walk(wo, u_component, u)
     }
