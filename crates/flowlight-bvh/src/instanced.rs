@@ -25,6 +25,7 @@
 use crate::build::{build_parallel, Aabb, Node, PrimRef};
 use crate::traverse::{SlabRay, STACK_SIZE};
 use crate::Bvh;
+use flowlight_core::denormals::with_denormals_flushed;
 use flowlight_core::geometry::{InstanceHit, InstanceHitFilter, Ray};
 use glam::{Affine3A, Mat4, Vec3};
 
@@ -147,6 +148,17 @@ impl TwoLevelBvh {
         if self.nodes.is_empty() || ray.t_max.is_nan() || ray.t_max <= 0.0 {
             return None;
         }
+        // The whole query, the rays' transforms included, in the queries' floating-point
+        // mode (`Bvh::traverse`); the meshes' traversals then only read it.
+        with_denormals_flushed(|| self.traverse_in_mode::<ANY_HIT, FILTER>(ray, accept))
+    }
+
+    #[inline(always)]
+    fn traverse_in_mode<const ANY_HIT: bool, const FILTER: bool>(
+        &self,
+        ray: &Ray,
+        accept: &dyn Fn(u32, u32, f32, f32) -> bool,
+    ) -> Option<InstanceHit> {
         let slab = SlabRay::new(ray);
         let mut t_max = ray.t_max;
         let mut hit = None;

@@ -5,6 +5,7 @@
 
 pub mod bsdf;
 pub mod camera;
+pub mod denormals;
 pub mod geometry;
 pub mod light;
 pub mod material;

@@ -28,10 +28,10 @@ pub const BUILD_SOURCE: &str = env!("FLOWLIGHT_EMBREE_SOURCE");
 /// The library file the build found, opened at run time.
 pub const BUILD_LIBRARY: &str = env!("FLOWLIGHT_EMBREE_LIB");
 
-mod denormals;
+use flowlight_core::denormals;
 
 /// Runs `f`, a loop of Embree queries, in the floating-point mode Embree asks for (flush to
-/// zero, denormals are zero; see the `denormals` module), set once for the whole loop
+/// zero, denormals are zero; see `flowlight_core::denormals`), set once for the whole loop
 /// instead of around each query. `f` should do little besides the queries: the renderer's
 /// own arithmetic belongs outside, where denormals keep their IEEE meaning.
 pub fn with_query_mode<R>(f: impl FnOnce() -> R) -> R {
@@ -1118,7 +1118,7 @@ unsafe extern "C" fn filter_callback(args: *const embree4_sys::RTCFilterFunction
     let hit = a.hit as *const u32;
     // Rust code runs in the thread's own floating-point mode, not the query's: switched once
     // for the callback's N candidates.
-    crate::denormals::with_denormals_kept(|| {
+    denormals::with_denormals_kept(|| {
         for i in 0..n {
             if *a.valid.add(i) == 0 {
                 continue;

@@ -143,6 +143,11 @@ impl Intersector for BvhIntersector {
     fn name(&self) -> &'static str {
         "bvh"
     }
+    /// The BVH's queries set flush-to-zero themselves (`flowlight_bvh::Bvh`); set once
+    /// for the batch, each query only reads it.
+    fn batch(&self, queries: &mut dyn FnMut()) {
+        flowlight_core::denormals::with_denormals_flushed(queries)
+    }
     #[inline]
     fn intersect(&self, ray: &Ray) -> Option<TriangleHit> {
         match self {

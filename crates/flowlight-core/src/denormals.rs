@@ -1,20 +1,26 @@
-//! Flush-to-zero and denormals-are-zero for the length of Embree's queries.
+//! Flush-to-zero and denormals-are-zero for the length of ray queries, Embree's and the
+//! pure-Rust BVH's.
 //!
 //! Embree's performance notes ask for both MXCSR flags on every thread that traces: without
 //! them, denormal operands send its traversal down the CPU's slow microcode path. On an
 //! Intel Xeon VM, Embree's share of a Stanford dragon render halved with them (2348–2564
 //! samples → 1185–1261) and the render took 0.65–0.78× the CPU, the image unchanged bit
 //! for bit (docs/performance.md, "Dragon profile split on this VM, and Embree in
-//! flush-to-zero mode").
+//! flush-to-zero mode"). The pure-Rust BVH (`flowlight_bvh::Bvh`) has the same need: a ray
+//! leaving a surface that lies in a coordinate plane (the Cornell box's floor and walls at
+//! 0) starts at the smallest subnormal in that coordinate (`offset_ray_origin` rounds 0
+//! away from the surface), and every product with it in the triangle test was a microcode
+//! assist on Intel: the BVH's Cornell box render took 2.2× the CPU it takes in this mode
+//! (docs/performance.md, "Eighteenth session").
 //!
-//! The flags are set only around the foreign calls (one query, or a batch's loop of them)
-//! and restored right after. So the renderer's own arithmetic, host and plugins alike,
-//! keeps IEEE denormals and gives the same bits as before. Rust assumes the default
+//! The flags are set only around the queries (one query, or a batch's loop of them) and
+//! restored right after. So the renderer's own arithmetic, host and plugins alike, keeps
+//! IEEE denormals and gives the same bits as before. Rust assumes the default
 //! floating-point environment, so between the two MXCSR writes there is only the queries'
-//! data being moved, integer bookkeeping and the ray interval's comparisons (a denormal
-//! `t_max` gives an empty interval in either mode). The one place where
-//! Embree calls back into Rust, the hit filter, restores the thread's own mode for the
-//! length of the callback ([`with_denormals_kept`]).
+//! own arithmetic, their data being moved, integer bookkeeping and the ray interval's
+//! comparisons (a denormal `t_max` gives an empty interval in either mode). Where a query
+//! calls back into other Rust code, a hit filter, the callback runs in the thread's own mode
+//! ([`with_denormals_kept`]).
 //!
 //! Other architectures: the closure runs as it is.
 
@@ -45,9 +51,10 @@ fn write_mxcsr(csr: u32) {
     }
 }
 
-/// Runs `f` (an Embree query) with FTZ and DAZ set, then restores the thread's mode.
+/// Runs `f` (ray queries) with FTZ and DAZ set, then restores the thread's mode. Nested, the
+/// inner call only reads the mode (no write).
 #[inline(always)]
-pub(crate) fn with_denormals_flushed<R>(f: impl FnOnce() -> R) -> R {
+pub fn with_denormals_flushed<R>(f: impl FnOnce() -> R) -> R {
     #[cfg(target_arch = "x86_64")]
     {
         let old = read_mxcsr();
@@ -65,10 +72,10 @@ pub(crate) fn with_denormals_flushed<R>(f: impl FnOnce() -> R) -> R {
     }
 }
 
-/// Runs `f` (Rust code Embree calls back) with FTZ and DAZ cleared, as the thread had them
-/// before the query, then puts Embree's mode back.
+/// Runs `f` (Rust code a query calls back: a hit filter) with FTZ and DAZ cleared, as the
+/// thread had them before the query, then puts the query's mode back.
 #[inline(always)]
-pub(crate) fn with_denormals_kept<R>(f: impl FnOnce() -> R) -> R {
+pub fn with_denormals_kept<R>(f: impl FnOnce() -> R) -> R {
     #[cfg(target_arch = "x86_64")]
     {
         let embree = read_mxcsr();
