@@ -297,7 +297,7 @@ impl<'a> Lights<'a> {
     /// pairs a lamp made of several triangles (a glTF quad is two) gets them stratified on
     /// each of its triangles, where [`Lights::sample`]'s separately drawn, randomly paired
     /// choice scatters them: what the path tracers use.
-    #[inline]
+    #[inline(always)]
     pub fn sample_from_pair(&self, u: Vec2) -> Option<LightSample> {
         if self.is_empty() {
             return None;
@@ -319,7 +319,7 @@ impl<'a> Lights<'a> {
     }
 
     /// A point (or direction) on light `i`, chosen with probability `p_choose`, from `u`.
-    #[inline]
+    #[inline(always)]
     fn sample_light(&self, i: usize, p_choose: f32, u: Vec2) -> Option<LightSample> {
         if p_choose <= 0.0 {
             return None;

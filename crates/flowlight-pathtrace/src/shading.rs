@@ -135,7 +135,7 @@ impl ShadowRay {
 
 /// [`connect_light`] without the visibility test: the connection and the shadow ray that
 /// decides it (traced later, in a batch, by the wavefront sampler).
-#[inline]
+#[inline(always)]
 pub(crate) fn light_connection(
     scene: &Scene,
     hit: &SurfaceHit,
