@@ -209,6 +209,19 @@ pub(crate) struct PrimRef {
 const _: () = assert!(std::mem::size_of::<PrimRef>() == 32);
 
 impl PrimRef {
+    /// A placeholder for a degenerate triangle in [`crate::Bvh`]'s first pass, removed before
+    /// the build: the only reference whose `hi.w` is not 0.
+    pub(crate) const DEGENERATE: PrimRef = PrimRef {
+        lo: Vec4::ZERO,
+        hi: Vec4::new(0.0, 0.0, 0.0, 1.0),
+    };
+
+    /// Whether this is [`PrimRef::DEGENERATE`].
+    #[inline(always)]
+    pub(crate) fn is_degenerate_marker(&self) -> bool {
+        self.hi.w != 0.0
+    }
+
     pub(crate) fn new(t: &[Vec3; 3], index: u32) -> PrimRef {
         let [a, b, c] = t.map(Vec3A::from);
         PrimRef::from_bounds(
