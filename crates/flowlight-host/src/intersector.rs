@@ -42,11 +42,12 @@ pub trait Intersector: Send + Sync {
         });
     }
     /// Runs `queries`, a loop over a batch's rays that calls this intersector and only moves
-    /// the results, in whatever mode the backend's queries want. Embree sets flush-to-zero
-    /// and denormals-are-zero once for the batch (`flowlight_embree::with_query_mode`);
-    /// around every single ray the two MXCSR writes cost about a tenth of the dragon's render.
+    /// the results, in the ray queries' floating-point mode: flush-to-zero and
+    /// denormals-are-zero, set once for the batch (`flowlight_core::denormals`). Both
+    /// backends' single queries set it themselves; around every single ray the two MXCSR
+    /// writes cost about a tenth of the dragon's render, so inside a batch they only read it.
     fn batch(&self, queries: &mut dyn FnMut()) {
-        queries()
+        flowlight_core::denormals::with_denormals_flushed(queries)
     }
 }
 
@@ -142,11 +143,6 @@ impl BvhIntersector {
 impl Intersector for BvhIntersector {
     fn name(&self) -> &'static str {
         "bvh"
-    }
-    /// The BVH's queries set flush-to-zero themselves (`flowlight_bvh::Bvh`); set once
-    /// for the batch, each query only reads it.
-    fn batch(&self, queries: &mut dyn FnMut()) {
-        flowlight_core::denormals::with_denormals_flushed(queries)
     }
     #[inline]
     fn intersect(&self, ray: &Ray) -> Option<TriangleHit> {
@@ -264,9 +260,6 @@ impl EmbreeIntersector {
 impl Intersector for EmbreeIntersector {
     fn name(&self) -> &'static str {
         "embree"
-    }
-    fn batch(&self, queries: &mut dyn FnMut()) {
-        flowlight_embree::with_query_mode(queries)
     }
     /// The scene's own batch call: packets for small scenes (flat or instanced), else single
     /// rays, with the FP mode set once ([`flowlight_embree::EmbreeScene::intersect_batch`]).
