@@ -3,8 +3,10 @@
 //!
 //! Shared by [`BinaryBvh`], the widening of [`crate::Bvh`] and the top level of
 //! [`crate::TwoLevelBvh`]. Boxes are `Vec3A` (SIMD unions); a [`PrimRef`] is a box and an
-//! index (32 bytes, the index in the `w` lane), its centroid recomputed when needed; a bin index is one clamped
-//! float-to-i32 conversion per axis ([`Binner::bins_of`]); the partition of a split gathers
+//! index (32 bytes, the index in the `w` lane), its centroid recomputed when needed; a bin
+//! index is one clamped float-to-i32 conversion per axis ([`Binner::bins_of`]); the binning
+//! adds runs of references that share their bins at once ([`Binner::fill`]); the partition
+//! of a split gathers
 //! both children's bounds and centroid bounds, so the widening needs no second pass over
 //! them; [`decide`] can weigh the SAH by leaf packs instead of triangles ([`best_split`]).
 
@@ -306,10 +308,81 @@ struct Bin {
 }
 
 type Bins = [[Bin; SAH_BINS]; 3];
-const EMPTY_BINS: Bins = [[Bin {
-    bounds: Aabb::EMPTY,
-    count: 0,
-}; SAH_BINS]; 3];
+
+/// Empty bins, written in place. A `const` of the bins was copied with `memmove`, which at
+/// 2,304 bytes takes its `rep movsb` path; the fill's first loads of those bins then waited
+/// for the copy's stores (a string copy's stores are not forwarded to loads), a fixed cost
+/// on every node, and most nodes are small.
+#[inline(always)]
+fn empty_bins() -> Bins {
+    let empty = Bin {
+        bounds: Aabb::EMPTY,
+        count: 0,
+    };
+    let mut bins = [[empty; SAH_BINS]; 3];
+    for axis_bins in &mut bins {
+        for b in axis_bins.iter_mut() {
+            *b = empty;
+        }
+    }
+    bins
+}
+
+/// The bins of one reference on the three axes, as integers in one register, so that two
+/// references' bins compare with one instruction.
+#[derive(Clone, Copy)]
+struct BinKey(
+    #[cfg(target_arch = "x86_64")] std::arch::x86_64::__m128i,
+    #[cfg(not(target_arch = "x86_64"))] [u32; 3],
+);
+
+impl BinKey {
+    /// The key of clamped bin coordinates ([`Binner::clamped`]: each lane in
+    /// [0, SAH_BINS − 1], not NaN).
+    #[inline(always)]
+    fn of(f: Vec3A) -> BinKey {
+        #[cfg(target_arch = "x86_64")]
+        {
+            // SAFETY: SSE2 is part of the x86_64 baseline.
+            BinKey(unsafe { std::arch::x86_64::_mm_cvttps_epi32(f.into()) })
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            BinKey(f.to_array().map(|x| x as u32))
+        }
+    }
+
+    /// Whether both keys name the same bins on all three axes (the fourth lane, whatever
+    /// it holds, is ignored).
+    #[inline(always)]
+    fn same(self, o: BinKey) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::*;
+            // SAFETY: SSE2 is part of the x86_64 baseline.
+            unsafe { _mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(self.0, o.0))) & 7 == 7 }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            self.0 == o.0
+        }
+    }
+
+    /// The bin on each axis.
+    #[inline(always)]
+    fn indices(self) -> [usize; 3] {
+        #[cfg(target_arch = "x86_64")]
+        {
+            // SAFETY: an `__m128i` is 16 plain bytes, as is `[i32; 4]`.
+            let v: [i32; 4] = unsafe { std::mem::transmute(self.0) };
+            [v[0] as usize, v[1] as usize, v[2] as usize]
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            self.0.map(|x| x as usize)
+        }
+    }
+}
 
 /// Maps centroids to bins along each axis with non-zero centroid extent.
 #[derive(Clone, Copy, Debug)]
@@ -341,16 +414,20 @@ impl Binner {
     /// NaN and negatives to bin 0 (the SSE `max` returns its second operand, 0, for a NaN
     /// first one), overflow to the last bin — what the saturating cast
     /// `(f as usize).min(SAH_BINS − 1)` gives, without its cost (a float to 64-bit integer
-    /// conversion with range checks was 15% of a build). Binning and partitioning both use
-    /// this function, so they agree exactly.
-    #[inline(always)]
+    /// conversion with range checks was 15% of a build). Binning and partitioning both use this
+    /// definition (the fill through [`BinKey`], the partition through [`Binner::left_of`]), so
+    /// they agree exactly; the tests check both against this function.
+    #[cfg_attr(not(test), allow(dead_code))]
     fn bins_of(&self, c: Vec3A) -> [usize; 3] {
-        let f = ((c - self.cmin) * self.scale)
+        BinKey::of(self.clamped(c)).indices()
+    }
+
+    /// `(c − cmin)·scale` clamped to [0, SAH_BINS − 1], NaN to 0: the bins before truncation.
+    #[inline(always)]
+    fn clamped(&self, c: Vec3A) -> Vec3A {
+        ((c - self.cmin) * self.scale)
             .max(Vec3A::ZERO)
             .min(Vec3A::splat((SAH_BINS - 1) as f32))
-            .to_array();
-        // SAFETY: every lane is in [0, SAH_BINS − 1] (not NaN), so it fits an i32.
-        f.map(|x| unsafe { x.to_int_unchecked::<i32>() } as usize)
     }
 
     /// Whether a reference falls left of the split before bin `split` (1 to `SAH_BINS − 1`)
@@ -365,18 +442,43 @@ impl Binner {
         move |r| !((r.centroid_on(axis) - cmin) * scale >= limit)
     }
 
+    /// Bins `refs`: each bin's box and count on each axis (an axis without extent puts
+    /// everything in its bin 0, which [`best_split`] ignores). The same bins as
+    /// [`Binner::bins_of`] gives.
+    ///
+    /// References in mesh order come in runs that fall in the same bins on all three axes
+    /// (neighbouring triangles; the partitions keep runs together). A run's box and count
+    /// grow in registers and go to the bins when the run ends. Adding each reference to its
+    /// bins instead made every update load what the previous one had just stored (a
+    /// store-forwarding chain per reference and axis). Min and max are exact, so the bins
+    /// are the same either way.
     fn fill(&self, refs: &[PrimRef]) -> Bins {
-        let mut bins = EMPTY_BINS;
-        for r in refs {
-            let k = self.bins_of(r.centroid());
-            for (a, axis_bins) in bins.iter_mut().enumerate() {
-                if self.active[a] {
-                    let b = &mut axis_bins[k[a]];
-                    b.bounds = b.bounds.union(r.bounds());
-                    b.count += 1;
-                }
+        let mut bins = empty_bins();
+        let Some(first) = refs.first() else {
+            return bins;
+        };
+        let flush = |bins: &mut Bins, key: BinKey, b: Aabb, n: u32| {
+            for (axis_bins, k) in bins.iter_mut().zip(key.indices()) {
+                let bin = &mut axis_bins[k];
+                bin.bounds = bin.bounds.union(b);
+                bin.count += n;
             }
+        };
+        let mut run_key = BinKey::of(self.clamped(first.centroid()));
+        let mut run_box = Aabb::EMPTY;
+        let mut run_len = 0u32;
+        for r in refs {
+            let key = BinKey::of(self.clamped(r.centroid()));
+            if !key.same(run_key) {
+                flush(&mut bins, run_key, run_box, run_len);
+                run_key = key;
+                run_box = Aabb::EMPTY;
+                run_len = 0;
+            }
+            run_box = run_box.union(r.bounds());
+            run_len += 1;
         }
+        flush(&mut bins, run_key, run_box, run_len);
         bins
     }
 
@@ -386,18 +488,15 @@ impl Binner {
         }
         refs.par_chunks(PARALLEL_SCAN_CHUNK)
             .map(|c| self.fill(c))
-            .reduce(
-                || EMPTY_BINS,
-                |mut a, b| {
-                    for (aa, ba) in a.iter_mut().zip(&b) {
-                        for (x, y) in aa.iter_mut().zip(ba) {
-                            x.bounds = x.bounds.union(y.bounds);
-                            x.count += y.count;
-                        }
+            .reduce(empty_bins, |mut a, b| {
+                for (aa, ba) in a.iter_mut().zip(&b) {
+                    for (x, y) in aa.iter_mut().zip(ba) {
+                        x.bounds = x.bounds.union(y.bounds);
+                        x.count += y.count;
                     }
-                    a
-                },
-            )
+                }
+                a
+            })
     }
 }
 
@@ -823,7 +922,7 @@ mod tests {
     fn three_axis_sweep_is_the_per_axis_sweep() {
         let mut rng = Rng::new(9, 9);
         for round in 0..20_000 {
-            let mut bins = EMPTY_BINS;
+            let mut bins = empty_bins();
             let active = [0, 1, 2].map(|_| rng.uniform() < 0.9);
             let scale = [1.0, 1e-3, 1e30, f32::MAX][round % 4];
             let fill = rng.uniform();
@@ -889,6 +988,72 @@ mod tests {
                     let left = binner.left_of(axis, split)(&r);
                     assert_eq!(left, bin < split, "{f} axis {axis} split {split}");
                 }
+            }
+        }
+    }
+
+    /// The binning by runs gives each bin the box and count that adding every reference to
+    /// its own bins gives, bit for bit: on a coherent strip (long runs), on the same strip
+    /// shuffled (runs of one), with a flat axis, and on empty and one-reference slices.
+    #[test]
+    fn run_binning_is_the_per_reference_binning() {
+        let per_reference = |binner: &Binner, refs: &[PrimRef]| {
+            let mut bins = empty_bins();
+            for r in refs {
+                for (a, k) in binner.bins_of(r.centroid()).into_iter().enumerate() {
+                    bins[a][k].bounds = bins[a][k].bounds.union(r.bounds());
+                    bins[a][k].count += 1;
+                }
+            }
+            bins
+        };
+        let same = |a: &Bins, b: &Bins| {
+            a.iter().flatten().zip(b.iter().flatten()).all(|(x, y)| {
+                x.count == y.count
+                    && x.bounds.min.to_array().map(f32::to_bits)
+                        == y.bounds.min.to_array().map(f32::to_bits)
+                    && x.bounds.max.to_array().map(f32::to_bits)
+                        == y.bounds.max.to_array().map(f32::to_bits)
+            })
+        };
+        let mut rng = Rng::new(21, 4);
+        for flat_axis in [None, Some(1)] {
+            // A strip of small triangles along a curve, in order.
+            let mut refs: Vec<PrimRef> = (0..5000)
+                .map(|i| {
+                    let t = i as f32 / 5000.0;
+                    let mut c = Vec3::new((t * 9.0).sin(), (t * 7.0).cos(), t * 3.0);
+                    let mut e = Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 0.01;
+                    let mut f = Vec3::new(e.z, e.x, e.y);
+                    if let Some(a) = flat_axis {
+                        (c[a], e[a], f[a]) = (0.25, 0.0, 0.0);
+                    }
+                    PrimRef::new(&[c, c + e, c + f], i)
+                })
+                .collect();
+            for shuffled in [false, true] {
+                if shuffled {
+                    for i in (1..refs.len()).rev() {
+                        let j = ((rng.uniform() * (i + 1) as f32) as usize).min(i);
+                        refs.swap(i, j);
+                    }
+                }
+                let (_, c) = scan_seq(&refs);
+                let binner = Binner::new(&c);
+                assert_eq!(binner.active[1], flat_axis.is_none());
+                for slice in [&refs[..], &refs[..0], &refs[..1], &refs[17..40]] {
+                    let (runs, each) = (binner.fill(slice), per_reference(&binner, slice));
+                    assert!(
+                        same(&runs, &each),
+                        "shuffled {shuffled}, {} refs",
+                        slice.len()
+                    );
+                }
+                let whole = per_reference(&binner, &refs);
+                let runs = binner.fill(&refs);
+                let nonempty = runs[0].iter().filter(|b| b.count > 0).count();
+                assert!(nonempty > SAH_BINS / 2, "the strip spans the bins");
+                assert_eq!(whole[0].iter().map(|b| b.count).sum::<u32>(), 5000);
             }
         }
     }
