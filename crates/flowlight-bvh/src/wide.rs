@@ -345,15 +345,119 @@ fn build_sequential(refs: &mut [PrimRef], base: usize, root: Child, out: &mut Su
     idx as u32
 }
 
+/// A subtree built in parallel, before its nodes and packs are laid out: either built on one
+/// thread ([`Subtree`], references relative to itself) or a node whose children were built
+/// in parallel. Each part's size is known, so [`Part::write`] can place every node and pack
+/// in the final arrays once, all parts at the same time. (Merging the children's arrays
+/// into the parent's at each parallel level copied the upper part of the tree once per
+/// level, on one thread at the root, into fresh memory each time.)
+enum Part {
+    Flat(Subtree),
+    Fork(Box<Fork>),
+}
+
+/// A node whose non-leaf children were built in parallel.
+struct Fork {
+    /// Where the node's range starts in the final triangle order.
+    base: usize,
+    /// The node's children in order, with the subtree of each one that is not a leaf.
+    children: Vec<(Child, Option<Part>)>,
+    /// Nodes and packs of the whole part, its node included.
+    nodes: usize,
+    packs: usize,
+}
+
+impl Part {
+    fn nodes(&self) -> usize {
+        match self {
+            Part::Flat(t) => t.nodes.len(),
+            Part::Fork(f) => f.nodes,
+        }
+    }
+
+    fn packs(&self) -> usize {
+        match self {
+            Part::Flat(t) => t.leaves.len(),
+            Part::Fork(f) => f.packs,
+        }
+    }
+
+    /// Writes the part's nodes to `nodes` and its packs to `packs` (each exactly its size
+    /// long), depth first as [`build_sequential`] lays out a tree; the part's first node
+    /// and pack are `node_base` and `pack_base` of the final arrays.
+    fn write(
+        self,
+        nodes: &mut [WideNode],
+        packs: &mut [(u32, u8)],
+        node_base: u32,
+        pack_base: u32,
+    ) {
+        debug_assert_eq!((nodes.len(), packs.len()), (self.nodes(), self.packs()));
+        match self {
+            Part::Flat(t) => {
+                let pack_shift = pack_base << 2;
+                for (out, node) in nodes.iter_mut().zip(&t.nodes) {
+                    *out = *node;
+                    for r in &mut out.child {
+                        if *r == EMPTY_CHILD {
+                        } else if *r & LEAF_BIT != 0 {
+                            *r += pack_shift;
+                        } else {
+                            *r += node_base;
+                        }
+                    }
+                }
+                packs.copy_from_slice(&t.leaves);
+            }
+            Part::Fork(f) => {
+                let (root, mut nodes) = nodes.split_first_mut().expect("a fork has a node");
+                *root = WideNode::EMPTY;
+                let mut packs = packs;
+                let (mut node_at, mut pack_at) = (node_base + 1, pack_base);
+                let mut jobs = Vec::with_capacity(f.children.len());
+                for (k, (c, sub)) in f.children.into_iter().enumerate() {
+                    let child = match sub {
+                        None => {
+                            let mut leaf = Vec::with_capacity(LEAF_PACKS);
+                            let r = push_leaf(&mut leaf, f.base + c.start, c.len);
+                            let (mine, rest) = std::mem::take(&mut packs).split_at_mut(leaf.len());
+                            mine.copy_from_slice(&leaf);
+                            packs = rest;
+                            let r = r + (pack_at << 2);
+                            pack_at += leaf.len() as u32;
+                            r
+                        }
+                        Some(sub) => {
+                            let (n, p) = (sub.nodes(), sub.packs());
+                            let (sub_nodes, rest) = std::mem::take(&mut nodes).split_at_mut(n);
+                            nodes = rest;
+                            let (sub_packs, rest) = std::mem::take(&mut packs).split_at_mut(p);
+                            packs = rest;
+                            jobs.push((sub, sub_nodes, sub_packs, node_at, pack_at));
+                            let r = node_at;
+                            node_at += n as u32;
+                            pack_at += p as u32;
+                            r
+                        }
+                    };
+                    root.set(k, &c.bounds, child);
+                }
+                jobs.into_par_iter()
+                    .for_each(|(sub, n, p, nb, pb)| sub.write(n, p, nb, pb));
+            }
+        }
+    }
+}
+
 /// Builds the subtree of `root` (range: all of `refs`), its children in parallel when large.
-fn build_parallel(refs: &mut [PrimRef], base: usize, root: Child) -> Subtree {
+fn build_parallel(refs: &mut [PrimRef], base: usize, root: Child) -> Part {
     if refs.len() < PARALLEL_BUILD_THRESHOLD {
         let mut out = Subtree {
             nodes: Vec::with_capacity(refs.len() / 2),
             leaves: Vec::with_capacity(refs.len() / 2),
         };
         build_sequential(refs, base, root, &mut out);
-        return out;
+        return Part::Flat(out);
     }
     let (ch, n) = widen(refs, root);
     let mut slices = Vec::with_capacity(n);
@@ -363,41 +467,48 @@ fn build_parallel(refs: &mut [PrimRef], base: usize, root: Child) -> Subtree {
         slices.push((s, *c));
         rest = r;
     }
-    let subs: Vec<Option<Subtree>> = slices
+    let children: Vec<(Child, Option<Part>)> = slices
         .into_par_iter()
-        .map(|(s, c)| (!c.leaf).then(|| build_parallel(s, base + c.start, Child { start: 0, ..c })))
+        .map(|(s, c)| {
+            let sub = (!c.leaf).then(|| build_parallel(s, base + c.start, Child { start: 0, ..c }));
+            (c, sub)
+        })
         .collect();
-    let total: usize = subs.iter().flatten().map(|s| s.nodes.len()).sum();
-    let mut out = Subtree {
-        nodes: Vec::with_capacity(1 + total),
-        leaves: Vec::new(),
-    };
-    out.nodes.push(WideNode::EMPTY);
-    for (k, (c, sub)) in ch[..n].iter().zip(subs).enumerate() {
-        let child = match sub {
-            None => push_leaf(&mut out.leaves, base + c.start, c.len),
-            Some(sub) => {
-                let node_shift = out.nodes.len() as u32;
-                let leaf_shift = (out.leaves.len() as u32) << 2;
-                out.nodes.extend(sub.nodes.iter().map(|node| {
-                    let mut node = *node;
-                    for r in &mut node.child {
-                        if *r == EMPTY_CHILD {
-                        } else if *r & LEAF_BIT != 0 {
-                            *r += leaf_shift;
-                        } else {
-                            *r += node_shift;
-                        }
-                    }
-                    node
-                }));
-                out.leaves.extend_from_slice(&sub.leaves);
-                node_shift
-            }
-        };
-        out.nodes[0].set(k, &c.bounds, child);
+    let nodes = 1 + children
+        .iter()
+        .flat_map(|(_, s)| s)
+        .map(Part::nodes)
+        .sum::<usize>();
+    let packs = children
+        .iter()
+        .map(|(c, s)| s.as_ref().map_or(c.len.div_ceil(LANES), Part::packs))
+        .sum();
+    Part::Fork(Box::new(Fork {
+        base,
+        children,
+        nodes,
+        packs,
+    }))
+}
+
+/// The tree over `refs` (whose range is `root`), built in parallel where large and laid out
+/// as [`build_sequential`] lays it out.
+fn build_tree(refs: &mut [PrimRef], root: Child) -> Subtree {
+    let part = build_parallel(refs, 0, root);
+    assert!(part.packs() <= MAX_PACKS, "too many triangles for a Bvh");
+    match part {
+        Part::Flat(t) => t,
+        part => {
+            let mut t = Subtree {
+                nodes: Vec::new(),
+                leaves: vec![(0, 0); part.packs()],
+            };
+            t.nodes
+                .par_extend(rayon::iter::repeat_n(WideNode::EMPTY, part.nodes()));
+            part.write(&mut t.nodes, &mut t.leaves, 0, 0);
+            t
+        }
     }
-    out
 }
 
 impl Bvh {
@@ -459,11 +570,7 @@ impl Bvh {
             depth: 0,
             leaf: refs.len() <= MAX_LEAF_SIZE,
         };
-        let tree = build_parallel(&mut refs, 0, root);
-        assert!(
-            tree.leaves.len() <= MAX_PACKS,
-            "too many triangles for a Bvh"
-        );
+        let tree = build_tree(&mut refs, root);
         let bound = stack_bound(&tree.nodes, 0);
         // The SAH depth cap keeps trees far below this (`MAX_SAH_DEPTH + 32` binary levels).
         assert!(bound <= STACK_SIZE, "BVH too deep for the traversal stack");
@@ -1315,6 +1422,43 @@ mod tests {
             })
             .collect();
         check_structure(&Bvh::build(&tris), &tris);
+    }
+
+    /// The parallel build lays out its parts once at the end ([`Part::write`]); its nodes
+    /// and packs are those of the whole tree built on one thread ([`build_sequential`]),
+    /// entry for entry, with forks two and three levels deep (up to 150k triangles).
+    #[test]
+    fn parallel_layout_is_the_sequential_layout() {
+        for n in [100, 5_000, 40_000, 150_000] {
+            let tris = random_soup(n, 7 + n as u64);
+            let mut refs: Vec<PrimRef> = tris
+                .iter()
+                .enumerate()
+                .map(|(i, t)| PrimRef::new(t, i as u32))
+                .collect();
+            let (bounds, cbounds) = scan(&refs);
+            let root = Child {
+                start: 0,
+                len: refs.len(),
+                bounds,
+                cbounds,
+                depth: 0,
+                leaf: false,
+            };
+            let mut seq_refs = refs.clone();
+            let parallel = build_tree(&mut refs, root);
+            let mut sequential = Subtree::default();
+            build_sequential(&mut seq_refs, 0, root, &mut sequential);
+            assert!(parallel.nodes.len() > 1 + n / 4096, "{n}: too few nodes");
+            assert!(parallel.nodes == sequential.nodes, "{n}: nodes differ");
+            assert!(parallel.leaves == sequential.leaves, "{n}: packs differ");
+            assert!(
+                refs.iter()
+                    .map(PrimRef::index)
+                    .eq(seq_refs.iter().map(PrimRef::index)),
+                "{n}: triangle order differs"
+            );
+        }
     }
 
     /// The indexed build is the build over the gathered triangles, degenerate ones included.
