@@ -12,8 +12,9 @@
 //!   The SAH of these splits counts leaf packs, `⌈n/4⌉`, not triangles (Embree's block
 //!   rounding): a pack of one triangle costs one pass of the 4-lane test like a full one, so
 //!   splits that fill packs win (about 40% fewer nodes, faster builds). No binary tree is
-//!   materialised; the upper levels are built in parallel (rayon) and the result does not
-//!   depend on the thread schedule.
+//!   materialised; the upper levels are built in parallel (rayon), their parts laid out
+//!   once at the end in the depth-first order of the sequential build, and the result does
+//!   not depend on the thread schedule.
 //! * **Nodes** — 256 bytes, four cache lines: the eight children's boxes in SoA order
 //!   (`min x` of the 8 children, `max x`, `min y`, …, each row 32 bytes: one AVX register or
 //!   two SSE ones) and eight child references (interior node index, or leaf: first pack
@@ -243,6 +244,21 @@ struct Child {
     cbounds: Aabb,
     depth: u32,
     leaf: bool,
+}
+
+impl Child {
+    /// The root of a build over all of `refs` (not empty).
+    fn root(refs: &[PrimRef]) -> Child {
+        let (bounds, cbounds) = scan(refs);
+        Child {
+            start: 0,
+            len: refs.len(),
+            bounds,
+            cbounds,
+            depth: 0,
+            leaf: refs.len() <= MAX_LEAF_SIZE,
+        }
+    }
 }
 
 /// Nodes and packs of a subtree; child references are relative to the subtree (its root
@@ -561,15 +577,8 @@ impl Bvh {
         if refs.is_empty() {
             return empty;
         }
-        let (bounds, cbounds) = scan(&refs);
-        let root = Child {
-            start: 0,
-            len: refs.len(),
-            bounds,
-            cbounds,
-            depth: 0,
-            leaf: refs.len() <= MAX_LEAF_SIZE,
-        };
+        let root = Child::root(&refs);
+        let bounds = root.bounds;
         let tree = build_tree(&mut refs, root);
         let bound = stack_bound(&tree.nodes, 0);
         // The SAH depth cap keeps trees far below this (`MAX_SAH_DEPTH + 32` binary levels).
@@ -1436,15 +1445,7 @@ mod tests {
                 .enumerate()
                 .map(|(i, t)| PrimRef::new(t, i as u32))
                 .collect();
-            let (bounds, cbounds) = scan(&refs);
-            let root = Child {
-                start: 0,
-                len: refs.len(),
-                bounds,
-                cbounds,
-                depth: 0,
-                leaf: false,
-            };
+            let root = Child::root(&refs);
             let mut seq_refs = refs.clone();
             let parallel = build_tree(&mut refs, root);
             let mut sequential = Subtree::default();
