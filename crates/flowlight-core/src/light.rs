@@ -373,7 +373,10 @@ impl<'a> Lights<'a> {
 
     /// The light sample `ls` as seen from `p_ref`. `None` when it carries no light there
     /// (back face, outside a spot's cone, grazing, coincident).
-    #[inline]
+    ///
+    /// Always inlined: as a call it returned its `Option<Incident>` through the stack, after
+    /// a square root and two divisions, and was 4.7% of a Cornell box render's samples.
+    #[inline(always)]
     pub fn incident(&self, ls: &LightSample, p_ref: Vec3) -> Option<Incident> {
         let i = ls.light as usize;
         match ls.kind {
