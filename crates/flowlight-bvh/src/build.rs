@@ -26,6 +26,11 @@ pub(crate) const PARALLEL_BUILD_THRESHOLD: usize = 4096;
 /// Nodes with at least this many triangles compute bounds and bins in parallel.
 pub(crate) const PARALLEL_SCAN_THRESHOLD: usize = 1 << 16;
 const PARALLEL_SCAN_CHUNK: usize = 1 << 14;
+/// Nodes with at least this many triangles are partitioned in parallel
+/// ([`partition_parallel`]). Below it the blocks' pass and the swaps cost about what they
+/// save on two threads, and another parallel region is another wait for the pool's
+/// threads to wake.
+const PARALLEL_PARTITION_THRESHOLD: usize = 1 << 17;
 /// SAH cost of traversing a node relative to intersecting one triangle. pbrt-v4 uses 1/2; a
 /// node visit is mostly a cache miss while a leaf's triangles are contiguous. 2 gave 3×
 /// fewer nodes and faster incoherent rays on 1M-triangle soups, but made the Cornell box
@@ -646,7 +651,7 @@ fn partition_parallel(
     refs: &mut [PrimRef],
     pred: impl Fn(&PrimRef) -> bool + Sync,
 ) -> (usize, [(Aabb, Aabb); 2]) {
-    if refs.len() < PARALLEL_SCAN_THRESHOLD {
+    if refs.len() < PARALLEL_PARTITION_THRESHOLD {
         return partition(refs, pred);
     }
     let blocks: Vec<(usize, [(Aabb, Aabb); 2])> = refs
@@ -1133,7 +1138,7 @@ mod tests {
             )
         };
         let mut rng = Rng::new(5, 8);
-        let n = 3 * PARALLEL_SCAN_THRESHOLD + 1234;
+        let n = 3 * PARALLEL_PARTITION_THRESHOLD + 1234;
         let mut refs: Vec<PrimRef> = (0..n)
             .map(|i| {
                 let t = i as f32 / n as f32;
