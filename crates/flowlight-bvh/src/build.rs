@@ -1059,6 +1059,14 @@ mod tests {
         }
     }
 
+    /// Fisher–Yates, so that references in mesh order lose their runs.
+    fn shuffle(refs: &mut [PrimRef], rng: &mut Rng) {
+        for i in (1..refs.len()).rev() {
+            let j = ((rng.uniform() * (i + 1) as f32) as usize).min(i);
+            refs.swap(i, j);
+        }
+    }
+
     /// The binning by runs gives each bin the box and count that adding every reference to
     /// its own bins gives, bit for bit: on a coherent strip (long runs), on the same strip
     /// shuffled (runs of one), with a flat axis, and on empty and one-reference slices.
@@ -1100,10 +1108,7 @@ mod tests {
                 .collect();
             for shuffled in [false, true] {
                 if shuffled {
-                    for i in (1..refs.len()).rev() {
-                        let j = ((rng.uniform() * (i + 1) as f32) as usize).min(i);
-                        refs.swap(i, j);
-                    }
+                    shuffle(&mut refs, &mut rng);
                 }
                 let (_, c) = scan_seq(&refs);
                 let binner = Binner::new(&c);
@@ -1148,10 +1153,7 @@ mod tests {
             .collect();
         for shuffled in [false, true] {
             if shuffled {
-                for i in (1..refs.len()).rev() {
-                    let j = ((rng.uniform() * (i + 1) as f32) as usize).min(i);
-                    refs.swap(i, j);
-                }
+                shuffle(&mut refs, &mut rng);
             }
             for cut in [0.02, 0.5, 0.97] {
                 let pred = |r: &PrimRef| r.centroid().x < cut * 10.0;
