@@ -78,10 +78,10 @@ pub fn with_denormals_flushed<R>(f: impl FnOnce() -> R) -> R {
 pub fn with_denormals_kept<R>(f: impl FnOnce() -> R) -> R {
     #[cfg(target_arch = "x86_64")]
     {
-        let embree = read_mxcsr();
-        write_mxcsr(embree & !FTZ_DAZ);
+        let query_mode = read_mxcsr();
+        write_mxcsr(query_mode & !FTZ_DAZ);
         let r = f();
-        write_mxcsr(embree);
+        write_mxcsr(query_mode);
         r
     }
     #[cfg(not(target_arch = "x86_64"))]

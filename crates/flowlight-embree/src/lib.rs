@@ -30,14 +30,6 @@ pub const BUILD_LIBRARY: &str = env!("FLOWLIGHT_EMBREE_LIB");
 
 use flowlight_core::denormals;
 
-/// Runs `f`, a loop of Embree queries, in the floating-point mode Embree asks for (flush to
-/// zero, denormals are zero; see `flowlight_core::denormals`), set once for the whole loop
-/// instead of around each query. `f` should do little besides the queries: the renderer's
-/// own arithmetic belongs outside, where denormals keep their IEEE meaning.
-pub fn with_query_mode<R>(f: impl FnOnce() -> R) -> R {
-    denormals::with_denormals_flushed(f)
-}
-
 /// Layouts of the structures that cross into Embree, as the 4.4 library uses them.
 pub mod abi {
     use embree4_sys::RTCRay;
@@ -310,7 +302,7 @@ impl Device {
         denormals::with_denormals_flushed(|| self.closest_hit_in_mode(scene, ray, args))
     }
 
-    /// [`Device::closest_hit`] in the caller's FP mode (inside [`with_query_mode`]).
+    /// [`Device::closest_hit`] in the caller's FP mode (inside `denormals::with_denormals_flushed`).
     #[inline(always)]
     fn closest_hit_in_mode(
         &self,
@@ -338,7 +330,7 @@ impl Device {
         denormals::with_denormals_flushed(|| self.any_hit_in_mode(scene, ray, args))
     }
 
-    /// [`Device::any_hit`] in the caller's FP mode (inside [`with_query_mode`]).
+    /// [`Device::any_hit`] in the caller's FP mode (inside `denormals::with_denormals_flushed`).
     #[inline(always)]
     fn any_hit_in_mode(
         &self,
@@ -364,7 +356,8 @@ impl Device {
         rays: &[Ray],
         mut emit: impl FnMut(usize, Option<InstanceHit>),
     ) {
-        with_query_mode(|| {
+        // The FP mode Embree asks for, set once for the batch instead of around each query.
+        denormals::with_denormals_flushed(|| {
             if !packets {
                 for (i, ray) in rays.iter().enumerate() {
                     emit(
@@ -400,7 +393,8 @@ impl Device {
     /// switch, by packets or single rays as [`Device::closest_batch`].
     fn occluded_batch(&self, scene: RTCScene, packets: bool, rays: &[Ray], blocked: &mut [u8]) {
         assert_eq!(rays.len(), blocked.len(), "one answer per ray");
-        with_query_mode(|| {
+        // The FP mode Embree asks for, set once for the batch instead of around each query.
+        denormals::with_denormals_flushed(|| {
             if !packets {
                 for (ray, b) in rays.iter().zip(blocked.iter_mut()) {
                     *b = u8::from(self.any_hit_in_mode(scene, ray, None));
