@@ -177,19 +177,29 @@ impl TriPack {
 /// the caller wants it, so `occluded` never loads it).
 type RawHit = (usize, usize, f32, f32, f32);
 
-/// Appends the packs of a leaf over `refs[first .. first + len]` (`len ≤ LANES·LEAF_PACKS`)
-/// to `packs`; returns the leaf's child reference.
-fn push_leaf(packs: &mut Vec<(u32, u8)>, first: usize, len: usize) -> u32 {
+/// The packs of a leaf over `refs[first .. first + len]` (`len ≤ LANES·LEAF_PACKS`):
+/// `(first ref, count)` of each.
+fn leaf_packs(first: usize, len: usize) -> impl ExactSizeIterator<Item = (u32, u8)> {
     debug_assert!((1..=LANES * LEAF_PACKS).contains(&len));
-    let first_pack = packs.len();
-    let n = len.div_ceil(LANES);
-    for p in 0..n {
-        packs.push((
+    (0..len.div_ceil(LANES)).map(move |p| {
+        (
             (first + p * LANES) as u32,
             (len - p * LANES).min(LANES) as u8,
-        ));
-    }
+        )
+    })
+}
+
+/// The child reference of a leaf of `n` packs from pack `first_pack` on.
+fn leaf_ref(first_pack: usize, n: usize) -> u32 {
     LEAF_BIT | ((first_pack as u32) << 2) | (n as u32 - 1)
+}
+
+/// Appends the packs of a leaf over `refs[first .. first + len]` to `packs`; returns the
+/// leaf's child reference.
+fn push_leaf(packs: &mut Vec<(u32, u8)>, first: usize, len: usize) -> u32 {
+    let first_pack = packs.len();
+    packs.extend(leaf_packs(first, len));
+    leaf_ref(first_pack, packs.len() - first_pack)
 }
 
 /// A 4-wide bounding volume hierarchy over a triangle soup, with closest-hit and any-hit
@@ -434,13 +444,15 @@ impl Part {
                 for (k, (c, sub)) in f.children.into_iter().enumerate() {
                     let child = match sub {
                         None => {
-                            let mut leaf = Vec::with_capacity(LEAF_PACKS);
-                            let r = push_leaf(&mut leaf, f.base + c.start, c.len);
-                            let (mine, rest) = std::mem::take(&mut packs).split_at_mut(leaf.len());
-                            mine.copy_from_slice(&leaf);
+                            let leaf = leaf_packs(f.base + c.start, c.len);
+                            let n = leaf.len();
+                            let (mine, rest) = std::mem::take(&mut packs).split_at_mut(n);
+                            for (out, p) in mine.iter_mut().zip(leaf) {
+                                *out = p;
+                            }
                             packs = rest;
-                            let r = r + (pack_at << 2);
-                            pack_at += leaf.len() as u32;
+                            let r = leaf_ref(pack_at as usize, n);
+                            pack_at += n as u32;
                             r
                         }
                         Some(sub) => {
@@ -497,7 +509,10 @@ fn build_parallel(refs: &mut [PrimRef], base: usize, root: Child) -> Part {
         .sum::<usize>();
     let packs = children
         .iter()
-        .map(|(c, s)| s.as_ref().map_or(c.len.div_ceil(LANES), Part::packs))
+        .map(|(c, s)| {
+            s.as_ref()
+                .map_or_else(|| leaf_packs(0, c.len).len(), Part::packs)
+        })
         .sum();
     Part::Fork(Box::new(Fork {
         base,
@@ -1435,11 +1450,20 @@ mod tests {
 
     /// The parallel build lays out its parts once at the end ([`Part::write`]); its nodes
     /// and packs are those of the whole tree built on one thread ([`build_sequential`]),
-    /// entry for entry, with forks two and three levels deep (up to 150k triangles).
+    /// entry for entry, with forks two and three levels deep (up to 150k triangles), and
+    /// with a leaf among a fork's children (three triangles far from the rest).
     #[test]
     fn parallel_layout_is_the_sequential_layout() {
-        for n in [100, 5_000, 40_000, 150_000] {
-            let tris = random_soup(n, 7 + n as u64);
+        let far = |t: [Vec3; 3]| t.map(|v| v * 0.01 + Vec3::splat(100.0));
+        let mut cases: Vec<Vec<[Vec3; 3]>> = [100, 5_000, 40_000, 150_000]
+            .into_iter()
+            .map(|n| random_soup(n, 7 + n as u64))
+            .collect();
+        let mut with_far_leaf = random_soup(6_000, 3);
+        with_far_leaf.extend(random_soup(3, 4).into_iter().map(far));
+        cases.push(with_far_leaf);
+        for tris in cases {
+            let n = tris.len();
             let mut refs: Vec<PrimRef> = tris
                 .iter()
                 .enumerate()
@@ -1451,6 +1475,15 @@ mod tests {
             let mut sequential = Subtree::default();
             build_sequential(&mut seq_refs, 0, root, &mut sequential);
             assert!(parallel.nodes.len() > 1 + n / 4096, "{n}: too few nodes");
+            if n == 6_003 {
+                let root = &parallel.nodes[0];
+                assert!(
+                    root.child
+                        .iter()
+                        .any(|&r| r != EMPTY_CHILD && r & LEAF_BIT != 0),
+                    "the far triangles are a leaf of the root fork"
+                );
+            }
             assert!(parallel.nodes == sequential.nodes, "{n}: nodes differ");
             assert!(parallel.leaves == sequential.leaves, "{n}: packs differ");
             assert!(
