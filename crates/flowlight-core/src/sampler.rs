@@ -33,6 +33,35 @@ pub trait SampleStream {
     /// independent source ignores it.
     #[inline]
     fn seek(&mut self, _vertex: u32, _slot: u32) {}
+
+    /// The pair [`SampleStream::uniform2`] will return at `slot` of `vertex` if the draws
+    /// before it stay within their own slots (at the dimension [`SampleStream::seek`]`(vertex,
+    /// slot)` moves to from here), computed now: a source whose numbers are a function of
+    /// their dimension can give it before the path gets there, so that its arithmetic runs
+    /// beside the work in between instead of after it. `None` for a sequential source,
+    /// whose numbers depend on the draws before.
+    #[inline]
+    fn pair_ahead(&self, _vertex: u32, _slot: u32) -> Option<PairAhead> {
+        None
+    }
+
+    /// [`SampleStream::uniform2`], taking `ahead`'s value where it is the value of this
+    /// draw (its key), else drawing as usual: the same number either way.
+    #[inline]
+    fn uniform2_ahead(&mut self, ahead: Option<PairAhead>) -> Vec2 {
+        let _ = ahead;
+        self.uniform2()
+    }
+}
+
+/// A pair computed before its turn ([`SampleStream::pair_ahead`]): its value, and which draw
+/// it is the value of in the stream's own terms, so that the stream takes it back only for
+/// that draw.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PairAhead {
+    /// The draw (for [`crate::sobol::SobolSampler`]: its sample index and dimension).
+    pub key: u64,
+    pub value: Vec2,
 }
 
 /// The numbers a path vertex draws, in order, as dimension slots of [`SampleStream::seek`]:
@@ -44,6 +73,9 @@ pub const SLOT_ROULETTE: u32 = 1;
 /// ... and the BSDF's: a lobe's own discrete choice (one number: a dielectric's reflect or
 /// refract) and the component and direction (a pair, [`crate::bsdf::Bsdf::sample`]).
 pub const SLOT_BSDF: u32 = 2;
+/// The slot of the BSDF's pair, after its one number at [`SLOT_BSDF`] (the order in which
+/// [`crate::bsdf::Bsdf::sample`]'s arguments are drawn).
+pub const SLOT_BSDF_PAIR: u32 = SLOT_BSDF + 1;
 /// Slots reserved per vertex. The camera's raster position is dimension 0.
 pub const DIMS_PER_VERTEX: u32 = 4;
 

@@ -38,8 +38,15 @@
 //! dimension forward (to the slot the vertex reserves, [`DIMS_PER_VERTEX`] per vertex), so a
 //! vertex that draws more numbers than its slots spills into fresh dimensions, not into the
 //! next vertex's.
+//!
+//! Since a number is a function of (sample, dimension), a path can have a pair computed
+//! before its turn ([`SampleStream::pair_ahead`], at the dimension its slot will have) and
+//! hand it back when it draws ([`SampleStream::uniform2_ahead`]); the stream takes it only
+//! for the draw it was computed for (sample index and dimension), so the numbers are those
+//! drawn in turn. The path tracer computes a vertex's pairs before the vertex's work, so
+//! that their multiplies run beside it instead of holding it up.
 
-use crate::sampler::{SampleStream, DIMS_PER_VERTEX};
+use crate::sampler::{PairAhead, SampleStream, DIMS_PER_VERTEX};
 use glam::Vec2;
 
 /// Direction number k of Sobol's dimension 1 (the generator matrix column of index bit k).
@@ -204,19 +211,60 @@ impl SampleStream for SobolSampler {
 
     #[inline]
     fn uniform2(&mut self) -> Vec2 {
-        let (shuffle, s0, s1) = self.dimension_seeds(self.dim);
+        let value = self.pair_at(self.dim);
         self.dim += 1;
-        let t = laine_karras(self.index_reversed, shuffle);
-        Vec2::new(to_unit(t ^ s0), to_unit(sobol1_of_reversed(t) ^ s1))
+        value
     }
 
     #[inline]
     fn seek(&mut self, vertex: u32, slot: u32) {
-        let start = 1 + vertex
-            .saturating_sub(1)
-            .saturating_mul(DIMS_PER_VERTEX)
-            .saturating_add(slot);
-        self.dim = self.dim.max(start);
+        self.dim = self.dim.max(slot_dimension(vertex, slot));
+    }
+
+    #[inline]
+    fn pair_ahead(&self, vertex: u32, slot: u32) -> Option<PairAhead> {
+        let dim = self.dim.max(slot_dimension(vertex, slot));
+        Some(PairAhead {
+            key: self.draw_key(dim),
+            value: self.pair_at(dim),
+        })
+    }
+
+    #[inline]
+    fn uniform2_ahead(&mut self, ahead: Option<PairAhead>) -> Vec2 {
+        match ahead {
+            Some(a) if a.key == self.draw_key(self.dim) => {
+                self.dim += 1;
+                a.value
+            }
+            _ => self.uniform2(),
+        }
+    }
+}
+
+/// The first dimension of `slot` at `vertex` ([`SampleStream::seek`]).
+#[inline]
+fn slot_dimension(vertex: u32, slot: u32) -> u32 {
+    1 + vertex
+        .saturating_sub(1)
+        .saturating_mul(DIMS_PER_VERTEX)
+        .saturating_add(slot)
+}
+
+impl SobolSampler {
+    /// Which draw dimension `dim` of this sample is: the key of its [`PairAhead`] (the seed
+    /// is not in it: a [`PairAhead`] belongs to one path, whose branches differ by index).
+    #[inline]
+    fn draw_key(&self, dim: u32) -> u64 {
+        (u64::from(self.index_reversed) << 32) | u64::from(dim)
+    }
+
+    /// The pair of dimension `dim` (Sobol' dimensions 0 and 1 of the shuffled index).
+    #[inline]
+    fn pair_at(&self, dim: u32) -> Vec2 {
+        let (shuffle, s0, s1) = self.dimension_seeds(dim);
+        let t = laine_karras(self.index_reversed, shuffle);
+        Vec2::new(to_unit(t ^ s0), to_unit(sobol1_of_reversed(t) ^ s1))
     }
 }
 
@@ -271,6 +319,45 @@ mod tests {
         assert_eq!(sobol1(2), 0xc000_0000);
         assert_eq!(sobol1(3), 0x4000_0000);
         assert_eq!(sobol1(4), 0xa000_0000);
+    }
+
+    /// A pair ahead is the pair `uniform2` gives after `seek` to its slot, and a stream takes
+    /// it back only for that draw: not one dimension later, not in another branch's stream.
+    #[test]
+    fn pairs_ahead_are_the_pairs_drawn_in_turn() {
+        for i in 0..64u32 {
+            let start = SobolSampler::new(Rng::hash(&[3, u64::from(i / 8)]), i % 8);
+            for (vertex, slot, drawn_before) in [(1, 0, 0), (1, 3, 2), (2, 0, 4), (3, 3, 1)] {
+                let mut s = start.clone();
+                for _ in 0..drawn_before {
+                    s.uniform();
+                }
+                let ahead = s.pair_ahead(vertex, slot).unwrap();
+                let mut in_turn = s.clone();
+                in_turn.seek(vertex, slot);
+                let want = in_turn.clone().uniform2();
+                assert_eq!(ahead.value, want, "sample {i} vertex {vertex} slot {slot}");
+                // Taken at its draw, with the stream moved on as by `uniform2`.
+                let mut taken = in_turn.clone();
+                let moved = Some(PairAhead {
+                    value: Vec2::splat(0.25),
+                    ..ahead
+                });
+                assert_eq!(taken.uniform2_ahead(moved), Vec2::splat(0.25));
+                let mut drawn = in_turn.clone();
+                drawn.uniform2();
+                assert_eq!(taken.dimension(), drawn.dimension());
+                assert_eq!(taken.uniform2(), drawn.uniform2());
+                // Not taken one dimension later, nor by a branch of the stream.
+                let mut later = in_turn.clone();
+                later.uniform();
+                let want_later = later.clone().uniform2();
+                assert_eq!(later.uniform2_ahead(moved), want_later);
+                let mut branch = in_turn.branch(1, 4);
+                let want_branch = branch.clone().uniform2();
+                assert_eq!(branch.uniform2_ahead(moved), want_branch);
+            }
+        }
     }
 
     #[test]
