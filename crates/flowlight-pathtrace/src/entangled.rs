@@ -529,16 +529,24 @@ fn vertex<S: BranchStream>(
     let at = bsdf.at(shading.wo);
     // The vertex's light connection with a path's (or branch's) numbers and throughput.
     let physical = path.physical;
-    let mut connect_here = |rng: &mut S, beta: Rgb, ahead: Option<PairAhead>| {
+    let mut connect_here = |u_light: Option<Vec2>, beta: Rgb| {
         let shadows = (&mut *shadow_rays, &mut *shadow_owner);
         connect(
-            scene, &bsdf, &at, hit, &shading, rng, ahead, physical, beta, depth, index, shadows,
+            scene, &bsdf, &at, hit, &shading, u_light, beta, depth, index, shadows,
         );
     };
     if !split {
-        connect_here(&mut path.rng, path.beta, light_ahead);
-        // From here on the path may end; its shadow ray (already pushed) counts either way.
-        return extend(scene, path, hit, &at, &shading, t, bsdf_ahead);
+        // The light pair is drawn first, as ever, but the connection is made after the
+        // extension: the two are independent chains of latency (the disk's division and
+        // polynomials; the light sample's square root and divisions), and this way the
+        // core works on the connection while the extension's chain completes. The
+        // connection takes β before the roulette, as before; its shadow ray counts whether
+        // or not the path goes on.
+        let u_light = light_pair(&bsdf, &mut path.rng, light_ahead, physical);
+        let beta = path.beta;
+        let going = extend(scene, path, hit, &at, &shading, t, bsdf_ahead);
+        connect_here(u_light, beta);
+        return going;
     }
     // A split: k branches, each with β/k, its own numbers from here on (`trunk.branch(j,
     // k)`), its own light connection here and its own roulette and BSDF sample. Every
@@ -552,7 +560,8 @@ fn vertex<S: BranchStream>(
         let mut rng = trunk.branch(j, k);
         let light_ahead = rng.pair_ahead(physical, SLOT_LIGHT);
         let bsdf_ahead = rng.pair_ahead(physical, SLOT_BSDF_PAIR);
-        connect_here(&mut rng, path.beta, light_ahead);
+        let u_light = light_pair(&bsdf, &mut rng, light_ahead, physical);
+        connect_here(u_light, path.beta);
         if j == 0 {
             path.rng = rng;
             first_bsdf_ahead = bsdf_ahead;
@@ -567,31 +576,43 @@ fn vertex<S: BranchStream>(
     extend(scene, path, hit, &at, &shading, t, first_bsdf_ahead)
 }
 
-/// The light connection of a vertex: a light sample from `rng`'s numbers, its shadow ray
-/// and [`ShadowOwner`] pushed onto `shadows` where it may carry light. `bsdf` stays a `Cow`:
+/// The light pair of a vertex's connection, drawn (where its BSDF has a non-Dirac part).
+#[inline(always)]
+fn light_pair<S: SampleStream>(
+    bsdf: &Bsdf,
+    rng: &mut S,
+    ahead: Option<PairAhead>,
+    physical: u32,
+) -> Option<Vec2> {
+    if !bsdf.has_non_delta() {
+        return None;
+    }
+    rng.seek(physical, SLOT_LIGHT);
+    Some(rng.uniform2_ahead(ahead))
+}
+
+/// The light connection of a vertex: a light sample from its light pair `u_light` (`None`:
+/// no connection, [`light_pair`]), its shadow ray and [`ShadowOwner`] pushed onto `shadows`
+/// where it may carry light. `bsdf` stays a `Cow`:
 /// its variant says whether it is the material's table entry (evaluated after the shadow
 /// ray) or built for the hit (evaluated now); `at` is it at ω_o.
 #[allow(clippy::too_many_arguments, clippy::ptr_arg)]
 #[inline(always)]
-fn connect<S: SampleStream>(
+fn connect(
     scene: &Scene,
     bsdf: &Cow<'_, Bsdf>,
     at: &BsdfAt,
     hit: &SurfaceHit,
     shading: &Shading,
-    rng: &mut S,
-    ahead: Option<PairAhead>,
-    physical: u32,
+    u_light: Option<Vec2>,
     beta: Rgb,
     depth: u32,
     index: u32,
     (shadow_rays, shadow_owner): (&mut Vec<Ray>, &mut Vec<ShadowOwner>),
 ) {
-    if !bsdf.has_non_delta() {
+    let Some(u_light) = u_light else {
         return;
-    }
-    rng.seek(physical, SLOT_LIGHT);
-    let u_light = rng.uniform2_ahead(ahead);
+    };
     let Some(ls) = light_sample(scene, bsdf, hit, shading, u_light) else {
         return;
     };
