@@ -389,7 +389,8 @@ fn contributions_of<'a>(
 
 /// A vertex's light and BSDF pairs, computed before the work that leads to their use
 /// ([`SampleStream::pair_ahead`]), before even the surface data of its hit: with Sobol'
-/// numbers each pair is a chain of about ten dependent integer multiplies, which otherwise
+/// numbers each pair is a chain of seven dependent integer multiplies and a table lookup
+/// (the dimension's seeds, the index shuffle, the second dimension), which otherwise
 /// starts only when the path gets to it, behind the surface, the BSDF, the light sample and
 /// its connection. Where the path's draws land elsewhere (a vertex before this one drew more
 /// numbers than its slots) a pair is not taken and the number is drawn as usual, and at a
@@ -558,9 +559,9 @@ fn vertex<S: BranchStream>(
     let mut first_bsdf_ahead = None;
     for j in 0..k {
         let mut rng = trunk.branch(j, k);
-        let light_ahead = rng.pair_ahead(physical, SLOT_LIGHT);
+        // The branch's BSDF pair ahead of its connection; its light pair is drawn at once.
         let bsdf_ahead = rng.pair_ahead(physical, SLOT_BSDF_PAIR);
-        let u_light = light_pair(&bsdf, &mut rng, light_ahead, physical);
+        let u_light = light_pair(&bsdf, &mut rng, None, physical);
         connect_here(u_light, path.beta);
         if j == 0 {
             path.rng = rng;
