@@ -11,7 +11,11 @@
 //!
 //! `cargo bench -p flowlight-host --bench rays` (`FLOWLIGHT_BENCH_RAYS=N` rays per run,
 //! default 1M; `FLOWLIGHT_BENCH_SIZES=10000,100000` to pick meshes;
-//! `FLOWLIGHT_BENCH_REPEAT=R` rounds). `cargo build --release -p flowlight-host --bench rays`
+//! `FLOWLIGHT_BENCH_REPEAT=R` rounds; `FLOWLIGHT_EMBREE_ROBUST=0` times Embree's fast mode
+//! instead of the robust one renders use by default, `FLOWLIGHT_EMBREE_QUALITY` its build
+//! quality; the first line on stderr names the mode). `FLOWLIGHT_BENCH_LEAKS=M` prints,
+//! instead of the timings, how many of M million rays from inside each closed mesh slip
+//! through it with Embree robust, Embree fast and the BVH. `cargo build --release -p flowlight-host --bench rays`
 //! builds the same binary (under `target/release/deps/rays-*`) from the release artifacts,
 //! without rebuilding every dependency under the `bench` profile.
 
@@ -129,8 +133,69 @@ fn queries<I: Intersector + 'static>(i: I) -> (Query, Query) {
     )
 }
 
+/// Rays from inside a [`lumpy_sphere`] (origins within 0.3 of its centre, where every
+/// radius is at least 0.8; uniform directions): each must hit, so a miss is a ray that
+/// slipped through the closed mesh between two triangles.
+fn inside_rays(rng: &mut Rng, out: &mut Vec<Ray>) {
+    let dir = |rng: &mut Rng| {
+        let z = 1.0 - 2.0 * rng.uniform();
+        let a = std::f32::consts::TAU * rng.uniform();
+        let s = (1.0 - z * z).max(0.0).sqrt();
+        Vec3::new(s * a.cos(), s * a.sin(), z)
+    };
+    out.clear();
+    for _ in 0..BATCH {
+        let o = dir(rng) * (0.3 * rng.uniform());
+        out.push(Ray {
+            origin: o,
+            dir: dir(rng),
+            t_max: f32::INFINITY,
+        });
+    }
+}
+
+/// `FLOWLIGHT_BENCH_LEAKS=M` (instead of the timings): how many of M million rays from inside each closed mesh leak
+/// through it, for Embree in robust and in fast mode (16-lane packets, as renders of
+/// scenes up to 100k triangles trace) and for the BVH. A measurement, not a test: the tests
+/// aim rays at shared edges and vertices (tests/embree.rs); this gives the rate for rays
+/// that hit edges only by chance, as a render's do.
+fn leak_table(sizes: &[usize], millions: usize) {
+    println!("| triangles | backend | rays from inside | leaked |\n|---:|---|---:|---:|");
+    for &n in sizes {
+        let scene = lumpy_sphere(n);
+        let mut backends: Vec<(&str, Box<dyn Intersector>)> = Vec::new();
+        for (name, robust) in [("embree, robust", true), ("embree, fast", false)] {
+            let options = SceneOptions {
+                robust,
+                packets: Packets::Always,
+                ..SceneOptions::default()
+            };
+            match EmbreeIntersector::build_with(&scene, options) {
+                Ok((e, _)) => backends.push((name, Box::new(e))),
+                Err(e) => eprintln!("Embree: {e}"),
+            }
+        }
+        backends.push(("bvh (8-wide)", Box::new(BvhIntersector::build(&scene).0)));
+        for (name, backend) in &backends {
+            let mut rng = Rng::new(11, 3);
+            let (mut rays, mut hits) = (Vec::new(), vec![CompactHit::MISS; BATCH]);
+            let (mut count, mut leaked) = (0usize, 0usize);
+            while count < millions * 1_000_000 {
+                inside_rays(&mut rng, &mut rays);
+                backend.intersect_batch(&rays, &mut hits);
+                count += rays.len();
+                leaked += hits.iter().filter(|h| !h.is_hit()).count();
+            }
+            println!(
+                "| {} | {name} | {count} | {leaked} |",
+                scene.triangles.len()
+            );
+        }
+    }
+}
+
 /// Builds every backend once; the build times of this round.
-fn build_all(scene: &Scene, tris: &[[Vec3; 3]]) -> (Vec<Backend>, Vec<f64>) {
+fn build_all(scene: &Scene, tris: &[[Vec3; 3]], embree: SceneOptions) -> (Vec<Backend>, Vec<f64>) {
     let mut out = Vec::new();
     let mut times = Vec::new();
     // Embree twice: single rays (the row every ratio divides by) and 16-lane packets.
@@ -138,10 +203,7 @@ fn build_all(scene: &Scene, tris: &[[Vec3; 3]]) -> (Vec<Backend>, Vec<f64>) {
         ("embree", Packets::Never),
         ("embree (16-lane packets)", Packets::Always),
     ] {
-        let options = SceneOptions {
-            packets,
-            ..SceneOptions::default()
-        };
+        let options = SceneOptions { packets, ..embree };
         match EmbreeIntersector::build_with(scene, options) {
             Ok((e, t)) => {
                 let (closest, any) = queries(e);
@@ -216,9 +278,29 @@ fn main() {
     // Thread counts to time each backend at (a many-core machine shows how each scales).
     let thread_counts = counts("FLOWLIGHT_BENCH_THREADS", vec![1, 2]);
     let rays = rays(nrays);
+    // The Embree scenes' mode: robust and medium quality unless `FLOWLIGHT_EMBREE_ROBUST=0`
+    // or `FLOWLIGHT_EMBREE_QUALITY` say otherwise (the packet rows set their own policy).
+    let embree_options = SceneOptions::from_env().unwrap_or_else(|e| {
+        eprintln!("rays: {e}");
+        std::process::exit(2)
+    });
     match flowlight_embree::device() {
-        Ok(d) => eprintln!("Embree {} from {}", d.version_string(), d.library),
+        Ok(d) => eprintln!(
+            "Embree {} from {}; scenes {}, build quality {:?}",
+            d.version_string(),
+            d.library,
+            if embree_options.robust {
+                "robust (RTC_SCENE_FLAG_ROBUST)"
+            } else {
+                "fast (no RTC_SCENE_FLAG_ROBUST)"
+            },
+            embree_options.quality
+        ),
         Err(e) => eprintln!("no Embree: {e}"),
+    }
+    if let Some(m) = env("FLOWLIGHT_BENCH_LEAKS") {
+        let millions = m.parse().expect("FLOWLIGHT_BENCH_LEAKS: millions of rays");
+        return leak_table(&sizes, millions);
     }
     println!(
         "| triangles | backend | build (s) | build / Embree | threads | closest (Mrays/s) | \
@@ -234,7 +316,7 @@ fn main() {
         let mut closest: Vec<Vec<Vec<f64>>> = Vec::new();
         let mut any: Vec<Vec<Vec<f64>>> = Vec::new();
         for round in 0..repeat {
-            let (backends, times) = build_all(&scene, &tris);
+            let (backends, times) = build_all(&scene, &tris, embree_options);
             if round == 0 {
                 names = backends.iter().map(|b| b.name).collect();
                 builds = vec![Vec::new(); names.len()];
