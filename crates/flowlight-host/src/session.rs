@@ -93,6 +93,27 @@ fn comparable_path(p: &Path) -> PathBuf {
     std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf())
 }
 
+/// One warning per Embree variable of the ray benchmark that is set (`is_set`) while a render
+/// of `config` runs: the benchmark has no config and reads `FLOWLIGHT_EMBREE_ROBUST` and
+/// `FLOWLIGHT_EMBREE_QUALITY`, a render takes `[render] robust` and `build_quality` from its
+/// config only. Said aloud because a render timed with one of them set measures the config's
+/// mode, not the variable's (earlier measurements of the robust mode's cost were void so).
+fn ignored_embree_variables(is_set: impl Fn(&str) -> bool, config: &Path) -> Vec<String> {
+    [
+        ("FLOWLIGHT_EMBREE_ROBUST", "robust"),
+        ("FLOWLIGHT_EMBREE_QUALITY", "build_quality"),
+    ]
+    .into_iter()
+    .filter(|(var, _)| is_set(var))
+    .map(|(var, key)| {
+        format!(
+            "{var} is read by the ray benchmark and tests, not by renders: set [render] {key} in {}",
+            config.display()
+        )
+    })
+    .collect()
+}
+
 /// The host's precision for the config's `render.precision`.
 fn frame_precision(config: &RenderConfig) -> Precision {
     match config.precision {
@@ -142,6 +163,9 @@ impl Session {
         let load_time = t0.elapsed();
         let camera = config.camera(&scene).map_err(|e| e.to_string())?;
         tracing::debug!(?camera, "camera");
+        for warning in ignored_embree_variables(|v| std::env::var_os(v).is_some(), &config.path) {
+            tracing::warn!("{warning}");
+        }
         let options = flowlight_embree::SceneOptions {
             robust: config.robust,
             quality: flowlight_embree::BuildQuality::parse(&config.build_quality)
@@ -638,4 +662,30 @@ pub fn stats_json(integrator: &str, s: &crate::RenderStats) -> String {
     }
     out += "\n  }\n}\n";
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn embree_variables_set_for_a_render_are_named_with_the_config_key() {
+        let cfg = Path::new("scenes/cornell-box/cornell-box.toml");
+        assert!(ignored_embree_variables(|_| false, cfg).is_empty());
+        let both = ignored_embree_variables(|_| true, cfg);
+        assert_eq!(both.len(), 2, "{both:?}");
+        assert!(
+            both[0].starts_with("FLOWLIGHT_EMBREE_ROBUST ")
+                && both[0].contains("[render] robust in scenes/cornell-box/cornell-box.toml"),
+            "{both:?}"
+        );
+        assert!(
+            both[1].starts_with("FLOWLIGHT_EMBREE_QUALITY ")
+                && both[1].contains("[render] build_quality in"),
+            "{both:?}"
+        );
+        let one = ignored_embree_variables(|v| v == "FLOWLIGHT_EMBREE_QUALITY", cfg);
+        assert_eq!(one.len(), 1);
+        assert!(one[0].starts_with("FLOWLIGHT_EMBREE_QUALITY "));
+    }
 }
