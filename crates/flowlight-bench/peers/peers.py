@@ -8,6 +8,7 @@ Run `setup.sh` once (venv with Mitsuba 3.9.1, Debian's libllvm19), build the rel
 
     crates/flowlight-bench/peers/peers.py            # both scenes, the defaults below
     crates/flowlight-bench/peers/peers.py --set termination=throughput --scenes cornell-box
+    crates/flowlight-bench/peers/peers.py --render-set robust=false   # Mitsuba 3's Embree flags
 
 What it does, per scene (`cornell-box`, `stanford-dragon`):
   1. writes the Flowlight config and the Mitsuba scene into --out (the Cornell box's Mitsuba
@@ -22,6 +23,11 @@ What it does, per scene (`cornell-box`, `stanford-dragon`):
   4. prints the luminance check (mean luminance of every renderer / reference, averaged over
      the rounds, must be within 0.5%) and the table. Each ratio is taken within a round
      (paired), then the median and range over rounds are printed.
+
+Embree's scene flags differ by default: Flowlight builds in robust mode (`[render] robust =
+true`: watertight at shared edges, as Blender Cycles), Mitsuba 3 with RTC_SCENE_FLAG_NONE and
+build quality high. `--render-set robust=false` gives the timed Flowlight renders Mitsuba's
+mode (docs/embree.md has what the robust mode costs and buys).
 
 CPU time is the process's user + system time over the render only (scene loading, BVH
 building and, for Mitsuba, a warm-up render that JIT-compiles the kernels are left
@@ -151,6 +157,21 @@ def fl_config(path, scene, a, camera=None, intersector="embree"):
     lines += ["[integrator]", 'plugin = "mcpt"', 'variant = "entangled"',
               f"path_depth = {a.depth}"]
     open(path, "w").write("\n".join(lines) + "\n")
+
+
+def with_render_settings(cfg, lines):
+    """`cfg` itself without `lines`, else a copy beside it (`*-timed.toml`) with `lines` added
+    to its [render] table (`flowlight render` fails with the key's name on an unknown or
+    repeated key)."""
+    if not lines:
+        return cfg
+    text = open(cfg).read().splitlines()
+    at = text.index("[render]") + 1
+    while at < len(text) and not text[at].startswith("["):
+        at += 1
+    timed = cfg[:-len(".toml")] + "-timed.toml"
+    open(timed, "w").write("\n".join(text[:at] + lines + text[at:]) + "\n")
+    return timed
 
 
 def prepare_cornell(a, out):
@@ -418,6 +439,10 @@ def main():
                     help="the flowlight binary (default: this checkout's release build)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="Flowlight MCPT parameter, as `flowlight render --set` (repeatable), e.g. termination=throughput")
+    ap.add_argument("--render-set", action="append", default=[], metavar="KEY=VALUE",
+                    help="a [render] setting of the timed Flowlight renders, TOML syntax (repeatable), "
+                         "e.g. robust=false (Embree's fast mode, Mitsuba 3's own scene flags) or "
+                         "build_quality='\"high\"'; the reference keeps the defaults")
     ap.add_argument("--variants", default=",".join(VARIANTS), help="Mitsuba variants, comma separated")
     ap.add_argument("--mitsuba-samplers", default="independent",
                     help="Mitsuba samplers, comma separated (independent, stratified, multijitter, ldsampler): each variant renders with each")
@@ -454,7 +479,15 @@ def main():
             text = run([a.flowlight, "plugins"])
             m = re.search(rf"^mcpt \(Integrator\).*?^\s+{key}\s+(?:string|integer)\s+default \"?(\w+)\"?", text, re.M | re.S)
             sets = {key: (m.group(1) if m else "?") + " (default)", **sets}
-    fl_label = "Flowlight MCPT (entangled, " + ", ".join(f"{k} {v}" for k, v in sets.items()) + ")"
+    render_sets = []
+    for rs in a.render_set:
+        try:
+            (key, value), = tomllib.loads(rs).items()
+        except (tomllib.TOMLDecodeError, ValueError):
+            die(f"--render-set {rs!r}: expected one KEY=VALUE in TOML syntax, e.g. robust=false")
+        render_sets.append((key, value, rs))
+    fl_label = "Flowlight MCPT (entangled, " + ", ".join(f"{k} {v}" for k, v in sets.items()) + \
+        "".join(f", render {k} = {json.dumps(v)}" for k, v, _ in render_sets) + ")"
     rev = subprocess.run(["git", "-C", ROOT, "describe", "--always", "--dirty"], capture_output=True, text=True).stdout.strip()
     print(f"# Peers: Flowlight {rev or '?'} ({a.flowlight}) vs Mitsuba {MITSUBA_VERSION} {', '.join(variants)}; Mitsuba samplers {', '.join(samplers)}")
     print(f"\nCommand: {' '.join(sys.argv)}")
@@ -470,6 +503,7 @@ def main():
         ref = reference(a, name, cfg, a.out)
         if a.reference_only:
             continue
+        timed_cfg = with_render_settings(cfg, [rs for _, _, rs in render_sets])
         renderers = ["flowlight"] + [f"{v}/{s}" for v in variants for s in samplers]
         rows = {r: [] for r in renderers}
         for k in range(a.runs):
@@ -477,7 +511,7 @@ def main():
             for r in order:
                 img = os.path.join(a.out, f"{name}-{r.replace('/', '-')}-{k}.exr")
                 seed = 1000 + k
-                t = flowlight_render(a, cfg, seed, img) if r == "flowlight" else mitsuba_render(a, r, xml, seed, img)
+                t = flowlight_render(a, timed_cfg, seed, img) if r == "flowlight" else mitsuba_render(a, r, xml, seed, img)
                 t.update(compare(a, img, ref))
                 rows[r].append(t)
                 print(f"[{name}] round {k} {r}: cpu {t['cpu']:.2f} s, wall {t['wall']:.2f} s, "
