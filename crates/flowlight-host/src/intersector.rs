@@ -32,6 +32,12 @@ pub trait Intersector: Send + Sync {
             }
         });
     }
+    /// [`Intersector::intersect_batch`] for rays the caller says are coherent (camera rays
+    /// of a tile in raster order): the same hits, by whatever traversal suits such rays.
+    /// By default the batch call itself; Embree takes its coherent packet traversal.
+    fn intersect_coherent_batch(&self, rays: &[Ray], hits: &mut [CompactHit]) {
+        self.intersect_batch(rays, hits)
+    }
     /// Shadow rays of a batch (no alpha test): `blocked[i]` is 1 where
     /// [`Intersector::occluded`] of `rays[i]` holds, else 0.
     fn occluded_batch(&self, rays: &[Ray], blocked: &mut [u8]) {
@@ -248,6 +254,29 @@ impl EmbreeIntersector {
         Ok((e, start.elapsed()))
     }
 
+    fn closest_batch(&self, coherent: bool, rays: &[Ray], hits: &mut [CompactHit]) {
+        match self {
+            EmbreeIntersector::Flat(s) if coherent => s.intersect_coherent_batch(rays, hits),
+            EmbreeIntersector::Flat(s) => s.intersect_batch(rays, hits),
+            EmbreeIntersector::Instanced {
+                scene,
+                first_virtual,
+            } => {
+                assert_eq!(rays.len(), hits.len(), "one hit per ray");
+                let emit = |i: usize, h: Option<InstanceHit>| {
+                    hits[i] = h.map_or(CompactHit::MISS, |h| {
+                        CompactHit::from(virtual_hit(first_virtual, h))
+                    });
+                };
+                if coherent {
+                    scene.intersect_coherent_batch(rays, emit)
+                } else {
+                    scene.intersect_batch(rays, emit)
+                }
+            }
+        }
+    }
+
     /// Triangles stored in Embree (each instanced mesh once).
     pub fn stored_triangle_count(&self) -> usize {
         match self {
@@ -264,20 +293,12 @@ impl Intersector for EmbreeIntersector {
     /// The scene's own batch call: packets for small scenes (flat or instanced), else single
     /// rays, with the FP mode set once ([`flowlight_embree::EmbreeScene::intersect_batch`]).
     fn intersect_batch(&self, rays: &[Ray], hits: &mut [CompactHit]) {
-        match self {
-            EmbreeIntersector::Flat(s) => s.intersect_batch(rays, hits),
-            EmbreeIntersector::Instanced {
-                scene,
-                first_virtual,
-            } => {
-                assert_eq!(rays.len(), hits.len(), "one hit per ray");
-                scene.intersect_batch(rays, |i, h| {
-                    hits[i] = h.map_or(CompactHit::MISS, |h| {
-                        CompactHit::from(virtual_hit(first_virtual, h))
-                    });
-                });
-            }
-        }
+        self.closest_batch(false, rays, hits)
+    }
+    /// Packets through Embree's coherent traversal, at any scene size
+    /// ([`flowlight_embree::EmbreeScene::intersect_coherent_batch`]).
+    fn intersect_coherent_batch(&self, rays: &[Ray], hits: &mut [CompactHit]) {
+        self.closest_batch(true, rays, hits)
     }
     fn occluded_batch(&self, rays: &[Ray], blocked: &mut [u8]) {
         match self {
@@ -439,13 +460,17 @@ impl<'a> UnitTracer<'a> {
     /// Closest hits of a batch of rays as compact hits (ABI 4): `hits[i]` is `rays[i]`'s hit
     /// exactly as [`UnitTracer::closest`] finds it, from the intersector's own batch call
     /// ([`Intersector::intersect_batch`]: for Embree, packets in small scenes) unless the
-    /// scene needs alpha tests. The plugin's `coherent` hint is not used: Embree's packets
-    /// pay by the scene's size, not by the rays' coherence (docs/performance.md, "Tenth
-    /// session").
-    pub fn intersect_batch(&mut self, rays: &[Ray], _coherent: bool, hits: &mut [CompactHit]) {
+    /// scene needs alpha tests. Batches the plugin calls `coherent` (camera rays of a tile in
+    /// raster order) go to [`Intersector::intersect_coherent_batch`]: Embree's coherent
+    /// packet traversal, which on such rays is several times faster than its default.
+    pub fn intersect_batch(&mut self, rays: &[Ray], coherent: bool, hits: &mut [CompactHit]) {
         self.counts.closest += rays.len() as u64;
         if !self.alpha {
-            return self.intersector.intersect_batch(rays, hits);
+            return if coherent {
+                self.intersector.intersect_coherent_batch(rays, hits)
+            } else {
+                self.intersector.intersect_batch(rays, hits)
+            };
         }
         let this = &*self;
         this.intersector.batch(&mut || {
