@@ -9,6 +9,18 @@ fn flowlight() -> Command {
     Command::new(env!("CARGO_BIN_EXE_flowlight"))
 }
 
+/// The standard output of a command that must have succeeded (else both streams, in the
+/// failure).
+fn succeeded(o: &std::process::Output) -> String {
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        o.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    stdout
+}
+
 #[test]
 fn render_writes_an_exr_and_a_summary() {
     let dir = common::scratch("cli-render");
@@ -27,12 +39,7 @@ fn render_writes_an_exr_and_a_summary() {
         .arg(&out)
         .output()
         .unwrap();
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let stdout = succeeded(&o);
     for key in [
         "wall time",
         "samples/s",
@@ -262,12 +269,7 @@ fn summary_names_embrees_mode() {
             .arg(dir.join(format!("robust-{robust}.exr")))
             .output()
             .unwrap();
-        let stdout = String::from_utf8_lossy(&o.stdout);
-        assert!(
-            o.status.success(),
-            "{stdout}\n{}",
-            String::from_utf8_lossy(&o.stderr)
-        );
+        let stdout = succeeded(&o);
         assert!(stdout.contains(expected), "no '{expected}' in:\n{stdout}");
     }
 }
