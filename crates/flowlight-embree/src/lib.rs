@@ -346,14 +346,16 @@ impl Device {
     }
 
     /// The closest hits of `rays` in `scene`, handed to `emit(i, hit)` in order, in one FP
-    /// mode switch: 16 at a time through `rtcIntersect16` when `packets` (and, when the
-    /// packets are `Packets::Coherent`, with `RTC_RAY_QUERY_FLAG_COHERENT`), else one by
-    /// one through `rtcIntersect1`. All give the same hits bit for bit (the tests). A flat
-    /// scene's hits carry Embree's invalid instance id.
+    /// mode switch: one by one through `rtcIntersect1` ([`BatchMode::SingleRays`]), else 16
+    /// at a time through `rtcIntersect16`, with `RTC_RAY_QUERY_FLAG_COHERENT` in the
+    /// arguments for [`BatchMode::CoherentPackets`]. Single rays and plain packets give the
+    /// same hits bit for bit; coherent packets the same distances, but a tie between two
+    /// triangles at one distance may go the other way (the tests). A flat scene's hits carry
+    /// Embree's invalid instance id.
     fn closest_batch(
         &self,
         scene: RTCScene,
-        packets: BatchMode,
+        mode: BatchMode,
         rays: &[Ray],
         mut emit: impl FnMut(usize, Option<InstanceHit>),
     ) {
@@ -369,13 +371,13 @@ impl Device {
             min_width_distance_factor: 0.0,
             _pad: [0; 4],
         };
-        let args = match packets {
+        let args = match mode {
             BatchMode::CoherentPackets => &mut coherent as *mut _ as *mut c_void,
             _ => std::ptr::null_mut(),
         };
         // The FP mode Embree asks for, set once for the batch instead of around each query.
         denormals::with_denormals_flushed(|| {
-            if packets == BatchMode::SingleRays {
+            if mode == BatchMode::SingleRays {
                 for (i, ray) in rays.iter().enumerate() {
                     emit(
                         i,
@@ -389,8 +391,9 @@ impl Device {
                 let valid = load16(&mut p.ray, chunk);
                 p.hit.geom_id = [u32::MAX; 16];
                 // SAFETY: a committed scene; the 4.4 `RTCRayHit16` layout (checked in `abi`),
-                // 64-byte aligned, as is the valid mask; NULL arguments (the defaults, as for
-                // the single-ray call).
+                // 64-byte aligned, as is the valid mask; `args` NULL (the defaults, as for the
+                // single-ray call) or `coherent`, alive on this frame and laid out as
+                // `RTCIntersectArguments` (checked in `filter`).
                 unsafe { (self.api.intersect16)(&valid, scene, &mut p, args) };
                 for k in 0..chunk.len() {
                     let hit = (p.hit.geom_id[k] != u32::MAX).then_some(InstanceHit {
@@ -557,10 +560,15 @@ impl Packets {
 }
 
 impl SceneOptions {
-    /// Whether coherent batches take Embree's coherent packets: [`SceneOptions::coherent`],
-    /// unless packets are off altogether.
-    fn coherent_packets(&self) -> bool {
-        self.coherent && self.packets != Packets::Never
+    /// How a scene built with these options traces coherent batches, given how it traces
+    /// the others (`plain`): Embree's coherent packets when [`SceneOptions::coherent`] is on
+    /// and packets are not off altogether, else as the others.
+    fn coherent_mode(&self, plain: BatchMode) -> BatchMode {
+        if self.coherent && self.packets != Packets::Never {
+            BatchMode::CoherentPackets
+        } else {
+            plain
+        }
     }
 
     /// The defaults (robust, medium quality, packets by size), changed by
@@ -685,8 +693,8 @@ pub struct EmbreeScene {
     triangles: usize,
     /// Batches go through 16-lane packets ([`Packets::resolve`]).
     packets: bool,
-    /// Coherent batches take Embree's coherent packet traversal.
-    coherent: bool,
+    /// How coherent batches are traced ([`SceneOptions::coherent`]).
+    coherent: BatchMode,
 }
 
 // SAFETY: a committed Embree scene is read-only and may be queried from any thread.
@@ -716,12 +724,13 @@ impl EmbreeScene {
         unsafe {
             let scene = (api.new_scene)(dev.handle);
             dev.check("rtcNewScene")?;
+            let packets = options.packets.resolve(triangles.len());
             let out = EmbreeScene {
                 dev,
                 scene,
                 triangles: triangles.len(),
-                packets: options.packets.resolve(triangles.len()),
-                coherent: options.coherent_packets(),
+                packets,
+                coherent: options.coherent_mode(BatchMode::of(packets)),
             };
             // Alpha-tested queries pass their filter in the call's arguments. The flag is set
             // only for scenes that need it, so that every other scene keeps Embree's default
@@ -884,14 +893,10 @@ impl EmbreeScene {
 
     /// [`EmbreeScene::intersect_batch`] for coherent rays (camera rays of a tile in raster
     /// order): 16-lane packets through Embree's coherent traversal, whatever the scene's
-    /// size. The same hits.
+    /// size ([`SceneOptions::coherent`]). The same distances; a tie between two triangles at
+    /// one distance may go the other way.
     pub fn intersect_coherent_batch(&self, rays: &[Ray], hits: &mut [CompactHit]) {
-        let mode = if self.coherent {
-            BatchMode::CoherentPackets
-        } else {
-            BatchMode::of(self.packets)
-        };
-        self.intersect_batch_in(mode, rays, hits)
+        self.intersect_batch_in(self.coherent, rays, hits)
     }
 
     fn intersect_batch_in(&self, mode: BatchMode, rays: &[Ray], hits: &mut [CompactHit]) {
@@ -946,8 +951,8 @@ pub struct EmbreeInstancedScene {
     instances: usize,
     /// Batches go through 16-lane packets ([`Packets::resolve`] of the stored triangles).
     packets: bool,
-    /// Coherent batches take Embree's coherent packet traversal.
-    coherent: bool,
+    /// How coherent batches are traced ([`SceneOptions::coherent`]).
+    coherent: BatchMode,
 }
 
 // SAFETY: as for `EmbreeScene`: committed scenes are read-only.
@@ -985,13 +990,14 @@ impl EmbreeInstancedScene {
         unsafe {
             let top = (api.new_scene)(dev.handle);
             dev.check("rtcNewScene")?;
+            let packets = options
+                .packets
+                .resolve(built.iter().map(|m| m.triangles).sum());
             let out = EmbreeInstancedScene {
                 dev,
                 top,
-                packets: options
-                    .packets
-                    .resolve(built.iter().map(|m| m.triangles).sum()),
-                coherent: options.coherent_packets(),
+                packets,
+                coherent: options.coherent_mode(BatchMode::of(packets)),
                 meshes: built,
                 instances: instances.len(),
             };
@@ -1065,12 +1071,7 @@ impl EmbreeInstancedScene {
         rays: &[Ray],
         emit: impl FnMut(usize, Option<InstanceHit>),
     ) {
-        let mode = if self.coherent {
-            BatchMode::CoherentPackets
-        } else {
-            BatchMode::of(self.packets)
-        };
-        self.dev.closest_batch(self.top, mode, rays, emit);
+        self.dev.closest_batch(self.top, self.coherent, rays, emit);
     }
 
     /// Shadow rays of a batch: `blocked[i]` is 1 where [`EmbreeInstancedScene::occluded`]

@@ -33,8 +33,9 @@ pub trait Intersector: Send + Sync {
         });
     }
     /// [`Intersector::intersect_batch`] for rays the caller says are coherent (camera rays
-    /// of a tile in raster order): the same hits, by whatever traversal suits such rays.
-    /// By default the batch call itself; Embree takes its coherent packet traversal.
+    /// of a tile in raster order), by whatever traversal suits such rays: the same
+    /// distances, but a tie between two triangles at one distance may go the other way. By
+    /// default the batch call itself; Embree takes its coherent packet traversal.
     fn intersect_coherent_batch(&self, rays: &[Ray], hits: &mut [CompactHit]) {
         self.intersect_batch(rays, hits)
     }
@@ -462,7 +463,8 @@ impl<'a> UnitTracer<'a> {
     /// ([`Intersector::intersect_batch`]: for Embree, packets in small scenes) unless the
     /// scene needs alpha tests. Batches the plugin calls `coherent` (camera rays of a tile in
     /// raster order) go to [`Intersector::intersect_coherent_batch`]: Embree's coherent
-    /// packet traversal, which on such rays is several times faster than its default.
+    /// packet traversal, several times faster on such rays, which finds the same distance
+    /// but may settle a tie between two triangles at it the other way.
     pub fn intersect_batch(&mut self, rays: &[Ray], coherent: bool, hits: &mut [CompactHit]) {
         self.counts.closest += rays.len() as u64;
         if !self.alpha {
