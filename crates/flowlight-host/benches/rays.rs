@@ -15,14 +15,16 @@
 //! instead of the robust one renders use by default, `FLOWLIGHT_EMBREE_QUALITY` its build
 //! quality; the first line on stderr names the mode). `FLOWLIGHT_BENCH_LEAKS=M` prints,
 //! instead of the timings, how many of M million rays from inside each closed mesh slip
-//! through it with Embree robust, Embree fast and the BVH. `cargo build --release -p flowlight-host --bench rays`
-//! builds the same binary (under `target/release/deps/rays-*`) from the release artifacts,
-//! without rebuilding every dependency under the `bench` profile.
+//! through it with Embree robust, Embree fast and the BVH.
+//! `cargo build --release -p flowlight-host --bench rays` builds the same binary (under
+//! `target/release/deps/rays-*`) from the release artifacts, without rebuilding every
+//! dependency under the `bench` profile.
 
 use flowlight_bvh::BinaryBvh;
 use flowlight_core::geometry::Ray;
 use flowlight_core::mesh::CompactHit;
 use flowlight_core::rng::Rng;
+use flowlight_core::sampling::uniform_sphere;
 use flowlight_embree::{Packets, SceneOptions};
 use flowlight_host::intersector::{BvhIntersector, EmbreeIntersector, Intersector};
 use flowlight_scene::Scene;
@@ -72,12 +74,9 @@ fn rays(n: usize) -> Vec<Ray> {
     (0..n)
         .map(|_| {
             let o = Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 3.0 - Vec3::splat(1.5);
-            let z = 1.0 - 2.0 * rng.uniform();
-            let a = std::f32::consts::TAU * rng.uniform();
-            let s = (1.0 - z * z).max(0.0).sqrt();
             Ray {
                 origin: o,
-                dir: Vec3::new(s * a.cos(), s * a.sin(), z),
+                dir: uniform_sphere(rng.uniform2()),
                 t_max: f32::INFINITY,
             }
         })
@@ -137,12 +136,7 @@ fn queries<I: Intersector + 'static>(i: I) -> (Query, Query) {
 /// radius is at least 0.8; uniform directions): each must hit, so a miss is a ray that
 /// slipped through the closed mesh between two triangles.
 fn inside_rays(rng: &mut Rng, out: &mut Vec<Ray>) {
-    let dir = |rng: &mut Rng| {
-        let z = 1.0 - 2.0 * rng.uniform();
-        let a = std::f32::consts::TAU * rng.uniform();
-        let s = (1.0 - z * z).max(0.0).sqrt();
-        Vec3::new(s * a.cos(), s * a.sin(), z)
-    };
+    let dir = |rng: &mut Rng| uniform_sphere(rng.uniform2());
     out.clear();
     for _ in 0..BATCH {
         let o = dir(rng) * (0.3 * rng.uniform());
@@ -154,8 +148,8 @@ fn inside_rays(rng: &mut Rng, out: &mut Vec<Ray>) {
     }
 }
 
-/// `FLOWLIGHT_BENCH_LEAKS=M` (instead of the timings): how many of M million rays from inside each closed mesh leak
-/// through it, for Embree in robust and in fast mode (16-lane packets, as renders of
+/// `FLOWLIGHT_BENCH_LEAKS=M` (instead of the timings): how many of M million rays from
+/// inside each closed mesh leak through it, for Embree in robust and in fast mode (16-lane packets, as renders of
 /// scenes up to 100k triangles trace) and for the BVH. A measurement, not a test: the tests
 /// aim rays at shared edges and vertices (tests/embree.rs); this gives the rate for rays
 /// that hit edges only by chance, as a render's do.
