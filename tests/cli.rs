@@ -9,37 +9,24 @@ fn flowlight() -> Command {
     Command::new(env!("CARGO_BIN_EXE_flowlight"))
 }
 
-/// The standard output of a command that must have succeeded (else both streams, in the
-/// failure).
-fn succeeded(o: &std::process::Output) -> String {
-    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
-    assert!(
-        o.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    stdout
-}
-
 #[test]
 fn render_writes_an_exr_and_a_summary() {
     let dir = common::scratch("cli-render");
     let out = dir.join("nested/furnace.exr");
-    let o = flowlight()
-        .args([
-            "render",
-            common::scene_config("furnace/furnace.toml")
-                .to_str()
-                .unwrap(),
-            "--spp",
-            "2",
-            "-q",
-            "--out",
-        ])
-        .arg(&out)
-        .output()
-        .unwrap();
-    let stdout = succeeded(&o);
+    let stdout = common::run_ok(
+        flowlight()
+            .args([
+                "render",
+                common::scene_config("furnace/furnace.toml")
+                    .to_str()
+                    .unwrap(),
+                "--spp",
+                "2",
+                "-q",
+                "--out",
+            ])
+            .arg(&out),
+    );
     for key in [
         "wall time",
         "samples/s",
@@ -264,12 +251,11 @@ fn summary_names_embrees_mode() {
             ),
         )
         .unwrap();
-        let o = flowlight()
-            .args(["render", cfg.to_str().unwrap(), "-q", "--out"])
-            .arg(dir.join(format!("robust-{robust}.exr")))
-            .output()
-            .unwrap();
-        let stdout = succeeded(&o);
+        let stdout = common::run_ok(
+            flowlight()
+                .args(["render", cfg.to_str().unwrap(), "-q", "--out"])
+                .arg(dir.join(format!("robust-{robust}.exr"))),
+        );
         assert!(stdout.contains(expected), "no '{expected}' in:\n{stdout}");
     }
 }

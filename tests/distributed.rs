@@ -48,17 +48,6 @@ fn small_config(dir: &Path, base: &str, size: u32, spp: u32, extra: &str) -> Pat
     path
 }
 
-fn run_ok(cmd: &mut Command) -> String {
-    let o = cmd.output().unwrap();
-    let stdout = String::from_utf8_lossy(&o.stdout).to_string();
-    assert!(
-        o.status.success(),
-        "{cmd:?} failed:\n{stdout}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    stdout
-}
-
 /// The stderr of a command that must fail.
 fn run_err(cmd: &mut Command) -> String {
     let o = cmd.output().unwrap();
@@ -67,7 +56,7 @@ fn run_err(cmd: &mut Command) -> String {
 }
 
 fn render_part(cfg: &Path, out: &Path, args: &[&str]) {
-    run_ok(
+    common::run_ok(
         flowlight()
             .arg("render")
             .arg(cfg)
@@ -138,7 +127,7 @@ fn mcpt_parts_merged_equal_the_full_render_bitwise() {
     let merged = dir.join("merged.exr");
     // Any order of the inputs.
     parts.reverse();
-    let summary = run_ok(&mut merge(&merged, &parts, &[]));
+    let summary = common::run_ok(&mut merge(&merged, &parts, &[]));
     assert!(summary.contains("0..16 of 0..16"), "{summary}");
     let (_, _, a) = read_exr_rgb(&full).unwrap();
     let (_, _, b) = read_exr_rgb(&merged).unwrap();
@@ -185,7 +174,7 @@ fn erpt_parts_merge_to_the_full_render_and_agree_with_path_tracing() {
         parts.push(p);
     }
     let merged = dir.join("merged.exr");
-    run_ok(&mut merge(&merged, &parts, &[]));
+    common::run_ok(&mut merge(&merged, &parts, &[]));
     assert!(
         dir.join("merged.stats.json").exists(),
         "ERPT's statistics are merged"
@@ -388,13 +377,13 @@ fn the_recipes_render_the_cornell_box_in_four_parts() {
             .env("SLURM_ARRAY_TASK_ID", k.to_string())
             .env("SLURM_ARRAY_TASK_COUNT", "4")
             .env("SLURM_CPUS_PER_TASK", "1");
-        run_ok(&mut c);
+        common::run_ok(&mut c);
     }
     let parts: Vec<PathBuf> = (0..4)
         .map(|k| slurm_parts.join(format!("part-{k}.exr")))
         .collect();
     let out = dir.join("slurm.exr");
-    run_ok(&mut merge(&out, &parts, &[]));
+    common::run_ok(&mut merge(&out, &parts, &[]));
     assert_eq!(bits(&read_exr_rgb(&out).unwrap().2), full_bits);
 
     // The Kubernetes Indexed Job's container command, once per completion index.
@@ -416,13 +405,13 @@ fn the_recipes_render_the_cornell_box_in_four_parts() {
             .env("PARTS_DIR", &k8s_parts)
             .env("PARTS", "4")
             .env("JOB_COMPLETION_INDEX", k.to_string());
-        run_ok(&mut c);
+        common::run_ok(&mut c);
     }
     let parts: Vec<PathBuf> = (0..4)
         .map(|k| k8s_parts.join(format!("part-{k}.exr")))
         .collect();
     let out = dir.join("k8s.exr");
-    run_ok(&mut merge(&out, &parts, &[]));
+    common::run_ok(&mut merge(&out, &parts, &[]));
     assert_eq!(bits(&read_exr_rgb(&out).unwrap().2), full_bits);
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -450,7 +439,7 @@ fn parts_of_an_enormously_bright_scene_keep_their_energy_through_the_merge() {
         render_part(&cfg, p, &["--spp", "8", "--part", &format!("{k}/2")]);
     }
     let merged = dir.join("merged.exr");
-    run_ok(&mut merge(&merged, &parts, &[]));
+    common::run_ok(&mut merge(&merged, &parts, &[]));
     let (_, _, a) = read_exr_rgb(&full).unwrap();
     let (_, _, b) = read_exr_rgb(&merged).unwrap();
     let mean = |l: &[Rgb]| l.iter().map(|c| c.luminance() as f64).sum::<f64>() / l.len() as f64;

@@ -347,3 +347,16 @@ pub fn with_seed_sampler<R>(
     settings.variant = flowlight_pathtrace::Variant::Untangled;
     body(&scene, &tracer, settings)
 }
+
+/// Runs `cmd`, which must succeed (else the failure shows the command and both streams),
+/// and returns its standard output.
+pub fn run_ok(cmd: &mut std::process::Command) -> String {
+    let o = cmd.output().unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout).to_string();
+    assert!(
+        o.status.success(),
+        "{cmd:?} failed:\n{stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    stdout
+}
