@@ -51,53 +51,56 @@ pub mod abi {
         pub inst_prim_id: [u32; 1],
     }
 
-    /// `RTCRayHit16` of the 4.4 library, for `rtcIntersect16`: the 16-lane ray, then the
-    /// 16-lane hit (structure of arrays; the hit with `instPrimID` as in [`RTCHit`]).
+    /// `RTCRayHitN` of the 4.4 library for `rtcIntersect{N}` (N = 4, 8 or 16): the N-lane
+    /// ray, then the N-lane hit (structure of arrays; the hit with `instPrimID` as in
+    /// [`RTCHit`]). 64-byte aligned, which covers every N's alignment (16, 32, 64 bytes);
+    /// the ray is 12·4·N bytes, a multiple of 64 for N ≥ 4, so the hit starts where Embree
+    /// expects it.
     #[repr(C, align(64))]
     #[derive(Clone, Copy, Debug)]
-    pub struct RTCRayHit16 {
-        pub ray: RTCRay16,
-        pub hit: RTCHit16,
+    pub struct RTCRayHitN<const N: usize> {
+        pub ray: RTCRayN<N>,
+        pub hit: RTCHitN<N>,
     }
 
-    /// `RTCHit16` of the 4.4 library.
+    /// `RTCHitN` of the 4.4 library.
     #[repr(C, align(64))]
     #[derive(Clone, Copy, Debug)]
-    pub struct RTCHit16 {
-        pub ng_x: [f32; 16],
-        pub ng_y: [f32; 16],
-        pub ng_z: [f32; 16],
-        pub u: [f32; 16],
-        pub v: [f32; 16],
-        pub prim_id: [u32; 16],
-        pub geom_id: [u32; 16],
-        pub inst_id: [[u32; 16]; 1],
-        pub inst_prim_id: [[u32; 16]; 1],
+    pub struct RTCHitN<const N: usize> {
+        pub ng_x: [f32; N],
+        pub ng_y: [f32; N],
+        pub ng_z: [f32; N],
+        pub u: [f32; N],
+        pub v: [f32; N],
+        pub prim_id: [u32; N],
+        pub geom_id: [u32; N],
+        pub inst_id: [[u32; N]; 1],
+        pub inst_prim_id: [[u32; N]; 1],
     }
 
-    /// `RTCRay16`: the ray half of [`RTCRayHit16`], for `rtcOccluded16`.
+    /// `RTCRayN`: the ray half of [`RTCRayHitN`], for `rtcOccluded{N}`.
     #[repr(C, align(64))]
     #[derive(Clone, Copy, Debug)]
-    pub struct RTCRay16 {
-        pub org_x: [f32; 16],
-        pub org_y: [f32; 16],
-        pub org_z: [f32; 16],
-        pub tnear: [f32; 16],
-        pub dir_x: [f32; 16],
-        pub dir_y: [f32; 16],
-        pub dir_z: [f32; 16],
-        pub time: [f32; 16],
-        pub tfar: [f32; 16],
-        pub mask: [u32; 16],
-        pub id: [u32; 16],
-        pub flags: [u32; 16],
+    pub struct RTCRayN<const N: usize> {
+        pub org_x: [f32; N],
+        pub org_y: [f32; N],
+        pub org_z: [f32; N],
+        pub tnear: [f32; N],
+        pub dir_x: [f32; N],
+        pub dir_y: [f32; N],
+        pub dir_z: [f32; N],
+        pub time: [f32; N],
+        pub tfar: [f32; N],
+        pub mask: [u32; N],
+        pub id: [u32; N],
+        pub flags: [u32; N],
     }
 
-    /// The `valid` mask of a packet call (−1 = active lane), 64-byte aligned as Embree
-    /// requires of a 16-lane mask.
+    /// The `valid` mask of a packet call (−1 = active lane), 64-byte aligned (Embree
+    /// requires 4·N).
     #[repr(C, align(64))]
     #[derive(Clone, Copy, Debug)]
-    pub struct Valid16(pub [i32; 16]);
+    pub struct ValidN<const N: usize>(pub [i32; N]);
 
     /// `RTCRayHit` with the 4.4 hit.
     #[repr(C, align(16))]
@@ -114,12 +117,15 @@ pub mod abi {
     const _: () = assert!(std::mem::size_of::<embree4_sys::RTCRayHit>() == 80);
     const _: () = assert!(std::mem::size_of::<RTCHit>() == 48);
     const _: () = assert!(std::mem::size_of::<RTCRayHit>() == 96);
-    // RTCRay16 (12 arrays of 16) then RTCHit16 (9 arrays of 16, instID and instPrimID one
-    // level).
-    const _: () = assert!(std::mem::size_of::<RTCRayHit16>() == 21 * 64);
-    const _: () = assert!(std::mem::offset_of!(RTCRayHit16, hit) == 12 * 64);
-    const _: () = assert!(std::mem::size_of::<RTCRay16>() == 12 * 64);
-    const _: () = assert!(std::mem::size_of::<Valid16>() == 64);
+    // RTCRayN (12 arrays of N) then RTCHitN (9 arrays of N, instID and instPrimID one
+    // level), for the two widths used.
+    const _: () = assert!(std::mem::size_of::<RTCRayHitN<16>>() == 21 * 64);
+    const _: () = assert!(std::mem::offset_of!(RTCRayHitN<16>, hit) == 12 * 64);
+    const _: () = assert!(std::mem::size_of::<RTCRayN<16>>() == 12 * 64);
+    const _: () = assert!(std::mem::size_of::<ValidN<16>>() == 64);
+    const _: () = assert!(std::mem::offset_of!(RTCRayHitN<8>, hit) == 12 * 32);
+    const _: () = assert!(std::mem::size_of::<RTCRayN<8>>() == 12 * 32);
+    const _: () = assert!(std::mem::size_of::<RTCHitN<8>>() == 9 * 32 + 32);
     const _: () = assert!(std::mem::offset_of!(RTCRayHit, hit) == 48);
     const _: () = assert!(std::mem::size_of::<embree4_sys::RTCIntersectArguments>() == 32);
     const _: () = assert!(embree4_sys::RTC_MAX_INSTANCE_LEVEL_COUNT == 1);
@@ -158,13 +164,19 @@ struct Api {
     /// The third argument is `RTCIntersectArguments*` (NULL for the defaults).
     intersect1: Fn<unsafe extern "C" fn(RTCScene, *mut abi::RTCRayHit, *mut c_void)>,
     occluded1: Fn<unsafe extern "C" fn(RTCScene, *mut RTCRay, *mut c_void)>,
-    /// `rtcIntersect16(valid, scene, rayhit, args)`.
-    intersect16:
-        Fn<unsafe extern "C" fn(*const abi::Valid16, RTCScene, *mut abi::RTCRayHit16, *mut c_void)>,
-    /// `rtcOccluded16(valid, scene, ray, args)`.
-    occluded16:
-        Fn<unsafe extern "C" fn(*const abi::Valid16, RTCScene, *mut abi::RTCRay16, *mut c_void)>,
+    /// `rtcIntersect16(valid, scene, rayhit, args)`: coherent camera rays.
+    intersect16: IntersectN<16>,
+    /// `rtcIntersect8` / `rtcOccluded8(valid, scene, ray, args)`: incoherent rays.
+    intersect8: IntersectN<8>,
+    occluded8: OccludedN<8>,
 }
+
+/// `rtcIntersect{N}(valid, scene, rayhit, args)`.
+type IntersectN<const N: usize> =
+    unsafe extern "C" fn(*const abi::ValidN<N>, RTCScene, *mut abi::RTCRayHitN<N>, *mut c_void);
+/// `rtcOccluded{N}(valid, scene, ray, args)`.
+type OccludedN<const N: usize> =
+    unsafe extern "C" fn(*const abi::ValidN<N>, RTCScene, *mut abi::RTCRayN<N>, *mut c_void);
 
 /// The process's one Embree device and the library it came from.
 pub struct Device {
@@ -257,7 +269,8 @@ fn open_device() -> Result<Device, String> {
         intersect1: sym!("rtcIntersect1"),
         occluded1: sym!("rtcOccluded1"),
         intersect16: sym!("rtcIntersect16"),
-        occluded16: sym!("rtcOccluded16"),
+        intersect8: sym!("rtcIntersect8"),
+        occluded8: sym!("rtcOccluded8"),
     };
     // SAFETY: a NUL-terminated config string.
     let handle = unsafe { (api.new_device)(c"verbose=0".as_ptr()) };
@@ -346,9 +359,10 @@ impl Device {
     }
 
     /// The closest hits of `rays` in `scene`, handed to `emit(i, hit)` in order, in one FP
-    /// mode switch: one by one through `rtcIntersect1` ([`BatchMode::SingleRays`]), else 16
-    /// at a time through `rtcIntersect16`, with `RTC_RAY_QUERY_FLAG_COHERENT` in the
-    /// arguments for [`BatchMode::CoherentPackets`]. Single rays and plain packets give the
+    /// mode switch: one by one through `rtcIntersect1` ([`BatchMode::SingleRays`]), 8 at a
+    /// time through `rtcIntersect8` ([`BatchMode::Packets`]), or 16 at a time through
+    /// `rtcIntersect16` with `RTC_RAY_QUERY_FLAG_COHERENT` in the arguments
+    /// ([`BatchMode::CoherentPackets`]: a tile's camera rays, where the wider packet pays). Single rays and plain packets give the
     /// same hits bit for bit; coherent packets the same distances, but a tie between two
     /// triangles at one distance may go the other way (the tests). A flat scene's hits carry
     /// Embree's invalid instance id.
@@ -386,31 +400,50 @@ impl Device {
                 }
                 return;
             }
-            let mut p = empty_packet();
-            for (c, chunk) in rays.chunks(16).enumerate() {
-                let valid = load16(&mut p.ray, chunk);
-                p.hit.geom_id = [u32::MAX; 16];
-                // SAFETY: a committed scene; the 4.4 `RTCRayHit16` layout (checked in `abi`),
-                // 64-byte aligned, as is the valid mask; `args` NULL (the defaults, as for the
-                // single-ray call) or `coherent`, alive on this frame and laid out as
-                // `RTCIntersectArguments` (checked in `filter`).
-                unsafe { (self.api.intersect16)(&valid, scene, &mut p, args) };
-                for k in 0..chunk.len() {
-                    let hit = (p.hit.geom_id[k] != u32::MAX).then_some(InstanceHit {
-                        t: p.ray.tfar[k],
-                        instance: p.hit.inst_id[0][k],
-                        prim: p.hit.prim_id[k],
-                        b1: p.hit.u[k],
-                        b2: p.hit.v[k],
-                    });
-                    emit(16 * c + k, hit);
+            match mode {
+                BatchMode::CoherentPackets => {
+                    self.closest_packets::<16>(self.api.intersect16, scene, rays, args, emit)
                 }
+                _ => self.closest_packets::<8>(self.api.intersect8, scene, rays, args, emit),
             }
         })
     }
 
+    /// [`Device::closest_batch`]'s packets of N lanes through `intersect` (`rtcIntersect{N}`).
+    #[inline]
+    fn closest_packets<const N: usize>(
+        &self,
+        intersect: IntersectN<N>,
+        scene: RTCScene,
+        rays: &[Ray],
+        args: *mut c_void,
+        mut emit: impl FnMut(usize, Option<InstanceHit>),
+    ) {
+        let mut p = empty_packet::<N>();
+        for (c, chunk) in rays.chunks(N).enumerate() {
+            let valid = load_lanes(&mut p.ray, chunk);
+            p.hit.geom_id = [u32::MAX; N];
+            // SAFETY: a committed scene; the 4.4 `RTCRayHitN` layout (checked in `abi`),
+            // 64-byte aligned, as is the valid mask; `args` NULL (the defaults, as for the
+            // single-ray call) or the coherent arguments, alive on the caller's frame and
+            // laid out as `RTCIntersectArguments` (checked in `filter`).
+            unsafe { intersect(&valid, scene, &mut p, args) };
+            for k in 0..chunk.len() {
+                let hit = (p.hit.geom_id[k] != u32::MAX).then_some(InstanceHit {
+                    t: p.ray.tfar[k],
+                    instance: p.hit.inst_id[0][k],
+                    prim: p.hit.prim_id[k],
+                    b1: p.hit.u[k],
+                    b2: p.hit.v[k],
+                });
+                emit(N * c + k, hit);
+            }
+        }
+    }
+
     /// Whether each of `rays` is blocked in `scene` (`blocked[i]` 1 or 0), in one FP mode
-    /// switch, by packets or single rays as [`Device::closest_batch`].
+    /// switch, by packets (8 lanes, as [`Device::closest_batch`]'s incoherent packets) or
+    /// single rays.
     fn occluded_batch(&self, scene: RTCScene, packets: bool, rays: &[Ray], blocked: &mut [u8]) {
         assert_eq!(rays.len(), blocked.len(), "one answer per ray");
         // The FP mode Embree asks for, set once for the batch instead of around each query.
@@ -421,11 +454,12 @@ impl Device {
                 }
                 return;
             }
-            let mut ray = empty_packet().ray;
-            for (chunk, blocked) in rays.chunks(16).zip(blocked.chunks_mut(16)) {
-                let valid = load16(&mut ray, chunk);
-                // SAFETY: as in `closest_batch`; Embree sets a blocked lane's tfar to -inf.
-                unsafe { (self.api.occluded16)(&valid, scene, &mut ray, std::ptr::null_mut()) };
+            const N: usize = 8;
+            let mut ray = empty_packet::<N>().ray;
+            for (chunk, blocked) in rays.chunks(N).zip(blocked.chunks_mut(N)) {
+                let valid = load_lanes(&mut ray, chunk);
+                // SAFETY: as in `closest_packets`; Embree sets a blocked lane's tfar to -inf.
+                unsafe { (self.api.occluded8)(&valid, scene, &mut ray, std::ptr::null_mut()) };
                 for (k, b) in blocked.iter_mut().enumerate() {
                     *b = u8::from(ray.tfar[k] == f32::NEG_INFINITY);
                 }
@@ -509,8 +543,8 @@ impl Default for SceneOptions {
     }
 }
 
-/// Whether a scene (flat or instanced) answers batches of rays with Embree's 16-lane packet
-/// traversal (`rtcIntersect16` / `rtcOccluded16`) or one `rtcIntersect1` / `rtcOccluded1`
+/// Whether a scene (flat or instanced) answers batches of rays with Embree's 8-lane packet
+/// traversal (`rtcIntersect8` / `rtcOccluded8`) or one `rtcIntersect1` / `rtcOccluded1`
 /// per ray. Both give the same hits bit for bit (the tests); only the speed differs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Packets {
@@ -520,15 +554,18 @@ pub enum Packets {
     Never,
 }
 
-/// The largest scene [`Packets::Auto`] traces in packets. A packet of incoherent rays
-/// descends into the union of the nodes its rays need: in a small tree that union is nearly
-/// the whole tree anyway, so one call serves 16 rays at little extra work, while in a large
-/// one the lanes part ways and the packet does the work of many single rays. Measured on
-/// whole MCPT renders (docs/performance.md, "Tenth session"): packets cut the render CPU to
-/// about 0.89× on the Cornell box (38 triangles) and on a 5k-triangle scene, 0.95× at 20k and
-/// 82k, and changed nothing on the dragon (871k); the `rays` bench agrees (shadow rays 1.08–
-/// 1.33× as fast at 100k, neither faster nor slower at 1M).
-pub const PACKET_MAX_TRIANGLES: usize = 100_000;
+/// The largest scene [`Packets::Auto`] traces in packets: the largest size measured. A
+/// packet of incoherent rays descends into the union of the nodes its rays need: in a small
+/// tree that union is nearly the whole tree anyway, so one call serves all lanes at little
+/// extra work, while in a large one the lanes part ways. Embree's 16-lane packets (until the
+/// twenty-second session) paid only up to about 100k triangles: the `rays` bench had them at
+/// 0.93–0.98× single rays at 100k and 0.97–1.03× at 1M, and renders of the dragon (871k)
+/// unchanged. Its 8-lane packets are 1.08–1.16× as fast as single rays at 10k triangles,
+/// 1.05–1.10× at 100k and 1.03–1.11× at 1M (robust mode, closest and any hit, 1 and 2
+/// threads), and take 9% off a Cornell box render and 2% off the dragon's against the
+/// 16-lane ones there (docs/performance.md, "Twenty-second session"). Above 1M: untested,
+/// single rays as before.
+pub const PACKET_MAX_TRIANGLES: usize = 1_000_000;
 
 impl Packets {
     /// Whether a scene of `triangles` triangles uses packets.
@@ -604,41 +641,41 @@ fn triangle_hit(rh: abi::RTCRayHit) -> TriangleHit {
 }
 
 /// A packet with every lane inactive-looking (Embree reads only the valid lanes).
-fn empty_packet() -> abi::RTCRayHit16 {
-    abi::RTCRayHit16 {
-        ray: abi::RTCRay16 {
-            org_x: [0.0; 16],
-            org_y: [0.0; 16],
-            org_z: [0.0; 16],
-            tnear: [0.0; 16],
-            dir_x: [0.0; 16],
-            dir_y: [0.0; 16],
-            dir_z: [1.0; 16],
-            time: [0.0; 16],
-            tfar: [-0.0; 16],
-            mask: [u32::MAX; 16],
-            id: [0; 16],
-            flags: [0; 16],
+fn empty_packet<const N: usize>() -> abi::RTCRayHitN<N> {
+    abi::RTCRayHitN {
+        ray: abi::RTCRayN {
+            org_x: [0.0; N],
+            org_y: [0.0; N],
+            org_z: [0.0; N],
+            tnear: [0.0; N],
+            dir_x: [0.0; N],
+            dir_y: [0.0; N],
+            dir_z: [1.0; N],
+            time: [0.0; N],
+            tfar: [-0.0; N],
+            mask: [u32::MAX; N],
+            id: [0; N],
+            flags: [0; N],
         },
-        hit: abi::RTCHit16 {
-            ng_x: [0.0; 16],
-            ng_y: [0.0; 16],
-            ng_z: [0.0; 16],
-            u: [0.0; 16],
-            v: [0.0; 16],
-            prim_id: [u32::MAX; 16],
-            geom_id: [u32::MAX; 16],
-            inst_id: [[u32::MAX; 16]],
-            inst_prim_id: [[u32::MAX; 16]],
+        hit: abi::RTCHitN {
+            ng_x: [0.0; N],
+            ng_y: [0.0; N],
+            ng_z: [0.0; N],
+            u: [0.0; N],
+            v: [0.0; N],
+            prim_id: [u32::MAX; N],
+            geom_id: [u32::MAX; N],
+            inst_id: [[u32::MAX; N]],
+            inst_prim_id: [[u32::MAX; N]],
         },
     }
 }
 
-/// Fills the first `rays.len()` (≤ 16) lanes of `ray` and returns their valid mask.
-#[inline(always)]
-fn load16(ray: &mut abi::RTCRay16, rays: &[Ray]) -> abi::Valid16 {
-    debug_assert!(rays.len() <= 16);
-    let mut valid = abi::Valid16([0; 16]);
+/// Fills the first `rays.len()` (≤ N) lanes of `ray` and returns their valid mask.
+#[inline]
+fn load_lanes<const N: usize>(ray: &mut abi::RTCRayN<N>, rays: &[Ray]) -> abi::ValidN<N> {
+    debug_assert!(rays.len() <= N);
+    let mut valid = abi::ValidN([0; N]);
     for (k, r) in rays.iter().enumerate() {
         let r = EmbreeScene::rtc_ray(r);
         valid.0[k] = -1;
@@ -691,7 +728,7 @@ pub struct EmbreeScene {
     dev: &'static Device,
     scene: RTCScene,
     triangles: usize,
-    /// Batches go through 16-lane packets ([`Packets::resolve`]).
+    /// Batches go through 8-lane packets ([`Packets::resolve`]).
     packets: bool,
     /// How coherent batches are traced ([`SceneOptions::coherent`]).
     coherent: BatchMode,
@@ -878,14 +915,14 @@ impl EmbreeScene {
         self.dev.any_hit(self.scene, ray, Some(&mut args))
     }
 
-    /// Whether batches go through 16-lane packets ([`SceneOptions::packets`]).
+    /// Whether batches go through 8-lane packets ([`SceneOptions::packets`]).
     pub fn uses_packets(&self) -> bool {
         self.packets
     }
 
     /// Closest hits of a batch of rays: `hits[i]` is `rays[i]`'s hit exactly as
     /// [`EmbreeScene::intersect`] finds it, as a compact hit (`instance` unknown). The FP mode
-    /// is set once for the batch; the rays go 16 at a time through `rtcIntersect16` or one by
+    /// is set once for the batch; the rays go 8 at a time through `rtcIntersect8` or one by
     /// one through `rtcIntersect1` ([`SceneOptions::packets`]).
     pub fn intersect_batch(&self, rays: &[Ray], hits: &mut [CompactHit]) {
         self.intersect_batch_in(BatchMode::of(self.packets), rays, hits)
@@ -949,7 +986,7 @@ pub struct EmbreeInstancedScene {
     /// Kept alive while the top scene refers to them.
     meshes: Vec<EmbreeScene>,
     instances: usize,
-    /// Batches go through 16-lane packets ([`Packets::resolve`] of the stored triangles).
+    /// Batches go through 8-lane packets ([`Packets::resolve`] of the stored triangles).
     packets: bool,
     /// How coherent batches are traced ([`SceneOptions::coherent`]).
     coherent: BatchMode,
@@ -1050,7 +1087,7 @@ impl EmbreeInstancedScene {
         self.dev.closest_hit(self.top, ray, None).map(instance_hit)
     }
 
-    /// Whether batches go through 16-lane packets: [`SceneOptions::packets`] for the
+    /// Whether batches go through 8-lane packets: [`SceneOptions::packets`] for the
     /// triangles stored (each mesh once).
     pub fn uses_packets(&self) -> bool {
         self.packets

@@ -69,7 +69,7 @@ fn placements(rng: &mut Rng) -> Vec<(u32, Mat4)> {
         .collect()
 }
 
-/// Batches through instances, by 16-lane packets and by single rays, give exactly the
+/// Batches through instances, by 8-lane packets and by single rays, give exactly the
 /// single-ray answers: the same t, instance, triangle and barycentrics bit for bit.
 #[test]
 fn instanced_batches_return_exactly_the_single_ray_answers() {

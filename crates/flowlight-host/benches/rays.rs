@@ -1,5 +1,5 @@
 //! Ray benchmark (not a test): incoherent closest-hit and any-hit throughput and build time
-//! of the Embree intersector (one `rtcIntersect1` / `rtcOccluded1` per ray, and 16-lane
+//! of the Embree intersector (one `rtcIntersect1` / `rtcOccluded1` per ray, and 8-lane
 //! packets), the host's BVH intersector (the 8-wide `flowlight_bvh::Bvh`) and the binary
 //! `flowlight_bvh::BinaryBvh` on closed meshes of ~10k, ~100k and ~1M triangles, with 1 and
 //! 2 threads (`FLOWLIGHT_BENCH_THREADS=1,2,16` for other counts). Every backend is called as
@@ -149,7 +149,7 @@ fn inside_rays(rng: &mut Rng, out: &mut Vec<Ray>) {
 }
 
 /// `FLOWLIGHT_BENCH_LEAKS=M` (instead of the timings): how many of M million rays from
-/// inside each closed mesh leak through it, for Embree in robust and in fast mode (16-lane packets, as renders of
+/// inside each closed mesh leak through it, for Embree in robust and in fast mode (8-lane packets, as renders of
 /// scenes up to 100k triangles trace) and for the BVH. A measurement, not a test: the tests
 /// aim rays at shared edges and vertices (tests/embree.rs); this gives the rate for rays
 /// that hit edges only by chance, as a render's do.
@@ -192,10 +192,10 @@ fn leak_table(sizes: &[usize], millions: usize) {
 fn build_all(scene: &Scene, tris: &[[Vec3; 3]], embree: SceneOptions) -> (Vec<Backend>, Vec<f64>) {
     let mut out = Vec::new();
     let mut times = Vec::new();
-    // Embree twice: single rays (the row every ratio divides by) and 16-lane packets.
+    // Embree twice: single rays (the row every ratio divides by) and 8-lane packets (what renders of scenes up to 1M triangles use).
     for (name, packets) in [
         ("embree", Packets::Never),
-        ("embree (16-lane packets)", Packets::Always),
+        ("embree (8-lane packets)", Packets::Always),
     ] {
         let options = SceneOptions { packets, ..embree };
         match EmbreeIntersector::build_with(scene, options) {
