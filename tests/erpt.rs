@@ -256,12 +256,18 @@ const VARNISH: &str = r#"{"name": "varnish", "pbrMetallicRoughness": {"baseColor
 
 /// Writes the floor-and-wall scene lit by a sun (or none) and `tail` (e.g. an
 /// `[environment]`) with `integrator` into a scratch folder; returns the config's path.
-fn distant_scene(name: &str, sun: bool, integrator: &str, tail: &str) -> String {
+fn distant_scene(name: &str, sun: bool, integrator: &str, tail: &str) -> common::ScratchConfig {
     distant_scene_of(name, LAMBERT, sun, integrator, tail)
 }
 
 /// [`distant_scene`] with the floor and wall of `material`.
-fn distant_scene_of(name: &str, material: &str, sun: bool, integrator: &str, tail: &str) -> String {
+fn distant_scene_of(
+    name: &str,
+    material: &str,
+    sun: bool,
+    integrator: &str,
+    tail: &str,
+) -> common::ScratchConfig {
     let gltf = if sun {
         common::quads_gltf(
             &[FLOOR, SHORT_WALL],
@@ -295,7 +301,8 @@ path_depth = 3
         ),
     )
     .unwrap();
-    cfg.display().to_string()
+    let path = cfg.display().to_string();
+    common::ScratchConfig { dir, path }
 }
 
 const SKY: &str = "[environment]\ncolor = [0.6, 0.8, 1.0]\nstrength = 1.5\n";

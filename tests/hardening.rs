@@ -48,7 +48,7 @@ fn loaded_end(elf: &[u8]) -> usize {
 /// A scratch folder holding a copy of the furnace scene and a config `c.toml` whose
 /// `[render]`, `[integrator]` and `[output]` tables are given.
 struct Case {
-    dir: PathBuf,
+    dir: common::TempDir,
     config: PathBuf,
 }
 

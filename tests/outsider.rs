@@ -78,10 +78,12 @@ fn build_plugin(dir: &Path, name: &str) -> PathBuf {
     lib
 }
 
-/// A fresh folder outside the workspace.
-fn outside(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("flowlight-outsider-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
+/// A folder outside the workspace, not yet made, removed with what is made there when dropped
+/// (unless the test fails).
+fn outside(name: &str) -> common::TempDir {
+    let d = common::TempDir::new(&format!("flowlight-outsider-{}-{name}", std::process::id()));
+    // `new-plugin` makes the folder itself.
+    std::fs::remove_dir(&*d).unwrap();
     assert!(
         !d.starts_with(common::repo()),
         "temp dir inside the workspace"

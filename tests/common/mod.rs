@@ -7,6 +7,8 @@ use flowlight_core::Rgb;
 use flowlight_host::render::RenderOutcome;
 use flowlight_host::session::{Overrides, Session};
 use std::path::PathBuf;
+
+pub use flowlight_testkit::gltf::TempDir;
 use std::sync::atomic::AtomicBool;
 
 pub fn repo() -> PathBuf {
@@ -17,12 +19,24 @@ pub fn scene_config(rel: &str) -> PathBuf {
     repo().join("scenes").join(rel)
 }
 
-/// A fresh scratch directory under the system temp dir.
-pub fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("flowlight-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh scratch directory under the system temp dir, removed when dropped (unless the
+/// test fails).
+pub fn scratch(name: &str) -> TempDir {
+    TempDir::new(&format!("flowlight-test-{}-{name}", std::process::id()))
+}
+
+/// A config written into a scratch directory: it derefs to the config's path (as the test
+/// helpers take it), and the directory is removed when it is dropped.
+pub struct ScratchConfig {
+    pub dir: TempDir,
+    pub path: String,
+}
+
+impl std::ops::Deref for ScratchConfig {
+    type Target = str;
+    fn deref(&self) -> &str {
+        &self.path
+    }
 }
 
 pub fn toml_params(pairs: &[(&str, toml::Value)]) -> Vec<(String, toml::Value)> {

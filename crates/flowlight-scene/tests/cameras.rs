@@ -7,13 +7,13 @@ use common::*;
 use flowlight_core::camera::{Camera, Projection};
 use flowlight_scene::{load_gltf, parse_config, CameraProjection, Scene};
 use glam::{Vec2, Vec3};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 const CONFIG: &str = "scene = \"s.gltf\"\n[integrator]\nplugin = \"mcpt\"\n";
 
 /// A unit quad in z = 0 ([−1, 1]², as two triangles) plus the extra `nodes` (JSON objects
 /// after the mesh node, all roots of the scene) and `cameras` (the JSON array's items).
-fn scene_with(tag: &str, nodes: &[&str], cameras: &str) -> (PathBuf, Scene) {
+fn scene_with(tag: &str, nodes: &[&str], cameras: &str) -> (TempDir, Scene) {
     let dir = temp_dir(tag);
     let positions = [
         [-1.0, -1.0, 0.0],
@@ -54,7 +54,7 @@ fn camera(dir: &Path, scene: &Scene, toml: &str) -> Result<Camera, String> {
 /// at x = 5 looking along −X), node 2 places cameras[0] "Top" (orthographic, xmag 2, ymag 1,
 /// at y = 4 looking down), node 3 "Front" places the unnamed cameras[2] (perspective at
 /// z = 10 looking along −Z, aspectRatio 1).
-fn three_cameras(tag: &str) -> (PathBuf, Scene) {
+fn three_cameras(tag: &str) -> (TempDir, Scene) {
     let h = std::f32::consts::FRAC_1_SQRT_2;
     scene_with(
         tag,

@@ -46,16 +46,13 @@ fn runner(cases: u32) -> TestRunner {
     })
 }
 
-fn scratch(tag: &str) -> PathBuf {
+fn scratch(tag: &str) -> flowlight_testkit::gltf::TempDir {
     static N: AtomicUsize = AtomicUsize::new(0);
-    let d = std::env::temp_dir().join(format!(
+    flowlight_testkit::gltf::TempDir::new(&format!(
         "flowlight-fuzz-{}-{}-{tag}",
         std::process::id(),
         N.fetch_add(1, Ordering::Relaxed)
-    ));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    ))
 }
 
 /// Loads `bytes` as `file` and checks the outcome: Ok, or an error that names the file and

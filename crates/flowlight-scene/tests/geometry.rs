@@ -94,10 +94,24 @@ impl Builder {
     }
 }
 
-fn write(tag: &str, json: &str) -> PathBuf {
-    let p = temp_dir(tag).join("scene.gltf");
-    std::fs::write(&p, json).unwrap();
-    p
+/// A glTF file written into a test's temporary directory, removed with it when dropped.
+struct Written {
+    _dir: common::TempDir,
+    path: PathBuf,
+}
+
+impl std::ops::Deref for Written {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.path
+    }
+}
+
+fn write(tag: &str, json: &str) -> Written {
+    let dir = temp_dir(tag);
+    let path = dir.join("scene.gltf");
+    std::fs::write(&path, json).unwrap();
+    Written { _dir: dir, path }
 }
 
 fn load(p: &Path) -> Result<Scene, SceneError> {

@@ -10,7 +10,8 @@ use std::collections::BTreeMap;
 const TRI: [[f32; 3]; 3] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
 
 fn load(tag: &str, material: &str) -> Result<flowlight_scene::Scene, String> {
-    let p = temp_dir(tag).join("m.gltf");
+    let dir = temp_dir(tag);
+    let p = dir.join("m.gltf");
     std::fs::write(&p, embedded_gltf(&TRI, &[0, 1, 2], material, "")).unwrap();
     load_gltf(&p, &BTreeMap::new()).map_err(|e| e.to_string())
 }

@@ -55,18 +55,65 @@ pub fn png8(width: u32, height: u32, channels: u32, texels: &[u8]) -> Vec<u8> {
     out
 }
 
-/// A fresh empty temporary directory for one test.
-pub fn temp_dir(tag: &str) -> PathBuf {
+/// A fresh empty temporary directory for one test, removed when dropped.
+pub fn temp_dir(tag: &str) -> TempDir {
     use std::sync::atomic::{AtomicUsize, Ordering};
     static N: AtomicUsize = AtomicUsize::new(0);
-    let d = std::env::temp_dir().join(format!(
+    TempDir::new(&format!(
         "flowlight-testkit-{}-{}-{tag}",
         std::process::id(),
         N.fetch_add(1, Ordering::Relaxed)
-    ));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("creating a temporary directory");
-    d
+    ))
+}
+
+/// A test's scratch directory under the system's temporary directory: made fresh (emptied if
+/// a crashed run left it), used as a [`Path`], and removed with its contents when dropped,
+/// unless the test is failing (a panic unwinding through it), so that a failure's files stay
+/// to be looked at. Without the removal every run of the test suite left its scenes, images
+/// and copied plugins behind (hundreds of megabytes per run).
+#[derive(Debug)]
+pub struct TempDir(PathBuf);
+
+impl TempDir {
+    /// `std::env::temp_dir()/name`, fresh and empty.
+    pub fn new(name: &str) -> TempDir {
+        let d = std::env::temp_dir().join(name);
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).expect("creating a temporary directory");
+        TempDir(d)
+    }
+
+    /// The directory's path, owned (for APIs that keep it).
+    pub fn to_path_buf(&self) -> PathBuf {
+        self.0.clone()
+    }
+}
+
+impl std::ops::Deref for TempDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for TempDir {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<std::ffi::OsStr> for TempDir {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.0.as_os_str()
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        if !std::thread::panicking() {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
 }
 
 /// Little-endian bytes of f32 values.

@@ -4,19 +4,17 @@
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-pub use flowlight_testkit::gltf::base64;
+pub use flowlight_testkit::gltf::{base64, TempDir};
 
-/// A fresh empty temporary directory for one test.
-pub fn temp_dir(tag: &str) -> PathBuf {
+/// A fresh empty temporary directory for one test, removed when dropped (unless the test
+/// fails).
+pub fn temp_dir(tag: &str) -> TempDir {
     static N: AtomicUsize = AtomicUsize::new(0);
-    let d = std::env::temp_dir().join(format!(
+    TempDir::new(&format!(
         "flowlight-scene-test-{}-{}-{tag}",
         std::process::id(),
         N.fetch_add(1, Ordering::Relaxed)
-    ));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    ))
 }
 
 /// Little-endian bytes of positions (VEC3 f32) followed by indices (u32).
