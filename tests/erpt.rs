@@ -256,7 +256,7 @@ const VARNISH: &str = r#"{"name": "varnish", "pbrMetallicRoughness": {"baseColor
 
 /// Writes the floor-and-wall scene lit by a sun (or none) and `tail` (e.g. an
 /// `[environment]`) with `integrator` into a scratch folder; returns the config's path.
-fn distant_scene(name: &str, sun: bool, integrator: &str, tail: &str) -> common::ScratchConfig {
+fn distant_scene(name: &str, sun: bool, integrator: &str, tail: &str) -> common::InTempDir<String> {
     distant_scene_of(name, LAMBERT, sun, integrator, tail)
 }
 
@@ -267,7 +267,7 @@ fn distant_scene_of(
     sun: bool,
     integrator: &str,
     tail: &str,
-) -> common::ScratchConfig {
+) -> common::InTempDir<String> {
     let gltf = if sun {
         common::quads_gltf(
             &[FLOOR, SHORT_WALL],
@@ -301,8 +301,8 @@ path_depth = 3
         ),
     )
     .unwrap();
-    let path = cfg.display().to_string();
-    common::ScratchConfig { dir, path }
+    let value = cfg.display().to_string();
+    common::InTempDir { dir, value }
 }
 
 const SKY: &str = "[environment]\ncolor = [0.6, 0.8, 1.0]\nstrength = 1.5\n";

@@ -140,8 +140,7 @@ fn chains_meeting_zero_densities_never_deposit_there() {
 }
 
 /// A furnace whose emission strength is `strength`, written next to a copy of the config.
-/// (The directory, removed when dropped, and the config's path.)
-fn furnace_with_strength(strength: &str) -> (common::TempDir, std::path::PathBuf) {
+fn furnace_with_strength(strength: &str) -> common::InTempDir<std::path::PathBuf> {
     let dir = common::scratch(&format!("strong-{strength}"));
     let gltf = std::fs::read_to_string(common::scene_config("furnace/furnace.gltf")).unwrap();
     let patched = gltf.replace(
@@ -155,14 +154,14 @@ fn furnace_with_strength(strength: &str) -> (common::TempDir, std::path::PathBuf
         dir.join("erpt.toml"),
     )
     .unwrap();
-    let config = dir.join("erpt.toml");
-    (dir, config)
+    let value = dir.join("erpt.toml");
+    common::InTempDir { dir, value }
 }
 
 #[test]
 fn enormous_seeds_are_capped_or_counted_never_written_as_nan() {
     // 1e30 everywhere: quanta, chain counts and deposits stay finite and keep the energy.
-    let (_dir, cfg) = furnace_with_strength("1e30");
+    let cfg = furnace_with_strength("1e30");
     let mut c = flowlight_scene::config::load_config(&cfg).unwrap();
     c.width = 16;
     c.height = 16;
@@ -186,7 +185,7 @@ fn enormous_seeds_are_capped_or_counted_never_written_as_nan() {
 
     // 3e38: the emitters' power overflows f32. The scene is refused when it loads, with a
     // line naming the cause, instead of failing at write time after the whole render.
-    let (_dir, cfg) = furnace_with_strength("3e38");
+    let cfg = furnace_with_strength("3e38");
     let c = flowlight_scene::config::load_config(&cfg).unwrap();
     let err = Session::from_config(c, &ov)
         .err()

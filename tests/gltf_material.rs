@@ -10,7 +10,7 @@ use common::{mean_and_stderr, render, scene_config, scratch, session_at};
 
 /// The furnace scene with a white material of the given roughness and ior, written to a
 /// scratch folder; returns the config's path.
-fn white_furnace(tag: &str, roughness: f32, ior: f32) -> common::ScratchConfig {
+fn white_furnace(tag: &str, roughness: f32, ior: f32) -> common::InTempDir<String> {
     let dir = scratch(&format!("gltf-furnace-{tag}"));
     let gltf = std::fs::read_to_string(scene_config("furnace/furnace.gltf")).unwrap();
     let pbr = r#""pbrMetallicRoughness": {
@@ -45,8 +45,8 @@ fn white_furnace(tag: &str, roughness: f32, ior: f32) -> common::ScratchConfig {
         dir.join("furnace.toml"),
     )
     .unwrap();
-    let path = dir.join("furnace.toml").display().to_string();
-    common::ScratchConfig { dir, path }
+    let value = dir.join("furnace.toml").display().to_string();
+    common::InTempDir { dir, value }
 }
 
 fn check(variant: &str, roughness: f32, ior: f32, depth: i64) {

@@ -7,9 +7,11 @@ use flowlight_core::Rgb;
 use flowlight_host::render::RenderOutcome;
 use flowlight_host::session::{Overrides, Session};
 use std::path::PathBuf;
-
-pub use flowlight_testkit::gltf::TempDir;
 use std::sync::atomic::AtomicBool;
+
+// Not every test file uses both.
+#[allow(unused_imports)]
+pub use flowlight_testkit::gltf::{InTempDir, TempDir};
 
 pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -23,20 +25,6 @@ pub fn scene_config(rel: &str) -> PathBuf {
 /// test fails).
 pub fn scratch(name: &str) -> TempDir {
     TempDir::new(&format!("flowlight-test-{}-{name}", std::process::id()))
-}
-
-/// A config written into a scratch directory: it derefs to the config's path (as the test
-/// helpers take it), and the directory is removed when it is dropped.
-pub struct ScratchConfig {
-    pub dir: TempDir,
-    pub path: String,
-}
-
-impl std::ops::Deref for ScratchConfig {
-    type Target = str;
-    fn deref(&self) -> &str {
-        &self.path
-    }
 }
 
 pub fn toml_params(pairs: &[(&str, toml::Value)]) -> Vec<(String, toml::Value)> {

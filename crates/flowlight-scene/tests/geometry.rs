@@ -7,6 +7,7 @@ use common::*;
 use flowlight_core::geometry::Ray;
 use flowlight_scene::source::GltfSource;
 use flowlight_scene::{load_gltf, Scene, SceneError};
+use flowlight_testkit::gltf::InTempDir;
 use glam::{Vec2, Vec3};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -94,24 +95,12 @@ impl Builder {
     }
 }
 
-/// A glTF file written into a test's temporary directory, removed with it when dropped.
-struct Written {
-    _dir: common::TempDir,
-    path: PathBuf,
-}
-
-impl std::ops::Deref for Written {
-    type Target = Path;
-    fn deref(&self) -> &Path {
-        &self.path
-    }
-}
-
-fn write(tag: &str, json: &str) -> Written {
+/// The glTF `json` written into a test's temporary directory, which goes with the result.
+fn write(tag: &str, json: &str) -> InTempDir<PathBuf> {
     let dir = temp_dir(tag);
-    let path = dir.join("scene.gltf");
-    std::fs::write(&path, json).unwrap();
-    Written { _dir: dir, path }
+    let value = dir.join("scene.gltf");
+    std::fs::write(&value, json).unwrap();
+    InTempDir { dir, value }
 }
 
 fn load(p: &Path) -> Result<Scene, SceneError> {

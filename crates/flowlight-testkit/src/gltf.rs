@@ -82,11 +82,6 @@ impl TempDir {
         std::fs::create_dir_all(&d).expect("creating a temporary directory");
         TempDir(d)
     }
-
-    /// The directory's path, owned (for APIs that keep it).
-    pub fn to_path_buf(&self) -> PathBuf {
-        self.0.clone()
-    }
 }
 
 impl std::ops::Deref for TempDir {
@@ -105,6 +100,23 @@ impl AsRef<Path> for TempDir {
 impl AsRef<std::ffi::OsStr> for TempDir {
     fn as_ref(&self) -> &std::ffi::OsStr {
         self.0.as_os_str()
+    }
+}
+
+/// A value that names something inside a [`TempDir`] (a file's path, say), kept together
+/// with the directory so that the directory lasts as long as the value is used: it derefs
+/// to what the value derefs to (`InTempDir<PathBuf>` to a [`Path`], `InTempDir<String>` to a
+/// `str`).
+#[derive(Debug)]
+pub struct InTempDir<T> {
+    pub dir: TempDir,
+    pub value: T,
+}
+
+impl<T: std::ops::Deref> std::ops::Deref for InTempDir<T> {
+    type Target = T::Target;
+    fn deref(&self) -> &T::Target {
+        &self.value
     }
 }
 
