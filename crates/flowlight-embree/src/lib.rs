@@ -362,10 +362,11 @@ impl Device {
     /// mode switch: one by one through `rtcIntersect1` ([`BatchMode::SingleRays`]), 8 at a
     /// time through `rtcIntersect8` ([`BatchMode::Packets`]), or 16 at a time through
     /// `rtcIntersect16` with `RTC_RAY_QUERY_FLAG_COHERENT` in the arguments
-    /// ([`BatchMode::CoherentPackets`]: a tile's camera rays, where the wider packet pays). Single rays and plain packets give the
-    /// same hits bit for bit; coherent packets the same distances, but a tie between two
-    /// triangles at one distance may go the other way (the tests). A flat scene's hits carry
-    /// Embree's invalid instance id.
+    /// ([`BatchMode::CoherentPackets`]: a tile's camera rays; 16 lanes as when that mode was
+    /// measured, and 8 there made no difference to a Cornell box render). Single rays and
+    /// plain packets give the same hits bit for bit; coherent packets the same distances,
+    /// but a tie between two triangles at one distance may go the other way (the tests). A
+    /// flat scene's hits carry Embree's invalid instance id.
     fn closest_batch(
         &self,
         scene: RTCScene,
@@ -373,38 +374,36 @@ impl Device {
         rays: &[Ray],
         mut emit: impl FnMut(usize, Option<InstanceHit>),
     ) {
-        // Embree's coherent packet traversal (one node stack for the packet, for rays that
-        // cross the same nodes in the same order) is taken only when the call's arguments
-        // say so; on incoherent rays it is about twice as slow as its default.
-        let mut coherent = filter::IntersectArguments {
-            flags: RTCRayQueryFlags::COHERENT,
-            feature_mask: RTCFeatureFlags::RTC_FEATURE_FLAG_ALL,
-            context: std::ptr::null_mut(),
-            filter: None,
-            intersect: None,
-            min_width_distance_factor: 0.0,
-            _pad: [0; 4],
-        };
-        let args = match mode {
-            BatchMode::CoherentPackets => &mut coherent as *mut _ as *mut c_void,
-            _ => std::ptr::null_mut(),
-        };
         // The FP mode Embree asks for, set once for the batch instead of around each query.
-        denormals::with_denormals_flushed(|| {
-            if mode == BatchMode::SingleRays {
+        denormals::with_denormals_flushed(|| match mode {
+            BatchMode::SingleRays => {
                 for (i, ray) in rays.iter().enumerate() {
                     emit(
                         i,
                         self.closest_hit_in_mode(scene, ray, None).map(instance_hit),
                     );
                 }
-                return;
             }
-            match mode {
-                BatchMode::CoherentPackets => {
-                    self.closest_packets::<16>(self.api.intersect16, scene, rays, args, emit)
-                }
-                _ => self.closest_packets::<8>(self.api.intersect8, scene, rays, args, emit),
+            BatchMode::Packets => {
+                let defaults = std::ptr::null_mut();
+                self.closest_packets::<8>(self.api.intersect8, scene, rays, defaults, emit)
+            }
+            BatchMode::CoherentPackets => {
+                // Embree's coherent packet traversal (one node stack for the packet, for rays
+                // that cross the same nodes in the same order) is taken only when the call's
+                // arguments say so; on incoherent rays it is about twice as slow as its
+                // default.
+                let mut coherent = filter::IntersectArguments {
+                    flags: RTCRayQueryFlags::COHERENT,
+                    feature_mask: RTCFeatureFlags::RTC_FEATURE_FLAG_ALL,
+                    context: std::ptr::null_mut(),
+                    filter: None,
+                    intersect: None,
+                    min_width_distance_factor: 0.0,
+                    _pad: [0; 4],
+                };
+                let args = &mut coherent as *mut _ as *mut c_void;
+                self.closest_packets::<16>(self.api.intersect16, scene, rays, args, emit)
             }
         })
     }
@@ -560,11 +559,11 @@ pub enum Packets {
 /// extra work, while in a large one the lanes part ways. Embree's 16-lane packets (until the
 /// twenty-second session) paid only up to about 100k triangles: the `rays` bench had them at
 /// 0.93–0.98× single rays at 100k and 0.97–1.03× at 1M, and renders of the dragon (871k)
-/// unchanged. Its 8-lane packets are 1.08–1.16× as fast as single rays at 10k triangles,
-/// 1.05–1.10× at 100k and 1.03–1.11× at 1M (robust mode, closest and any hit, 1 and 2
-/// threads), and take 9% off a Cornell box render and 2% off the dragon's against the
-/// 16-lane ones there (docs/performance.md, "Twenty-second session"). Above 1M: untested,
-/// single rays as before.
+/// unchanged. Its 8-lane packets are 1.07–1.14× as fast as single rays at 10k triangles,
+/// 1.05–1.10× at 100k and 1.02–1.11× at 1M (robust mode, closest and any hit, 1 and 2
+/// threads); a Cornell box render takes 9% less CPU with them than with the 16-lane ones,
+/// and a dragon render 4% less than with single rays (docs/performance.md, "Twenty-second
+/// session"). Above 1M: untested, single rays as before.
 pub const PACKET_MAX_TRIANGLES: usize = 1_000_000;
 
 impl Packets {
