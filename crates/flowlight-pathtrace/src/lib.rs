@@ -7,6 +7,8 @@
 //!   `"independent"`).
 //! * [`seeds`]: the entangled sampler split into its techniques, each a stored path with its
 //!   MIS-weighted estimate: ERPT's entangled seeds.
+//! * [`walk`]: the one path walker under [`entangled`] and [`seeds`]: the per-vertex step,
+//!   the wavefront scheduler, and the sink each of them reports to.
 //!
 //! Both track the physical ray depth (every scattering event, capped by `max_ray_depth`) and
 //! the virtual, lighting depth (thesis §2): scattering events counted from the first
@@ -18,8 +20,9 @@ pub mod entangled;
 pub mod sampler;
 pub mod seeds;
 pub mod settings;
-mod shading;
+pub mod shading;
 pub mod untangled;
+pub mod walk;
 
 pub use settings::{PathSettings, Variant};
 

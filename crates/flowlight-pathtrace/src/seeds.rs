@@ -50,24 +50,22 @@
 //! classification. A connection vertex's stored type is that of the smooth component that
 //! scatters most light (above); it is only computed when the filter's answer depends on it.
 //!
-//! [`trace_wavefront`] traces many trees at once as ray batches (camera, then per bounce
-//! extension and shadow rays), each tree into buffers of its own that join the store in the
-//! order of the trees: the same store, bit for bit, as path-at-a-time calls in that order.
-//! Both run the same per-vertex step (`Tree::vertex`), which returns a light connection's
-//! shadow ray instead of tracing it.
+//! The path tree is walked by the crate's walker ([`crate::walk`]), the same step and
+//! scheduler as MCPT's; this module is its seed sink. [`trace_wavefront`] walks many trees at
+//! once as ray batches, each tree into buffers of its own that join the store in the order of
+//! the trees: the same store, bit for bit, as path-at-a-time calls ([`trace`]) in that order.
 
+use crate::sampler::BranchStream;
 use crate::settings::PathSettings;
-use crate::shading::{connection_bsdf, light_connection, light_sample, side_consistent, Shading};
+use crate::shading::{connection_bsdf, Shading};
 use crate::untangled::{environment_vertex, light_vertex};
+use crate::walk::{self, ConnectionEvent, Extension, PathSink, Step, WalkState, Wave, WaveSinks};
 use crate::SampleContributions;
-use flowlight_core::bsdf::{volume, Bsdf};
+use flowlight_core::bsdf::Bsdf;
 use flowlight_core::geometry::{Ray, SurfaceHit};
-use flowlight_core::light::{area_to_solid_angle, LightKind};
-use flowlight_core::mesh::CompactHit;
+use flowlight_core::light::LightKind;
 use flowlight_core::path::{NodeType, Path, PathVertex, MAX_PATH_VERTICES};
 use flowlight_core::rng::Rng;
-use flowlight_core::sampler::{SampleStream, SLOT_BSDF, SLOT_LIGHT, SLOT_ROULETTE};
-use flowlight_core::sampling::power_heuristic;
 use flowlight_core::Rgb;
 use flowlight_sdk::{Scene, Tracer};
 use glam::{Vec2, Vec3};
@@ -190,17 +188,6 @@ fn connection_node(bsdf: &Bsdf, wo: Vec3, wi: Vec3) -> (NodeType, u8) {
     (best.0, best.1)
 }
 
-/// How the trunk's last step was drawn, for the density of the vertex it reaches.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Step {
-    /// The camera ray: density 1 in the film measure.
-    Eye,
-    /// A Dirac lobe: its discrete probability.
-    Dirac(f32),
-    /// A smooth BSDF sample: solid-angle density, times the area Jacobian at a surface.
-    Smooth(f32),
-}
-
 /// Which seeds [`trace_split`] stores with their paths.
 pub trait SeedFilter {
     /// Whether a seed whose path has the node types `types` (eye first, light last) is kept.
@@ -219,7 +206,7 @@ pub struct SeedSplit<'a> {
 /// connection, emitter hit and environment escape that carries light) to `store`. The
 /// estimates sum to the entangled sampler's estimate of the same path tree
 /// ([`crate::entangled::trace`], same random-number order).
-pub fn trace<S: SampleStream + Clone>(
+pub fn trace<S: BranchStream>(
     scene: &Scene,
     tracer: &Tracer,
     settings: &PathSettings,
@@ -233,7 +220,7 @@ pub fn trace<S: SampleStream + Clone>(
 /// [`trace`] that stores only the seeds `split.filter` keeps; the others' estimates are added
 /// to `split.rest` (not cleared first). The same random numbers are drawn as by [`trace`], and
 /// a seed is stored here exactly when [`trace`] stores it and the filter keeps its path.
-pub fn trace_split<S: SampleStream + Clone>(
+pub fn trace_split<S: BranchStream>(
     scene: &Scene,
     tracer: &Tracer,
     settings: &PathSettings,
@@ -245,7 +232,16 @@ pub fn trace_split<S: SampleStream + Clone>(
     trace_with(scene, tracer, settings, rng, raster, store, Some(split));
 }
 
-fn trace_with<S: SampleStream + Clone>(
+/// A light connection's shadow ray in [`trace`]'s thread buffer.
+type ShadowBuffer = (Vec<Ray>, Vec<(u32, PendingConnection)>);
+
+thread_local! {
+    /// [`trace`]'s shadow rays and their records between a vertex and their tests.
+    static SHADOWS: std::cell::RefCell<ShadowBuffer> =
+        const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
+}
+
+fn trace_with<S: BranchStream>(
     scene: &Scene,
     tracer: &Tracer,
     settings: &PathSettings,
@@ -256,58 +252,45 @@ fn trace_with<S: SampleStream + Clone>(
 ) {
     store.samples += 1;
     let (trunk, seeds) = (store.vertices.len(), store.seeds.len());
-    let mut tree = Tree::start(scene, rng.clone(), raster);
+    // Without a split nothing goes to the rest (allocates nothing).
+    let (mut no_rest, mut no_count) = (SampleContributions::default(), 0);
+    let (filter, rest, rest_count) = match split {
+        Some(s) => (Some(s.filter), &mut *s.rest, &mut s.count),
+        None => (None, &mut no_rest, &mut no_count),
+    };
     let mut out = TreeOut {
         vertices: &mut store.vertices,
         seeds: &mut store.seeds,
         base: trunk,
-        split,
+        filter,
+        rest,
+        rest_count,
     };
-    tree.begin(scene, &mut out);
-    loop {
-        let Some(hit) = tracer.intersect(&tree.ray) else {
-            tree.escape(scene, &mut out);
-            break;
-        };
-        let (going, pending) = tree.vertex(scene, settings, &hit, &mut out);
-        if let Some(p) = pending {
-            out.connect(p, !tracer.occluded(&p.ray));
-        }
-        if !going {
-            break;
-        }
-    }
-    *rng = tree.rng;
+    let trail = SeedTrail::new(raster);
+    *rng = SHADOWS.with_borrow_mut(|shadows| {
+        let start = rng.clone();
+        walk::run_single(
+            scene, tracer, settings, start, raster, trail, &mut out, shadows,
+        )
+    });
     // A tree without seeds keeps no trunk.
     if store.seeds.len() == seeds {
         store.vertices.truncate(trunk);
     }
 }
 
-/// Reusable buffers of [`trace_wavefront`]: the trees of one wave and their own trunks, seeds
-/// and split-off estimates (one set per work unit, so no allocation per path).
+/// Reusable buffers of [`trace_wavefront`]: the wave and the trees' own trunks, seeds and
+/// split-off estimates (one set per work unit or thread, so no allocation per path).
 pub struct SeedWavefront<S = Rng> {
-    trees: Vec<Tree<S>>,
+    wave: Wave<S, SeedTrail, PendingConnection>,
     buffers: Vec<TreeBuffers>,
-    active: Vec<u32>,
-    rays: Vec<Ray>,
-    hits: Vec<CompactHit>,
-    shadow_rays: Vec<Ray>,
-    pending: Vec<(u32, PendingConnection)>,
-    blocked: Vec<u8>,
 }
 
 impl<S> Default for SeedWavefront<S> {
     fn default() -> Self {
         SeedWavefront {
-            trees: Vec::new(),
+            wave: Wave::default(),
             buffers: Vec::new(),
-            active: Vec::new(),
-            rays: Vec::new(),
-            hits: Vec::new(),
-            shadow_rays: Vec::new(),
-            pending: Vec::new(),
-            blocked: Vec::new(),
         }
     }
 }
@@ -328,27 +311,33 @@ impl TreeBuffers {
         self.rest.clear();
         self.rest_count = 0;
     }
+}
 
-    /// Runs `f` with this tree's [`TreeOut`], then counts the seeds it split off.
-    fn with_out<R>(
-        &mut self,
-        filter: Option<&dyn SeedFilter>,
-        f: impl FnOnce(&mut TreeOut) -> R,
-    ) -> R {
-        let mut split = filter.map(|filter| SeedSplit {
-            filter,
-            rest: &mut self.rest,
-            count: 0,
-        });
-        let mut out = TreeOut {
-            vertices: &mut self.vertices,
-            seeds: &mut self.seeds,
+/// The sinks of a seed wave: tree `i` reports into `buffers[i]`.
+struct TreeSinks<'a, 'f> {
+    buffers: &'a mut [TreeBuffers],
+    filter: Option<&'f dyn SeedFilter>,
+}
+
+impl<'f> WaveSinks for TreeSinks<'_, 'f> {
+    type Trail = SeedTrail;
+    type Pending = PendingConnection;
+    type Sink<'b>
+        = TreeOut<'b>
+    where
+        Self: 'b;
+
+    #[inline(always)]
+    fn sink(&mut self, tree: usize) -> TreeOut<'_> {
+        let b = &mut self.buffers[tree];
+        TreeOut {
+            vertices: &mut b.vertices,
+            seeds: &mut b.seeds,
             base: 0,
-            split: split.as_mut(),
-        };
-        let r = f(&mut out);
-        self.rest_count += split.map_or(0, |s| s.count);
-        r
+            filter: self.filter,
+            rest: &mut b.rest,
+            rest_count: &mut b.rest_count,
+        }
     }
 }
 
@@ -362,16 +351,14 @@ pub struct TreeSeeds<'a> {
     pub rest_count: u64,
 }
 
-/// [`trace`] (no `filter`) or [`trace_split`] for `starts.len()` path trees at once: the
-/// camera rays as one batch (marked coherent), then per bounce one batch of extension rays and
-/// one of shadow rays, as [`crate::entangled::trace_wavefront`] does, with the shading built
-/// from the compact hits by [`Scene::surface`] (the host's own surface code). Tree `i` starts
-/// from `starts[i]` = (its generator, its raster position). The seeds land in `store` tree by
-/// tree in the order of `starts`, each tree's trunk followed by nothing of another tree, so the
-/// store equals what the path-at-a-time calls in that order give, bit for bit; `each` is
-/// called for every tree in that order, after its seeds are stored.
+/// [`trace`] (no `filter`) or [`trace_split`] for `starts.len()` path trees at once, as ray
+/// batches ([`walk::run_wave`]). Tree `i` starts from `starts[i]` = (its generator, its raster
+/// position). The seeds land in `store` tree by tree in the order of `starts`, each tree's
+/// trunk followed by nothing of another tree, so the store equals what the path-at-a-time
+/// calls in that order give, bit for bit; `each` is called for every tree in that order,
+/// after its seeds are stored.
 #[allow(clippy::too_many_arguments)]
-pub fn trace_wavefront<S: SampleStream + Clone>(
+pub fn trace_wavefront<S: BranchStream>(
     scene: &Scene,
     tracer: &Tracer,
     settings: &PathSettings,
@@ -381,61 +368,25 @@ pub fn trace_wavefront<S: SampleStream + Clone>(
     store: &mut SeedStore,
     mut each: impl FnMut(TreeSeeds),
 ) {
+    debug_assert_eq!(settings.branches, 1, "seed trees do not split");
     let n = starts.len();
     if wf.buffers.len() < n {
         wf.buffers.resize_with(n, TreeBuffers::default);
     }
-    wf.trees.clear();
-    wf.active.clear();
-    for (i, (rng, raster)) in starts.iter().enumerate() {
-        let tree = Tree::start(scene, rng.clone(), *raster);
-        let buffers = &mut wf.buffers[i];
-        buffers.clear();
-        buffers.with_out(filter, |out| tree.begin(scene, out));
-        wf.trees.push(tree);
-        wf.active.push(i as u32);
-    }
-    let mut coherent = true;
-    while !wf.active.is_empty() {
-        wf.rays.clear();
-        wf.rays
-            .extend(wf.active.iter().map(|&i| wf.trees[i as usize].ray));
-        tracer.intersect_batch(&wf.rays, coherent, &mut wf.hits);
-        coherent = false;
-        wf.shadow_rays.clear();
-        wf.pending.clear();
-        let mut kept = 0;
-        for k in 0..wf.active.len() {
-            let i = wf.active[k] as usize;
-            let tree = &mut wf.trees[i];
-            let compact = wf.hits[k];
-            scene.prefetch_surfaces(&wf.hits, k);
-            let going = wf.buffers[i].with_out(filter, |out| {
-                if !compact.is_hit() {
-                    tree.escape(scene, out);
-                    return false;
-                }
-                let hit = scene.surface(&tree.ray, &compact);
-                let (going, pending) = tree.vertex(scene, settings, &hit, out);
-                if let Some(p) = pending {
-                    wf.shadow_rays.push(p.ray);
-                    wf.pending.push((i as u32, p));
-                }
-                going
-            });
-            if going {
-                wf.active[kept] = i as u32;
-                kept += 1;
-            }
-        }
-        wf.active.truncate(kept);
-        if !wf.shadow_rays.is_empty() {
-            tracer.occluded_batch(&wf.shadow_rays, &mut wf.blocked);
-            for (&(i, p), &b) in wf.pending.iter().zip(&wf.blocked) {
-                wf.buffers[i as usize].with_out(filter, |out| out.connect(p, b == 0));
-            }
-        }
-    }
+    wf.buffers[..n].iter_mut().for_each(TreeBuffers::clear);
+    let mut sinks = TreeSinks {
+        buffers: &mut wf.buffers[..n],
+        filter,
+    };
+    walk::run_wave(
+        scene,
+        tracer,
+        settings,
+        starts,
+        SeedTrail::new,
+        &mut wf.wave,
+        &mut sinks,
+    );
     for (i, buffers) in wf.buffers[..n].iter().enumerate() {
         store.samples += 1;
         let first_seed = store.seeds.len();
@@ -456,16 +407,39 @@ pub fn trace_wavefront<S: SampleStream + Clone>(
     }
 }
 
+/// What the seed sink keeps per tree beside the walker's state.
+#[derive(Clone, Debug)]
+pub struct SeedTrail {
+    raster: Vec2,
+    /// p of the trunk so far (in the target's measure), survival included.
+    density: f64,
+    /// Node types of the trunk (eye first), with room for a connection vertex and a light.
+    types: [NodeType; MAX_PATH_VERTICES + 1],
+}
+
+impl SeedTrail {
+    fn new(raster: Vec2) -> Self {
+        SeedTrail {
+            raster,
+            density: 1.0,
+            types: [NodeType::Eye; MAX_PATH_VERTICES + 1],
+        }
+    }
+}
+
 /// Where a tree's trunk and seeds go: `vertices` from index `base` on holds the trunk, `seeds`
-/// the stored seeds, and `split` (if any) takes the seeds its filter does not keep.
-struct TreeOut<'a, 'b> {
+/// the stored seeds; with a `filter`, the seeds it does not keep go to `rest` (and are
+/// counted in `rest_count`). The seed sink of the walker.
+pub struct TreeOut<'a> {
     vertices: &'a mut Vec<PathVertex>,
     seeds: &'a mut Vec<Seed>,
     base: usize,
-    split: Option<&'a mut SeedSplit<'b>>,
+    filter: Option<&'a dyn SeedFilter>,
+    rest: &'a mut SampleContributions,
+    rest_count: &'a mut u64,
 }
 
-impl TreeOut<'_, '_> {
+impl TreeOut<'_> {
     /// Trunk vertices so far (eye included).
     fn trunk_len(&self) -> usize {
         self.vertices.len() - self.base
@@ -480,33 +454,43 @@ impl TreeOut<'_, '_> {
         });
     }
 
-    /// Where a seed of type `types` goes: `true` to the store, `false` to the split's rest
-    /// (after adding its estimate there). Without a split every seed is stored.
+    /// Where a seed of type `types` goes: `true` to the store, `false` to the rest (after
+    /// adding its estimate there). Without a filter every seed is stored.
     fn route(&mut self, types: &[NodeType], layer: u32, estimate: Rgb) -> bool {
-        match &mut self.split {
+        match self.filter {
             None => true,
-            Some(s) if s.filter.keeps(types) => true,
-            Some(s) => {
-                s.count += 1;
-                s.rest.add(layer, estimate);
+            Some(f) if f.keeps(types) => true,
+            Some(_) => {
+                *self.rest_count += 1;
+                self.rest.add(layer, estimate);
                 false
             }
         }
     }
 
-    /// A light connection's shadow ray answered: a stored seed stays only if `visible` (it is
-    /// the tree's last seed: nothing is stored between a connection and its answer); a seed
-    /// for the split's rest goes there only if `visible`.
-    fn connect(&mut self, p: PendingConnection, visible: bool) {
-        if p.stored {
-            if !visible {
-                self.seeds.pop();
-            }
-        } else if visible {
-            if let Some(s) = &mut self.split {
-                s.count += 1;
-                s.rest.add(p.layer, p.estimate);
-            }
+    /// A seed of `technique` ending at the light vertex `light`.
+    #[allow(clippy::too_many_arguments)]
+    fn seed(
+        trail: &SeedTrail,
+        light: PathVertex,
+        connect: Option<(NodeType, u8)>,
+        estimate: Rgb,
+        layer: u32,
+        mis_weight: f32,
+        density: f64,
+        technique: Technique,
+    ) -> Seed {
+        Seed {
+            trunk: 0,
+            prefix: 0,
+            connect,
+            light,
+            raster: trail.raster,
+            estimate,
+            layer,
+            mis_weight,
+            density,
+            technique,
         }
     }
 }
@@ -514,20 +498,201 @@ impl TreeOut<'_, '_> {
 /// A light connection waiting for its shadow ray. Its seed, when stored, is stored at once
 /// (`stored`) and taken back if the ray is blocked, so the pending record stays small.
 #[derive(Clone, Copy, Debug)]
-struct PendingConnection {
-    ray: Ray,
+pub struct PendingConnection {
     stored: bool,
     layer: u32,
     estimate: Rgb,
 }
 
+impl PathSink for TreeOut<'_> {
+    type Trail = SeedTrail;
+    type Pending = PendingConnection;
+
+    /// Stores the eye vertex.
+    fn begin(&mut self, _: &mut SeedTrail, scene: &Scene, ray: &Ray) {
+        self.vertices
+            .push(PathVertex::eye(ray.origin, scene.camera.forward));
+    }
+
+    /// The trunk's density to the hit: the step's density (a Dirac step: the lobe's discrete
+    /// probability; the eye ray: 1) times the area Jacobian |n·ω|/d² of a smooth step.
+    #[inline]
+    fn arrive<S>(&mut self, trail: &mut SeedTrail, state: &WalkState<S>, hit: &SurfaceHit) {
+        trail.density *= match state.step {
+            Step::Eye => 1.0,
+            Step::Dirac(pdf) => pdf as f64,
+            Step::Smooth(pdf) => {
+                let d = hit.p - state.prev_p;
+                let d2 = d.length_squared() as f64;
+                pdf as f64 * (hit.ng.dot(d).abs() as f64 / (d2 * d2.sqrt()))
+            }
+        };
+    }
+
+    /// The emitter hit's seed.
+    fn emitted<S>(
+        &mut self,
+        trail: &mut SeedTrail,
+        state: &WalkState<S>,
+        hit: &SurfaceHit,
+        estimate: Rgb,
+        w: f32,
+    ) {
+        let count = self.trunk_len();
+        trail.types[count] = NodeType::Light;
+        if estimate.is_black() || !self.route(&trail.types[..=count], state.depth, estimate) {
+            return;
+        }
+        let light = PathVertex::from_hit(hit, NodeType::Light, 0);
+        let seed = Self::seed(
+            trail,
+            light,
+            None,
+            estimate,
+            state.depth,
+            w,
+            trail.density,
+            Technique::Hit,
+        );
+        self.push(count, seed);
+    }
+
+    /// The environment's seed: the escaped direction as a vertex at infinity.
+    fn escaped<S>(
+        &mut self,
+        trail: &mut SeedTrail,
+        state: &WalkState<S>,
+        scene: &Scene,
+        estimate: Rgb,
+        w: f32,
+    ) {
+        let Some(env) = scene.lights.environment_index() else {
+            return;
+        };
+        let density = match state.step {
+            Step::Eye => trail.density,
+            Step::Dirac(pdf) | Step::Smooth(pdf) => trail.density * pdf as f64,
+        };
+        let count = self.trunk_len();
+        trail.types[count] = NodeType::Light;
+        if estimate.is_black() || !self.route(&trail.types[..=count], state.depth, estimate) {
+            return;
+        }
+        let light = environment_vertex(&state.ray, env);
+        let seed = Self::seed(
+            trail,
+            light,
+            None,
+            estimate,
+            state.depth,
+            w,
+            density,
+            Technique::Escape,
+        );
+        self.push(count, seed);
+    }
+
+    /// Room for the scattering vertex and a light vertex after it.
+    #[inline]
+    fn has_room(&self) -> bool {
+        self.trunk_len() + 2 <= MAX_PATH_VERTICES
+    }
+
+    /// The trunk vertex; its node type is the BSDF sample's, set by [`PathSink::extended`].
+    fn scatter(&mut self, _: &mut SeedTrail, hit: &SurfaceHit) {
+        self.vertices
+            .push(PathVertex::from_hit(hit, NodeType::DiffuseReflection, 0));
+    }
+
+    /// The connection's seed, stored at once (and taken back if its shadow ray is blocked)
+    /// where the filter keeps it.
+    fn connect(&mut self, trail: &mut SeedTrail, c: &ConnectionEvent) -> Option<PendingConnection> {
+        let (f, w_over_pdf) = connection_bsdf(c.at, c.conn)?;
+        let conn = c.conn;
+        // The light's own density in the target's measure: area density on an area light,
+        // else what next-event estimation divides by.
+        let p_light = if c.light.kind == LightKind::Area {
+            c.light.pdf
+        } else {
+            conn.pdf
+        };
+        let estimate = c.beta * f * conn.radiance * (conn.wi_local.z.abs() * w_over_pdf);
+        // The weight itself, for the seed (≤ 1 although the product rounds).
+        let w = (w_over_pdf * conn.pdf).min(1.0);
+        if estimate.is_black() {
+            return None;
+        }
+        // The scattering vertex is the trunk's last.
+        let count = self.trunk_len() - 1;
+        let class = connection_class(
+            self.filter,
+            c.bsdf,
+            c.shading,
+            conn.wi_local,
+            &mut trail.types[..count + 2],
+        );
+        if let Some(connect) = class {
+            let light = light_vertex(c.scene, c.light, c.hit.p);
+            let density = trail.density * p_light as f64;
+            let seed = Self::seed(
+                trail,
+                light,
+                Some(connect),
+                estimate,
+                c.depth,
+                w,
+                density,
+                Technique::Connection,
+            );
+            self.push(count + 1, seed);
+        }
+        Some(PendingConnection {
+            stored: class.is_some(),
+            layer: c.depth,
+            estimate,
+        })
+    }
+
+    /// The survival probability enters the trunk's density; the BSDF sample's node type and
+    /// component become the trunk vertex's.
+    fn extended(&mut self, trail: &mut SeedTrail, bsdf: &Bsdf, extension: &Extension) {
+        if let Some(t) = extension.survived {
+            trail.density *= 1.0 - t as f64;
+        }
+        if let Some((node, u)) = extension.sampled {
+            // `Bsdf::sample` chooses the component with the pair's first number.
+            let (component, _) = bsdf.choose_component(u);
+            let count = self.trunk_len() - 1;
+            if let Some(v) = self.vertices.last_mut() {
+                v.node = node;
+                v.component = component as u8;
+            }
+            trail.types[count] = node;
+        }
+    }
+
+    /// A stored seed stays only if `visible` (it is the tree's last seed: nothing is stored
+    /// between a connection and its answer); a seed for the rest goes there only if
+    /// `visible`.
+    fn answered(&mut self, _: &Scene, p: PendingConnection, visible: bool) {
+        if p.stored {
+            if !visible {
+                self.seeds.pop();
+            }
+        } else if visible && self.filter.is_some() {
+            *self.rest_count += 1;
+            self.rest.add(p.layer, p.estimate);
+        }
+    }
+}
+
 /// The class of a light connection from the trunk's last vertex, `types[types.len() − 2]`,
 /// decided before its shadow ray: `Some` with the node type and component to store the vertex
-/// with ([`connection_node`]), or `None` when the split's filter does not keep it. The
+/// with ([`connection_node`]), or `None` when the filter does not keep it. The
 /// most-scattering component is only looked for when the seed is stored or when the filter's
 /// answer depends on which smooth component's type the vertex gets.
 fn connection_class(
-    split: Option<&SeedSplit>,
+    filter: Option<&dyn SeedFilter>,
     bsdf: &Bsdf,
     shading: &Shading,
     wi: Vec3,
@@ -535,13 +700,13 @@ fn connection_class(
 ) -> Option<(NodeType, u8)> {
     let n = types.len();
     types[n - 1] = NodeType::Light;
-    if let Some(s) = split {
+    if let Some(filter) = filter {
         // The filter's answer for each type a smooth component can give the vertex.
         let mut answer = None;
         let mut agree = true;
         for (c, _) in bsdf.components().filter(|(c, _)| !c.is_delta()) {
             types[n - 2] = c.node_type(shading.wo, wi);
-            let keeps = s.filter.keeps(types);
+            let keeps = filter.keeps(types);
             agree &= answer.is_none_or(|a| a == keeps);
             answer = Some(keeps);
         }
@@ -552,286 +717,8 @@ fn connection_class(
         } else {
             let node = connection_node(bsdf, shading.wo, wi);
             types[n - 2] = node.0;
-            return s.filter.keeps(types).then_some(node);
+            return filter.keeps(types).then_some(node);
         }
     }
     Some(connection_node(bsdf, shading.wo, wi))
-}
-
-/// One entangled path tree being split into seeds: the locals of the sampler between two
-/// bounces.
-#[derive(Clone, Debug)]
-struct Tree<S> {
-    rng: S,
-    raster: Vec2,
-    ray: Ray,
-    beta: Rgb,
-    /// p of the trunk so far, survival included.
-    density: f64,
-    inside: Option<Rgb>,
-    depth: u32,
-    physical: u32,
-    step: Step,
-    prev_p: Vec3,
-    /// Product of η'² over the refractions so far (as `entangled::trace`).
-    eta2: f32,
-    last: bool,
-    /// Node types of the trunk (eye first), with room for a connection vertex and a light.
-    types: [NodeType; MAX_PATH_VERTICES + 1],
-}
-
-impl<S: SampleStream> Tree<S> {
-    fn start(scene: &Scene, rng: S, raster: Vec2) -> Self {
-        let ray = scene.camera.generate_ray(raster);
-        Tree {
-            rng,
-            raster,
-            ray,
-            beta: Rgb::ONE,
-            density: 1.0,
-            inside: None,
-            depth: 0,
-            physical: 0,
-            step: Step::Eye,
-            prev_p: ray.origin,
-            eta2: 1.0,
-            last: false,
-            types: [NodeType::Eye; MAX_PATH_VERTICES + 1],
-        }
-    }
-
-    /// Stores the eye vertex.
-    fn begin(&self, scene: &Scene, out: &mut TreeOut) {
-        out.vertices
-            .push(PathVertex::eye(self.ray.origin, scene.camera.forward));
-    }
-
-    /// The ray escaped: the environment's seed, MIS-weighted against its light sample.
-    fn escape(&mut self, scene: &Scene, out: &mut TreeOut) {
-        let ray = self.ray;
-        let le = scene.lights.environment_radiance(ray.dir);
-        let Some(env) = scene.lights.environment_index() else {
-            return;
-        };
-        if le.is_black() {
-            return;
-        }
-        let (w, p) = match self.step {
-            Step::Eye => (1.0, self.density),
-            Step::Dirac(pdf) => (1.0, self.density * pdf as f64),
-            Step::Smooth(pdf) => (
-                power_heuristic(pdf, scene.lights.pdf_environment(ray.dir)),
-                self.density * pdf as f64,
-            ),
-        };
-        let estimate = self.beta * le * w;
-        let count = out.trunk_len();
-        self.types[count] = NodeType::Light;
-        if estimate.is_black() || !out.route(&self.types[..=count], self.depth, estimate) {
-            return;
-        }
-        let light = environment_vertex(&ray, env);
-        let seed = Seed {
-            trunk: 0,
-            prefix: 0,
-            connect: None,
-            light,
-            raster: self.raster,
-            estimate,
-            layer: self.depth,
-            mis_weight: w,
-            density: p,
-            technique: Technique::Escape,
-        };
-        out.push(count, seed);
-    }
-
-    /// The sampler's step at `hit`: its emission seed, its light connection (returned with the
-    /// shadow ray that decides it, not traced here) and its BSDF sample. Returns whether the
-    /// tree goes on (with `self.ray`).
-    fn vertex(
-        &mut self,
-        scene: &Scene,
-        settings: &PathSettings,
-        hit: &SurfaceHit,
-        out: &mut TreeOut,
-    ) -> (bool, Option<PendingConnection>) {
-        let count = out.trunk_len();
-        if let Some(sigma) = self.inside.take() {
-            self.beta *= volume::transmittance(sigma, hit.t);
-        }
-        let wo_world = -self.ray.dir;
-        self.density *= match self.step {
-            Step::Eye => 1.0,
-            Step::Dirac(pdf) => pdf as f64,
-            Step::Smooth(pdf) => {
-                let d = hit.p - self.prev_p;
-                let d2 = d.length_squared() as f64;
-                pdf as f64 * (hit.ng.dot(d).abs() as f64 / (d2 * d2.sqrt()))
-            }
-        };
-
-        if hit.emitter >= 0 {
-            let le = scene.lights.emitted(hit.emitter as usize, hit.p, wo_world);
-            if !le.is_black() {
-                let w = match self.step {
-                    Step::Eye | Step::Dirac(_) => 1.0,
-                    Step::Smooth(pdf) => {
-                        let pdf_light = area_to_solid_angle(
-                            scene.lights.pdf_area(hit.emitter as usize),
-                            self.prev_p,
-                            hit.p,
-                            hit.ng,
-                        );
-                        power_heuristic(pdf, pdf_light)
-                    }
-                };
-                let estimate = self.beta * le * w;
-                self.types[count] = NodeType::Light;
-                if !estimate.is_black() && out.route(&self.types[..=count], self.depth, estimate) {
-                    let seed = Seed {
-                        trunk: 0,
-                        prefix: 0,
-                        connect: None,
-                        light: PathVertex::from_hit(hit, NodeType::Light, 0),
-                        raster: self.raster,
-                        estimate,
-                        layer: self.depth,
-                        mis_weight: w,
-                        density: self.density,
-                        technique: Technique::Hit,
-                    };
-                    out.push(count, seed);
-                }
-            }
-        }
-        if self.last {
-            return (false, None);
-        }
-
-        let bsdf = scene.bsdf(hit);
-        let next_depth = if self.depth == 0 && bsdf.is_delta() {
-            0
-        } else {
-            self.depth + 1
-        };
-        // Room for this vertex and a light vertex after it.
-        if next_depth > settings.path_depth || count + 2 > MAX_PATH_VERTICES {
-            return (false, None);
-        }
-        self.depth = next_depth;
-        self.physical += 1;
-        let shading = Shading::new(hit, wo_world);
-        // Its node type is the BSDF sample's, set below.
-        out.vertices
-            .push(PathVertex::from_hit(hit, NodeType::DiffuseReflection, 0));
-
-        let rng = &mut self.rng;
-        let mut pending = None;
-        if bsdf.has_non_delta() {
-            rng.seek(self.physical, SLOT_LIGHT);
-            let u_light = rng.uniform2();
-            if let Some(ls) = light_sample(scene, &bsdf, hit, &shading, u_light) {
-                if let Some((conn, shadow)) = light_connection(scene, hit, &shading, &ls) {
-                    if let Some((f, w_over_pdf)) = connection_bsdf(&bsdf.at(shading.wo), &conn) {
-                        // The light's own density in the target's measure: area density on an
-                        // area light, else what next-event estimation divides by.
-                        let p_light = if ls.kind == LightKind::Area {
-                            ls.pdf
-                        } else {
-                            conn.pdf
-                        };
-                        let estimate =
-                            self.beta * f * conn.radiance * (conn.wi_local.z.abs() * w_over_pdf);
-                        // The weight itself, for the seed (≤ 1 although the product rounds).
-                        let w = (w_over_pdf * conn.pdf).min(1.0);
-                        if !estimate.is_black() {
-                            let class = connection_class(
-                                out.split.as_deref(),
-                                &bsdf,
-                                &shading,
-                                conn.wi_local,
-                                &mut self.types[..count + 2],
-                            );
-                            if let Some(connect) = class {
-                                let seed = Seed {
-                                    trunk: 0,
-                                    prefix: 0,
-                                    connect: Some(connect),
-                                    light: light_vertex(scene, &ls, hit.p),
-                                    raster: self.raster,
-                                    estimate,
-                                    layer: self.depth,
-                                    mis_weight: w,
-                                    density: self.density * p_light as f64,
-                                    technique: Technique::Connection,
-                                };
-                                out.push(count + 1, seed);
-                            }
-                            pending = Some(PendingConnection {
-                                ray: shadow.ray(hit),
-                                stored: class.is_some(),
-                                layer: self.depth,
-                                estimate,
-                            });
-                        }
-                    }
-                }
-            }
-        }
-
-        // As in the entangled sampler: the BSDF sample is traced for emission also where the
-        // path cannot go on.
-        let t = if self.depth > 0 {
-            // The same decision as `entangled::trace` (same random stream, same throughput).
-            settings.termination.probability_with_throughput(
-                self.depth,
-                bsdf.albedo(),
-                self.beta.max_component() * self.eta2,
-            )
-        } else {
-            0.0
-        };
-        self.last = t >= 1.0 || self.physical >= settings.max_ray_depth;
-        if !self.last && t > 0.0 {
-            rng.seek(self.physical, SLOT_ROULETTE);
-            if rng.uniform() < t {
-                return (false, pending);
-            }
-            self.beta /= 1.0 - t;
-            self.density *= 1.0 - t as f64;
-        }
-
-        rng.seek(self.physical, SLOT_BSDF);
-        let u_lobe = rng.uniform();
-        let u = rng.uniform2();
-        let Some(s) = bsdf.sample(shading.wo, u_lobe, u) else {
-            return (false, pending);
-        };
-        // `Bsdf::sample` chooses the component with the pair's first number.
-        let (component, _) = bsdf.choose_component(u.x);
-        if let Some(v) = out.vertices.last_mut() {
-            v.node = s.node;
-            v.component = component as u8;
-        }
-        self.types[count] = s.node;
-        let wi_world = shading.frame.to_world(s.wi);
-        if !side_consistent(hit, wi_world, s.wi) {
-            return (false, pending);
-        }
-        self.beta *= s.f * (s.wi.z.abs() / s.pdf);
-        if self.beta.is_black() {
-            return (false, pending);
-        }
-        self.eta2 *= s.eta * s.eta;
-        self.step = if s.delta {
-            Step::Dirac(s.pdf)
-        } else {
-            Step::Smooth(s.pdf)
-        };
-        self.prev_p = hit.p;
-        self.inside = volume::entered(scene.material(hit), hit.ng, wi_world);
-        self.ray = hit.spawn_ray(wi_world);
-        (true, pending)
-    }
 }

@@ -1,4 +1,5 @@
-//! Per-vertex shading helpers shared by both samplers.
+//! Per-vertex shading helpers of the path samplers: the shading frame, light samples and their
+//! connections, and the value of a connection.
 
 use flowlight_core::bsdf::{Bsdf, BsdfAt};
 use flowlight_core::geometry::{Frame, Ray, SurfaceHit};
@@ -9,7 +10,7 @@ use flowlight_sdk::{Scene, Tracer};
 use glam::{Vec2, Vec3};
 
 /// The shading frame at a hit and the outgoing direction in it.
-pub(crate) struct Shading {
+pub struct Shading {
     pub frame: Frame,
     pub wo: Vec3,
 }
@@ -55,7 +56,7 @@ pub(crate) fn side_consistent(hit: &SurfaceHit, w_world: Vec3, w_local: Vec3) ->
 
 /// An unoccluded light sample as seen from a hit.
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct Connection {
+pub struct Connection {
     pub wi_local: Vec3,
     /// Radiance arriving along −wi (area, environment), I/d² (point, spot) or the irradiance
     /// at normal incidence (directional).

@@ -194,6 +194,11 @@ pub fn trace<S: SampleStream>(
             }
         }
 
+        // `max_ray_depth` scattering events have been made: this hit may only end the path
+        // on an emitter (above), as the entangled sampler's last BSDF sample does.
+        if physical >= settings.max_ray_depth {
+            return none;
+        }
         physical += 1;
         let shading = Shading::new(&hit, wo_world);
         let (c, _p_select) = bsdf.choose_component(rng.uniform());
@@ -241,9 +246,6 @@ pub fn trace<S: SampleStream>(
             beta /= 1.0 - t;
         }
 
-        if physical >= settings.max_ray_depth {
-            return none;
-        }
         let Some(s) = component.sample_with(shading.wo, rng.uniform(), rng.uniform2()) else {
             return none;
         };

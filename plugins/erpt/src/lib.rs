@@ -76,13 +76,13 @@ use flowlight_core::sobol::SobolSampler;
 use flowlight_core::Rgb;
 use flowlight_pathtrace::sampler::{sample_start, PixelSampler, SamplerKind};
 use flowlight_pathtrace::seeds::{self, SeedFilter, SeedStore, SeedWavefront};
+use flowlight_pathtrace::walk::units;
 use flowlight_pathtrace::{entangled, untangled, SampleContributions};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::{
     export_integrator, AccumulationStyle, Film, Integrator, IntegratorInfo, MutationSet, Params,
     Scene, Stats, StatsBuilder, Tracer, WorkUnit, MAX_MUTATIONS,
 };
-use glam::Vec2;
 use settings::{ErptSettings, QuantumScope, SeedKind};
 use std::cell::RefCell;
 use std::time::Instant;
@@ -288,9 +288,7 @@ impl Erpt {
             let filter: Option<&dyn SeedFilter> = self
                 .splits_while_tracing()
                 .then_some(&self.settings.part as &dyn SeedFilter);
-            let mut starts = Vec::with_capacity(SEED_WAVE);
-            let mut wave = Vec::with_capacity(SEED_WAVE);
-            let mut flush = |starts: &mut Vec<_>, wave: &mut Vec<(u32, u32, u32)>| {
+            units::for_each_wave::<S>(seed, pixels, samples, SEED_WAVE, |starts, wave| {
                 let (store, keys) = (&mut out.store, &mut out.keys);
                 seeds::trace_wavefront(
                     &self.scene,
@@ -301,7 +299,7 @@ impl Erpt {
                     wf,
                     store,
                     |tree| {
-                        let (x, y, s) = wave[tree.index];
+                        let units::SampleKey { x, y, s } = wave[tree.index];
                         keys.push(SampleKey {
                             x,
                             y,
@@ -313,21 +311,7 @@ impl Erpt {
                         }
                     },
                 );
-                starts.clear();
-                wave.clear();
-            };
-            for (x, y) in pixels {
-                for s in samples.clone() {
-                    starts.push(sample_start::<S>(seed, x, y, s));
-                    wave.push((x, y, s));
-                    if starts.len() == SEED_WAVE {
-                        flush(&mut starts, &mut wave);
-                    }
-                }
-            }
-            if !starts.is_empty() {
-                flush(&mut starts, &mut wave);
-            }
+            });
         })
     }
 
@@ -361,39 +345,29 @@ impl Erpt {
         let (mut samples, mut deposits, mut skipped) = (0u64, 0u64, 0u64);
         S::with_mcpt_wave(|(wf, out)| {
             out.resize_with(SEED_WAVE, SampleContributions::default);
-            let mut starts = Vec::with_capacity(SEED_WAVE);
-            let mut pixels = Vec::with_capacity(SEED_WAVE);
-            let mut flush = |starts: &mut Vec<(S, Vec2)>, pixels: &mut Vec<(u32, u32)>| {
-                let out = &mut out[..starts.len()];
-                entangled::trace_wavefront(
-                    &self.scene,
-                    tracer,
-                    &self.settings.seeds,
-                    starts,
-                    wf,
-                    out,
-                );
-                for (&(x, y), c) in pixels.iter().zip(out.iter()) {
-                    deposit_at_pixel(film, x, y, c, &mut deposits, &mut skipped);
-                }
-                samples += starts.len() as u64;
-                starts.clear();
-                pixels.clear();
-            };
-            for y in unit.y0..unit.y1 {
-                for x in unit.x0..unit.x1 {
-                    for s in unit.sample_begin..unit.sample_begin + unit.sample_count {
-                        starts.push(sample_start::<S>(unit.seed, x, y, s));
-                        pixels.push((x, y));
-                        if starts.len() == SEED_WAVE {
-                            flush(&mut starts, &mut pixels);
-                        }
+            let sample_range = unit.sample_begin..unit.sample_begin + unit.sample_count;
+            let pixels = units::unit_pixels(unit);
+            units::for_each_wave::<S>(
+                unit.seed,
+                pixels,
+                sample_range,
+                SEED_WAVE,
+                |starts, keys| {
+                    let out = &mut out[..starts.len()];
+                    entangled::trace_wavefront(
+                        &self.scene,
+                        tracer,
+                        &self.settings.seeds,
+                        starts,
+                        wf,
+                        out,
+                    );
+                    for (key, c) in keys.iter().zip(out.iter()) {
+                        deposit_at_pixel(film, key.x, key.y, c, &mut deposits, &mut skipped);
                     }
-                }
-            }
-            if !starts.is_empty() {
-                flush(&mut starts, &mut pixels);
-            }
+                    samples += starts.len() as u64;
+                },
+            );
         });
         let c = &self.counters;
         stats.add(c.seed_seconds, start.elapsed().as_secs_f64());

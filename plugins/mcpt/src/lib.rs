@@ -37,13 +37,13 @@ use flowlight_core::rng::Rng;
 use flowlight_core::sobol::SobolSampler;
 use flowlight_core::Rgb;
 use flowlight_pathtrace::sampler::{sample_start, PixelSampler, SamplerKind};
+use flowlight_pathtrace::walk::units;
 use flowlight_pathtrace::{entangled, untangled, PathSettings, SampleContributions, Variant};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::{
     export_integrator, param, Film, Integrator, IntegratorInfo, MutationSet, ParamKind, Params,
     Scene, Stats, StatsBuilder, Tracer, WorkUnit,
 };
-use glam::Vec2;
 
 pub struct Mcpt {
     scene: Scene<'static>,
@@ -211,33 +211,29 @@ impl Mcpt {
         film: &mut Film,
     ) -> Result<(), String> {
         let mut wf = entangled::Wavefront::<S>::default();
-        let n = self.wavefront;
-        let mut starts = Vec::with_capacity(n);
-        let mut pixels = Vec::with_capacity(n);
-        let mut out = vec![SampleContributions::default(); n];
-        let mut flush = |starts: &mut Vec<(S, Vec2)>, pixels: &mut Vec<(u32, u32)>| {
-            let out = &mut out[..starts.len()];
-            entangled::trace_wavefront(&self.scene, tracer, &self.settings, starts, &mut wf, out);
-            for (&(x, y), c) in pixels.iter().zip(out.iter()) {
-                deposit(film, x, y, c, self.layers);
-            }
-            starts.clear();
-            pixels.clear();
-        };
-        for y in unit.y0..unit.y1 {
-            for x in unit.x0..unit.x1 {
-                for s in unit.sample_begin..unit.sample_begin + unit.sample_count {
-                    starts.push(sample_start::<S>(unit.seed, x, y, s));
-                    pixels.push((x, y));
-                    if starts.len() == n {
-                        flush(&mut starts, &mut pixels);
-                    }
+        let mut out = vec![SampleContributions::default(); self.wavefront];
+        let samples = unit.sample_begin..unit.sample_begin + unit.sample_count;
+        let pixels = units::unit_pixels(unit);
+        units::for_each_wave::<S>(
+            unit.seed,
+            pixels,
+            samples,
+            self.wavefront,
+            |starts, keys| {
+                let out = &mut out[..starts.len()];
+                entangled::trace_wavefront(
+                    &self.scene,
+                    tracer,
+                    &self.settings,
+                    starts,
+                    &mut wf,
+                    out,
+                );
+                for (key, c) in keys.iter().zip(out.iter()) {
+                    deposit(film, key.x, key.y, c, self.layers);
                 }
-            }
-        }
-        if !starts.is_empty() {
-            flush(&mut starts, &mut pixels);
-        }
+            },
+        );
         Ok(())
     }
 }

@@ -132,3 +132,6 @@ pub struct Walker<S, T> {
     pub state: WalkState<S>,
     pub trail: T,
 }
+
+#[cfg(test)]
+mod tests;

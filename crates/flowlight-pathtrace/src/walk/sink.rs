@@ -63,8 +63,7 @@ pub trait PathSink {
 
     /// The path reached `hit` by `state.step` from `state.prev_p` (before its emission).
     #[inline(always)]
-    fn arrive<S>(&mut self, _trail: &mut Self::Trail, _state: &WalkState<S>, _hit: &SurfaceHit) {
-    }
+    fn arrive<S>(&mut self, _trail: &mut Self::Trail, _state: &WalkState<S>, _hit: &SurfaceHit) {}
 
     /// Emission found at `hit`: its estimate β L_e w and MIS weight `w`, at `state.depth`.
     fn emitted<S>(

@@ -181,11 +181,27 @@ pub fn run_single<S: BranchStream, K: PathSink>(
     };
     sink.begin(&mut path.trail, scene, &ray);
     let mut branches = Vec::new();
-    walk(scene, tracer, settings, &mut path, sink, shadows, &mut branches);
+    walk(
+        scene,
+        tracer,
+        settings,
+        &mut path,
+        sink,
+        shadows,
+        &mut branches,
+    );
     // A path splits once, at its first lighting vertex, so branches do not split again.
     let mut none = Vec::new();
     for mut branch in branches {
-        walk(scene, tracer, settings, &mut branch, sink, shadows, &mut none);
+        walk(
+            scene,
+            tracer,
+            settings,
+            &mut branch,
+            sink,
+            shadows,
+            &mut none,
+        );
         debug_assert!(none.is_empty());
     }
     path.state.rng
