@@ -1,4 +1,4 @@
-//! ERPT's entangled seeds and the MCPT/ERPT split (issue 9): every seed's estimate is its MIS
+//! ERPT's entangled seeds and the MCPT/ERPT split: every seed's estimate is its MIS
 //! weight times f/p with the chains' own target function, the seeds of a path tree sum to the
 //! entangled path tracer's estimate, and ERPT with entangled seeds, and with each split, is
 //! unbiased (per-region z-tests against MCPT or the exact furnace), and keeps red and blue
@@ -343,6 +343,91 @@ fn the_seed_wavefront_stores_what_path_at_a_time_tracing_stores() {
 
 /// Runs `f` with each scene of the seed-tracing tests (the Cornell box and the glass caustic at
 /// 32², the satin sun-and-sky scene), a tracer for it and the default path settings.
+/// MCPT's contributions and ERPT's entangled seeds come from one walker step
+/// (`flowlight_pathtrace::walk`): for every camera sample, the seeds' (layer, estimate) in
+/// order are MCPT's (layer, contribution) in order, bit for bit, path at a time and as a
+/// wavefront, with independent and Sobol' numbers.
+#[test]
+fn seeds_and_mcpt_contributions_are_equal_path_by_path() {
+    use flowlight_core::sobol::SobolSampler;
+    use flowlight_pathtrace::sampler::{sample_start, PixelSampler};
+    fn check<S: PixelSampler>(
+        config: &str,
+        scene: &Scene,
+        tracer: &Tracer,
+        settings: &PathSettings,
+    ) -> usize {
+        let mut store = SeedStore::default();
+        let mut contributions = SampleContributions::default();
+        let starts: Vec<(S, glam::Vec2)> = (0..1024u32)
+            .map(|i| sample_start::<S>(11, i % 32, (i / 32) % 32, i / 1024))
+            .collect();
+        let mut wave = vec![SampleContributions::default(); starts.len()];
+        let mut wf = entangled::Wavefront::<S>::default();
+        entangled::trace_wavefront(scene, tracer, settings, &starts, &mut wf, &mut wave);
+        let mut seed_wf = seeds::SeedWavefront::<S>::default();
+        let mut wave_seeds = SeedStore::default();
+        let mut firsts = Vec::new();
+        seeds::trace_wavefront(
+            scene,
+            tracer,
+            settings,
+            &starts,
+            None,
+            &mut seed_wf,
+            &mut wave_seeds,
+            |t| firsts.push(t.first_seed),
+        );
+        firsts.push(wave_seeds.seeds.len());
+        let mut compared = 0;
+        for (i, (rng, raster)) in starts.iter().enumerate() {
+            store.clear();
+            seeds::trace(
+                scene,
+                tracer,
+                settings,
+                &mut rng.clone(),
+                *raster,
+                &mut store,
+            );
+            contributions.clear();
+            entangled::trace(scene, tracer, settings, rng, *raster, &mut contributions);
+            let seeds: Vec<(u32, Rgb)> =
+                store.seeds.iter().map(|s| (s.layer, s.estimate)).collect();
+            let bits = |v: &[(u32, Rgb)]| -> Vec<(u32, [u32; 3])> {
+                v.iter()
+                    .map(|(l, c)| (*l, [c.r.to_bits(), c.g.to_bits(), c.b.to_bits()]))
+                    .collect()
+            };
+            assert_eq!(
+                bits(&seeds),
+                bits(&contributions.entries),
+                "{config}: sample {i}"
+            );
+            assert_eq!(
+                bits(&wave[i].entries),
+                bits(&contributions.entries),
+                "{config}: wave {i}"
+            );
+            let wave_seeds: Vec<(u32, Rgb)> = wave_seeds.seeds[firsts[i]..firsts[i + 1]]
+                .iter()
+                .map(|s| (s.layer, s.estimate))
+                .collect();
+            assert_eq!(bits(&wave_seeds), bits(&seeds), "{config}: seed wave {i}");
+            compared += seeds.len();
+        }
+        compared
+    }
+    for_seed_scenes("equal", |config, scene, tracer, settings| {
+        let mut settings = settings.clone();
+        // Seeds store their paths: at most 32 scattering vertices.
+        settings.max_ray_depth = 32;
+        let n = check::<Rng>(config, scene, tracer, &settings)
+            + check::<SobolSampler>(config, scene, tracer, &settings);
+        assert!(n > 500, "{config}: only {n} contributions compared");
+    });
+}
+
 fn for_seed_scenes(tag: &str, mut f: impl FnMut(&str, &Scene, &Tracer, &PathSettings)) {
     for config in [
         "cornell-box/cornell-box.toml",
