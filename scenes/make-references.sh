@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Renders the committed references scenes/<scene>/reference/<scene>.exr of the benchmark
-# suites (scenes/suite.toml, scenes/suite-erpt.toml): once, long, with the most efficient MCPT
+# suites (scenes/suite.toml, scenes/experiments/*.toml): once, long, with the most efficient MCPT
 # configuration per scene (docs/results.md), at the suites' 128x128 and each scene's
 # path_depth, with lighting layers, as two independent halves (seeds 1000000 and 1000001)
 # whose difference gives the variance layer and the floor (docs/bench.md). The EXR metadata
@@ -11,7 +11,7 @@
 #
 # FLOWLIGHT (default target/debug/flowlight) and THREADS (default 2) can be set. The
 # committed files were made with BUDGET=spp (the table's spp: a floor of about 1/30 of the
-# best MCPT relMSE at 8 s; release build, 2 threads; docs/results.md lists spp, wall time and
+# best MCPT relMSE at 8 s; release build, 2 threads; docs/results.md lists spp and
 # floor per scene). The default BUDGET=time renders each scene's wall-time budget instead
 # (split over the two halves), for a quick look; such references are too short for the floor
 # rule against ERPT. Then commit the new files.

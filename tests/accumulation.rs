@@ -1,4 +1,4 @@
-//! The accumulation styles on real renders (issue 13): every style, thread count and cache
+//! The accumulation styles on real renders (thesis §5.9): every style, thread count and cache
 //! size gives the same bits in exact precision, for ERPT (flanged, with and without lighting
 //! layers) and MCPT; f32 precision agrees to rounding; the host's choice and the config's
 //! errors.

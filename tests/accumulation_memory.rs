@@ -1,7 +1,8 @@
-//! Caching never holds more than its cap (issue 13): a counting global allocator watches
-//! every byte this test binary allocates while four threads deposit chain-like streams over
-//! a whole 1080p-wide film with eight lighting layers, touching far more micro-tiles than
-//! the cap holds. One test per binary, so no other test's allocations are counted.
+//! Caching never holds more than its cap (docs/config.md, "Accumulation"): a counting global
+//! allocator watches every byte this test binary allocates while four threads deposit
+//! chain-like streams over a whole 1080p-wide film with eight lighting layers, touching far
+//! more micro-tiles than the cap holds. One test per binary, so no other test's allocations are
+//! counted.
 
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;

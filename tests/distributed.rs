@@ -1,4 +1,4 @@
-//! Distributed renders (issue 14, docs/distributed.md): `render --part/--samples` and
+//! Distributed renders (docs/distributed.md): `render --part/--samples` and
 //! `flowlight merge`, run as a user would, and the recipes under docs/distributed/.
 
 mod common;

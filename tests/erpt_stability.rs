@@ -1,7 +1,7 @@
-//! ERPT on hard cases (issue 5, MCMC part): chains that meet zero densities, corner traps
-//! (y₁ and x₂ on the same surface), and seeds of 1e30 and of overflowing energy. No NaN or
-//! infinity may reach the image, no invalid state may be deposited, and what was thrown away
-//! is counted.
+//! ERPT on hard cases (the MCMC part of the stability suite): chains that meet zero densities,
+//! corner traps (y₁ and x₂ on the same surface), and seeds of 1e30 and of overflowing energy.
+//! No NaN or infinity may reach the image, no invalid state may be deposited, and what was
+//! thrown away is counted.
 
 mod common;
 

@@ -1,4 +1,4 @@
-//! Issue 12: nothing a user gives the renderer crashes it or destroys their files. One test
+//! Hardening: nothing a user gives the renderer crashes it or destroys their files. One test
 //! per item, each a table of inputs and the message or behaviour expected, run through the
 //! `flowlight` binary as a user would. Every scene is copied into a scratch folder first, so
 //! that a regression overwrites a copy, never the repository's scenes.

@@ -1,4 +1,4 @@
-//! Numerical stability on the scenes that break renderers (issue 5): scale and translation,
+//! Numerical stability on the scenes that break renderers: scale and translation,
 //! self-intersection acne, grazing angles, degenerate geometry and extreme materials and
 //! lights, glass in a furnace (total internal reflection), and mirror chains against the
 //! lighting depth. Every check compares with an analytic value or with an equivalent scene,

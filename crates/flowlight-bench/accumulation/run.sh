@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The accumulation benchmarks of docs/performance.md ("Accumulation styles"), from the
+# The accumulation benchmarks of docs/performance.md ("Accumulation, threads and seams"), from the
 # release build (cargo build --release --workspace):
 #
 #   crates/flowlight-bench/accumulation/run.sh memory  [THREADS...]   # default 1 2 8 16

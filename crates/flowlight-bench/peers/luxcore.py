@@ -3,7 +3,7 @@
 sampler, and with its plain random sampler) on the glass caustic, at equal wall time:
 relMSE against the committed reference and efficiency 1/(relMSE x wall time), as ratios to
 Flowlight's best MCPT on that scene (entangled, `expo`), printed as a markdown table
-(docs/results.md, "LuxCore on the glass caustic").
+(docs/results.md, "ERPT against LuxCore's Metropolis").
 
 Run `setup-luxcore.sh` once (a venv with pyluxcore 2.11.2 from PyPI, pinned by hash), build
 the release binaries (`cargo build --release --workspace`), then, from anywhere:
@@ -28,7 +28,7 @@ What it does:
      refuses the comparison when that floor exceeds 1/10 of the smallest relMSE compared;
   3. each round (one per seed) renders, one after the other in an order that alternates
      between rounds: Flowlight's ERPT default (scenes/glass-caustic/erpt.toml), Flowlight's
-     entangled `expo` MCPT (the best MCPT of issue 9's runs), LuxCore Metropolis, LuxCore
+     entangled `expo` MCPT (the best MCPT on this scene), LuxCore Metropolis, LuxCore
      random, each for --seconds of wall time with --threads threads;
   4. compares every image with the reference (`flowlight compare`: relMSE, mean luminance
      ratio), checks that every renderer's mean luminance is within 1% of the reference's

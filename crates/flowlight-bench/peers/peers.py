@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Flowlight MCPT side by side with Mitsuba 3 (`llvm_ad_rgb`, `scalar_rgb`): CPU time per
 sample, wall time, relMSE x spp and efficiency 1/(relMSE x time), as ratios to Flowlight,
-printed as a markdown table (docs/performance.md, "Peers").
+printed as a markdown table (docs/performance.md, "Peers: Mitsuba 3").
 
 Run `setup.sh` once (venv with Mitsuba 3.9.1, Debian's libllvm19), build the release binary
 (`cargo build --release -p flowlight -p flowlight-mcpt`), then, from anywhere:

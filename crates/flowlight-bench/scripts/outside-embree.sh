@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Issue 10's third figure: the share of an MCPT render of the Stanford dragon that is spent
-# outside Embree's ray queries (target ≤ 40%). One render thread (`dragon.toml`, 480×320,
+# Performance target 3 (docs/performance.md): the share of an MCPT render of the Stanford
+# dragon that is spent outside Embree's ray queries (target ≤ 40%). One render thread (`dragon.toml`, 480×320,
 # 8 spp), sampled by `perf record -F 999`; a render thread's samples are split by library:
 # libembree4 (the ray queries) against everything else (the plugin's sampling and shading
 # and surface data, the host's batch callbacks and accumulation, libc). The loader, the

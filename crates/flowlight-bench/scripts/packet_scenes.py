@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Scenes for the Embree packet measurement (docs/performance.md, "Tenth session"): a lumpy
+"""Scenes for measuring Embree's packets on whole renders (docs/performance.md, "Standing
+decisions"; first used for `4d4fd96`, 2026-12-04): a lumpy
 icosphere of 20·4^N triangles on the floor of a box (white, red and green walls, no front)
 lit by a ceiling lamp, written as OUT/packets-N.gltf with a render config OUT/packets-N.toml
 (256², depth 32, 16 spp, Embree). Standard library only.

@@ -62,7 +62,7 @@ pub struct RenderResult {
     pub max_ray_depth: Option<u32>,
 }
 
-/// The value of integer parameter `name` for a session: the one given, else the plugin's
+/// The value of integer parameter `name` for this render: the one given, else the plugin's
 /// declared default.
 fn effective_int(session: &Session, name: &str) -> Option<u32> {
     let given = session

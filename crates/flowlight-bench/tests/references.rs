@@ -12,7 +12,7 @@ fn scenes() -> PathBuf {
 
 #[test]
 fn committed_references_load_with_their_recorded_floor_and_match_their_scenes() {
-    let suite = load_suite(&scenes().join("suite-erpt.toml")).unwrap();
+    let suite = load_suite(&scenes().join("experiments/suite-erpt.toml")).unwrap();
     assert!(suite.scenes.len() >= 6, "the five scenes and the ring");
     for s in &suite.scenes {
         let path = s.committed_reference.clone().unwrap();

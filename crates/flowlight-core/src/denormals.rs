@@ -2,16 +2,15 @@
 //! pure-Rust BVH's.
 //!
 //! Embree's performance notes ask for both MXCSR flags on every thread that traces: without
-//! them, denormal operands send its traversal down the CPU's slow microcode path. On an
-//! Intel Xeon VM, Embree's share of a Stanford dragon render halved with them (2348–2564
-//! samples → 1185–1261) and the render took 0.65–0.78× the CPU, the image unchanged bit
-//! for bit (docs/performance.md, "Dragon profile split on this VM, and Embree in
-//! flush-to-zero mode"). The pure-Rust BVH (`flowlight_bvh::Bvh`) has the same need: a ray
-//! leaving a surface that lies in a coordinate plane (the Cornell box's floor and walls at
-//! 0) starts at the smallest subnormal in that coordinate (`offset_ray_origin` rounds 0
-//! away from the surface), and every product with it in the triangle test was a microcode
-//! assist on Intel: the BVH's Cornell box render took 2.2× the CPU it takes in this mode
-//! (docs/performance.md, "Eighteenth session").
+//! them, denormal operands send its traversal down the CPU's slow microcode path. On an Intel
+//! Xeon VM, Embree's share of a Stanford dragon render halved with them (2348–2564 samples →
+//! 1185–1261) and the render took 0.65–0.78× the CPU, the image unchanged bit for bit
+//! (`127b24e`, 2026-12-03; docs/performance.md, "Standing decisions"). The pure-Rust BVH
+//! (`flowlight_bvh::Bvh`) has the same need: a ray leaving a surface that lies in a coordinate
+//! plane (the Cornell box's floor and walls at 0) starts at the smallest subnormal in that
+//! coordinate (`offset_ray_origin` rounds 0 away from the surface), and every product with it
+//! in the triangle test was a microcode assist on Intel: the BVH's Cornell box render took 2.2×
+//! the CPU it takes in this mode (`053ae62`, 2026-12-05).
 //!
 //! The flags are set only around the queries (one query, or a batch's loop of them) and
 //! restored right after. So the renderer's own arithmetic, host and plugins alike, keeps

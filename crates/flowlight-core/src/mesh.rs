@@ -300,7 +300,7 @@ impl<'a> MeshView<'a> {
     /// its stored triangle's index row and material (its emitter rank only matters on
     /// emissive materials, few triangles, and is not asked for). Step one of two; a hint, a
     /// no-op off x86-64. On an 871k-triangle scan those loads miss the cache, and in a batch
-    /// of hits one after another each miss would wait for the last (docs/performance.md).
+    /// of hits one after another each miss would wait for the last (`ac60800`; docs/performance.md).
     #[inline]
     pub fn prefetch_triangle(&self, prim: u32, instance: u32) {
         let (_, tri) = self.locate_hit(prim, instance);

@@ -35,9 +35,9 @@
 //! too: a refraction into glass scales β by 1/η'² (≈ 0.44), the radiance compression across
 //! the interface, and without the η² factor a path inside glass would survive with about 0.44
 //! times the probability of one outside although it carries the same light. Each [`crate::bsdf::BsdfSample`]
-//! reports the η' it crossed, and the tracer keeps the running product of η'². (Before the
-//! fifth session the factor was left out; on the glass caustic the throughput rule was then
-//! 2.5× less efficient than `expo`, docs/results.md.) One difference remains: the decision
+//! reports the η' it crossed, and the tracer keeps the running product of η'². (Before
+//! `1cefc37`, 2026-12-02, the factor was left out; on the glass caustic the throughput rule
+//! was then 2.5× less efficient than `expo`, docs/mcpt.md.) One difference remains: the decision
 //! comes *before* the BSDF sample (a stopped path then saves the sample, and the call sites
 //! keep their shape), so q uses the sample's expected weight ρ_k instead of its actual weight
 //! f·|cos θ|/p. For a Lambertian vertex sampled by its cosine the two are equal; for a mixture

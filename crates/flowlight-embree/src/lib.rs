@@ -556,14 +556,14 @@ pub enum Packets {
 /// The largest scene [`Packets::Auto`] traces in packets: the largest size measured. A
 /// packet of incoherent rays descends into the union of the nodes its rays need: in a small
 /// tree that union is nearly the whole tree anyway, so one call serves all lanes at little
-/// extra work, while in a large one the lanes part ways. Embree's 16-lane packets (until the
-/// twenty-second session) paid only up to about 100k triangles: the `rays` bench had them at
+/// extra work, while in a large one the lanes part ways. Embree's 16-lane packets (until `4f135ca`,
+/// 2026-12-05) paid only up to about 100k triangles: the `rays` bench had them at
 /// 0.93–0.98× single rays at 100k and 0.97–1.03× at 1M, and renders of the dragon (871k)
 /// unchanged. Its 8-lane packets are 1.07–1.14× as fast as single rays at 10k triangles,
 /// 1.05–1.10× at 100k and 1.02–1.11× at 1M (robust mode, closest and any hit, 1 and 2
 /// threads); a Cornell box render takes 9% less CPU with them than with the 16-lane ones,
-/// and a dragon render 4% less than with single rays (docs/performance.md, "Twenty-second
-/// session"). Above 1M: untested, single rays as before.
+/// and a dragon render 4% less than with single rays (`4f135ca`; docs/performance.md,
+/// "Standing decisions"). Above 1M: untested, single rays as before.
 pub const PACKET_MAX_TRIANGLES: usize = 1_000_000;
 
 impl Packets {

@@ -1,13 +1,14 @@
-//! Ray benchmark (not a test): incoherent closest-hit and any-hit throughput and build time
-//! of the Embree intersector (one `rtcIntersect1` / `rtcOccluded1` per ray, and 8-lane
-//! packets), the host's BVH intersector (the 8-wide `flowlight_bvh::Bvh`) and the binary
-//! `flowlight_bvh::BinaryBvh` on closed meshes of ~10k, ~100k and ~1M triangles, with 1 and
-//! 2 threads (`FLOWLIGHT_BENCH_THREADS=1,2,16` for other counts). Every backend is called as
-//! the host calls it: batches of [`BATCH`] rays through [`Intersector::intersect_batch`] /
-//! [`Intersector::occluded_batch`]. Prints a Markdown table (docs/performance.md holds the
-//! last one): medians over `FLOWLIGHT_BENCH_REPEAT` rounds (default 5) with the range, and
-//! each backend's ratio to Embree. Within a round the backends run one after the other on
-//! the same rays, so a ratio compares runs made seconds apart (the machine may be shared).
+//! Ray benchmark (not a test): incoherent closest-hit and any-hit throughput and build time of
+//! the Embree intersector (one `rtcIntersect1` / `rtcOccluded1` per ray, and 8-lane packets),
+//! the host's BVH intersector (the 8-wide `flowlight_bvh::Bvh`) and the binary
+//! `flowlight_bvh::BinaryBvh` on closed meshes of ~10k, ~100k and ~1M triangles, with 1 and 2
+//! threads (`FLOWLIGHT_BENCH_THREADS=1,2,16` for other counts). Every backend is called as the
+//! host calls it: batches of [`BATCH`] rays through [`Intersector::intersect_batch`] /
+//! [`Intersector::occluded_batch`]. Prints a Markdown table (docs/performance.md, "Target 2",
+//! gives the latest figures): medians over `FLOWLIGHT_BENCH_REPEAT` rounds (default 5) with the
+//! range, and each backend's ratio to Embree. Within a round the backends run one after the
+//! other on the same rays, so a ratio compares runs made seconds apart (the machine may be
+//! shared).
 //!
 //! `cargo bench -p flowlight-host --bench rays` (`FLOWLIGHT_BENCH_RAYS=N` rays per run,
 //! default 1M; `FLOWLIGHT_BENCH_SIZES=10000,100000` to pick meshes;

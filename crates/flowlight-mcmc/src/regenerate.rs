@@ -525,7 +525,7 @@ impl Chains {
     /// The rule for a move from (or to) the path `v`. Recomputed on every call rather than
     /// cached with the chain's state (which would take a flag in the plugin ABI's `Path`):
     /// [`all_forced`] measured 0.9% of the mirror chain's ERPT render and 0.15% of the glass
-    /// caustic's (perf, self time, eighth session).
+    /// caustic's (perf, self time, 2026-12-03).
     fn of(scene: &Scene, policy: &Policy, v: &[PathVertex]) -> Chains {
         if policy.free_chains && all_forced(scene, v) {
             Chains::Free

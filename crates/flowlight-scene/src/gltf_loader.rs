@@ -1184,7 +1184,7 @@ fn primitive_triangles(prim: &gltf::Primitive) -> u64 {
 /// Refuses, before any geometry is decoded, a scene whose instance count or instanced
 /// (virtual) triangle count exceeds [`MAX_INSTANCES`] / [`MAX_VIRTUAL_TRIANGLES`], or whose
 /// estimated geometry memory (stored triangles × [`BYTES_PER_STORED_TRIANGLE`] + instances ×
-/// [`BYTES_PER_INSTANCE`]) exceeds `MemAvailable` (issue 12, "Limits").
+/// [`BYTES_PER_INSTANCE`]) exceeds `MemAvailable` (docs/config.md, "Limits and checks").
 fn check_instancing_limits(
     file: &Path,
     doc: &gltf::Document,
