@@ -25,7 +25,9 @@ pub const R2: FloatParam = float_param!(
     "largest raster jump, pixels; 0: Veach's sqrt(0.05·W·H/pi) (5 % of the image area); else greater than r1; bounded by film_window/2"
 );
 
-/// `theta1`: the exponential cone's smallest angle in radians.
+/// `theta1`: the exponential cone's smallest angle in radians. The bound is π/2 written out:
+/// a declaration's bounds are literals, whose text the docs table shows.
+#[allow(clippy::approx_constant)]
 pub const THETA1: FloatParam = float_param!(
     "theta1",
     0.0001,
@@ -33,7 +35,8 @@ pub const THETA1: FloatParam = float_param!(
     "smallest direction perturbation, radians (less than theta2)"
 );
 
-/// `theta2`: the exponential cone's largest angle in radians.
+/// `theta2`: the exponential cone's largest angle in radians (bound π/2, as [`THETA1`]'s).
+#[allow(clippy::approx_constant)]
 pub const THETA2: FloatParam = float_param!(
     "theta2",
     0.1,

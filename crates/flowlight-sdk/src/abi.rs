@@ -189,11 +189,18 @@ impl ResolvedList {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct ParamValue {
+    /// The config key.
     pub name: StrRef,
+    /// Which of the value fields holds the value (`Int` also for an integer given to a
+    /// float parameter).
     pub kind: ParamKind,
+    /// The value of an `Int`.
     pub int: i64,
+    /// The value of a `Float`.
     pub float: f64,
+    /// The value of a `Bool`: 1 for true, 0 for false.
     pub boolean: u32,
+    /// The value of a `String` (host-owned, valid for the `create` call).
     pub string: StrRef,
 }
 
