@@ -63,7 +63,7 @@ pub struct RenderResult {
     pub max_ray_depth: Option<u32>,
 }
 
-/// The resolved value of the session's integer parameter with role `role` (the integrator
+/// The resolved value of the render's integer parameter with role `role` (the integrator
 /// reports what it read, default included; `None` when it declares no such parameter).
 fn resolved_int(session: &Session, role: ParamRole) -> Option<u32> {
     let name = session
