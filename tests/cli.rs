@@ -83,6 +83,37 @@ fn plugins_lists_versions_and_parameters_and_refuses_mismatches() {
             && s.contains("ABI version"),
         "{s}"
     );
+    // Ranges and roles are listed with each parameter.
+    assert!(s.contains("in 1..=32 [role PathDepth]"), "{s}");
+}
+
+/// `flowlight plugins --markdown` prints each plugin's generated table between the markers
+/// the docs hold it in; plugins without parameters and refused ones print none.
+#[test]
+fn plugins_markdown_prints_the_generated_tables() {
+    let o = flowlight()
+        .args(["plugins", "--markdown"])
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let s = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        s.contains("<!-- params:mcpt -->\n| parameter | type | default | values | meaning |"),
+        "{s}"
+    );
+    assert!(
+        s.contains("| `path_depth` | integer | `8` | `1..=32` |"),
+        "{s}"
+    );
+    assert!(
+        s.contains("<!-- params:drill -->") && s.contains("<!-- /params -->"),
+        "{s}"
+    );
+    assert!(!s.contains("params:hard-reconnection"), "{s}");
+    assert!(
+        !s.contains("test_bad_abi") && !s.contains("search path"),
+        "{s}"
+    );
 }
 
 #[test]

@@ -571,3 +571,180 @@ fn the_mutation_list_is_read_under_the_declared_name() {
         "{err}"
     );
 }
+
+/// The plugins whose parameters the docs list, and the doc holding each table.
+const DOCUMENTED: [(&str, &str); 8] = [
+    ("mcpt", "docs/mcpt.md"),
+    ("erpt", "docs/erpt.md"),
+    ("soft-reconnection", "docs/erpt.md"),
+    ("blow", "docs/erpt.md"),
+    ("drill", "docs/erpt.md"),
+    ("lens-perturbation", "docs/erpt.md"),
+    ("caustic-perturbation", "docs/erpt.md"),
+    ("multichain-perturbation", "docs/erpt.md"),
+];
+
+/// Every parameter table in the docs is the one `flowlight plugins --markdown` generates from
+/// the plugin's declarations: a doc that drifts from the code fails here, naming the file and
+/// printing the table to paste.
+#[test]
+fn docs_parameter_tables_are_the_generated_ones() {
+    use flowlight_host::param_docs::{docs_table, markdown_table, marked_block};
+    let mut stale = Vec::new();
+    for (name, doc) in DOCUMENTED {
+        let lib = PluginLibrary::load(&find_plugin(name, &search_dirs(&[])).unwrap()).unwrap();
+        let params = lib.params();
+        assert!(!params.is_empty(), "{name} declares no parameter");
+        let text = std::fs::read_to_string(common::repo().join(doc)).unwrap();
+        let expected = markdown_table(&params);
+        match docs_table(&text, name) {
+            Some(t) if t == expected => {}
+            found => stale.push(format!(
+                "{doc}: the table of '{name}' {} the declarations; paste:\n{}",
+                if found.is_some() {
+                    "differs from"
+                } else {
+                    "is missing, see"
+                },
+                marked_block(name, &params)
+            )),
+        }
+    }
+    assert!(stale.is_empty(), "{}", stale.join("\n"));
+    // Every loaded plugin with parameters is documented (the fixtures excepted).
+    for f in flowlight_host::plugin::list_plugin_files(&search_dirs(&[])) {
+        let Ok(lib) = PluginLibrary::load(&f) else {
+            continue;
+        };
+        if !lib.params().is_empty() && !lib.name.starts_with("test-") {
+            assert!(
+                DOCUMENTED.iter().any(|(n, _)| *n == lib.name),
+                "plugin '{}' has parameters but no table in the docs",
+                lib.name
+            );
+        }
+    }
+}
+
+/// Each declaration carries its range and role across the ABI; the bench and the CLI read
+/// them instead of names.
+#[test]
+fn declarations_cross_the_abi_with_ranges_and_roles() {
+    use flowlight_sdk::ParamRole;
+    let load = |n| PluginLibrary::load(&find_plugin(n, &search_dirs(&[])).unwrap()).unwrap();
+    for (plugin, max_ray_depth) in [("mcpt", ("64", "1..=1024")), ("erpt", ("32", "1..=32"))] {
+        let params = load(plugin).params();
+        let by_role = |role| params.iter().find(|p| p.role == role).unwrap();
+        let depth = by_role(ParamRole::PathDepth);
+        assert_eq!(
+            (
+                depth.name.as_str(),
+                depth.default.as_str(),
+                depth.range.as_str()
+            ),
+            ("path_depth", "8", "1..=32"),
+            "{plugin}"
+        );
+        let cap = by_role(ParamRole::MaxRayDepth);
+        assert_eq!(
+            (cap.default.as_str(), cap.range.as_str()),
+            max_ray_depth,
+            "{plugin}"
+        );
+        assert_eq!(by_role(ParamRole::Layers).name, "layers", "{plugin}");
+    }
+    let drill = load("drill").params();
+    let width = drill.iter().find(|p| p.name == "width").unwrap();
+    assert_eq!(width.range, "\"narrow\" | \"wide\"");
+    assert_eq!(
+        drill
+            .iter()
+            .find(|p| p.name == "cap_degrees")
+            .unwrap()
+            .default,
+        "by width"
+    );
+}
+
+/// A value outside its declared range is refused with the standard line, in an integrator
+/// and in a mutation.
+#[test]
+fn values_outside_their_declared_range_are_refused() {
+    let refused = |config: &str, params: &[(&str, toml::Value)]| {
+        Session::prepare(
+            &common::scene_config(config),
+            &Overrides {
+                params: common::toml_params(params),
+                ..Default::default()
+            },
+        )
+        .err()
+        .expect("an out-of-range value was accepted")
+    };
+    let e = refused("cornell-box/cornell-box.toml", &[("path_depth", 40.into())]);
+    assert!(
+        e.contains("parameter 'path_depth' must be in 1..=32, got 40"),
+        "{e}"
+    );
+    let e = refused(
+        "cornell-box/cornell-box.toml",
+        &[("wavefront", (-1).into())],
+    );
+    assert!(
+        e.contains("parameter 'wavefront' must be in 0..=65536, got -1"),
+        "{e}"
+    );
+    let e = refused("cornell-box/erpt.toml", &[("max_ray_depth", 33.into())]);
+    assert!(
+        e.contains("parameter 'max_ray_depth' must be in 1..=32, got 33"),
+        "{e}"
+    );
+    let list = common::mutations(&[("drill", &[("p_stop", 1.5.into())])]);
+    let e = refused("cornell-box/erpt.toml", &[("mutations", list)]);
+    assert!(
+        e.contains("parameter 'p_stop' must be in [0.0, 1.0], got 1.5"),
+        "{e}"
+    );
+}
+
+/// The values a render used, defaults included, are in its EXR header: the integrator's and
+/// each mutation's, with the mutation's selection probability.
+#[test]
+fn resolved_parameters_are_written_into_the_exr_metadata() {
+    let dir = common::scratch("resolved-params");
+    let list = common::mutations(&[
+        ("drill", &[("width", "wide".into()), ("weight", 1.into())]),
+        ("lens-perturbation", &[("weight", 3.into())]),
+    ]);
+    let mut s = common::session_at(
+        "cornell-box/erpt.toml",
+        8,
+        8,
+        1,
+        &[("path_depth", 3.into()), ("mutations", list)],
+    );
+    let exr = dir.join("resolved.exr");
+    s.exr_path = Some(exr.clone());
+    let out = common::render(&s);
+    s.write_outputs(out.frame, &out.stats).unwrap();
+    let meta = flowlight_host::output::read_exr_metadata(&exr).unwrap();
+    let get = |k: &str| {
+        meta.get(k)
+            .unwrap_or_else(|| panic!("no {k} in {:?}", meta.entries))
+    };
+    // Given, and defaulted (ERPT's own default, not MCPT's).
+    assert_eq!(get("flowlight.param.path_depth"), "3");
+    assert_eq!(get("flowlight.param.max_ray_depth"), "32");
+    assert_eq!(get("flowlight.param.seeds"), "\"untangled\"");
+    assert_eq!(get("flowlight.param.sampler"), "\"independent\"");
+    // Only what ERPT declares: MCPT's variant is not ERPT's parameter.
+    assert!(meta.get("flowlight.param.variant").is_none());
+    assert_eq!(get("flowlight.mutations.0.plugin"), "drill");
+    assert_eq!(get("flowlight.mutations.0.probability"), "0.25");
+    assert_eq!(get("flowlight.mutations.0.param.width"), "\"wide\"");
+    // Drill's cap follows `width` when not given.
+    assert_eq!(get("flowlight.mutations.0.param.cap_degrees"), "10.0");
+    assert_eq!(get("flowlight.mutations.1.probability"), "0.75");
+    assert_eq!(get("flowlight.mutations.1.param.r1"), "0.1");
+    assert_eq!(get("flowlight.mutations.1.param.free_chains"), "true");
+}

@@ -92,6 +92,10 @@ enum Command {
         /// Extra directories to search.
         #[arg(long)]
         path: Vec<PathBuf>,
+        /// Print each plugin's parameter table in markdown, between the markers the docs
+        /// hold it in (`<!-- params:NAME -->` … `<!-- /params -->`).
+        #[arg(long)]
+        markdown: bool,
     },
     /// Compare an image with a reference: RMSE, relMSE, mean luminance ratio, error image.
     Compare {
@@ -240,7 +244,7 @@ pub fn main() {
             parts,
             allow_missing,
         } => merge::run(&out, &parts, allow_missing),
-        Command::Plugins { path } => plugins::run(&path),
+        Command::Plugins { path, markdown } => plugins::run(&path, markdown),
         Command::Compare { a, b, out, epsilon } => compare::run(&a, &b, out.as_deref(), epsilon),
         Command::Seams { image, tile, layer } => seams::run(&image, tile, layer.as_deref()),
         Command::Reference {

@@ -1,12 +1,29 @@
-//! `flowlight plugins`: the plugins on the search path, with versions and parameters.
+//! `flowlight plugins`: the plugins on the search path, with versions and parameters; with
+//! `--markdown`, each plugin's parameter table as the docs hold it (generated from the
+//! plugin's declarations, [`flowlight_host::param_docs`]).
 
 use anyhow::Result;
+use flowlight_host::param_docs::marked_block;
 use flowlight_host::plugin::{list_plugin_files, search_dirs, PluginLibrary};
+use flowlight_sdk::ParamRole;
 use std::path::PathBuf;
 
-pub fn run(extra: &[PathBuf]) -> Result<()> {
+pub fn run(extra: &[PathBuf], markdown: bool) -> Result<()> {
     let dirs = search_dirs(extra);
     let files = list_plugin_files(&dirs);
+    if markdown {
+        for f in files {
+            // A plugin without parameters has no table; a refused one neither (the plain
+            // listing says why).
+            match PluginLibrary::load(&f) {
+                Ok(p) if !p.params().is_empty() => {
+                    println!("{}", marked_block(&p.name, &p.params()))
+                }
+                _ => {}
+            }
+        }
+        return Ok(());
+    }
     println!(
         "search path: {}",
         dirs.iter()
@@ -25,8 +42,17 @@ pub fn run(extra: &[PathBuf]) -> Result<()> {
                 println!("  file   {}", p.path.display());
                 println!("  sdk    {}, {}", p.sdk_version, p.rustc_version);
                 for param in p.params() {
+                    let range = if param.range.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" in {}", param.range)
+                    };
+                    let role = match param.role {
+                        ParamRole::None => String::new(),
+                        r => format!(" [role {r:?}]"),
+                    };
                     println!(
-                        "  {:<14} {:<8} default {:<12} {}",
+                        "  {:<14} {:<8} default {:<12} {}{range}{role}",
                         param.name,
                         param.kind.name(),
                         param.default,

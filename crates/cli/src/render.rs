@@ -2,6 +2,8 @@
 
 use anyhow::{anyhow, Result};
 use flowlight_host::session::{Overrides, Session};
+use flowlight_sdk::abi::StatSpec;
+use flowlight_sdk::StatDisplay;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -181,7 +183,7 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
             s.stray_deposits
         );
     }
-    print_integrator_stats(&s.integrator);
+    print_integrator_stats(&s.integrator, session.instance.stat_specs());
     if s.interrupted {
         println!("  interrupted     yes: the image holds the samples finished before the stop");
     }
@@ -200,25 +202,25 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
     Ok(())
 }
 
-/// The integrator's counters: plain ones one per line; `group.name` ones (e.g. ERPT's quality
-/// norms per strategy) one line per group with strengths, mean and longest streaks.
-fn print_integrator_stats(stats: &[(String, f64)]) {
+/// The integrator's counters as their declarations ask ([`StatDisplay`]): plain ones one per
+/// line; `group.name` ones (e.g. ERPT's quality norms per strategy) one line per group;
+/// [`StatDisplay::Hidden`] ones only in the `.stats.json`. `specs` are the instance's
+/// counter specs, in the order of `stats`.
+fn print_integrator_stats(stats: &[(String, f64)], specs: &[StatSpec]) {
     if stats.is_empty() {
         return;
     }
-    let fmt = |v: f64| {
-        if v.fract() == 0.0 && v.abs() < 1e15 {
-            format!("{v}")
-        } else {
-            format!("{v:.4}")
-        }
-    };
+    let shown: Vec<(&str, String)> = stats
+        .iter()
+        .zip(specs)
+        .filter_map(|((k, v), spec)| Some((k.as_str(), format_stat(*v, spec.display)?)))
+        .collect();
     println!("  integrator statistics (all counters in the .stats.json beside the image)");
-    for (k, v) in stats.iter().filter(|(k, _)| !k.contains('.')) {
-        println!("    {k:<24}{}", fmt(*v));
+    for (k, v) in shown.iter().filter(|(k, _)| !k.contains('.')) {
+        println!("    {k:<24}{v}");
     }
     let mut groups: Vec<&str> = Vec::new();
-    for (k, _) in stats {
+    for (k, _) in &shown {
         if let Some((g, _)) = k.split_once('.') {
             if !groups.contains(&g) {
                 groups.push(g);
@@ -226,17 +228,50 @@ fn print_integrator_stats(stats: &[(String, f64)]) {
         }
     }
     for g in groups {
-        let shown: Vec<String> = stats
+        let line: Vec<String> = shown
             .iter()
             .filter_map(|(k, v)| {
                 let name = k.strip_prefix(g)?.strip_prefix('.')?;
-                let keep = name == "mutations"
-                    || name.ends_with("_strength")
-                    || name.ends_with("_mean_streak")
-                    || name.ends_with("_streak_max");
-                keep.then(|| format!("{name} {}", fmt(*v)))
+                Some(format!("{name} {v}"))
             })
             .collect();
-        println!("    {g}: {}", shown.join(", "));
+        println!("    {g}: {}", line.join(", "));
+    }
+}
+
+/// A counter's value as the summary shows it (`None`: not shown).
+fn format_stat(v: f64, display: StatDisplay) -> Option<String> {
+    Some(match display {
+        StatDisplay::Number if v.fract() == 0.0 && v.abs() < 1e15 => format!("{v}"),
+        StatDisplay::Number => format!("{v:.4}"),
+        StatDisplay::Seconds => format!("{v:.3} s"),
+        StatDisplay::Percent => format!("{:.2}%", 100.0 * v),
+        StatDisplay::Hidden => return None,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn counters_are_formatted_as_declared() {
+        assert_eq!(
+            format_stat(12.0, StatDisplay::Number).as_deref(),
+            Some("12")
+        );
+        assert_eq!(
+            format_stat(0.5, StatDisplay::Number).as_deref(),
+            Some("0.5000")
+        );
+        assert_eq!(
+            format_stat(1.25, StatDisplay::Seconds).as_deref(),
+            Some("1.250 s")
+        );
+        assert_eq!(
+            format_stat(0.4567, StatDisplay::Percent).as_deref(),
+            Some("45.67%")
+        );
+        assert_eq!(format_stat(3.0, StatDisplay::Hidden), None);
     }
 }

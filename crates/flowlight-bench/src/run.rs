@@ -10,6 +10,7 @@ use flowlight_host::accumulation::Frame;
 use flowlight_host::metrics::{self, Errors};
 use flowlight_host::session::{Overrides, Session};
 use flowlight_scene::config::{load_config, RenderConfig};
+use flowlight_sdk::ParamRole;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
@@ -55,32 +56,29 @@ pub struct RenderResult {
     pub plugin: String,
     /// The integrator parameters used, `key=value` separated by spaces.
     pub params: String,
-    /// The integrator's `path_depth` (its parameter, else the plugin's declared default;
-    /// `None` when the plugin has no such parameter).
+    /// The integrator's path depth: the resolved value of its parameter with role
+    /// [`ParamRole::PathDepth`] (`None` when the plugin has no such parameter).
     pub path_depth: Option<u32>,
-    /// The integrator's `max_ray_depth`, likewise.
+    /// The integrator's [`ParamRole::MaxRayDepth`] parameter, likewise.
     pub max_ray_depth: Option<u32>,
 }
 
-/// The value of integer parameter `name` for this render: the one given, else the plugin's
-/// declared default.
-fn effective_int(session: &Session, name: &str) -> Option<u32> {
-    let given = session
-        .config
-        .integrator_params
-        .iter()
-        .find(|(k, _)| k == name)
-        .and_then(|(_, v)| v.as_integer());
-    let declared = || {
-        session
-            .instance
-            .plugin()
-            .params()
-            .into_iter()
-            .find(|p| p.name == name)
-            .and_then(|p| p.default.parse::<i64>().ok())
-    };
-    given.or_else(declared).and_then(|v| u32::try_from(v).ok())
+/// The resolved value of the render's integer parameter with role `role` (the integrator
+/// reports what it read, default included; `None` when it declares no such parameter).
+fn resolved_int(session: &Session, role: ParamRole) -> Option<u32> {
+    let name = session
+        .instance
+        .plugin()
+        .params()
+        .into_iter()
+        .find(|p| p.role == role)?
+        .name;
+    session
+        .instance
+        .resolved_params()
+        .into_iter()
+        .find(|(k, _)| *k == name)
+        .and_then(|(_, v)| v.parse::<u32>().ok())
 }
 
 pub(crate) fn resolve_config(req: &RenderRequest) -> Result<RenderConfig, String> {
@@ -89,17 +87,14 @@ pub(crate) fn resolve_config(req: &RenderRequest) -> Result<RenderConfig, String
         if *p != cfg.integrator_plugin {
             // Another plugin gets only its own parameters, except the scene's path depth
             // (when the plugin has one): every method of a suite renders the same layers of
-            // path space as the scene's reference.
-            let depth = cfg
-                .integrator_params
-                .iter()
-                .find(|(k, _)| k == "path_depth")
-                .cloned();
+            // path space as the scene's reference. Both plugins' parameters are found by
+            // their declared role, whatever their names.
+            let depth = role_value(&cfg, ParamRole::PathDepth);
             cfg.integrator_plugin = p.clone();
             cfg.integrator_params.clear();
             if let Some(d) = depth {
-                if plugin_declares(&cfg, "path_depth") {
-                    cfg.integrator_params.push(d);
+                if let Some(name) = role_param(&cfg, ParamRole::PathDepth) {
+                    cfg.integrator_params.push((name, d));
                 }
             }
         }
@@ -113,9 +108,9 @@ pub(crate) fn resolve_config(req: &RenderRequest) -> Result<RenderConfig, String
     Ok(cfg)
 }
 
-/// Whether the config's integrator plugin declares parameter `name` (false when it cannot be
-/// found or loaded: the render itself then reports that).
-fn plugin_declares(cfg: &RenderConfig, name: &str) -> bool {
+/// The name of the parameter with role `role` of the config's integrator plugin (`None`
+/// when it declares none, or cannot be found or loaded: the render itself then reports that).
+pub(crate) fn role_param(cfg: &RenderConfig, role: ParamRole) -> Option<String> {
     use flowlight_host::plugin::{find_plugin, search_dirs, PluginLibrary};
     let path = cfg.base_dir.join(&cfg.integrator_plugin);
     let candidate = if cfg.integrator_plugin.contains('/') {
@@ -123,10 +118,22 @@ fn plugin_declares(cfg: &RenderConfig, name: &str) -> bool {
     } else {
         cfg.integrator_plugin.clone()
     };
-    find_plugin(&candidate, &search_dirs(&cfg.plugin_search_paths))
+    let lib = find_plugin(&candidate, &search_dirs(&cfg.plugin_search_paths))
         .ok()
-        .and_then(|p| PluginLibrary::load(&p).ok())
-        .is_some_and(|lib| lib.params().iter().any(|p| p.name == name))
+        .and_then(|p| PluginLibrary::load(&p).ok())?;
+    lib.params()
+        .into_iter()
+        .find(|p| p.role == role)
+        .map(|p| p.name)
+}
+
+/// The config's value of its integrator's parameter with role `role`, if the config sets it.
+fn role_value(cfg: &RenderConfig, role: ParamRole) -> Option<toml::Value> {
+    let name = role_param(cfg, role)?;
+    cfg.integrator_params
+        .iter()
+        .find(|(k, _)| *k == name)
+        .map(|(_, v)| v.clone())
 }
 
 /// Renders `req` and returns the normalised image, without writing any file.
@@ -174,8 +181,8 @@ pub fn render_request(req: &RenderRequest) -> Result<RenderResult, String> {
         invalid_samples: out.stats.invalid_deposits,
         plugin: session.instance.plugin().name.clone(),
         params,
-        path_depth: effective_int(&session, "path_depth"),
-        max_ray_depth: effective_int(&session, "max_ray_depth"),
+        path_depth: resolved_int(&session, ParamRole::PathDepth),
+        max_ray_depth: resolved_int(&session, ParamRole::MaxRayDepth),
     })
 }
 
@@ -263,6 +270,13 @@ pub fn ensure_reference(
     let mut req = scene_request(s, suite.threads);
     req.plugin = suite.reference_plugin.clone();
     req.params = suite.reference_params.clone();
+    // The reference writes its lighting layers (the per-layer errors need them) when its
+    // plugin declares a parameter for them and the suite does not set it.
+    if let Some(name) = role_param(&resolve_config(&req)?, ParamRole::Layers) {
+        if !req.params.iter().any(|(k, _)| *k == name) {
+            req.params.push((name, toml::Value::Boolean(true)));
+        }
+    }
     req.budget = s.reference_budget;
     req.seed = suite.reference_seed;
     log(&format!(
@@ -295,11 +309,7 @@ pub fn check_reference_matches(
             cfg.height
         ));
     }
-    let depth = cfg
-        .integrator_params
-        .iter()
-        .find(|(k, _)| k == "path_depth")
-        .and_then(|(_, v)| v.as_integer());
+    let depth = role_value(cfg, ParamRole::PathDepth).and_then(|v| v.as_integer());
     if let (Some(want), Some(got)) = (depth, r.path_depth()) {
         if want != i64::from(got) {
             return Err(format!(

@@ -238,12 +238,9 @@ pub fn parse_suite(path: &Path, text: &str) -> Result<Suite, String> {
             "bench.floor_ratio must be a positive number, got {floor_ratio}"
         )));
     }
-    let mut reference_params = table_pairs(raw.reference.params);
-    if !reference_params.iter().any(|(k, _)| k == "layers")
-        && raw.reference.plugin.as_deref().unwrap_or("mcpt") == "mcpt"
-    {
-        reference_params.push(("layers".into(), toml::Value::Boolean(true)));
-    }
+    // The reference's lighting layers are asked for when it renders, through the plugin's
+    // parameter of role `Layers` (`run::ensure_reference`).
+    let reference_params = table_pairs(raw.reference.params);
     Ok(Suite {
         path: abs,
         budgets: b.budgets,
@@ -299,7 +296,6 @@ scenes = ["b"]
         );
         assert_eq!(s.scenes[0].reference_budget, Budget::Spp(64));
         assert_eq!(s.scenes[1].reference_budget, Budget::Spp(16));
-        assert!(s.reference_params.iter().any(|(k, _)| k == "layers"));
         assert!(!s.methods[1].runs_on("a"));
         assert_eq!(s.methods[1].plugin.as_deref(), Some("erpt"));
         for bad in [

@@ -9,6 +9,7 @@ pub mod accumulation;
 pub mod intersector;
 pub mod metrics;
 pub mod output;
+pub mod param_docs;
 pub mod params;
 pub mod parts;
 pub mod plugin;

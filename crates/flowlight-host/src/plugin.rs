@@ -3,8 +3,8 @@
 use crate::params::build_params;
 use flowlight_sdk::abi::{
     self, ErrorBuf, FilmTable, IntegratorInfo, IntegratorTable, MutationRef, MutationTable,
-    ParamSpec, PluginDeclaration, SceneView, StatList, StatSpec, Status, StrRef, TracerTable,
-    WorkUnit,
+    ParamRole, ParamSpec, PluginDeclaration, ResolvedList, SceneView, StatList, StatSpec, Status,
+    StrRef, TracerTable, WorkUnit,
 };
 use flowlight_sdk::stats::MAX_COUNTERS;
 use flowlight_sdk::{ParamKind, PluginKind, MAX_MUTATIONS};
@@ -82,7 +82,11 @@ pub struct ParamInfo {
     pub name: String,
     pub kind: ParamKind,
     pub default: String,
+    /// The values accepted as the docs print them (`1..=32`); empty: any of the type.
+    pub range: String,
     pub doc: String,
+    /// What host tools may rely on the parameter for.
+    pub role: ParamRole,
 }
 
 /// A loaded and checked plugin library. The declaration it points into lives as long as the
@@ -311,7 +315,9 @@ impl PluginLibrary {
                     name: s.name.as_str().into(),
                     kind: s.kind,
                     default: s.default.as_str().into(),
+                    range: s.range.as_str().into(),
                     doc: s.doc.as_str().into(),
+                    role: s.role,
                 }
             })
             .collect()
@@ -393,9 +399,12 @@ pub struct MutationInstance {
     instance: *mut c_void,
     /// Name as the integrator sees it (the plugin name).
     name: String,
-    /// The config's weight, as given (validated and normalised with the list's others by
-    /// [`normalised_weights`] when the integrator is created).
+    /// Selection probability p(sᵢ): the config's weight normalised with the list's others by
+    /// [`normalised_weights`] (the caller's one call of it).
     weight: f64,
+    /// The parameter values the instance resolved (owned by the instance, valid until
+    /// `destroy`).
+    resolved: ResolvedList,
 }
 
 // SAFETY: the SDK requires mutations to be Send + Sync.
@@ -403,7 +412,8 @@ unsafe impl Send for MutationInstance {}
 unsafe impl Sync for MutationInstance {}
 
 impl MutationInstance {
-    /// Creates an instance of a mutation plugin with `params` from the config.
+    /// Creates an instance of a mutation plugin with `params` from the config; `weight` is
+    /// its selection probability, from [`normalised_weights`] over the whole list.
     ///
     /// # Safety
     /// The data `view` points to must outlive the instance.
@@ -422,6 +432,7 @@ impl MutationInstance {
             }
         })?;
         let mut instance = std::ptr::null_mut();
+        let mut resolved = ResolvedList::EMPTY;
         let mut err = ErrorBuf::default();
         // SAFETY: the table is a checked mutation plugin's; the parameter list and `view` are
         // valid for the call, and the caller keeps `view`'s data alive for the instance.
@@ -431,6 +442,7 @@ impl MutationInstance {
                 list.as_slice().len(),
                 view,
                 &mut instance,
+                &mut resolved,
                 &mut err,
             )
         };
@@ -444,6 +456,7 @@ impl MutationInstance {
             instance,
             name,
             weight,
+            resolved,
         })
     }
 
@@ -451,9 +464,32 @@ impl MutationInstance {
         &self.plugin
     }
 
-    /// The weight the config gave (before normalisation).
+    /// The selection probability p(sᵢ) (normalised over the list).
     pub fn weight(&self) -> f64 {
         self.weight
+    }
+
+    /// The parameter values the instance resolved (after defaults), `(name, TOML text)`.
+    pub fn resolved_params(&self) -> Vec<(String, String)> {
+        // SAFETY: owned by the instance until `destroy` (in our Drop).
+        unsafe { resolved_pairs(&self.resolved) }
+    }
+}
+
+/// The entries of a [`ResolvedList`] as owned pairs.
+///
+/// # Safety
+/// `list` must come from a live instance's `create` (entries valid, `count` of them).
+unsafe fn resolved_pairs(list: &ResolvedList) -> Vec<(String, String)> {
+    if list.entries.is_null() || list.count == 0 {
+        return Vec::new();
+    }
+    // SAFETY: the caller upholds this function's contract.
+    unsafe {
+        std::slice::from_raw_parts(list.entries, list.count)
+            .iter()
+            .map(|e| (e.name.as_str().to_string(), e.value.as_str().to_string()))
+            .collect()
     }
 }
 
@@ -513,6 +549,8 @@ pub struct IntegratorInstance {
     pub info: IntegratorInfo,
     /// The counters the instance declared (owned by the instance, valid until `destroy`).
     stats: StatList,
+    /// The parameter values the instance resolved (owned likewise).
+    resolved: ResolvedList,
     // The plugin may keep pointers into these for its whole life; dropped after `destroy`.
     _view: Box<SceneView>,
     _mutation_refs: Vec<MutationRef>,
@@ -526,8 +564,8 @@ unsafe impl Sync for IntegratorInstance {}
 
 impl IntegratorInstance {
     /// Creates an instance with `params` from the config and the given mutation strategies
-    /// (their weights checked and normalised to sum to 1 by [`normalised_weights`]; `params`
-    /// no longer holds the mutation list).
+    /// (created with their selection probabilities, from one call of [`normalised_weights`]
+    /// over the list; `params` no longer holds the mutation list).
     ///
     /// # Safety
     /// The data `view` points to must outlive the instance.
@@ -551,18 +589,11 @@ impl IntegratorInstance {
                 m.name
             )));
         }
-        let entries: Vec<(&str, f64)> = mutations
-            .iter()
-            .map(|m| (m.name.as_str(), m.weight))
-            .collect();
-        let weights = normalised_weights(list_name.as_deref().unwrap_or("mutations"), &entries)
-            .map_err(call_error)?;
         let refs: Vec<MutationRef> = mutations
             .iter()
-            .zip(weights)
-            .map(|(m, weight)| MutationRef {
+            .map(|m| MutationRef {
                 name: StrRef::new(&m.name),
-                weight,
+                weight: m.weight,
                 table: &*m.table,
                 instance: m.instance,
             })
@@ -571,6 +602,7 @@ impl IntegratorInstance {
         let mut instance = std::ptr::null_mut();
         let mut info = IntegratorInfo::simple();
         let mut stats = StatList::EMPTY;
+        let mut resolved = ResolvedList::EMPTY;
         let mut err = ErrorBuf::default();
         // SAFETY: the table is a checked integrator plugin's; every pointer is valid for the
         // call, and `refs`, the mutation instances and the boxed view live in the returned
@@ -585,6 +617,7 @@ impl IntegratorInstance {
                 &mut instance,
                 &mut info,
                 &mut stats,
+                &mut resolved,
                 &mut err,
             )
         };
@@ -597,6 +630,7 @@ impl IntegratorInstance {
             instance,
             info,
             stats,
+            resolved,
             _view: view,
             _mutation_refs: refs,
             mutations,
@@ -622,6 +656,12 @@ impl IntegratorInstance {
 
     pub fn mutations(&self) -> &[MutationInstance] {
         &self.mutations
+    }
+
+    /// The parameter values the integrator resolved (after defaults), `(name, TOML text)`.
+    pub fn resolved_params(&self) -> Vec<(String, String)> {
+        // SAFETY: owned by the instance until `destroy` (in our Drop).
+        unsafe { resolved_pairs(&self.resolved) }
     }
 
     /// The mutation strategies as the integrator sees them (normalised weights), e.g. for

@@ -196,14 +196,14 @@ impl Session {
             Some(list) => take_mutations(&mut config.integrator_params, list, &config.path)?,
             None => Vec::new(),
         };
-        if let Some(list) = &list_name {
-            let weights: Vec<(&str, f64)> = mutation_entries
-                .iter()
-                .map(|e| (e.plugin.as_str(), e.weight))
-                .collect();
-            normalised_weights(list, &weights)
+        // The one normalisation of the list's weights: each instance gets its probability.
+        let weights: Vec<(&str, f64)> = mutation_entries
+            .iter()
+            .map(|e| (e.plugin.as_str(), e.weight))
+            .collect();
+        let probabilities =
+            normalised_weights(list_name.as_deref().unwrap_or("mutations"), &weights)
                 .map_err(|e| format!("{}: {e}", config.path.display()))?;
-        }
         let (bounds_min, bounds_max) = scene.bounds().unwrap_or((Vec3::ZERO, Vec3::ZERO));
         let environment = match &config.environment {
             Some(e) => load_environment(&config.path, e).map_err(|e| e.to_string())?,
@@ -239,7 +239,7 @@ impl Session {
         };
         let mut mutations = Vec::new();
         let mut plugin_files = vec![plugin_path.clone()];
-        for entry in &mutation_entries {
+        for (entry, &probability) in mutation_entries.iter().zip(&probabilities) {
             let path =
                 find_plugin(&relative_to(&entry.plugin, &config.base_dir), &dirs).map_err(|e| {
                     format!(
@@ -251,7 +251,7 @@ impl Session {
             plugin_files.push(path.clone());
             let lib = Arc::new(PluginLibrary::load(&path).map_err(|e| e.to_string())?);
             // SAFETY: as for the integrator below.
-            let m = unsafe { MutationInstance::create(lib, &entry.params, entry.weight, &view) }
+            let m = unsafe { MutationInstance::create(lib, &entry.params, probability, &view) }
                 .map_err(|e| format!("{}: {e}", config.path.display()))?;
             mutations.push(m);
         }
@@ -490,39 +490,39 @@ impl Session {
         } else {
             self.options.spp.to_string()
         };
-        ExrMetadata {
-            entries: vec![
-                (
-                    "software".into(),
-                    format!("flowlight {}", env!("CARGO_PKG_VERSION")),
-                ),
-                (
-                    "flowlight.integrator".into(),
-                    self.instance.plugin().name.clone(),
-                ),
-                ("flowlight.params".into(), params.join(" ")),
-                ("flowlight.spp".into(), spp),
-                ("flowlight.seed".into(), self.options.seed.to_string()),
-                (
-                    "flowlight.intersector".into(),
-                    self.intersector.name().into(),
-                ),
-                (
-                    "flowlight.biased".into(),
-                    (self.instance.info.biased != 0).to_string(),
-                ),
-                (
-                    "flowlight.interrupted".into(),
-                    stats.interrupted.to_string(),
-                ),
-                (
-                    "flowlight.partial_pass".into(),
-                    stats
-                        .partial_pass
-                        .map_or("0".to_string(), |p| p.fraction().to_string()),
-                ),
-            ],
-        }
+        let mut entries = vec![
+            (
+                "software".into(),
+                format!("flowlight {}", env!("CARGO_PKG_VERSION")),
+            ),
+            (
+                "flowlight.integrator".into(),
+                self.instance.plugin().name.clone(),
+            ),
+            ("flowlight.params".into(), params.join(" ")),
+            ("flowlight.spp".into(), spp),
+            ("flowlight.seed".into(), self.options.seed.to_string()),
+            (
+                "flowlight.intersector".into(),
+                self.intersector.name().into(),
+            ),
+            (
+                "flowlight.biased".into(),
+                (self.instance.info.biased != 0).to_string(),
+            ),
+            (
+                "flowlight.interrupted".into(),
+                stats.interrupted.to_string(),
+            ),
+            (
+                "flowlight.partial_pass".into(),
+                stats
+                    .partial_pass
+                    .map_or("0".to_string(), |p| p.fraction().to_string()),
+            ),
+        ];
+        entries.extend(crate::param_docs::metadata_entries(&self.instance));
+        ExrMetadata { entries }
     }
 }
 

@@ -16,6 +16,7 @@
 pub mod measure;
 pub mod migration;
 pub mod norms;
+pub mod params;
 pub mod perturbation;
 pub mod regenerate;
 pub mod specular_chain;

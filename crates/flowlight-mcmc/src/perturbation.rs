@@ -65,21 +65,18 @@ impl LensJump {
         }
     }
 
-    /// Veach's sizes with the plugin parameters `r1` (default 0.1) and `r2` (default 0:
-    /// Veach's r₂) applied, as the lens and multi-chain perturbations declare them; a bad
-    /// value is a one-line error naming the parameter.
+    /// Veach's sizes with the plugin parameters [`crate::params::R1`] and
+    /// [`crate::params::R2`] (0: Veach's r₂) applied, as the lens and multi-chain
+    /// perturbations declare them; a bad value is a one-line error naming the parameter.
     pub fn from_params(
         params: &flowlight_sdk::Params,
         width: u32,
         height: u32,
     ) -> Result<LensJump, String> {
         let mut jump = LensJump::veach(width, height);
-        let r1 = params.float("r1", 0.1)?;
-        let r2 = params.float("r2", 0.0)?;
-        if !(r1 > 0.0 && r1.is_finite()) {
-            return Err(format!("parameter 'r1' must be > 0 pixels, got {r1}"));
-        }
-        if !(r2 == 0.0 || (r2 > r1 && r2.is_finite())) {
+        let r1 = crate::params::R1.get(params)?;
+        let r2 = crate::params::R2.get(params)?;
+        if !(r2 == 0.0 || r2 > r1) {
             return Err(format!(
                 "parameter 'r2' must be 0 (Veach's default) or greater than r1 = {r1}, got {r2}"
             ));

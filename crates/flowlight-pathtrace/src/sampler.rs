@@ -7,7 +7,8 @@
 use flowlight_core::rng::Rng;
 use flowlight_core::sampler::SampleStream;
 use flowlight_core::sobol::SobolSampler;
-use flowlight_sdk::Params;
+use flowlight_sdk::declare::ChoiceParam;
+use flowlight_sdk::{choice_param, Params};
 use glam::Vec2;
 
 /// The `sampler` parameter's choices.
@@ -20,15 +21,27 @@ pub enum SamplerKind {
     Sobol,
 }
 
+/// `sampler`: where a pixel sample's random numbers come from (MCPT; ERPT's entangled seeds).
+pub const SAMPLER: ChoiceParam = choice_param!(
+    "sampler",
+    "sobol",
+    ["sobol", "independent"],
+    "entangled paths only (untangled: \"independent\", and \"sobol\" is refused): \"sobol\", Sobol' points of a per-dimension shuffled index, digitally shifted (a pixel's samples stratified together; unbiased), or \"independent\", a PCG32 stream per sample"
+);
+
 impl SamplerKind {
-    /// The `sampler` parameter of a plugin whose camera paths are entangled (`entangled`) or
-    /// untangled. Untangled paths keep independent numbers and refuse `"sobol"`, naming
-    /// `needs` (the setting that would allow it): with `sobol` two white-furnace tests of the
-    /// untangled estimator failed their noise guard from a few huge weights (cause not
-    /// isolated; docs/mcpt.md, "Samplers").
+    /// The `sampler` parameter ([`SAMPLER`]) of a plugin whose camera paths are entangled
+    /// (`entangled`) or untangled. Untangled paths default to `"independent"` and refuse
+    /// `"sobol"`, naming `needs` (the setting that would allow it): with `sobol` two
+    /// white-furnace tests of the untangled estimator failed their noise guard from a few
+    /// huge weights (cause not isolated; docs/mcpt.md, "Samplers").
     pub fn from_params(p: &Params, entangled: bool, needs: &str) -> Result<Self, String> {
-        let default = if entangled { "sobol" } else { "independent" };
-        match p.choice("sampler", default, &["sobol", "independent"])? {
+        let kind = if entangled {
+            SAMPLER.get(p)?
+        } else {
+            SAMPLER.get_or(p, "independent")?
+        };
+        match kind {
             "independent" => Ok(SamplerKind::Independent),
             _ if !entangled => Err(format!(
                 "parameter 'sampler' = \"sobol\" needs {needs} (untangled paths use independent numbers; see docs/mcpt.md, Samplers)"

@@ -20,7 +20,7 @@ use std::ffi::c_void;
 
 /// Bumped whenever any type or function table in this module changes incompatibly; every
 /// version and what changed is listed in the repository's `CHANGELOG.md`.
-pub const ABI_VERSION: u32 = 5;
+pub const ABI_VERSION: u32 = 6;
 /// Version of the SDK crate compiled into this binary.
 pub const SDK_VERSION: &str = env!("CARGO_PKG_VERSION");
 /// `rustc --version` of the compiler that built this binary.
@@ -118,26 +118,89 @@ pub enum PluginKind {
     Mutation = 1,
 }
 
-/// One parameter a plugin accepts, for validation and for `flowlight plugins`.
+/// One parameter a plugin accepts, for validation, for `flowlight plugins` (and its
+/// `--markdown` tables) and for the host tools that look for a parameter by its
+/// [`ParamRole`]. Built from a declaration ([`crate::declare`]) by its `spec()`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct ParamSpec {
+    /// The config key.
     pub name: StrRef,
+    /// The value's type; the host refuses a config value of another type.
     pub kind: ParamKind,
-    /// Default value as the user would write it in TOML.
+    /// Default value as the user would write it in TOML, or a phrase (`by width`) when the
+    /// default depends on other parameters.
     pub default: StrRef,
+    /// Values accepted, as the docs print them (`1..=32`, `[0.01, 0.999]`,
+    /// `"bxdf" | "equi"`); empty when every value of the type is (ABI 6).
+    pub range: StrRef,
+    /// One line: what the parameter means.
     pub doc: StrRef,
+    /// What host tools may rely on the parameter for (ABI 6).
+    pub role: ParamRole,
+}
+
+/// What a parameter means to host tools: the bench renders every method of a suite at the
+/// scene's [`ParamRole::PathDepth`] and asks the reference for [`ParamRole::Layers`], whatever
+/// the integrator names them.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ParamRole {
+    /// No role: only the plugin reads it.
+    None = 0,
+    /// An integer: the deepest lighting layer N rendered (paths of virtual length ≤ N + 1).
+    PathDepth = 1,
+    /// An integer: the cap on physical scattering events of a path.
+    MaxRayDepth = 2,
+    /// A boolean: write the lighting layers `layer0..=layerN` beside the image.
+    Layers = 3,
+}
+
+/// One parameter value an instance resolved (after defaults), which the host writes into the
+/// output's metadata (ABI 6). Owned by the instance, valid until `destroy`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct ResolvedParam {
+    /// The config key.
+    pub name: StrRef,
+    /// The value as TOML would write it (`8`, `0.95`, `"sobol"`, `true`).
+    pub value: StrRef,
+}
+
+/// The values an instance resolved, written by the SDK's glue after `create` (ABI 6).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct ResolvedList {
+    /// `count` entries owned by the instance (null when `count` is 0).
+    pub entries: *const ResolvedParam,
+    /// Number of entries.
+    pub count: usize,
+}
+
+impl ResolvedList {
+    /// No values.
+    pub const EMPTY: ResolvedList = ResolvedList {
+        entries: std::ptr::null(),
+        count: 0,
+    };
 }
 
 /// One parameter value from the config, already checked against the plugin's [`ParamSpec`]s.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct ParamValue {
+    /// The config key.
     pub name: StrRef,
+    /// Which of the value fields holds the value (`Int` also for an integer given to a
+    /// float parameter).
     pub kind: ParamKind,
+    /// The value of an `Int`.
     pub int: i64,
+    /// The value of a `Float`.
     pub float: f64,
+    /// The value of a `Bool`: 1 for true, 0 for false.
     pub boolean: u32,
+    /// The value of a `String` (host-owned, valid for the `create` call).
     pub string: StrRef,
 }
 
@@ -308,6 +371,22 @@ pub enum StatMerge {
     Ratio = 2,
 }
 
+/// How the host shows a counter in the render summary (the `.stats.json` has every counter,
+/// unformatted). Declared with the counter ([`crate::stats::StatsBuilder::sum_as`]), so the
+/// CLI need not guess from its name (ABI 6).
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StatDisplay {
+    /// A number: an integer as is, else with 4 decimals.
+    Number = 0,
+    /// Seconds (summed over threads): 3 decimals and `s`.
+    Seconds = 1,
+    /// A share in [0, 1], printed as a percentage with 2 decimals.
+    Percent = 2,
+    /// Only in the `.stats.json`, not in the summary (details such as streak totals).
+    Hidden = 3,
+}
+
 /// A statistics counter an integrator declared through [`crate::stats::StatsBuilder`]. The
 /// host gives each work unit a zeroed array of `f64`, one per counter, merges the arrays with
 /// [`StatMerge::combine`] and reports them (summary and JSON).
@@ -319,6 +398,8 @@ pub struct StatSpec {
     /// For [`StatMerge::Ratio`]: indices of the counters divided.
     pub numerator: u32,
     pub denominator: u32,
+    /// How the summary shows it (ABI 6).
+    pub display: StatDisplay,
 }
 
 /// What an integrator instance tells the host after creation.
@@ -406,6 +487,7 @@ pub struct IntegratorTable {
         instance: *mut *mut c_void,
         info: *mut IntegratorInfo,
         stats: *mut StatList,
+        resolved: *mut ResolvedList,
         err: *mut ErrorBuf,
     ) -> Status,
     pub destroy: unsafe extern "C" fn(instance: *mut c_void),
@@ -450,6 +532,7 @@ pub struct MutationTable {
         param_count: usize,
         scene: *const SceneView,
         instance: *mut *mut c_void,
+        resolved: *mut ResolvedList,
         err: *mut ErrorBuf,
     ) -> Status,
     pub destroy: unsafe extern "C" fn(instance: *mut c_void),
@@ -525,6 +608,8 @@ pub const fn layout_hash() -> u64 {
         size_of::<IntegratorInfo>(),
         size_of::<StatSpec>(),
         size_of::<StatList>(),
+        size_of::<ResolvedParam>(),
+        size_of::<ResolvedList>(),
         size_of::<MutationRef>(),
         size_of::<WorkUnit>(),
         size_of::<IntegratorTable>(),

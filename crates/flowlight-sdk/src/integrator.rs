@@ -3,12 +3,12 @@
 
 use crate::abi::{
     ErrorBuf, FilmTable, IntegratorInfo, IntegratorTable, MutationRef, ParamSpec, ParamValue,
-    SceneView, StatList, Status, TracerTable, WorkUnit,
+    ResolvedList, SceneView, StatList, Status, TracerTable, WorkUnit,
 };
 use crate::deposit::Film;
 use crate::guard::guard;
 use crate::mutation::MutationSet;
-use crate::params::Params;
+use crate::params::{Params, ResolvedTable};
 use crate::scene::Scene;
 use crate::stats::{StatTable, Stats, StatsBuilder};
 use crate::tracer::Tracer;
@@ -20,11 +20,15 @@ use std::ffi::c_void;
 pub trait Integrator: Sized + Send + Sync + 'static {
     /// Name the config uses (`plugin = "NAME"`).
     const NAME: &'static str;
+    /// One line for `flowlight plugins`.
     const DESCRIPTION: &'static str;
-    /// Parameters the plugin accepts; the host refuses others.
+    /// Parameters the plugin accepts; the host refuses others. Built from the parameters'
+    /// declarations ([`crate::declare`]): `&[PATH_DEPTH.spec(), …]`.
     const PARAMS: &'static [ParamSpec];
 
-    /// Builds an instance. `scene` and `mutations` (the strategies the config lists under the
+    /// Builds an instance. Read each parameter through its declaration
+    /// (`PATH_DEPTH.get(params)?`): the values read are reported to the host as the
+    /// instance's resolved parameters. `scene` and `mutations` (the strategies the config lists under the
     /// integrator's [`ParamKind::MutationList`](crate::ParamKind::MutationList) parameter,
     /// empty for most integrators) stay valid for the instance's whole life. Counters the
     /// integrator reports are declared on `stats`; keep the handles for
@@ -58,6 +62,8 @@ struct Instance<T> {
     /// Declared first, so dropped first: its scene borrows `bsdfs`.
     integrator: T,
     stats: StatTable,
+    /// The parameter values `create` read, for the host's metadata.
+    resolved: ResolvedTable,
     /// The per-material BSDFs the integrator's scene borrows ([`Scene::material_bsdfs`]).
     _bsdfs: Box<[Option<Bsdf>]>,
 }
@@ -72,6 +78,7 @@ unsafe extern "C" fn create<T: Integrator>(
     instance: *mut *mut c_void,
     info: *mut IntegratorInfo,
     stats: *mut StatList,
+    resolved: *mut ResolvedList,
     err: *mut ErrorBuf,
 ) -> Status {
     // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
@@ -89,8 +96,10 @@ unsafe extern "C" fn create<T: Integrator>(
             let boxed = Box::new(Instance {
                 integrator,
                 stats: table,
+                resolved: ResolvedTable::new(params.resolved()),
                 _bsdfs: bsdfs,
             });
+            *resolved = boxed.resolved.list();
             // The specs live in the box, which does not move until `destroy`.
             let specs = boxed.stats.specs();
             *stats = StatList {

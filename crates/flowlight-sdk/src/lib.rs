@@ -14,9 +14,13 @@
 //! use flowlight_sdk::core::Rgb;
 //! use flowlight_sdk::stats::{Counter, Stats, StatsBuilder};
 //! use flowlight_sdk::{
-//!     export_integrator, param, Film, Integrator, IntegratorInfo, MutationSet, ParamKind,
-//!     ParamSpec, Params, Scene, Tracer, WorkUnit,
+//!     export_integrator, float_param, Film, FloatParam, Integrator, IntegratorInfo,
+//!     MutationSet, ParamSpec, Params, Scene, Tracer, WorkUnit,
 //! };
+//!
+//! /// Declared once: the spec in `PARAMS`, the parsing in `create` and the docs table all
+//! /// come from it (see [`declare`]).
+//! const VALUE: FloatParam = float_param!("value", 1.0, 0.0 <= x, "radiance of every pixel");
 //!
 //! pub struct Constant {
 //!     value: f32,
@@ -27,8 +31,7 @@
 //! impl Integrator for Constant {
 //!     const NAME: &'static str = "constant";
 //!     const DESCRIPTION: &'static str = "every pixel gets `value`";
-//!     const PARAMS: &'static [ParamSpec] =
-//!         &[param("value", ParamKind::Float, "1.0", "radiance of every pixel")];
+//!     const PARAMS: &'static [ParamSpec] = &[VALUE.spec()];
 //!
 //!     fn create(
 //!         params: &Params,
@@ -38,7 +41,7 @@
 //!     ) -> Result<(Self, IntegratorInfo), String> {
 //!         let samples = stats.sum("samples");
 //!         let largest_unit = stats.max("largest_unit");
-//!         let value = params.float("value", 1.0)? as f32;
+//!         let value = VALUE.get(params)? as f32;
 //!         Ok((Constant { value, samples, largest_unit }, IntegratorInfo::simple()))
 //!     }
 //!
@@ -88,6 +91,7 @@
 //! where WHAT is `ABI version`, `type layout`, `SDK version` or `rustc version`.
 
 pub mod abi;
+pub mod declare;
 pub mod deposit;
 mod guard;
 pub mod integrator;
@@ -98,9 +102,10 @@ pub mod stats;
 pub mod tracer;
 
 pub use abi::{
-    AccumulationStyle, Deposit, IntegratorInfo, ParamSpec, PluginDeclaration, PluginKind, Proposal,
-    StatMerge, WorkUnit,
+    AccumulationStyle, Deposit, IntegratorInfo, ParamRole, ParamSpec, PluginDeclaration,
+    PluginKind, Proposal, StatDisplay, StatMerge, WorkUnit,
 };
+pub use declare::{BoolParam, ChoiceParam, FloatParam, IntParam, StringParam};
 pub use deposit::{Accumulator, Film};
 pub use flowlight_core as core;
 pub use integrator::Integrator;

@@ -1,11 +1,11 @@
 //! The `Mutation` trait: an ERPT/MCMC perturbation strategy, loadable as its own plugin.
 
 use crate::abi::{
-    ErrorBuf, MutationRef, MutationTable, ParamSpec, ParamValue, Proposal, SceneView, Status,
-    TracerTable,
+    ErrorBuf, MutationRef, MutationTable, ParamSpec, ParamValue, Proposal, ResolvedList, SceneView,
+    Status, TracerTable,
 };
 use crate::guard::guard;
-use crate::params::Params;
+use crate::params::{Params, ResolvedTable};
 use crate::scene::Scene;
 use crate::tracer::Tracer;
 use flowlight_core::bsdf::Bsdf;
@@ -43,6 +43,8 @@ pub trait Mutation: Sized + Send + Sync + 'static {
 struct MutationInstance<T> {
     /// Declared first, so dropped first.
     mutation: T,
+    /// The parameter values `create` read, for the host's metadata.
+    resolved: ResolvedTable,
     _bsdfs: Box<[Option<Bsdf>]>,
 }
 
@@ -51,6 +53,7 @@ unsafe extern "C" fn create<T: Mutation>(
     param_count: usize,
     scene: *const SceneView,
     instance: *mut *mut c_void,
+    resolved: *mut ResolvedList,
     err: *mut ErrorBuf,
 ) -> Status {
     // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
@@ -62,11 +65,14 @@ unsafe extern "C" fn create<T: Mutation>(
             // The instance keeps the table and drops it after the mutation, the scene's only holder.
             let bsdfs = scene.attach_constant_bsdfs();
             let mutation = T::create(&params, scene)?;
-            let inst = MutationInstance {
+            let inst = Box::new(MutationInstance {
                 mutation,
+                resolved: ResolvedTable::new(params.resolved()),
                 _bsdfs: bsdfs,
-            };
-            *instance = Box::into_raw(Box::new(inst)) as *mut c_void;
+            });
+            // The entries live in the box, which does not move until `destroy`.
+            *resolved = inst.resolved.list();
+            *instance = Box::into_raw(inst) as *mut c_void;
             Ok(())
         })
     }

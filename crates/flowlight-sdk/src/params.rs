@@ -1,14 +1,24 @@
 //! Plugin parameters: declared by the plugin, validated by the host, read by the plugin.
+//!
+//! A plugin declares each parameter once ([`crate::declare`]) and reads it through its
+//! declaration; [`Params`] is the raw list of values the config set, which the declarations'
+//! getters read. Every value read is recorded as resolved (the default when the config left
+//! it out), and the SDK's glue hands the record to the host for the output's metadata.
 
-use crate::abi::{ParamSpec, ParamValue, StrRef};
+use crate::abi::{ParamRole, ParamSpec, ParamValue, ResolvedList, ResolvedParam, StrRef};
+use std::cell::RefCell;
 
 /// Type of a parameter value.
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ParamKind {
+    /// A TOML integer (`i64`).
     Int = 0,
+    /// A TOML float; an integer is accepted and converted.
     Float = 1,
+    /// A TOML boolean.
     Bool = 2,
+    /// A TOML string.
     String = 3,
     /// `[[integrator.mutations]]`: an array of tables, each naming a mutation plugin, its
     /// `weight` and its parameters. The host loads those plugins and hands them to `create`.
@@ -16,6 +26,7 @@ pub enum ParamKind {
 }
 
 impl ParamKind {
+    /// The type's name in messages and tables (`integer`, `float`, …).
     pub fn name(self) -> &'static str {
         match self {
             ParamKind::Int => "integer",
@@ -27,7 +38,9 @@ impl ParamKind {
     }
 }
 
-/// Declares a parameter in a plugin's `PARAMS` list.
+/// An untyped entry of a plugin's `PARAMS` list: name, type, default text and doc, no range
+/// and no role. The default text is not checked against what `create` reads; prefer a
+/// typed declaration ([`crate::declare`]), whose `spec()` and getters share one default.
 pub const fn param(
     name: &'static str,
     kind: ParamKind,
@@ -38,13 +51,17 @@ pub const fn param(
         name: StrRef::new(name),
         kind,
         default: StrRef::new(default),
+        range: StrRef::EMPTY,
         doc: StrRef::new(doc),
+        role: ParamRole::None,
     }
 }
 
-/// The parameter values a plugin instance was created with (only those the config set).
+/// The parameter values a plugin instance was created with (only those the config set), and
+/// the record of the values read from it (resolved: the default when the config left it out).
 pub struct Params<'a> {
     values: &'a [ParamValue],
+    resolved: RefCell<Vec<(String, String)>>,
 }
 
 impl<'a> Params<'a> {
@@ -59,12 +76,36 @@ impl<'a> Params<'a> {
             } else {
                 std::slice::from_raw_parts(values, count)
             };
-            Params { values }
+            Params::from_slice(values)
         }
     }
 
+    /// The values of a list built in Rust (tests, hosts written in Rust).
     pub fn from_slice(values: &'a [ParamValue]) -> Params<'a> {
-        Params { values }
+        Params {
+            values,
+            resolved: RefCell::new(Vec::new()),
+        }
+    }
+
+    /// Whether the config set parameter `name`.
+    pub fn is_set(&self, name: &str) -> bool {
+        self.find(name).is_some()
+    }
+
+    /// Records `value` (TOML text) as the resolved value of `name`, replacing an earlier
+    /// record of the same name (a later read decides).
+    pub fn record(&self, name: &str, value: String) {
+        let mut r = self.resolved.borrow_mut();
+        match r.iter_mut().find(|(n, _)| n == name) {
+            Some(entry) => entry.1 = value,
+            None => r.push((name.to_string(), value)),
+        }
+    }
+
+    /// The resolved values read so far, in the order first read: `(name, TOML text)`.
+    pub fn resolved(&self) -> Vec<(String, String)> {
+        self.resolved.borrow().clone()
     }
 
     fn find(&self, name: &str) -> Option<&'a ParamValue> {
@@ -76,50 +117,83 @@ impl<'a> Params<'a> {
 
     /// Integer parameter, or `default` when absent. A float given for an int is an error.
     pub fn int(&self, name: &str, default: i64) -> Result<i64, String> {
-        match self.find(name) {
-            None => Ok(default),
-            Some(v) if v.kind == ParamKind::Int => Ok(v.int),
-            Some(v) => Err(format!(
-                "parameter '{name}' must be an integer, got a {}",
-                v.kind.name()
-            )),
-        }
+        let v = self.raw_int(name, default)?;
+        self.record(name, v.to_string());
+        Ok(v)
+    }
+
+    /// [`Params::int`] without recording (the declarations record after their range check).
+    pub(crate) fn raw_int(&self, name: &str, default: i64) -> Result<i64, String> {
+        Ok(match self.find(name) {
+            None => default,
+            Some(v) if v.kind == ParamKind::Int => v.int,
+            Some(v) => {
+                return Err(format!(
+                    "parameter '{name}' must be an integer, got a {}",
+                    v.kind.name()
+                ))
+            }
+        })
     }
 
     /// Float parameter; integers are accepted and converted.
     pub fn float(&self, name: &str, default: f64) -> Result<f64, String> {
-        match self.find(name) {
-            None => Ok(default),
-            Some(v) if v.kind == ParamKind::Float => Ok(v.float),
-            Some(v) if v.kind == ParamKind::Int => Ok(v.int as f64),
-            Some(v) => Err(format!(
-                "parameter '{name}' must be a number, got a {}",
-                v.kind.name()
-            )),
-        }
+        let v = self.raw_float(name, default)?;
+        self.record(name, toml_float(v));
+        Ok(v)
     }
 
+    /// [`Params::float`] without recording.
+    pub(crate) fn raw_float(&self, name: &str, default: f64) -> Result<f64, String> {
+        Ok(match self.find(name) {
+            None => default,
+            Some(v) if v.kind == ParamKind::Float => v.float,
+            Some(v) if v.kind == ParamKind::Int => v.int as f64,
+            Some(v) => {
+                return Err(format!(
+                    "parameter '{name}' must be a number, got a {}",
+                    v.kind.name()
+                ))
+            }
+        })
+    }
+
+    /// Boolean parameter, or `default` when absent.
     pub fn boolean(&self, name: &str, default: bool) -> Result<bool, String> {
-        match self.find(name) {
-            None => Ok(default),
-            Some(v) if v.kind == ParamKind::Bool => Ok(v.boolean != 0),
-            Some(v) => Err(format!(
-                "parameter '{name}' must be a boolean, got a {}",
-                v.kind.name()
-            )),
-        }
+        let v = match self.find(name) {
+            None => default,
+            Some(v) if v.kind == ParamKind::Bool => v.boolean != 0,
+            Some(v) => {
+                return Err(format!(
+                    "parameter '{name}' must be a boolean, got a {}",
+                    v.kind.name()
+                ))
+            }
+        };
+        self.record(name, v.to_string());
+        Ok(v)
     }
 
+    /// String parameter, or `default` when absent.
     pub fn string(&self, name: &str, default: &'a str) -> Result<&'a str, String> {
-        match self.find(name) {
-            None => Ok(default),
+        let v = self.raw_string(name, default)?;
+        self.record(name, format!("{v:?}"));
+        Ok(v)
+    }
+
+    /// [`Params::string`] without recording.
+    pub(crate) fn raw_string(&self, name: &str, default: &'a str) -> Result<&'a str, String> {
+        Ok(match self.find(name) {
+            None => default,
             // SAFETY: strings are valid for 'a by construction.
-            Some(v) if v.kind == ParamKind::String => Ok(unsafe { v.string.as_str() }),
-            Some(v) => Err(format!(
-                "parameter '{name}' must be a string, got a {}",
-                v.kind.name()
-            )),
-        }
+            Some(v) if v.kind == ParamKind::String => unsafe { v.string.as_str() },
+            Some(v) => {
+                return Err(format!(
+                    "parameter '{name}' must be a string, got a {}",
+                    v.kind.name()
+                ))
+            }
+        })
     }
 
     /// A string parameter that must be one of `choices`.
@@ -129,14 +203,67 @@ impl<'a> Params<'a> {
         default: &'a str,
         choices: &[&str],
     ) -> Result<&'a str, String> {
-        let s = self.string(name, default)?;
+        let s = self.raw_string(name, default)?;
         if choices.contains(&s) {
+            self.record(name, format!("{s:?}"));
             Ok(s)
         } else {
             Err(format!(
                 "parameter '{name}' must be one of {choices:?}, got \"{s}\""
             ))
         }
+    }
+}
+
+/// The resolved values of an instance as the C ABI hands them over: the strings are boxed
+/// and never move while the table lives (the SDK's glue keeps it in the instance).
+#[derive(Debug)]
+pub(crate) struct ResolvedTable {
+    _strings: Vec<(Box<str>, Box<str>)>,
+    entries: Vec<ResolvedParam>,
+}
+
+impl ResolvedTable {
+    pub(crate) fn new(values: Vec<(String, String)>) -> ResolvedTable {
+        let strings: Vec<(Box<str>, Box<str>)> = values
+            .into_iter()
+            .map(|(n, v)| (n.into_boxed_str(), v.into_boxed_str()))
+            .collect();
+        let entries = strings
+            .iter()
+            .map(|(n, v)| ResolvedParam {
+                name: StrRef::new(n),
+                value: StrRef::new(v),
+            })
+            .collect();
+        ResolvedTable {
+            _strings: strings,
+            entries,
+        }
+    }
+
+    /// The list the host reads until `destroy`.
+    pub(crate) fn list(&self) -> ResolvedList {
+        ResolvedList {
+            entries: if self.entries.is_empty() {
+                std::ptr::null()
+            } else {
+                self.entries.as_ptr()
+            },
+            count: self.entries.len(),
+        }
+    }
+}
+
+/// `x` as TOML writes a float: `8.0`, `0.95`, `1e-5`, `nan`, `inf`.
+pub(crate) fn toml_float(x: f64) -> String {
+    if x.is_nan() {
+        "nan".into()
+    } else if x.is_infinite() {
+        if x > 0.0 { "inf" } else { "-inf" }.into()
+    } else {
+        // Debug prints the shortest text that reads back exactly, with a `.0` on integers.
+        format!("{x:?}")
     }
 }
 

@@ -40,7 +40,7 @@
 //! assert_eq!(stats.get(longest), 16.0);
 //! ```
 
-use crate::abi::{StatMerge, StatSpec, StrRef};
+use crate::abi::{StatDisplay, StatMerge, StatSpec, StrRef};
 
 /// Most counters (sums, maxima and ratios together) one integrator may declare. The host
 /// allocates one `f64` per counter per work unit in flight and merges them under a lock, so
@@ -104,7 +104,7 @@ impl StatMerge {
 #[derive(Debug, Default)]
 pub struct StatsBuilder {
     names: Vec<Box<str>>,
-    specs: Vec<(StatMerge, u32, u32)>,
+    specs: Vec<(StatMerge, u32, u32, StatDisplay)>,
     error: Option<String>,
 }
 
@@ -124,7 +124,13 @@ impl StatsBuilder {
         self.names.is_empty()
     }
 
-    fn push(&mut self, name: String, merge: StatMerge, num: u32, den: u32) -> u32 {
+    fn push(
+        &mut self,
+        name: String,
+        merge: StatMerge,
+        (num, den): (u32, u32),
+        display: StatDisplay,
+    ) -> u32 {
         if self.error.is_none() {
             if name.is_empty() {
                 self.error = Some("statistics: a counter has an empty name".into());
@@ -138,22 +144,34 @@ impl StatsBuilder {
         }
         let index = self.names.len() as u32;
         self.names.push(name.into_boxed_str());
-        self.specs.push((merge, num, den));
+        self.specs.push((merge, num, den, display));
         index
     }
 
-    /// A counter whose per-unit values and units are summed (events, totals).
+    /// A counter whose per-unit values and units are summed (events, totals), shown as a
+    /// number ([`StatDisplay::Number`]).
     pub fn sum(&mut self, name: impl Into<String>) -> Counter {
-        let index = self.push(name.into(), StatMerge::Sum, 0, 0);
+        self.sum_as(name, StatDisplay::Number)
+    }
+
+    /// A summed counter shown as `display` in the render summary.
+    pub fn sum_as(&mut self, name: impl Into<String>, display: StatDisplay) -> Counter {
+        let index = self.push(name.into(), StatMerge::Sum, (0, 0), display);
         Counter {
             index,
             merge: StatMerge::Sum,
         }
     }
 
-    /// A counter that keeps the largest value added (longest streak, image size).
+    /// A counter that keeps the largest value added (longest streak, image size), shown as
+    /// a number.
     pub fn max(&mut self, name: impl Into<String>) -> Counter {
-        let index = self.push(name.into(), StatMerge::Max, 0, 0);
+        self.max_as(name, StatDisplay::Number)
+    }
+
+    /// A maximised counter shown as `display` in the render summary.
+    pub fn max_as(&mut self, name: impl Into<String>, display: StatDisplay) -> Counter {
+        let index = self.push(name.into(), StatMerge::Max, (0, 0), display);
         Counter {
             index,
             merge: StatMerge::Max,
@@ -161,20 +179,38 @@ impl StatsBuilder {
     }
 
     /// A derived counter: total of `numerator` / total of `denominator` (0 when the
-    /// denominator's total is 0).
+    /// denominator's total is 0), shown as a number.
     pub fn ratio(
         &mut self,
         name: impl Into<String>,
         numerator: Counter,
         denominator: Counter,
     ) -> Ratio {
+        self.ratio_as(name, numerator, denominator, StatDisplay::Number)
+    }
+
+    /// A derived counter shown as `display` in the render summary (e.g.
+    /// [`StatDisplay::Percent`] for a share of events).
+    pub fn ratio_as(
+        &mut self,
+        name: impl Into<String>,
+        numerator: Counter,
+        denominator: Counter,
+        display: StatDisplay,
+    ) -> Ratio {
         let index = self.push(
             name.into(),
             StatMerge::Ratio,
-            numerator.index,
-            denominator.index,
+            (numerator.index, denominator.index),
+            display,
         );
         Ratio { index }
+    }
+
+    /// How counter `name` is shown, if it is declared (for tests of a declaration).
+    pub fn display_of(&self, name: &str) -> Option<StatDisplay> {
+        let i = self.names.iter().position(|n| **n == *name)?;
+        Some(self.specs[i].3)
     }
 
     /// The first declaration error, if any.
@@ -191,12 +227,15 @@ impl StatsBuilder {
             .names
             .iter()
             .zip(&self.specs)
-            .map(|(name, &(merge, numerator, denominator))| StatSpec {
-                name: StrRef::new(name),
-                merge,
-                numerator,
-                denominator,
-            })
+            .map(
+                |(name, &(merge, numerator, denominator, display))| StatSpec {
+                    name: StrRef::new(name),
+                    merge,
+                    numerator,
+                    denominator,
+                    display,
+                },
+            )
             .collect();
         Ok(StatTable {
             _names: self.names,

@@ -8,19 +8,40 @@
 //! reconnection p_r — the expected number of extra rays per mutation stays small (a
 //! geometric series).
 //!
-//! | parameter | type | default | meaning |
-//! |---|---|---|---|
-//! | `width` | string | `"wide"` | `"wide"`: BSDF-sampled extensions; `"narrow"`: extensions in a cap around the original path |
-//! | `cap_degrees` | float | 10 | cap half-angle for `"narrow"` |
-//! | `p_reconnect` | float | 0.5 | probability of reconnecting at a smooth vertex |
+//! Parameters: declared below; their table, generated from the declarations, is in
+//! docs/erpt.md ("The strategies"), and `flowlight plugins --markdown` prints it.
 
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]
 
-use flowlight_mcmc::strategy::{cap_degrees, probability};
 use flowlight_mcmc::{Extension, Policy, Strategy, StrategyMutation};
 use flowlight_sdk::abi::ParamSpec;
-use flowlight_sdk::{export_mutation, param, ParamKind, Params};
+use flowlight_sdk::declare::{ChoiceParam, FloatParam};
+use flowlight_sdk::{choice_param, export_mutation, float_param, Params};
+
+/// `width`: how an extension is sampled.
+const WIDTH: ChoiceParam = choice_param!(
+    "width",
+    "wide",
+    ["wide", "narrow"],
+    "\"wide\": BSDF-sampled extensions; \"narrow\": extensions in a cap around the original path"
+);
+
+/// `cap_degrees`: the cap's half-angle for `"narrow"`.
+const CAP_DEGREES: FloatParam = float_param!(
+    "cap_degrees",
+    10.0,
+    0.0 < x <= 90.0,
+    "cap half-angle in degrees for \"narrow\""
+);
+
+/// `p_reconnect`: above 0, since a blow must be able to reconnect.
+const P_RECONNECT: FloatParam = float_param!(
+    "p_reconnect",
+    0.5,
+    0.0 < x <= 1.0,
+    "probability of reconnecting at a smooth vertex (above 0: a blow must be able to reconnect)"
+);
 
 pub struct Blow;
 
@@ -28,41 +49,16 @@ impl Strategy for Blow {
     const NAME: &'static str = "blow";
     const DESCRIPTION: &'static str =
         "expansion near the eye, random hard reconnection vs extension (corner-trap fix)";
-    const PARAMS: &'static [ParamSpec] = &[
-        param(
-            "width",
-            ParamKind::String,
-            "\"wide\"",
-            "\"wide\" (BSDF extension) or \"narrow\" (cap extension)",
-        ),
-        param(
-            "cap_degrees",
-            ParamKind::Float,
-            "10.0",
-            "cap half-angle for the narrow variant",
-        ),
-        param(
-            "p_reconnect",
-            ParamKind::Float,
-            "0.5",
-            "probability of reconnecting at a smooth vertex",
-        ),
-    ];
+    const PARAMS: &'static [ParamSpec] = &[WIDTH.spec(), CAP_DEGREES.spec(), P_RECONNECT.spec()];
 
     fn policy(p: &Params) -> Result<Policy, String> {
-        let extension = match p.choice("width", "wide", &["wide", "narrow"])? {
+        let extension = match WIDTH.get(p)? {
             "wide" => Extension::Bsdf,
-            _ => Extension::cap_degrees(cap_degrees(p, "cap_degrees", 10.0)?),
+            _ => Extension::cap_degrees(CAP_DEGREES.get(p)? as f32),
         };
-        let p_reconnect = probability(p, "p_reconnect", 0.5)?;
-        if p_reconnect == 0.0 {
-            return Err(
-                "parameter 'p_reconnect' must be > 0: a blow must be able to reconnect".into(),
-            );
-        }
         Ok(Policy {
             min_extensions: 0,
-            p_reconnect,
+            p_reconnect: P_RECONNECT.get(p)? as f32,
             extension: Some(extension),
             drill_caustics: false,
             free_chains: false,

@@ -28,20 +28,20 @@
 //! Every other strategy gives such a proposal density 0 (it lands on x_m exactly with
 //! probability 0), so the mixture density stays consistent.
 //!
-//! | parameter | type | default | meaning |
-//! |---|---|---|---|
-//! | `theta1` | float | 0.0001 | smallest direction perturbation, radians |
-//! | `theta2` | float | 0.1 | largest direction perturbation, radians |
+//! Parameters: declared once (shared ones in `flowlight_mcmc::params`); their table,
+//! generated from the declarations, is in docs/erpt.md ("Perturbations"), and
+//! `flowlight plugins --markdown` prints it.
 
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]
 
+use flowlight_mcmc::params::{exp_cone, THETA1, THETA2};
 use flowlight_mcmc::perturbation::ExpCone;
 use flowlight_mcmc::specular_chain;
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::core::path::Path;
 use flowlight_sdk::core::rng::Rng;
-use flowlight_sdk::{export_mutation, param, Mutation, ParamKind, Params, Proposal, Scene, Tracer};
+use flowlight_sdk::{export_mutation, Mutation, Params, Proposal, Scene, Tracer};
 
 pub struct CausticPerturbation {
     scene: Scene<'static>,
@@ -52,23 +52,10 @@ impl Mutation for CausticPerturbation {
     const NAME: &'static str = "caustic-perturbation";
     const DESCRIPTION: &'static str =
         "Veach's caustic perturbation: turn the light-side direction of a specular chain, retrace it, connect to the eye";
-    const PARAMS: &'static [ParamSpec] = &[
-        param(
-            "theta1",
-            ParamKind::Float,
-            "0.0001",
-            "smallest direction perturbation, radians",
-        ),
-        param(
-            "theta2",
-            ParamKind::Float,
-            "0.1",
-            "largest direction perturbation, radians",
-        ),
-    ];
+    const PARAMS: &'static [ParamSpec] = &[THETA1.spec(), THETA2.spec()];
 
     fn create(params: &Params, scene: Scene<'static>) -> Result<Self, String> {
-        let cone = ExpCone::new(params.float("theta1", 1e-4)?, params.float("theta2", 0.1)?)?;
+        let cone = exp_cone(params)?;
         Ok(CausticPerturbation { scene, cone })
     }
 

@@ -7,20 +7,41 @@
 //! the first cap step, it reconnects hard with probability `p_stop` at each smooth vertex.
 //! Ratio: the product over cap steps of p_cap(x)J(x)/(p_cap(y)J(y)) (see `soft-reconnection`).
 //!
-//! | parameter | type | default | meaning |
-//! |---|---|---|---|
-//! | `width` | string | `"narrow"` | `"narrow"` (2° caps) or `"wide"` (10° caps) |
-//! | `cap_degrees` | float | by width | cap half-angle, overrides `width` |
-//! | `p_stop` | float | 0.5 | probability of reconnecting at a smooth vertex of a non-caustic remainder |
-//! | `free_chains` | bool | true | follow mirror chains to any length (`flowlight_mcmc::regenerate`, "Dirac chains of any length"; docs/erpt.md); `false`: Veach's rule, every chain keeps x's number of vertices |
+//! Parameters: declared below; their table, generated from the declarations, is in
+//! docs/erpt.md ("The strategies"), and `flowlight plugins --markdown` prints it.
 
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]
 
-use flowlight_mcmc::strategy::{cap_degrees, probability};
+use flowlight_mcmc::params::FREE_CHAINS;
 use flowlight_mcmc::{Extension, Policy, Strategy, StrategyMutation};
 use flowlight_sdk::abi::ParamSpec;
-use flowlight_sdk::{export_mutation, param, ParamKind, Params};
+use flowlight_sdk::declare::{ChoiceParam, FloatParam};
+use flowlight_sdk::{choice_param, export_mutation, float_param, Params};
+
+/// `width`: the caps' default size.
+const WIDTH: ChoiceParam = choice_param!(
+    "width",
+    "narrow",
+    ["narrow", "wide"],
+    "\"narrow\" (2 degree caps) or \"wide\" (10 degree caps)"
+);
+
+/// `cap_degrees`: the caps' half-angle, by default the one `width` names.
+const CAP_DEGREES: FloatParam = float_param!(
+    "cap_degrees",
+    unset "by width",
+    0.0 < x <= 90.0,
+    "cap half-angle in degrees (overrides width)"
+);
+
+/// `p_stop`: the probability of reconnecting at a smooth vertex.
+const P_STOP: FloatParam = float_param!(
+    "p_stop",
+    0.5,
+    0.0 <= x <= 1.0,
+    "probability of reconnecting at a smooth vertex of a non-caustic remainder"
+);
 
 pub struct Drill;
 
@@ -29,47 +50,25 @@ impl Strategy for Drill {
     const DESCRIPTION: &'static str =
         "cap-sampled drilling along the original path; caustics drilled to the light";
     const PARAMS: &'static [ParamSpec] = &[
-        param(
-            "width",
-            ParamKind::String,
-            "\"narrow\"",
-            "\"narrow\" (2 degree caps) or \"wide\" (10 degree caps)",
-        ),
-        param(
-            "cap_degrees",
-            ParamKind::Float,
-            "by width",
-            "cap half-angle in degrees (overrides width)",
-        ),
-        param(
-            "p_stop",
-            ParamKind::Float,
-            "0.5",
-            "probability of reconnecting at a smooth vertex (non-caustic remainder)",
-        ),
-        param(
-            "free_chains",
-            ParamKind::Bool,
-            "true",
-            "follow mirror chains to whatever length they have (false: keep every chain's number of bounces)",
-        ),
+        WIDTH.spec(),
+        CAP_DEGREES.spec(),
+        P_STOP.spec(),
+        FREE_CHAINS.spec(),
     ];
 
     fn policy(p: &Params) -> Result<Policy, String> {
-        let default_cap = match p.choice("width", "narrow", &["narrow", "wide"])? {
+        let by_width = match WIDTH.get(p)? {
             "narrow" => 2.0,
             _ => 10.0,
         };
         Ok(Policy {
             min_extensions: 1,
-            p_reconnect: probability(p, "p_stop", 0.5)?,
-            extension: Some(Extension::cap_degrees(cap_degrees(
-                p,
-                "cap_degrees",
-                default_cap,
-            )?)),
+            p_reconnect: P_STOP.get(p)? as f32,
+            extension: Some(Extension::cap_degrees(
+                CAP_DEGREES.get_or(p, by_width)? as f32
+            )),
             drill_caustics: true,
-            free_chains: p.boolean("free_chains", true)?,
+            free_chains: FREE_CHAINS.get(p)?,
         })
     }
 }

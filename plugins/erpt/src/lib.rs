@@ -35,22 +35,8 @@
 //! the film in a `film_window`² window around their current position, so their deposits land
 //! around the seed's tile: units use flanged tiles (§5.9).
 //!
-//! | parameter | type | default | meaning |
-//! |---|---|---|---|
-//! | `mutations` | list | — | `[[integrator.mutations]]`: `plugin`, `weight` (default 1), the plugin's parameters |
-//! | `mutations_per_sample` | float | 8 | M: expected mutations per initial MC sample |
-//! | `chain_length` | int | 16 | N: steps of every chain |
-//! | `film_window` | int | 8 | K: side of the film-plane migration window (0: the raster position never moves) |
-//! | `quantum` | string | `"tile"` | `"tile"` or `"image"`: where e_d is estimated |
-//! | `mixture` | string | `"mixture"` | `"mixture"`: acceptance with Σ p(sᵢ)T^{sᵢ}; `"selected"`: the chosen strategy's ratio |
-//! | `max_chains_per_seed` | int | 1024 | cap on chains per seed; capped seeds deposit larger quanta (still unbiased) |
-//! | `max_consecutive` | int | 0 | consecutive sample filter, **biased**: at most this many consecutive deposits of a chain in one pixel |
-//! | `termination`, `path_depth`, `max_ray_depth`, `rr_depth`, `rr_max_survival` | | `"throughput"`, 8, 32, 5, 0.95 | the seed sampler's (see `mcpt`; for untangled seeds `"throughput"` is T = 1 − min(albedo, `rr_max_survival`) and `rr_depth` is unused; entangled seeds roll it on the throughput from `rr_depth`, as MCPT) |
-//! | `layers` | bool | false | write lighting layers `layer0…layerN` |
-//! | `seeds` | string | `"untangled"` | `"untangled"` (one light connection per path) or `"entangled"` (every connection, emitter hit and escape of an entangled path, MIS-weighted) |
-//! | `sampler` | string | `"sobol"` | entangled seeds only (untangled: `"independent"`; `"sobol"` refused): the seed paths' random numbers, `"sobol"` (a pixel's samples stratified together, as MCPT's default) or `"independent"`; chains always draw independent numbers |
-//! | `direct` | string | `"erpt"` | `"mcpt"`: direct light (layers 0 and 1, `ES*L`, `ES*[DG]L`) by path tracing, as Mitsuba 0.6's `directSamples` |
-//! | `chains_for` | string | `"all"` | paths the chains render: `"all"`, `"caustics"` (`E.*[DG].*S.*L`) or a Heckbert pattern over `E D G S L` with `. [] [^] * + ? \| ()` (`part.rs`); the rest by MCPT |
+//! The parameters are declared once, in `settings.rs`; the table generated from the
+//! declarations is in docs/erpt.md ("Parameters"), and `flowlight plugins --markdown` prints it.
 //!
 //! Seeds whose estimate is NaN, infinite or negative, or whose path the target function gives
 //! no energy, are skipped and counted; proposals with invalid densities or contributions are
@@ -440,11 +426,10 @@ impl Integrator for Erpt {
             })
             .collect();
         let counters = stats::Counters::declare(stats, &names);
-        let layers = params.boolean("layers", false)?;
         let chains_part_empty = settings.seed_kind == SeedKind::Entangled
             && settings.part.is_empty_for(scene_letters(&scene));
         let info = IntegratorInfo {
-            layer_count: if layers {
+            layer_count: if settings.layers {
                 settings.seeds.path_depth + 1
             } else {
                 0

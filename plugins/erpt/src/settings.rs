@@ -1,10 +1,18 @@
-//! ERPT parameters.
+//! ERPT parameters, each declared once ([`flowlight_sdk::declare`]): [`PARAMS`] and
+//! [`ErptSettings::from_params`] are built from the declarations, and so are the table in
+//! docs/erpt.md ("Parameters") and `flowlight plugins --markdown`.
 
 use crate::part::Part;
-use flowlight_pathtrace::sampler::SamplerKind;
+use flowlight_pathtrace::sampler::{SamplerKind, SAMPLER};
+use flowlight_pathtrace::settings as path;
 use flowlight_pathtrace::{PathSettings, Variant};
 use flowlight_sdk::abi::ParamSpec;
-use flowlight_sdk::{param, ParamKind, Params};
+use flowlight_sdk::declare::{
+    mutation_list, BoolParam, ChoiceParam, FloatParam, IntParam, StringParam,
+};
+use flowlight_sdk::{
+    bool_param, choice_param, float_param, int_param, string_param, ParamRole, Params,
+};
 
 /// Where the deposition quantum e_d is estimated (thesis Algorithm 1).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -43,6 +51,8 @@ pub struct ErptSettings {
     pub part: Part,
     /// Random numbers of the seed paths (entangled seeds only; chains draw independent ones).
     pub sampler: SamplerKind,
+    /// Lighting layers are written.
+    pub layers: bool,
 }
 
 /// Which sampler draws the seeds.
@@ -55,91 +65,161 @@ pub enum SeedKind {
     Entangled,
 }
 
+/// `mutations_per_sample`: M of §5.2.
+pub const MUTATIONS_PER_SAMPLE: FloatParam = float_param!(
+    "mutations_per_sample",
+    8.0,
+    0.0 < x,
+    "M: expected mutations per camera sample (one untangled path, or one entangled tree and all its seeds), §5.2: e_d = lum(sum of X) / (samples · M)"
+);
+
+/// `chain_length`: N, the steps of every chain.
+pub const CHAIN_LENGTH: IntParam = int_param!(
+    "chain_length",
+    16,
+    1..=1000000,
+    "N: mutations per chain; every chain of a seed has this length"
+);
+
+/// `film_window`: K, the side of the film-plane migration window.
+pub const FILM_WINDOW: IntParam = int_param!(
+    "film_window",
+    8,
+    0..=4096,
+    "K: side of the film-plane migration window around the current position (0: the raster position never moves)"
+);
+
+/// `quantum`: where e_d is estimated.
+pub const QUANTUM: ChoiceParam = choice_param!(
+    "quantum",
+    "tile",
+    ["tile", "image"],
+    "where e_d is estimated: \"tile\" (from each work unit's seeds) or \"image\" (from a one-sample-per-pixel pre-pass)"
+);
+
+/// `mixture`: the acceptance ratio with several strategies.
+pub const MIXTURE: ChoiceParam = choice_param!(
+    "mixture",
+    "mixture",
+    ["mixture", "selected"],
+    "acceptance ratio with several strategies: the \"mixture\" density sum p(s_i)·T^{s_i} (§5.4) or the \"selected\" strategy's own"
+);
+
+/// `max_chains_per_seed`: the cap on chains per seed.
+pub const MAX_CHAINS_PER_SEED: IntParam = int_param!(
+    "max_chains_per_seed",
+    1024,
+    1..=1000000,
+    "cap on chains per seed; a capped seed's chains carry a larger quantum (still unbiased)"
+);
+
+/// `max_consecutive`: the consecutive sample filter.
+pub const MAX_CONSECUTIVE: IntParam = int_param!(
+    "max_consecutive",
+    0,
+    0..=1000000,
+    "consecutive sample filter (BIASED): at most this many consecutive deposits of a chain in one pixel; 0 = off"
+);
+
+/// `max_ray_depth` of ERPT: seeds are stored as paths (at most 34 vertices), so a lower
+/// default and cap than MCPT's.
+pub const MAX_RAY_DEPTH: IntParam = int_param!(
+    "max_ray_depth",
+    32,
+    1..=32,
+    "maximal physical ray depth of the seeds, every bounce counted; at least path_depth (seeds are stored as paths of at most 34 vertices)"
+)
+.role(ParamRole::MaxRayDepth);
+
+/// `layers`: write the lighting layers.
+pub const LAYERS: BoolParam = bool_param!(
+    "layers",
+    false,
+    "also write lighting layers layer0..layerN as EXR layers; they sum to the image"
+)
+.role(ParamRole::Layers);
+
+/// `seeds`: the seed sampler.
+pub const SEEDS: ChoiceParam = choice_param!(
+    "seeds",
+    "untangled",
+    ["untangled", "entangled"],
+    "seed sampler: \"untangled\" (one light connection per path, the thesis') or \"entangled\" (every connection, emitter hit and escape of an entangled path, MIS-weighted)"
+);
+
+/// `direct`: who renders direct light.
+pub const DIRECT: ChoiceParam = choice_param!(
+    "direct",
+    "erpt",
+    ["erpt", "mcpt"],
+    "direct lighting (layers 0 and 1: ES*L, ES*[DG]L) by \"erpt\" chains or by \"mcpt\" (seeds deposited as path tracing would)"
+);
+
+/// `chains_for`: the part of path space the chains render.
+pub const CHAINS_FOR: StringParam = string_param!(
+    "chains_for",
+    "all",
+    "paths the chains render, the rest by MCPT: \"all\", \"caustics\" (E.*[DG].*S.*L) or a Heckbert pattern over E D G S L with . [] [^] * + ? | ()"
+);
+
+/// ERPT's parameters: its own, and the seed sampler's from `flowlight_pathtrace::settings`
+/// (with ERPT's [`MAX_RAY_DEPTH`]).
 pub const PARAMS: [ParamSpec; 18] = [
-    param("mutations", ParamKind::MutationList, "(required)", "[[integrator.mutations]] plugin = \"...\", weight = w, and that plugin's parameters"),
-    param("mutations_per_sample", ParamKind::Float, "8", "expected mutations per initial MC sample (M, §5.2): e_d = lum(ΣX_f) / (count · M)"),
-    param("chain_length", ParamKind::Int, "16", "mutations per chain (N); every chain of a seed has this length"),
-    param("film_window", ParamKind::Int, "8", "side K of the film-plane migration window around the current position (0: fixed raster position)"),
-    param("quantum", ParamKind::String, "\"tile\"", "where e_d is estimated: \"tile\" (per work unit) or \"image\" (1 spp pre-pass)"),
-    param("mixture", ParamKind::String, "\"mixture\"", "acceptance ratio with several strategies: \"mixture\" density (§5.4) or \"selected\" strategy's own"),
-    param("max_chains_per_seed", ParamKind::Int, "1024", "cap on chains per seed; a capped seed's chains carry a larger quantum (unbiased)"),
-    param("max_consecutive", ParamKind::Int, "0", "consecutive sample filter (BIASED): at most this many consecutive deposits of a chain in one pixel, 0 = off"),
-    param("termination", ParamKind::String, "\"throughput\"", "seed sampler's termination distribution: \"bxdf\", \"equi\", \"expo\" or \"throughput\""),
-    param("rr_max_survival", ParamKind::Float, "0.95", "termination = \"throughput\": cap on the seeds' survival probability, in [0.01, 0.999]"),
-    param("rr_depth", ParamKind::Int, "5", "termination = \"throughput\", entangled seeds: first lighting vertex where the roulette may stop a seed path (1..=1024)"),
-    param("path_depth", ParamKind::Int, "8", "path-space depth N of the seeds (1..=32)"),
-    param("max_ray_depth", ParamKind::Int, "32", "maximal physical ray depth of the seeds (path_depth..=32)"),
-    param("layers", ParamKind::Bool, "false", "also write lighting layers layer0..layerN"),
-    param("seeds", ParamKind::String, "\"untangled\"", "seed sampler: \"untangled\" (one light connection per path, the thesis') or \"entangled\" (every connection and emitter hit of an entangled path, MIS-weighted)"),
-    param("direct", ParamKind::String, "\"erpt\"", "direct lighting (layers 0 and 1: ES*L, ES*[DG]L) by \"erpt\" chains or \"mcpt\" (seeds deposited as path tracing would)"),
-    param("chains_for", ParamKind::String, "\"all\"", "paths the chains render, the rest by MCPT: \"all\", \"caustics\" (E.*[DG].*S.*L) or a Heckbert pattern over E D G S L with . [] ^ * + ? | ()"),
-    param("sampler", ParamKind::String, "\"sobol\"", "entangled seeds only (untangled: \"independent\"): the seed paths' random numbers, \"sobol\" (a pixel's samples stratified together, as MCPT's default) or \"independent\" (PCG32); chains always draw independent numbers"),
+    mutation_list(
+        "mutations",
+        "[[integrator.mutations]]: plugin = \"...\", weight = w (default 1; finite, >= 0, normalised to sum to 1), and that plugin's parameters",
+    ),
+    MUTATIONS_PER_SAMPLE.spec(),
+    CHAIN_LENGTH.spec(),
+    FILM_WINDOW.spec(),
+    QUANTUM.spec(),
+    MIXTURE.spec(),
+    MAX_CHAINS_PER_SEED.spec(),
+    MAX_CONSECUTIVE.spec(),
+    path::TERMINATION.spec(),
+    path::RR_MAX_SURVIVAL.spec(),
+    path::RR_DEPTH.spec(),
+    path::PATH_DEPTH.spec(),
+    MAX_RAY_DEPTH.spec(),
+    LAYERS.spec(),
+    SEEDS.spec(),
+    DIRECT.spec(),
+    CHAINS_FOR.spec(),
+    SAMPLER.spec(),
 ];
 
 impl ErptSettings {
+    /// Reads ERPT's parameters (all but `mutations`, which the host hands over as strategies).
     pub fn from_params(p: &Params) -> Result<Self, String> {
-        let mut seeds = PathSettings::from_params(p)?;
-        seeds.variant = Variant::Untangled;
-        // Seeds are stored as paths (at most 34 vertices): a lower default and cap than MCPT.
-        let max_ray_depth = p.int("max_ray_depth", 32)?;
-        if max_ray_depth < seeds.path_depth as i64 || max_ray_depth > 32 {
-            return Err(format!(
-                "parameter 'max_ray_depth' must be in path_depth..=32 ({}..=32) for ERPT, got {max_ray_depth}",
-                seeds.path_depth
-            ));
-        }
-        seeds.max_ray_depth = max_ray_depth as u32;
-        let mutations_per_sample = p.float("mutations_per_sample", 8.0)?;
-        if !(mutations_per_sample > 0.0 && mutations_per_sample.is_finite()) {
-            return Err(format!(
-                "parameter 'mutations_per_sample' must be positive, got {mutations_per_sample}"
-            ));
-        }
-        let chain_length = p.int("chain_length", 16)?;
-        if !(1..=1_000_000).contains(&chain_length) {
-            return Err(format!(
-                "parameter 'chain_length' must be in 1..=1000000, got {chain_length}"
-            ));
-        }
-        let film_window = p.int("film_window", 8)?;
-        if !(0..=4096).contains(&film_window) {
-            return Err(format!(
-                "parameter 'film_window' must be in 0..=4096, got {film_window}"
-            ));
-        }
-        let quantum = match p.choice("quantum", "tile", &["tile", "image"])? {
-            "tile" => QuantumScope::Tile,
-            _ => QuantumScope::Image,
-        };
-        let mixture = match p.choice("mixture", "mixture", &["mixture", "selected"])? {
-            "mixture" => MixtureRatio::Mixture,
-            _ => MixtureRatio::Selected,
-        };
-        let max_chains_per_seed = p.int("max_chains_per_seed", 1024)?;
-        if !(1..=1_000_000).contains(&max_chains_per_seed) {
-            return Err(format!(
-                "parameter 'max_chains_per_seed' must be in 1..=1000000, got {max_chains_per_seed}"
-            ));
-        }
-        let max_consecutive = p.int("max_consecutive", 0)?;
-        if max_consecutive < 0 {
-            return Err(format!(
-                "parameter 'max_consecutive' must be >= 0, got {max_consecutive}"
-            ));
-        }
-        let seed_kind = match p.choice("seeds", "untangled", &["untangled", "entangled"])? {
+        let seed_kind = match SEEDS.get(p)? {
             "untangled" => SeedKind::Untangled,
             _ => SeedKind::Entangled,
         };
-        if seed_kind == SeedKind::Entangled {
-            seeds.variant = Variant::Entangled;
-        }
+        let variant = match seed_kind {
+            SeedKind::Untangled => Variant::Untangled,
+            SeedKind::Entangled => Variant::Entangled,
+        };
+        let seeds = PathSettings::shared_from_params(p, variant, &MAX_RAY_DEPTH)?;
+        let mutations_per_sample = MUTATIONS_PER_SAMPLE.get(p)?;
+        let chain_length = CHAIN_LENGTH.get(p)?;
+        let film_window = FILM_WINDOW.get(p)?;
+        let quantum = match QUANTUM.get(p)? {
+            "tile" => QuantumScope::Tile,
+            _ => QuantumScope::Image,
+        };
+        let mixture = match MIXTURE.get(p)? {
+            "mixture" => MixtureRatio::Mixture,
+            _ => MixtureRatio::Selected,
+        };
+        let max_chains_per_seed = MAX_CHAINS_PER_SEED.get(p)?;
+        let max_consecutive = MAX_CONSECUTIVE.get(p)?;
         // Entangled seeds take the path tracer's stratified samples; untangled seeds (the
         // thesis' sampler) keep independent numbers, as MCPT's untangled variant does.
         let sampler =
             SamplerKind::from_params(p, seed_kind == SeedKind::Entangled, "seeds = \"entangled\"")?;
-        let direct_by_mcpt = p.choice("direct", "erpt", &["erpt", "mcpt"])? == "mcpt";
-        let part = Part::new(p.string("chains_for", "all")?, direct_by_mcpt)?;
+        let direct_by_mcpt = DIRECT.get(p)? == "mcpt";
+        let part = Part::new(CHAINS_FOR.get(p)?, direct_by_mcpt)?;
+        let layers = LAYERS.get(p)?;
         Ok(ErptSettings {
             sampler,
             seed_kind,
@@ -152,6 +232,7 @@ impl ErptSettings {
             mixture,
             max_chains_per_seed: max_chains_per_seed as u32,
             max_consecutive: max_consecutive as u32,
+            layers,
         })
     }
 }

@@ -13,6 +13,10 @@
 //! (seeds outside the chains' part, deposited directly), `part_misses` (proposals outside it),
 //! `units_without_chains` (units path-traced because no path of the scene can be in the part).
 //!
+//! Each counter declares how the render summary shows it ([`StatDisplay`]): per group the
+//! steps, the strengths (as percentages), the mean and longest streaks; the event counts,
+//! streak totals and costs per group only in the `.stats.json`; seconds as seconds.
+//!
 //! Costs (§5.5 leaves them out; they decide whether a mixture pays): per group g
 //! `g.propose_seconds` (time in the strategy's `propose`), `g.density_calls` and
 //! `g.density_seconds` (the mixture density asks every strategy for T(y→z) and T(z→y): 2k calls
@@ -25,6 +29,7 @@
 
 use flowlight_mcmc::norms::{Tally, EVENTS};
 use flowlight_sdk::stats::{Counter, Stats, StatsBuilder};
+use flowlight_sdk::StatDisplay;
 
 /// What one strategy's steps cost: time proposing, density calls and their time.
 #[derive(Clone, Copy, Debug, Default)]
@@ -96,24 +101,29 @@ impl Counters {
         let part_misses = b.sum("part_misses");
         let units_without_chains = b.sum("units_without_chains");
         let measure_calls = b.sum("measure_calls");
-        let measure_seconds = b.sum("measure_seconds");
-        let seed_seconds = b.sum("seed_seconds");
-        let flow_seconds = b.sum("flow_seconds");
+        let measure_seconds = b.sum_as("measure_seconds", StatDisplay::Seconds);
+        let seed_seconds = b.sum_as("seed_seconds", StatDisplay::Seconds);
+        let flow_seconds = b.sum_as("flow_seconds", StatDisplay::Seconds);
         let names: Vec<&str> = std::iter::once("total")
             .chain(strategies.iter().map(String::as_str))
             .collect();
         let groups: Vec<GroupCounters> = names
             .iter()
             .map(|g| {
+                // The summary's line per group: steps, strengths, mean and longest
+                // streaks; the rest only in the JSON.
                 let per_event = |b: &mut StatsBuilder, suffix: &str, max: bool| {
                     EVENTS.map(|e| {
                         let name = format!("{g}.{}{suffix}", e.name());
                         if max {
-                            b.max(name)
+                            b.max_as(name, StatDisplay::Number)
                         } else {
-                            b.sum(name)
+                            b.sum_as(name, StatDisplay::Hidden)
                         }
                     })
+                };
+                let hidden = |b: &mut StatsBuilder, name: &str| {
+                    b.sum_as(format!("{g}.{name}"), StatDisplay::Hidden)
                 };
                 GroupCounters {
                     mutations: b.sum(format!("{g}.mutations")),
@@ -121,9 +131,9 @@ impl Counters {
                     streaks: per_event(b, "_streaks", false),
                     streak_total: per_event(b, "_streak_total", false),
                     streak_max: per_event(b, "_streak_max", true),
-                    propose_seconds: b.sum(format!("{g}.propose_seconds")),
-                    density_calls: b.sum(format!("{g}.density_calls")),
-                    density_seconds: b.sum(format!("{g}.density_seconds")),
+                    propose_seconds: hidden(b, "propose_seconds"),
+                    density_calls: hidden(b, "density_calls"),
+                    density_seconds: hidden(b, "density_seconds"),
                 }
             })
             .collect();
@@ -132,21 +142,24 @@ impl Counters {
         b.ratio("mean_quantum", quantum_sum, units);
         b.ratio("seeds_per_sample", seeds, camera_samples);
         for (g, c) in names.iter().zip(&groups) {
-            b.ratio(
+            b.ratio_as(
                 format!("{g}.density_calls_per_mutation"),
                 c.density_calls,
                 c.mutations,
+                StatDisplay::Hidden,
             );
-            b.ratio(
+            b.ratio_as(
                 format!("{g}.propose_seconds_per_mutation"),
                 c.propose_seconds,
                 c.mutations,
+                StatDisplay::Hidden,
             );
             for (ei, e) in EVENTS.iter().enumerate() {
-                b.ratio(
+                b.ratio_as(
                     format!("{g}.{}_strength", e.name()),
                     c.events[ei],
                     c.mutations,
+                    StatDisplay::Percent,
                 );
             }
             for (ei, e) in EVENTS.iter().enumerate() {
@@ -215,6 +228,21 @@ mod tests {
         // 17 globals + 4 ratios, and per group (total + 8) 20 counters + 10 ratios.
         assert_eq!(b.len(), 17 + 4 + 9 * (20 + 10));
         assert_eq!(c.groups.len(), 9);
+        // The summary shows what the declarations ask, whatever the names.
+        assert_eq!(
+            b.display_of("s3.acceptance_strength"),
+            Some(StatDisplay::Percent)
+        );
+        assert_eq!(
+            b.display_of("s3.acceptance_streaks"),
+            Some(StatDisplay::Hidden)
+        );
+        assert_eq!(
+            b.display_of("total.rejection_streak_max"),
+            Some(StatDisplay::Number)
+        );
+        assert_eq!(b.display_of("flow_seconds"), Some(StatDisplay::Seconds));
+        assert_eq!(b.display_of("chains_per_seed"), Some(StatDisplay::Number));
     }
 
     #[test]

@@ -24,22 +24,21 @@
 //! Dirac step both ways and T depends on |u_y − u_x| alone, so T(y→x)/T(x→y) = 1. With
 //! K = 0 the raster position never moves; when r₂' ≤ r₁ every proposal is a domain miss.
 //!
-//! | parameter | type | default | meaning |
-//! |---|---|---|---|
-//! | `r1` | float | 0.1 | smallest jump, pixels (Veach's r₁) |
-//! | `r2` | float | 0 | largest jump, pixels; 0: Veach's √(0.05·W·H/π) (5 % of the image area) |
-//! | `free_chains` | bool | true | follow mirror chains to any length (`flowlight_mcmc::regenerate`, "Dirac chains of any length"; docs/erpt.md); `false`: Veach's rule, every chain keeps x's number of vertices |
+//! Parameters: declared once (shared ones in `flowlight_mcmc::params`); their table,
+//! generated from the declarations, is in docs/erpt.md ("Perturbations"), and
+//! `flowlight plugins --markdown` prints it.
 
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]
 
+use flowlight_mcmc::params::{FREE_CHAINS, R1, R2};
 use flowlight_mcmc::perturbation::LensJump;
 use flowlight_mcmc::regenerate::{density_with, propose_with};
 use flowlight_mcmc::{FilmMove, Policy};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::core::path::Path;
 use flowlight_sdk::core::rng::Rng;
-use flowlight_sdk::{export_mutation, param, Mutation, ParamKind, Params, Proposal, Scene, Tracer};
+use flowlight_sdk::{export_mutation, Mutation, Params, Proposal, Scene, Tracer};
 
 /// Strict reconnection at the first smooth vertex: the eye end of the lens perturbation.
 fn reconnect(free_chains: bool) -> Policy {
@@ -62,30 +61,11 @@ impl Mutation for LensPerturbation {
     const NAME: &'static str = "lens-perturbation";
     const DESCRIPTION: &'static str =
         "Veach's lens perturbation: log-uniform raster jump, Dirac chain followed, reconnect (ratio 1)";
-    const PARAMS: &'static [ParamSpec] = &[
-        param(
-            "r1",
-            ParamKind::Float,
-            "0.1",
-            "smallest raster jump in pixels",
-        ),
-        param(
-            "r2",
-            ParamKind::Float,
-            "0",
-            "largest raster jump in pixels (0: sqrt(0.05 W H / pi)); bounded by film_window/2",
-        ),
-        param(
-            "free_chains",
-            ParamKind::Bool,
-            "true",
-            "follow mirror chains to whatever length they have (false: keep the path's number of bounces, Veach's rule)",
-        ),
-    ];
+    const PARAMS: &'static [ParamSpec] = &[R1.spec(), R2.spec(), FREE_CHAINS.spec()];
 
     fn create(params: &Params, scene: Scene<'static>) -> Result<Self, String> {
         let jump = LensJump::from_params(params, scene.camera.width, scene.camera.height)?;
-        let policy = reconnect(params.boolean("free_chains", true)?);
+        let policy = reconnect(FREE_CHAINS.get(params)?);
         Ok(LensPerturbation {
             scene,
             jump,

@@ -9,20 +9,9 @@
 //!   termination distribution at a Λβ vertex; emitters are found by hitting them only after a
 //!   specular (Λα) vertex. This is ERPT's seed sampler.
 //!
-//! Parameters (`[integrator]` table of the render config):
-//!
-//! | name | type | default | meaning |
-//! |---|---|---|---|
-//! | `variant` | string | `"entangled"` | `"entangled"` or `"untangled"` |
-//! | `termination` | string | `"throughput"` | `"bxdf"` (albedo roulette), `"equi"` (T_k = 1/(N−k+1)), `"expo"` (layer shares double with depth) — §3.8; `"throughput"`: roulette with survival min(max(β)·η²·albedo, `rr_max_survival`) from lighting vertex `rr_depth` on, η² over the refractions crossed (untangled: 1 − min(albedo, `rr_max_survival`) at every vertex) |
-//! | `rr_depth`, `rr_max_survival` | int, float | 5, 0.95 | `"throughput"` only: start depth (entangled) and survival cap, in [0.01, 0.999] |
-//! | `path_depth` | int | 8 | path-space depth N: deepest lighting layer; a chain of mirrors seen from the eye does not use it up (virtual depth, §2) |
-//! | `max_ray_depth` | int | 64 | physical ray depth cap, every bounce counted |
-//! | `narrow_glossy_alpha` | float | 0.05 | untangled only: a glossy lobe with GGX α below it is Λα — no light connection there, light is found only by hitting it. A small lamp seen in a surface of roughness 0.2 (α = 0.04) is then nearly black; set 0 to connect at every non-Dirac vertex. Entangled MCPT connects at every non-Dirac vertex regardless |
-//! | `wavefront` | int | 256 | entangled only: paths traced together, as batches of camera, extension and shadow rays handed to the host in one call each (ABI 4); 0 traces one path at a time with one host call per ray. The image is the same bit for bit either way; only the speed differs |
-//! | `sampler` | string | `"sobol"` | entangled only (untangled: `"independent"`, and `"sobol"` is refused): where each pixel sample's random numbers come from: `"sobol"`, Sobol' points of a per-dimension shuffled (Owen-scrambled) index, digitally shifted (randomised quasi-Monte Carlo: the samples of a pixel are stratified against each other in every dimension, at every power of two of samples per pixel; unbiased); `"independent"`, a PCG32 stream per sample |
-//! | `branches` | int | 4 (untangled: 1) | entangled only: a camera path goes on as this many branches (1..=64) from its first lighting vertex, each with 1/k of the weight, its own numbers, its own light connection there and its own BSDF sample (splitting, as a production renderer's diffuse samples per camera sample). The camera ray, the first hit and its BSDF are paid once for k paths. With `sampler = "sobol"` and k a power of two the branches of a pixel's samples are stratified together |
-//! | `layers` | bool | false | also write lighting layers 0..=N (layer k = paths of virtual length k+1) as EXR layers `layer0`…; they sum to the image |
+//! Parameters (`[integrator]` table of the render config): each is declared once, in
+//! `flowlight_pathtrace::settings` and below; the table generated from the declarations is in
+//! docs/mcpt.md ("Parameters"), and `flowlight plugins --markdown` prints it.
 //!
 //! Each pixel sample's numbers depend only on (seed, pixel, sample index) — a PCG32 stream
 //! seeded from them, or the sample's Sobol' points — so an image does not depend on the
@@ -36,13 +25,16 @@
 use flowlight_core::rng::Rng;
 use flowlight_core::sobol::SobolSampler;
 use flowlight_core::Rgb;
-use flowlight_pathtrace::sampler::{sample_start, PixelSampler, SamplerKind};
+use flowlight_pathtrace::sampler::{sample_start, PixelSampler, SamplerKind, SAMPLER};
 use flowlight_pathtrace::walk::units;
-use flowlight_pathtrace::{entangled, untangled, PathSettings, SampleContributions, Variant};
+use flowlight_pathtrace::{
+    entangled, settings, untangled, PathSettings, SampleContributions, Variant,
+};
 use flowlight_sdk::abi::ParamSpec;
+use flowlight_sdk::declare::{BoolParam, IntParam};
 use flowlight_sdk::{
-    export_integrator, param, Film, Integrator, IntegratorInfo, MutationSet, ParamKind, Params,
-    Scene, Stats, StatsBuilder, Tracer, WorkUnit,
+    bool_param, export_integrator, int_param, Film, Integrator, IntegratorInfo, MutationSet,
+    ParamRole, Params, Scene, Stats, StatsBuilder, Tracer, WorkUnit,
 };
 
 pub struct Mcpt {
@@ -55,47 +47,36 @@ pub struct Mcpt {
     layers: bool,
 }
 
-const PARAMS: [ParamSpec; 11] = {
-    let p = flowlight_pathtrace::settings::PATH_PARAMS;
-    [
-        p[0],
-        p[1],
-        p[2],
-        p[3],
-        p[4],
-        p[5],
-        param(
-            "layers",
-            ParamKind::Bool,
-            "false",
-            "write per-depth lighting layers layer0..layerN as extra EXR layers",
-        ),
-        param(
-            "narrow_glossy_alpha",
-            ParamKind::Float,
-            "0.05",
-            "untangled only: GGX alpha below which a glossy vertex gets no light connection (0 = connect at every non-Dirac vertex)",
-        ),
-        param(
-            "wavefront",
-            ParamKind::Int,
-            "256",
-            "entangled only: paths traced together as ray batches (0 = one path at a time, one host call per ray)",
-        ),
-        param(
-            "branches",
-            ParamKind::Int,
-            "4",
-            "entangled only: branches a camera path splits into at its first lighting vertex, each with 1/k of the weight (1..=64; 1 = no split; untangled: 1)",
-        ),
-        param(
-            "sampler",
-            ParamKind::String,
-            "\"sobol\"",
-            "random numbers per pixel sample: \"sobol\" (Sobol' points, shuffled and shifted per dimension, stratified across a pixel's samples; entangled only) or \"independent\" (PCG32; the untangled variant's only choice)",
-        ),
-    ]
-};
+/// `layers`: write the lighting layers.
+const LAYERS: BoolParam = bool_param!(
+    "layers",
+    false,
+    "also write lighting layers layer0..layerN as EXR layers (layer k = paths of virtual length k + 1); they sum to the image"
+)
+.role(ParamRole::Layers);
+
+/// `wavefront`: paths traced together as ray batches. The default is large enough that a
+/// batch amortises the host call, small enough that the batch's rays and states stay in cache.
+const WAVEFRONT: IntParam = int_param!(
+    "wavefront",
+    256,
+    0..=65536,
+    "entangled only: paths traced together, as batches of camera, extension and shadow rays handed to the host in one call each; 0 traces one path at a time. The image is the same bit for bit either way"
+);
+
+const PARAMS: [ParamSpec; 11] = [
+    settings::VARIANT.spec(),
+    settings::TERMINATION.spec(),
+    settings::PATH_DEPTH.spec(),
+    settings::MAX_RAY_DEPTH.spec(),
+    settings::RR_DEPTH.spec(),
+    settings::RR_MAX_SURVIVAL.spec(),
+    LAYERS.spec(),
+    settings::NARROW_GLOSSY_ALPHA_PARAM.spec(),
+    WAVEFRONT.spec(),
+    settings::BRANCHES.spec(),
+    SAMPLER.spec(),
+];
 
 impl Integrator for Mcpt {
     const NAME: &'static str = "mcpt";
@@ -109,20 +90,14 @@ impl Integrator for Mcpt {
         _stats: &mut StatsBuilder,
     ) -> Result<(Self, IntegratorInfo), String> {
         let mut settings = PathSettings::from_params(params)?;
-        settings.branches =
-            flowlight_pathtrace::settings::branches_from_params(params, settings.variant)?;
-        let layers = params.boolean("layers", false)?;
+        settings.branches = settings::branches_from_params(params, settings.variant)?;
+        let layers = LAYERS.get(params)?;
         let sampler = SamplerKind::from_params(
             params,
             settings.variant == Variant::Entangled,
             "variant = \"entangled\"",
         )?;
-        let wavefront = params.int("wavefront", WAVEFRONT as i64)?;
-        if !(0..=65536).contains(&wavefront) {
-            return Err(format!(
-                "parameter 'wavefront' must be in 0..=65536, got {wavefront}"
-            ));
-        }
+        let wavefront = WAVEFRONT.get(params)?;
         let info = IntegratorInfo {
             layer_count: if layers { settings.path_depth + 1 } else { 0 },
             ..IntegratorInfo::simple()
@@ -152,10 +127,6 @@ impl Integrator for Mcpt {
         }
     }
 }
-
-/// Paths traced together as one wavefront by default: large enough that a batch amortises
-/// the host call, small enough that the batch's rays and states stay in cache.
-const WAVEFRONT: usize = 256;
 
 impl Mcpt {
     fn render_with<S: PixelSampler>(

@@ -30,25 +30,30 @@
 //!
 //! On paths whose first smooth vertex connects (E D …, E S D D …) it is the lens perturbation.
 //!
-//! | parameter | type | default | meaning |
-//! |---|---|---|---|
-//! | `r1` | float | 0.1 | smallest raster jump, pixels |
-//! | `r2` | float | 0 | largest raster jump, pixels; 0: √(0.05·W·H/π); bounded by `film_window`/2 |
-//! | `theta1` | float | 0.0001 | smallest direction perturbation, radians |
-//! | `theta2` | float | 0.1 | largest direction perturbation, radians |
-//! | `free_chains` | bool | true | follow mirror chains to any length (`flowlight_mcmc::regenerate`, "Dirac chains of any length"; docs/erpt.md); `false`: Veach's rule, every chain keeps x's number of vertices |
-//! | `axis` | string | `"direction"` | cone centre at a smooth vertex: x's own direction x_j→x_{j+1} (ratio Π J(x)/J(y)); `"next-vertex"`: towards x_{j+1} from y_j (Veach, the ratio above) |
+//! Parameters: declared once (shared ones in `flowlight_mcmc::params`); their table,
+//! generated from the declarations, is in docs/erpt.md ("Perturbations"), and
+//! `flowlight plugins --markdown` prints it.
 
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]
 
-use flowlight_mcmc::perturbation::{ExpCone, LensJump};
+use flowlight_mcmc::params::{exp_cone, FREE_CHAINS, R1, R2, THETA1, THETA2};
+use flowlight_mcmc::perturbation::LensJump;
 use flowlight_mcmc::regenerate::{density_with, propose_with};
 use flowlight_mcmc::{Extension, FilmMove, Policy};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::core::path::Path;
 use flowlight_sdk::core::rng::Rng;
-use flowlight_sdk::{export_mutation, param, Mutation, ParamKind, Params, Proposal, Scene, Tracer};
+use flowlight_sdk::declare::ChoiceParam;
+use flowlight_sdk::{choice_param, export_mutation, Mutation, Params, Proposal, Scene, Tracer};
+
+/// `axis`: the exponential cone's centre at a smooth vertex.
+const AXIS: ChoiceParam = choice_param!(
+    "axis",
+    "direction",
+    ["direction", "next-vertex"],
+    "cone centre at a smooth vertex: \"direction\", x's own outgoing direction x_j -> x_{j+1}; \"next-vertex\", towards x_{j+1} from y_j (Veach)"
+);
 
 pub struct MultichainPerturbation {
     scene: Scene<'static>,
@@ -61,58 +66,26 @@ impl Mutation for MultichainPerturbation {
     const DESCRIPTION: &'static str =
         "Veach's multi-chain perturbation: lens jump, exponential-cone steps through each specular chain, reconnect";
     const PARAMS: &'static [ParamSpec] = &[
-        param(
-            "r1",
-            ParamKind::Float,
-            "0.1",
-            "smallest raster jump in pixels",
-        ),
-        param(
-            "r2",
-            ParamKind::Float,
-            "0",
-            "largest raster jump in pixels (0: sqrt(0.05 W H / pi)); bounded by film_window/2",
-        ),
-        param(
-            "theta1",
-            ParamKind::Float,
-            "0.0001",
-            "smallest direction perturbation, radians",
-        ),
-        param(
-            "theta2",
-            ParamKind::Float,
-            "0.1",
-            "largest direction perturbation, radians",
-        ),
-        param(
-            "axis",
-            ParamKind::String,
-            "\"direction\"",
-            "cone axis at a smooth vertex: \"direction\" (the path's own outgoing direction) or \"next-vertex\" (towards its next vertex, Veach's)",
-        ),
-        param(
-            "free_chains",
-            ParamKind::Bool,
-            "true",
-            "follow mirror chains to whatever length they have (false: keep every chain's number of bounces, Veach's rule)",
-        ),
+        R1.spec(),
+        R2.spec(),
+        THETA1.spec(),
+        THETA2.spec(),
+        AXIS.spec(),
+        FREE_CHAINS.spec(),
     ];
 
     fn create(params: &Params, scene: Scene<'static>) -> Result<Self, String> {
         let jump = LensJump::from_params(params, scene.camera.width, scene.camera.height)?;
-        let cone = ExpCone::new(params.float("theta1", 1e-4)?, params.float("theta2", 0.1)?)?;
+        let cone = exp_cone(params)?;
         let policy = Policy {
             min_extensions: 0,
             p_reconnect: 1.0,
-            extension: Some(
-                match params.choice("axis", "direction", &["direction", "next-vertex"])? {
-                    "direction" => Extension::ConeAlong(cone),
-                    _ => Extension::Cone(cone),
-                },
-            ),
+            extension: Some(match AXIS.get(params)? {
+                "direction" => Extension::ConeAlong(cone),
+                _ => Extension::Cone(cone),
+            }),
             drill_caustics: false,
-            free_chains: params.boolean("free_chains", true)?,
+            free_chains: FREE_CHAINS.get(params)?,
         };
         Ok(MultichainPerturbation {
             scene,

@@ -13,17 +13,24 @@
 //! with p_cap = 1/(2π(1 − cos α)) inside the cap (0 outside: the reverse cap is centred on the
 //! direction from x_k to y_{k+1}), so equal caps leave only the Jacobians.
 //!
-//! | parameter | type | default | meaning |
-//! |---|---|---|---|
-//! | `cap_degrees` | float | 5 | cap half-angle α |
+//! Parameters: declared below; their table, generated from the declarations, is in
+//! docs/erpt.md ("The strategies"), and `flowlight plugins --markdown` prints it.
 
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]
 
-use flowlight_mcmc::strategy::cap_degrees;
 use flowlight_mcmc::{Extension, Policy, Strategy, StrategyMutation};
 use flowlight_sdk::abi::ParamSpec;
-use flowlight_sdk::{export_mutation, param, ParamKind, Params};
+use flowlight_sdk::declare::FloatParam;
+use flowlight_sdk::{export_mutation, float_param, Params};
+
+/// `cap_degrees`: the cap's half-angle α.
+const CAP_DEGREES: FloatParam = float_param!(
+    "cap_degrees",
+    5.0,
+    0.0 < x <= 90.0,
+    "cap half-angle alpha in degrees"
+);
 
 pub struct SoftReconnection;
 
@@ -31,18 +38,13 @@ impl Strategy for SoftReconnection {
     const NAME: &'static str = "soft-reconnection";
     const DESCRIPTION: &'static str =
         "film-plane migration + cap-sampled reconnection around x_{k+1}";
-    const PARAMS: &'static [ParamSpec] = &[param(
-        "cap_degrees",
-        ParamKind::Float,
-        "5.0",
-        "cap half-angle in degrees",
-    )];
+    const PARAMS: &'static [ParamSpec] = &[CAP_DEGREES.spec()];
 
     fn policy(p: &Params) -> Result<Policy, String> {
         Ok(Policy {
             min_extensions: 1,
             p_reconnect: 1.0,
-            extension: Some(Extension::cap_degrees(cap_degrees(p, "cap_degrees", 5.0)?)),
+            extension: Some(Extension::cap_degrees(CAP_DEGREES.get(p)? as f32)),
             drill_caustics: false,
             free_chains: false,
         })
