@@ -20,6 +20,7 @@ use std::ffi::c_void;
 pub trait Integrator: Sized + Send + Sync + 'static {
     /// Name the config uses (`plugin = "NAME"`).
     const NAME: &'static str;
+    /// One line for `flowlight plugins`.
     const DESCRIPTION: &'static str;
     /// Parameters the plugin accepts; the host refuses others.
     const PARAMS: &'static [ParamSpec];
@@ -158,13 +159,15 @@ unsafe extern "C" fn render<T: Integrator>(
                 "the host passed {stat_count} statistics slots for {declared} declared counters"
             ));
             }
+            // The integrator's own counters, then the mutations' (ABI 6), which it hands
+            // on through `MutationSet::propose`.
             let slots = if stats.is_null() || stat_count == 0 {
                 &mut [][..]
             } else {
-                std::slice::from_raw_parts_mut(stats, declared)
+                std::slice::from_raw_parts_mut(stats, stat_count)
             };
-            inst.integrator
-                .render(&*unit, &tracer, &mut film, &mut Stats::new(slots))
+            let mut stats = Stats::with_mutation_slots(slots, declared);
+            inst.integrator.render(&*unit, &tracer, &mut film, &mut stats)
         })
     }
 }

@@ -87,24 +87,30 @@
 //!
 //! where WHAT is `ABI version`, `type layout`, `SDK version` or `rustc version`.
 
+// Every public item is documented; `cargo clippy -- -D warnings` makes a gap an error.
+#![warn(missing_docs)]
+
 pub mod abi;
 pub mod deposit;
 mod guard;
 pub mod integrator;
 pub mod mutation;
+// The parameter declarations are being redesigned (one declaration per parameter, from which
+// parsing and the docs tables come); its remaining undocumented items go with that change.
+#[allow(missing_docs)]
 pub mod params;
 pub mod scene;
 pub mod stats;
 pub mod tracer;
 
 pub use abi::{
-    AccumulationStyle, Deposit, IntegratorInfo, ParamSpec, PluginDeclaration, PluginKind, Proposal,
+    AccumulationStyle, Deposit, IntegratorInfo, ParamSpec, PluginDeclaration, PluginKind,
     StatMerge, WorkUnit,
 };
 pub use deposit::{Accumulator, Film};
 pub use flowlight_core as core;
 pub use integrator::Integrator;
-pub use mutation::{Mutation, MutationSet, MAX_MUTATIONS};
+pub use mutation::{Mutation, MutationSet, Proposal, MAX_MUTATIONS};
 pub use params::{param, ParamKind, Params};
 pub use scene::Scene;
 pub use stats::{Counter, Ratio, Stats, StatsBuilder};

@@ -51,7 +51,7 @@ use flowlight_host::intersector::UnitTracer;
 use flowlight_host::session::{Overrides, Session};
 use flowlight_mcmc::{measurement, WeakNode};
 use flowlight_pathtrace::{untangled, PathSettings, Variant};
-use flowlight_sdk::{Scene, Tracer};
+use flowlight_sdk::{Scene, Stats, Tracer};
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
@@ -199,10 +199,12 @@ pub fn check_densities(
         }
         for _ in 0..2 {
             proposals += 1;
-            let p = set.propose(0, &tracer, &mut rng, &x, &mut y)?;
-            if p.valid == 0 {
+            let Some(ratio) = set
+                .propose(0, &tracer, &mut rng, &x, &mut y, &mut Stats::new(&mut []))?
+                .transition_ratio()
+            else {
                 continue;
-            }
+            };
             valid += 1;
             let what = || format!("{} → {}", x.heckbert(), y.heckbert());
             if y.vertex_count != x.vertex_count
@@ -217,7 +219,7 @@ pub fn check_densities(
                 ));
             }
             let f_y = measurement(&scene, &y);
-            let ratio = p.transition_ratio as f64;
+            let ratio = ratio as f64;
             if !ratio.is_finite() || ratio < 0.0 || !f_y.is_valid_radiance() {
                 return Err(format!(
                     "{name}: invalid ratio {ratio} or contribution {f_y:?} ({})",

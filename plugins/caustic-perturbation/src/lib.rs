@@ -41,7 +41,9 @@ use flowlight_mcmc::specular_chain;
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::core::path::Path;
 use flowlight_sdk::core::rng::Rng;
-use flowlight_sdk::{export_mutation, param, Mutation, ParamKind, Params, Proposal, Scene, Tracer};
+use flowlight_sdk::{
+    export_mutation, param, Mutation, ParamKind, Params, Proposal, Scene, Stats, StatsBuilder, Tracer,
+};
 
 pub struct CausticPerturbation {
     scene: Scene<'static>,
@@ -67,7 +69,11 @@ impl Mutation for CausticPerturbation {
         ),
     ];
 
-    fn create(params: &Params, scene: Scene<'static>) -> Result<Self, String> {
+    fn create(
+        params: &Params,
+        scene: Scene<'static>,
+        _stats: &mut StatsBuilder,
+    ) -> Result<Self, String> {
         let cone = ExpCone::new(params.float("theta1", 1e-4)?, params.float("theta2", 0.1)?)?;
         Ok(CausticPerturbation { scene, cone })
     }
@@ -78,6 +84,7 @@ impl Mutation for CausticPerturbation {
         rng: &mut Rng,
         current: &Path,
         proposal: &mut Path,
+        _stats: &mut Stats,
     ) -> Result<Proposal, String> {
         Ok(specular_chain::propose(
             &self.scene,

@@ -39,7 +39,9 @@ use flowlight_mcmc::{FilmMove, Policy};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::core::path::Path;
 use flowlight_sdk::core::rng::Rng;
-use flowlight_sdk::{export_mutation, param, Mutation, ParamKind, Params, Proposal, Scene, Tracer};
+use flowlight_sdk::{
+    export_mutation, param, Mutation, ParamKind, Params, Proposal, Scene, Stats, StatsBuilder, Tracer,
+};
 
 /// Strict reconnection at the first smooth vertex: the eye end of the lens perturbation.
 fn reconnect(free_chains: bool) -> Policy {
@@ -83,7 +85,11 @@ impl Mutation for LensPerturbation {
         ),
     ];
 
-    fn create(params: &Params, scene: Scene<'static>) -> Result<Self, String> {
+    fn create(
+        params: &Params,
+        scene: Scene<'static>,
+        _stats: &mut StatsBuilder,
+    ) -> Result<Self, String> {
         let jump = LensJump::from_params(params, scene.camera.width, scene.camera.height)?;
         let policy = reconnect(params.boolean("free_chains", true)?);
         Ok(LensPerturbation {
@@ -99,6 +105,7 @@ impl Mutation for LensPerturbation {
         rng: &mut Rng,
         current: &Path,
         proposal: &mut Path,
+        _stats: &mut Stats,
     ) -> Result<Proposal, String> {
         Ok(propose_with(
             &self.scene,

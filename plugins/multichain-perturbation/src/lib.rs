@@ -48,7 +48,9 @@ use flowlight_mcmc::{Extension, FilmMove, Policy};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::core::path::Path;
 use flowlight_sdk::core::rng::Rng;
-use flowlight_sdk::{export_mutation, param, Mutation, ParamKind, Params, Proposal, Scene, Tracer};
+use flowlight_sdk::{
+    export_mutation, param, Mutation, ParamKind, Params, Proposal, Scene, Stats, StatsBuilder, Tracer,
+};
 
 pub struct MultichainPerturbation {
     scene: Scene<'static>,
@@ -99,7 +101,11 @@ impl Mutation for MultichainPerturbation {
         ),
     ];
 
-    fn create(params: &Params, scene: Scene<'static>) -> Result<Self, String> {
+    fn create(
+        params: &Params,
+        scene: Scene<'static>,
+        _stats: &mut StatsBuilder,
+    ) -> Result<Self, String> {
         let jump = LensJump::from_params(params, scene.camera.width, scene.camera.height)?;
         let cone = ExpCone::new(params.float("theta1", 1e-4)?, params.float("theta2", 0.1)?)?;
         let policy = Policy {
@@ -127,6 +133,7 @@ impl Mutation for MultichainPerturbation {
         rng: &mut Rng,
         current: &Path,
         proposal: &mut Path,
+        _stats: &mut Stats,
     ) -> Result<Proposal, String> {
         Ok(propose_with(
             &self.scene,
