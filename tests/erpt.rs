@@ -63,7 +63,9 @@ fn every_strategy_satisfies_detailed_balance() {
         }
         x.film_window = 8;
         for (i, count) in checked.iter_mut().enumerate() {
-            let p = set.propose(i, &tracer, &mut rng, &x, &mut y, &mut Stats::new(&mut [])).unwrap();
+            let p = set
+                .propose(i, &tracer, &mut rng, &x, &mut y, &mut Stats::new(&mut []))
+                .unwrap();
             // A degenerate density (a NaN ratio) is a rejection (`finish` in the engine): a
             // direction drawn in a cap whose rounded end point lies just outside it (one seed
             // drew 1.99999° in a 2° cap) has T = 0 both ways.
@@ -367,7 +369,9 @@ fn mutations_keep_detailed_balance_with_lights_at_infinity() {
             let smooth_before_light = x.vertices[n - 1].node.heckbert() == 'D';
             x.film_window = 8;
             for i in 0..set.len() {
-                let p = set.propose(i, &tracer, &mut rng, &x, &mut y, &mut Stats::new(&mut [])).unwrap();
+                let p = set
+                    .propose(i, &tracer, &mut rng, &x, &mut y, &mut Stats::new(&mut []))
+                    .unwrap();
                 if !p.is_move() {
                     continue;
                 }

@@ -272,7 +272,9 @@ fn check_balance(
                 continue;
             }
             for (i, count) in counts.iter_mut().enumerate() {
-                let p = set.propose(i, tracer, &mut rng, &x, &mut y, &mut Stats::new(&mut [])).unwrap();
+                let p = set
+                    .propose(i, tracer, &mut rng, &x, &mut y, &mut Stats::new(&mut []))
+                    .unwrap();
                 if !p.is_move() {
                     continue;
                 }
@@ -604,10 +606,14 @@ fn the_caustic_chain_samples_its_leaf_in_proportion_to_f_times_the_leaf_jacobian
         let mut batch = vec![glam::DVec2::ZERO; batches];
         let mut accepted = 0usize;
         for step in 0..steps {
-            let p = set.propose(0, tracer, &mut rng, &x, &mut y, &mut Stats::new(&mut [])).unwrap();
+            let p = set
+                .propose(0, tracer, &mut rng, &x, &mut y, &mut Stats::new(&mut []))
+                .unwrap();
             if p.is_move() && p.transition_ratio().unwrap() > 0.0 {
                 let f_y = lum(&y);
-                if rng.uniform() < (f_y / f_x * p.transition_ratio().unwrap() as f64).min(1.0) as f32 {
+                if rng.uniform()
+                    < (f_y / f_x * p.transition_ratio().unwrap() as f64).min(1.0) as f32
+                {
                     std::mem::swap(&mut x, &mut y);
                     f_x = f_y;
                     accepted += 1;
@@ -708,7 +714,9 @@ fn common_integral(
     [(i, j), (j, i)].map(|(a, b)| {
         let mut t = Tally::default();
         for _ in 0..n {
-            let p = set.propose(a, tracer, rng, x, &mut y, &mut Stats::new(&mut [])).unwrap();
+            let p = set
+                .propose(a, tracer, rng, x, &mut y, &mut Stats::new(&mut []))
+                .unwrap();
             if !p.is_move() || set.density(b, x, &y).unwrap() <= 0.0 {
                 continue;
             }
@@ -898,7 +906,9 @@ fn free_chain_lengths_have_the_density_the_drill_samples() {
             let mut engine = [Tally::default(); 3];
             let mut hand = [Tally::default(); 3];
             for _ in 0..n {
-                let p = set.propose(0, tracer, &mut rng, &x, &mut y, &mut Stats::new(&mut [])).unwrap();
+                let p = set
+                    .propose(0, tracer, &mut rng, &x, &mut y, &mut Stats::new(&mut []))
+                    .unwrap();
                 // A degenerate density (a NaN ratio) is a rejection (`finish` in the engine).
                 if p.is_move() && p.transition_ratio().unwrap().is_finite() {
                     let t = set.density(0, &x, &y).unwrap();

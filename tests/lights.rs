@@ -424,7 +424,9 @@ width = "wide"
         assert_eq!(x.vertices[n].p, light);
         x.film_window = 8;
         for (i, count) in valid.iter_mut().enumerate() {
-            let p = set.propose(i, &tracer, &mut rng, &x, &mut y, &mut Stats::new(&mut [])).unwrap();
+            let p = set
+                .propose(i, &tracer, &mut rng, &x, &mut y, &mut Stats::new(&mut []))
+                .unwrap();
             if !p.is_move() {
                 continue;
             }

@@ -133,7 +133,9 @@ fn every_mutation_keeps_the_eye_vertex_on_the_orthographic_film() {
         assert!(near(x_eye, camera.eye_point(x.raster)), "{x_eye}");
         x.film_window = 8;
         for (i, count) in moved.iter_mut().enumerate() {
-            let p = set.propose(i, &tracer, &mut rng, &x, &mut y, &mut Stats::new(&mut [])).unwrap();
+            let p = set
+                .propose(i, &tracer, &mut rng, &x, &mut y, &mut Stats::new(&mut []))
+                .unwrap();
             if !p.is_move() {
                 continue;
             }

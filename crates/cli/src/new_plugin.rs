@@ -47,26 +47,72 @@ const TEMPLATES: [&str; 3] = [
 
 /// Rust's keywords, strict and reserved (2021 edition).
 const KEYWORDS: &[&str] = &[
-    "as", "async", "await", "break", "const", "continue", "crate", "dyn", "else", "enum",
-    "extern", "false", "fn", "for", "if", "impl", "in", "let", "loop", "match", "mod", "move",
-    "mut", "pub", "ref", "return", "self", "static", "struct", "super", "trait", "true", "type",
-    "unsafe", "use", "where", "while", "abstract", "become", "box", "do", "final", "gen",
-    "macro", "override", "priv", "try", "typeof", "unsized", "virtual", "yield", "union",
+    "as", "async", "await", "break", "const", "continue", "crate", "dyn", "else", "enum", "extern",
+    "false", "fn", "for", "if", "impl", "in", "let", "loop", "match", "mod", "move", "mut", "pub",
+    "ref", "return", "self", "static", "struct", "super", "trait", "true", "type", "unsafe", "use",
+    "where", "while", "abstract", "become", "box", "do", "final", "gen", "macro", "override",
+    "priv", "try", "typeof", "unsized", "virtual", "yield", "union",
 ];
 
 /// Types and traits of the standard prelude a generated type would shadow.
 const PRELUDE: &[&str] = &[
-    "Self", "Option", "Some", "None", "Result", "Ok", "Err", "String", "Vec", "Box", "ToString",
-    "ToOwned", "Clone", "Copy", "Send", "Sync", "Sized", "Unpin", "Drop", "Fn", "FnMut",
-    "FnOnce", "Iterator", "IntoIterator", "DoubleEndedIterator", "ExactSizeIterator", "Extend",
-    "FromIterator", "Default", "Eq", "PartialEq", "Ord", "PartialOrd", "AsRef", "AsMut", "Into",
-    "From", "TryFrom", "TryInto", "Debug", "Hash",
+    "Self",
+    "Option",
+    "Some",
+    "None",
+    "Result",
+    "Ok",
+    "Err",
+    "String",
+    "Vec",
+    "Box",
+    "ToString",
+    "ToOwned",
+    "Clone",
+    "Copy",
+    "Send",
+    "Sync",
+    "Sized",
+    "Unpin",
+    "Drop",
+    "Fn",
+    "FnMut",
+    "FnOnce",
+    "Iterator",
+    "IntoIterator",
+    "DoubleEndedIterator",
+    "ExactSizeIterator",
+    "Extend",
+    "FromIterator",
+    "Default",
+    "Eq",
+    "PartialEq",
+    "Ord",
+    "PartialOrd",
+    "AsRef",
+    "AsMut",
+    "Into",
+    "From",
+    "TryFrom",
+    "TryInto",
+    "Debug",
+    "Hash",
 ];
 
 /// Crates of the Flowlight workspace: `flowlight-NAME` would collide with one of them in
 /// the generated crate's dependency graph.
 const WORKSPACE_CRATES: &[&str] = &[
-    "core", "sdk", "bvh", "scene", "host", "pathtrace", "mcmc", "embree", "elf", "bench", "cli",
+    "core",
+    "sdk",
+    "bvh",
+    "scene",
+    "host",
+    "pathtrace",
+    "mcmc",
+    "embree",
+    "elf",
+    "bench",
+    "cli",
     "testkit",
 ];
 
@@ -351,10 +397,27 @@ mod tests {
         // Each of these generated a crate that failed to build: `Self` is a keyword, the
         // others clash with the prelude or with what the templates import.
         let clashing = [
-            "self", "scene", "film", "ray", "integrator", "mutation", "result", "string",
-            "option", "tracer", "params", "proposal", "strategy", "policy", "rng", "path",
+            "self",
+            "scene",
+            "film",
+            "ray",
+            "integrator",
+            "mutation",
+            "result",
+            "string",
+            "option",
+            "tracer",
+            "params",
+            "proposal",
+            "strategy",
+            "policy",
+            "rng",
+            "path",
         ];
-        for bad in clashing.iter().chain(["fn", "type", "async", "sdk", "mcmc", "core"].iter()) {
+        for bad in clashing
+            .iter()
+            .chain(["fn", "type", "async", "sdk", "mcmc", "core"].iter())
+        {
             let e = check_name(bad).unwrap_err().to_string();
             assert!(
                 e.starts_with(&format!("plugin name {bad:?} ")) && !e.contains('\n'),

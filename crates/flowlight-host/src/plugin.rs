@@ -3,8 +3,8 @@
 use crate::params::build_params;
 use flowlight_sdk::abi::{
     self, ErrorBuf, FilmTable, IntegratorInfo, IntegratorTable, MutationRef, MutationTable,
-    ParamSpec, PluginDeclaration, SceneView, StatList, StatMerge, StatSpec, Status, StrRef, TracerTable,
-    WorkUnit,
+    ParamSpec, PluginDeclaration, SceneView, StatList, StatMerge, StatSpec, Status, StrRef,
+    TracerTable, WorkUnit,
 };
 use flowlight_sdk::stats::MAX_COUNTERS;
 use flowlight_sdk::{ParamKind, PluginKind, MAX_MUTATIONS};
@@ -652,11 +652,12 @@ impl IntegratorInstance {
                 ),
             });
         }
-        inst.append_mutation_stats().map_err(|message| PluginError::Call {
-            name: inst.plugin.name.clone(),
-            path: inst.plugin.path.clone(),
-            message,
-        })?;
+        inst.append_mutation_stats()
+            .map_err(|message| PluginError::Call {
+                name: inst.plugin.name.clone(),
+                path: inst.plugin.path.clone(),
+                message,
+            })?;
         Ok(inst)
     }
 
@@ -687,7 +688,13 @@ impl IntegratorInstance {
                     ));
                 }
                 names.push(name.into_boxed_str());
-                let shifted = |i: u32| if s.merge == StatMerge::Ratio { i + base } else { i };
+                let shifted = |i: u32| {
+                    if s.merge == StatMerge::Ratio {
+                        i + base
+                    } else {
+                        i
+                    }
+                };
                 specs.push(StatSpec {
                     name: StrRef::new(names.last().expect("just pushed")),
                     merge: s.merge,

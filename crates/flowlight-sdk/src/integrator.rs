@@ -167,7 +167,8 @@ unsafe extern "C" fn render<T: Integrator>(
                 std::slice::from_raw_parts_mut(stats, stat_count)
             };
             let mut stats = Stats::with_mutation_slots(slots, declared);
-            inst.integrator.render(&*unit, &tracer, &mut film, &mut stats)
+            inst.integrator
+                .render(&*unit, &tracer, &mut film, &mut stats)
         })
     }
 }

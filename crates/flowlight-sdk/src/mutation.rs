@@ -89,7 +89,9 @@ impl From<ProposalRecord> for Proposal {
 /// Proposes a new path from the current state of a Markov chain (thesis §5.4).
 ///
 /// A mutation keeps the path length and the weak path type; otherwise it reports a domain
-/// miss. A move's ratio is T(y→x)/T(x→y); [`Mutation::density`] gives T itself so that an
+/// miss. (The regeneration engine of `flowlight-mcmc` may change the length of a chain of
+/// mirrors where every Dirac vertex of both paths is one, its "free chain lengths"; the
+/// conformance kit accepts that.) A move's ratio is T(y→x)/T(x→y); [`Mutation::density`] gives T itself so that an
 /// integrator can form the mixture density Σ p(sᵢ)·T^{sᵢ} of several strategies.
 ///
 /// `propose` and `density` are called from many threads at once with the same instance:
@@ -106,8 +108,11 @@ pub trait Mutation: Sized + Send + Sync + 'static {
     /// Builds an instance; `scene` stays valid for its whole life. Counters the strategy
     /// reports are declared on `stats` (reported as `NAME.counter`); keep the handles for
     /// [`Mutation::propose`].
-    fn create(params: &Params, scene: Scene<'static>, stats: &mut StatsBuilder)
-        -> Result<Self, String>;
+    fn create(
+        params: &Params,
+        scene: Scene<'static>,
+        stats: &mut StatsBuilder,
+    ) -> Result<Self, String>;
 
     /// Fills `proposal` from `current` and says whether it is a move, with its ratio.
     /// `stats` holds the counters declared in `create`, for the integrator's work unit.

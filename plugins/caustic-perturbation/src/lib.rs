@@ -42,7 +42,8 @@ use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::core::path::Path;
 use flowlight_sdk::core::rng::Rng;
 use flowlight_sdk::{
-    export_mutation, param, Mutation, ParamKind, Params, Proposal, Scene, Stats, StatsBuilder, Tracer,
+    export_mutation, param, Mutation, ParamKind, Params, Proposal, Scene, Stats, StatsBuilder,
+    Tracer,
 };
 
 pub struct CausticPerturbation {
