@@ -446,6 +446,32 @@ mod tests {
     }
 
     #[test]
+    fn a_proposal_round_trips_through_its_abi_record() {
+        for p in [
+            Proposal::Miss,
+            Proposal::SYMMETRIC,
+            Proposal::Move {
+                transition_ratio: 0.0,
+            },
+            Proposal::Move {
+                transition_ratio: 2.5,
+            },
+        ] {
+            assert_eq!(Proposal::from(ProposalRecord::from(p)), p);
+        }
+        let miss = ProposalRecord::from(Proposal::Miss);
+        assert_eq!((miss.valid, miss.transition_ratio), (0, 0.0));
+        // Any non-zero flag from a foreign plugin is a move; NaN ratios pass through.
+        let r = ProposalRecord {
+            valid: 7,
+            transition_ratio: f32::NAN,
+        };
+        assert!(Proposal::from(r).transition_ratio().unwrap().is_nan());
+        assert_eq!(Proposal::Miss.transition_ratio(), None);
+        assert!(!Proposal::Miss.is_move() && Proposal::SYMMETRIC.is_move());
+    }
+
+    #[test]
     fn zero_weights_are_never_chosen() {
         let r = refs(&[0.0, 0.6, 0.4, 0.0]);
         // SAFETY: as above.

@@ -425,6 +425,30 @@ mod tests {
     }
 
     #[test]
+    fn a_mutation_gets_the_slots_after_the_integrators_own() {
+        // The integrator declared 2 counters; two mutations declared 1 and 2.
+        let mut slots = vec![0.0; 5];
+        let mut stats = Stats::with_mutation_slots(&mut slots, 2);
+        let mut b = StatsBuilder::new();
+        let own = b.sum("own");
+        stats.add(own, 1.0);
+        stats.mutation_slots(1, 2).unwrap()[1] = 9.0;
+        stats.mutation_slots(0, 1).unwrap()[0] = 4.0;
+        assert!(stats.mutation_slots(2, 2).is_none(), "past the end");
+        assert_eq!(slots, [1.0, 0.0, 4.0, 0.0, 9.0]);
+        // An integrator's own handle never reaches the mutations' slots.
+        let mut slots = vec![0.0; 3];
+        let mut stats = Stats::with_mutation_slots(&mut slots, 1);
+        let mut b = StatsBuilder::new();
+        b.sum("a");
+        let second = b.sum("b");
+        let caught = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            stats.add(second, 1.0);
+        }));
+        assert!(caught.is_err());
+    }
+
+    #[test]
     #[should_panic(expected = "another integrator's StatsBuilder")]
     fn a_foreign_handle_panics_instead_of_writing_elsewhere() {
         let mut other = StatsBuilder::new();
