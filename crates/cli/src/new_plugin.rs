@@ -157,7 +157,7 @@ pub fn check_name(name: &str) -> Result<()> {
     }
     if WORKSPACE_CRATES.contains(&name) {
         return bad(&format!(
-            "would make a crate flowlight-{name}, the name of a Flowlight crate it depends on"
+            "would make a crate flowlight-{name}, the name of one of Flowlight's own crates"
         ));
     }
     let ty = type_name(name);

@@ -22,6 +22,8 @@
 //!   side, with the Jacobian that expresses it in the target function's measure;
 //! * [`norms`]: the acceptance/rejection/hit/miss strength and streak norms of §5.5.
 
+#![warn(missing_docs)]
+
 pub mod measure;
 pub mod migration;
 pub mod norms;

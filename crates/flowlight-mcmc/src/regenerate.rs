@@ -77,7 +77,10 @@ pub enum Extension {
     Bsdf,
     /// Uniform in the cap of half-angle acos(`cos_max`) around the direction to the original
     /// path's next vertex (soft reconnection).
-    Cap { cos_max: f32 },
+    Cap {
+        /// Cosine of the cap's half-angle.
+        cos_max: f32,
+    },
     /// Veach's exponential cone around the direction to the original path's next vertex
     /// (the multi-chain perturbation, [`crate::perturbation`]).
     Cone(ExpCone),
