@@ -13,7 +13,7 @@ use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
 use flowlight_host::intersector::UnitTracer;
 use flowlight_pathtrace::{untangled, PathSettings, Variant};
-use flowlight_sdk::{Scene, Tracer};
+use flowlight_sdk::{Scene, Stats, Tracer};
 
 /// Every strategy, as the tests use them.
 fn strategies() -> Vec<(&'static str, Vec<(&'static str, toml::Value)>)> {
@@ -63,11 +63,13 @@ fn every_strategy_satisfies_detailed_balance() {
         }
         x.film_window = 8;
         for (i, count) in checked.iter_mut().enumerate() {
-            let p = set.propose(i, &tracer, &mut rng, &x, &mut y).unwrap();
+            let p = set
+                .propose(i, &tracer, &mut rng, &x, &mut y, &mut Stats::new(&mut []))
+                .unwrap();
             // A degenerate density (a NaN ratio) is a rejection (`finish` in the engine): a
             // direction drawn in a cap whose rounded end point lies just outside it (one seed
             // drew 1.99999° in a 2° cap) has T = 0 both ways.
-            if p.valid == 0 || p.transition_ratio.is_nan() {
+            if !p.is_move() || p.transition_ratio().unwrap().is_nan() {
                 continue;
             }
             let forward = set.density(i, &x, &y).unwrap();
@@ -79,7 +81,7 @@ fn every_strategy_satisfies_detailed_balance() {
             );
             assert_eq!(y.vertex_count, x.vertex_count, "path length changed");
             let expected = reverse / forward;
-            let got = p.transition_ratio as f64;
+            let got = p.transition_ratio().unwrap() as f64;
             assert!(
                 (got - expected).abs() <= 2e-3 * expected.max(got) + 1e-30,
                 "{}: ratio {got} but T(y→x)/T(x→y) = {reverse}/{forward} = {expected} ({} → {})",
@@ -367,8 +369,10 @@ fn mutations_keep_detailed_balance_with_lights_at_infinity() {
             let smooth_before_light = x.vertices[n - 1].node.heckbert() == 'D';
             x.film_window = 8;
             for i in 0..set.len() {
-                let p = set.propose(i, &tracer, &mut rng, &x, &mut y).unwrap();
-                if p.valid == 0 {
+                let p = set
+                    .propose(i, &tracer, &mut rng, &x, &mut y, &mut Stats::new(&mut []))
+                    .unwrap();
+                if !p.is_move() {
                     continue;
                 }
                 let ly = y.vertices[n];
@@ -386,7 +390,7 @@ fn mutations_keep_detailed_balance_with_lights_at_infinity() {
                     set.name(i)
                 );
                 let expected = reverse / forward;
-                let got = p.transition_ratio as f64;
+                let got = p.transition_ratio().unwrap() as f64;
                 assert!(
                     (got - expected).abs() <= 2e-3 * expected.max(got) + 1e-30,
                     "{label} {}: ratio {got} vs T(y→x)/T(x→y) {expected} ({} → {})",

@@ -366,7 +366,7 @@ fn mutations_never_move_a_point_light_vertex_and_keep_detailed_balance() {
     use flowlight_core::rng::Rng;
     use flowlight_host::intersector::UnitTracer;
     use flowlight_pathtrace::{untangled, PathSettings, Variant};
-    use flowlight_sdk::{Scene, Tracer};
+    use flowlight_sdk::{Scene, Stats, Tracer};
 
     let light = Vec3::new(0.3, 1.0, 0.0);
     let gltf = quads_gltf(
@@ -424,8 +424,10 @@ width = "wide"
         assert_eq!(x.vertices[n].p, light);
         x.film_window = 8;
         for (i, count) in valid.iter_mut().enumerate() {
-            let p = set.propose(i, &tracer, &mut rng, &x, &mut y).unwrap();
-            if p.valid == 0 {
+            let p = set
+                .propose(i, &tracer, &mut rng, &x, &mut y, &mut Stats::new(&mut []))
+                .unwrap();
+            if !p.is_move() {
                 continue;
             }
             assert_eq!(
@@ -438,7 +440,7 @@ width = "wide"
             let reverse = set.density(i, &y, &x).unwrap();
             assert!(forward > 0.0, "{}", set.name(i));
             let expected = reverse / forward;
-            let got = p.transition_ratio as f64;
+            let got = p.transition_ratio().unwrap() as f64;
             assert!(
                 (got - expected).abs() <= 2e-3 * expected.max(got) + 1e-30,
                 "{}: ratio {got} vs {expected}",

@@ -12,7 +12,7 @@ use flowlight_host::intersector::UnitTracer;
 use flowlight_host::session::{Overrides, Session};
 use flowlight_pathtrace::{untangled, PathSettings, Variant};
 use flowlight_scene::config::load_config;
-use flowlight_sdk::{Scene, Tracer};
+use flowlight_sdk::{Scene, Stats, Tracer};
 use glam::Vec3;
 
 /// A session of `config` at `w`×`h` through an orthographic camera with the config's (or
@@ -133,8 +133,10 @@ fn every_mutation_keeps_the_eye_vertex_on_the_orthographic_film() {
         assert!(near(x_eye, camera.eye_point(x.raster)), "{x_eye}");
         x.film_window = 8;
         for (i, count) in moved.iter_mut().enumerate() {
-            let p = set.propose(i, &tracer, &mut rng, &x, &mut y).unwrap();
-            if p.valid == 0 {
+            let p = set
+                .propose(i, &tracer, &mut rng, &x, &mut y, &mut Stats::new(&mut []))
+                .unwrap();
+            if !p.is_move() {
                 continue;
             }
             let y_eye = y.vertices()[0].p;

@@ -6,8 +6,13 @@
 //! * the generated integrator (one-bounce direct light) against `mcpt` with
 //!   `path_depth = 1` on the Cornell box, and the CLI renders with it through
 //!   `FLOWLIGHT_PLUGIN_PATH`;
-//! * the generated mutation and the film-perturbation example through the conformance kit,
-//!   and ERPT with the example alone against path tracing on the Cornell box;
+//! * the generated mutations (on the regeneration engine, and by hand) and the
+//!   film-perturbation and gaussian-lens examples through the conformance kit (the
+//!   Gaussian one through `flowlight conformance` on its built library), ERPT with the
+//!   film-perturbation example alone against path tracing on the Cornell box, and a
+//!   mutation's statistics counters in ERPT's;
+//! * a generated crate's lockfile against the workspace's, and the names `new-plugin`
+//!   refuses because their crate would not compile;
 //! * the AO example against the analytic ambient occlusion next to a wall, its albedo and
 //!   normal layers against the material and the plane;
 //! * docs/writing-a-plugin.md's code against the example files it quotes.
@@ -213,17 +218,47 @@ fn new_plugin_integrator_builds_outside_and_renders_the_cornell_box() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-#[test]
-fn new_plugin_mutation_builds_outside_passes_the_kit_and_renders() {
-    let dir = outside("jitter");
+/// The registry packages of a `Cargo.lock`: (name, version).
+fn locked_registry_packages(lock: &Path) -> Vec<(String, String)> {
+    let text = std::fs::read_to_string(lock).unwrap_or_else(|e| panic!("{}: {e}", lock.display()));
+    let lock: toml::Table = toml::from_str(&text).unwrap();
+    lock["package"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p.get("source").is_some())
+        .map(|p| {
+            (
+                p["name"].as_str().unwrap().into(),
+                p["version"].as_str().unwrap().into(),
+            )
+        })
+        .collect()
+}
+
+/// Every registry package the generated crate resolved is one the workspace's lockfile holds
+/// at the same version.
+fn assert_resolved_like_the_workspace(dir: &Path) {
+    let workspace = locked_registry_packages(&common::repo().join("Cargo.lock"));
+    let generated = locked_registry_packages(&dir.join("Cargo.lock"));
+    assert!(
+        !generated.is_empty(),
+        "no registry package in {}",
+        dir.display()
+    );
+    let newer: Vec<_> = generated
+        .iter()
+        .filter(|p| !workspace.contains(p))
+        .collect();
+    assert!(newer.is_empty(), "resolved unlike the workspace: {newer:?}");
+}
+
+/// `new-plugin --kind KIND NAME` outside, built, through the kit with `params`, and ERPT
+/// rendering the Cornell box with it.
+fn generated_mutation_conforms_and_renders(kind: &str, name: &str, params: &[(&str, toml::Value)]) {
+    let dir = outside(name);
     let out = flowlight(
-        &[
-            "new-plugin",
-            "--kind",
-            "mutation",
-            "my-jitter",
-            dir.to_str().unwrap(),
-        ],
+        &["new-plugin", "--kind", kind, name, dir.to_str().unwrap()],
         Path::new(""),
     );
     assert!(
@@ -231,10 +266,11 @@ fn new_plugin_mutation_builds_outside_passes_the_kit_and_renders() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let lib = build_plugin(&dir, "my-jitter");
-    let report = flowlight_testkit::assert_mutation_conforms(lib.to_str().unwrap(), &[]);
+    let lib = build_plugin(&dir, name);
+    assert_resolved_like_the_workspace(&dir);
+    let report = flowlight_testkit::assert_mutation_conforms(lib.to_str().unwrap(), params);
     eprintln!("{report}");
-    assert_eq!(report.name, "my-jitter");
+    assert_eq!(report.name, name);
     // ERPT renders the Cornell box with it.
     let list = toml::Value::Array(vec![toml::Value::Table(
         [(
@@ -257,13 +293,7 @@ fn new_plugin_mutation_builds_outside_passes_the_kit_and_renders() {
     assert!(image_mean(&img) > 0.0);
     // A second run into the same folder is refused, and the files stay.
     let out = flowlight(
-        &[
-            "new-plugin",
-            "--kind",
-            "mutation",
-            "my-jitter",
-            dir.to_str().unwrap(),
-        ],
+        &["new-plugin", "--kind", kind, name, dir.to_str().unwrap()],
         Path::new(""),
     );
     assert!(!out.status.success());
@@ -273,6 +303,16 @@ fn new_plugin_mutation_builds_outside_passes_the_kit_and_renders() {
         "{err}"
     );
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn new_plugin_mutation_on_the_engine_builds_outside_passes_the_kit_and_renders() {
+    generated_mutation_conforms_and_renders("mutation", "my-drill", &[]);
+}
+
+#[test]
+fn new_plugin_raw_mutation_builds_outside_passes_the_kit_and_renders() {
+    generated_mutation_conforms_and_renders("raw-mutation", "my-jitter", &[]);
 }
 
 #[test]
@@ -295,6 +335,36 @@ fn a_bad_plugin_name_is_refused_in_one_line() {
         "{err}"
     );
     assert!(!dir.exists(), "nothing is written for a bad name");
+    // Names whose crate would not compile: a keyword, the prelude's or the template's own
+    // types, a Flowlight crate.
+    for name in [
+        "self",
+        "scene",
+        "film",
+        "ray",
+        "integrator",
+        "mutation",
+        "result",
+        "string",
+        "option",
+        "fn",
+        "sdk",
+        "strategy",
+    ] {
+        for kind in ["integrator", "mutation", "raw-mutation"] {
+            let out = flowlight(
+                &["new-plugin", "--kind", kind, name, dir.to_str().unwrap()],
+                Path::new(""),
+            );
+            assert!(!out.status.success(), "{kind} {name} was accepted");
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert!(
+                err.contains(&format!("plugin name \"{name}\"")) && err.trim().lines().count() == 1,
+                "{kind} {name}: {err}"
+            );
+            assert!(!dir.exists(), "nothing is written for {name}");
+        }
+    }
 }
 
 fn example(name: &str) -> PathBuf {
@@ -461,6 +531,84 @@ fn film_perturbation_example_passes_the_kit_and_erpt_with_it_matches_path_tracin
     }
 }
 
+#[test]
+fn gaussian_lens_example_passes_the_kit_on_its_built_library_and_counts_in_erpt() {
+    let lib = example("gaussian-lens");
+    // The kit without Cargo: the CLI on the built library.
+    let out = flowlight(
+        &["conformance", lib.to_str().unwrap(), "--set", "sigma=1.5"],
+        Path::new(""),
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    eprintln!("{stdout}");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.trim_end().ends_with("conforms"), "{stdout}");
+    // Its moves through the mirror chain and the glass sphere were checked.
+    for scene in ["mirror chain", "glass caustic"] {
+        let line = stdout
+            .lines()
+            .find(|l| l.trim_start().starts_with(scene))
+            .unwrap_or_else(|| panic!("no line for the {scene}: {stdout}"));
+        let through: usize = line
+            .split(" valid, ")
+            .nth(1)
+            .and_then(|r| r.split_whitespace().next())
+            .and_then(|n| n.parse().ok())
+            .unwrap_or_else(|| panic!("{line}"));
+        assert!(
+            through > 0,
+            "no move through mirrors or glass in the {scene}: {line}"
+        );
+    }
+    // A plugin that does not conform is refused in one line (the kit needs a mutation).
+    let out = flowlight(&["conformance", "mcpt"], Path::new(""));
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.trim().lines().count() == 1, "{err}");
+
+    // Its counters reach ERPT's statistics, after ERPT's own.
+    let list = toml::Value::Array(vec![toml::Value::Table(
+        [(
+            "plugin".to_string(),
+            toml::Value::String(lib.to_str().unwrap().into()),
+        )]
+        .into_iter()
+        .collect(),
+    )]);
+    let outcome = render(&session_at(
+        "cornell-box/erpt.toml",
+        16,
+        16,
+        2,
+        &[("mutations", list)],
+    ));
+    let counters = &outcome.stats.integrator;
+    let get = |name: &str| {
+        counters
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| *v)
+            .unwrap_or_else(|| panic!("no counter {name}: {counters:?}"))
+    };
+    let (proposals, misses) = (get("gaussian-lens.proposals"), get("gaussian-lens.misses"));
+    assert!(
+        proposals > 0.0 && misses >= 0.0 && misses < proposals,
+        "{proposals} {misses}"
+    );
+    // ERPT counts this strategy's steps itself (its group `gaussian-lens`): each step is one
+    // proposal. The mutation's counters come after ERPT's own.
+    assert_eq!(proposals, get("gaussian-lens.mutations"), "{counters:?}");
+    let at = |name: &str| counters.iter().position(|(n, _)| n == name).unwrap();
+    assert!(
+        at("gaussian-lens.proposals") > at("chains_per_seed"),
+        "{counters:?}"
+    );
+}
+
 /// Every ```rust block of docs/writing-a-plugin.md tagged `file=PATH region=NAME` equals the
 /// lines between `// region: NAME` and `// endregion: NAME` of PATH.
 #[test]
@@ -525,7 +673,7 @@ fn the_kit_refuses_a_mutation_whose_ratio_is_wrong() {
         &[
             "new-plugin",
             "--kind",
-            "mutation",
+            "raw-mutation",
             "wrong-ratio",
             dir.to_str().unwrap(),
         ],
@@ -538,7 +686,7 @@ fn the_kit_refuses_a_mutation_whose_ratio_is_wrong() {
     );
     let lib_rs = dir.join("src/lib.rs");
     let source = std::fs::read_to_string(&lib_rs).unwrap();
-    let broken = source.replace("transition_ratio: 1.0,", "transition_ratio: 2.0,");
+    let broken = source.replace("transition_ratio: 1.0", "transition_ratio: 2.0");
     assert_ne!(source, broken, "the template changed: update this test");
     std::fs::write(&lib_rs, broken).unwrap();
     cargo(&dir, &["build", "--release", "--offline", "--quiet"]);

@@ -10,11 +10,13 @@
 //! flowlight seams <image.exr> --tile N [--layer NAME]
 //! flowlight reference <config.toml> [--spp N | --time SECONDS] [--out FILE] | --from A.exr [--from B.exr]
 //! flowlight bench <suite.toml> [--out DIR] [--budgets 0.5,1] [--seeds 1,2] [--threads N]
-//! flowlight new-plugin --kind integrator|mutation NAME DIR [--sdk-path DIR | --sdk-version V]
+//! flowlight new-plugin --kind integrator|mutation|raw-mutation NAME DIR [--sdk-path DIR | --sdk-version V]
+//! flowlight conformance <plugin> [--set NAME=VALUE]...
 //! ```
 
 mod bench;
 mod compare;
+mod conformance;
 mod cpu_time;
 mod merge;
 mod new_plugin;
@@ -196,6 +198,14 @@ enum Command {
         #[arg(long)]
         sdk_version: Option<String>,
     },
+    /// Check a built mutation plugin with the conformance kit (docs/writing-a-plugin.md).
+    Conformance {
+        /// Path to the plugin library, or a plugin name.
+        plugin: String,
+        /// A plugin parameter, NAME=VALUE (TOML value or bare string); repeatable.
+        #[arg(long = "set", value_name = "NAME=VALUE")]
+        sets: Vec<String>,
+    },
 }
 
 /// Parses the command line, runs the subcommand, and exits with status 1 on an error.
@@ -302,6 +312,7 @@ pub fn main() {
             };
             new_plugin::run(kind, &name, &dir, sdk)
         }
+        Command::Conformance { plugin, sets } => conformance::run(&plugin, &sets),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

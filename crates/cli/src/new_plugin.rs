@@ -1,30 +1,120 @@
-//! `flowlight new-plugin --kind integrator|mutation NAME DIR`: writes a plugin crate that
-//! builds outside this workspace.
+//! `flowlight new-plugin --kind integrator|mutation|raw-mutation NAME DIR`: writes a plugin
+//! crate that builds outside this workspace.
 //!
 //! DIR gets `Cargo.toml` (a `cdylib` named `flowlight_<NAME with _>`, so the file is
-//! `libflowlight_<NAME with _>.so`, with `flowlight-sdk` as its only dependency and an empty
-//! `[workspace]` table so that it is a workspace of its own), `src/lib.rs` (a documented
-//! skeleton that works as generated: a one-bounce direct-lighting integrator, or a symmetric
-//! film-jitter mutation with a hard reconnection), unit tests inside it, a `README.md` and a
-//! `.gitignore`, and runs `rustfmt` over `src/lib.rs` when it is installed. The SDK is referenced by the absolute path of this checkout's
-//! `crates/flowlight-sdk` (default), another path (`--sdk-path`) or a registry version
-//! (`--sdk-version`).
+//! `libflowlight_<NAME with _>.so`, with `flowlight-sdk` as its dependency — and
+//! `flowlight-mcmc` for `mutation` — and an empty `[workspace]` table so that it is a
+//! workspace of its own), `src/lib.rs` (a documented skeleton that works as generated: a
+//! one-bounce direct-lighting integrator; a mutation made of a policy of `flowlight-mcmc`'s
+//! regeneration engine, as the in-tree strategies are; or a hand-written symmetric
+//! film-jitter mutation with a hard reconnection), unit tests inside it, a `README.md`, a
+//! `.gitignore` and a copy of the SDK's workspace `Cargo.lock`, so that the crate's
+//! dependencies resolve to the versions the host was built and tested with (without it,
+//! Cargo picks the newest versions it can). It runs `rustfmt` over `src/lib.rs` when it is
+//! installed. The SDK is referenced by the absolute path of this checkout's
+//! `crates/flowlight-sdk` (default; `flowlight-mcmc` is its sibling), another path
+//! (`--sdk-path`) or a registry version (`--sdk-version`).
 //!
 //! A NAME is what configs write (`plugin = "NAME"`): 1–64 characters, lowercase ASCII
-//! letters, digits and single `-` between them, starting with a letter. DIR must not exist
-//! or be an empty folder. Templates live in `crates/cli/templates/`; `__NAME__`, `__TYPE__`
-//! (NAME in CamelCase), `__CRATE__`, `__LIB__`, `__KIND__`, `__SDK_DEP__` and `__USAGE__` are
-//! replaced.
+//! letters, digits and single `-` between them, starting with a letter, and not a name whose
+//! crate would not compile: a Rust keyword, a name whose CamelCase type clashes with the
+//! standard prelude or an identifier the templates use (`scene` → `Scene`, `result` →
+//! `Result`, `self` → `Self`), or the name of a Flowlight crate (`sdk` → `flowlight-sdk`).
+//! DIR must not exist or be an empty folder. Templates live in `crates/cli/templates/`;
+//! `__NAME__`, `__TYPE__` (NAME in CamelCase), `__CRATE__`, `__LIB__`, `__KIND__`,
+//! `__SDK_DEP__` and `__USAGE__` are replaced.
 
 use anyhow::{anyhow, Context, Result};
 use std::path::{Path, PathBuf};
 
-/// Which trait the generated plugin implements.
+/// Which trait the generated plugin implements, and how.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Kind {
+    /// An `Integrator` (one-bounce direct lighting).
     Integrator,
+    /// A mutation on `flowlight-mcmc`'s regeneration engine (a `Strategy` and its policy).
     Mutation,
+    /// A `Mutation` written by hand (film jitter with a hard reconnection).
+    RawMutation,
 }
+
+/// The lib.rs templates: every identifier in them is one a generated type must not be named.
+const TEMPLATES: [&str; 3] = [
+    include_str!("../templates/integrator.rs.tmpl"),
+    include_str!("../templates/mutation.rs.tmpl"),
+    include_str!("../templates/raw-mutation.rs.tmpl"),
+];
+
+/// Rust's keywords, strict and reserved (2021 edition).
+const KEYWORDS: &[&str] = &[
+    "as", "async", "await", "break", "const", "continue", "crate", "dyn", "else", "enum", "extern",
+    "false", "fn", "for", "if", "impl", "in", "let", "loop", "match", "mod", "move", "mut", "pub",
+    "ref", "return", "self", "static", "struct", "super", "trait", "true", "type", "unsafe", "use",
+    "where", "while", "abstract", "become", "box", "do", "final", "gen", "macro", "override",
+    "priv", "try", "typeof", "unsized", "virtual", "yield", "union",
+];
+
+/// Types and traits of the standard prelude a generated type would shadow.
+const PRELUDE: &[&str] = &[
+    "Self",
+    "Option",
+    "Some",
+    "None",
+    "Result",
+    "Ok",
+    "Err",
+    "String",
+    "Vec",
+    "Box",
+    "ToString",
+    "ToOwned",
+    "Clone",
+    "Copy",
+    "Send",
+    "Sync",
+    "Sized",
+    "Unpin",
+    "Drop",
+    "Fn",
+    "FnMut",
+    "FnOnce",
+    "Iterator",
+    "IntoIterator",
+    "DoubleEndedIterator",
+    "ExactSizeIterator",
+    "Extend",
+    "FromIterator",
+    "Default",
+    "Eq",
+    "PartialEq",
+    "Ord",
+    "PartialOrd",
+    "AsRef",
+    "AsMut",
+    "Into",
+    "From",
+    "TryFrom",
+    "TryInto",
+    "Debug",
+    "Hash",
+];
+
+/// Crates of the Flowlight workspace: `flowlight-NAME` would collide with one of them in
+/// the generated crate's dependency graph.
+const WORKSPACE_CRATES: &[&str] = &[
+    "core",
+    "sdk",
+    "bvh",
+    "scene",
+    "host",
+    "pathtrace",
+    "mcmc",
+    "embree",
+    "elf",
+    "bench",
+    "cli",
+    "testkit",
+];
 
 /// Where the generated crate takes `flowlight-sdk` from.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -62,7 +152,32 @@ pub fn check_name(name: &str) -> Result<()> {
     if name.ends_with('-') || name.contains("--") {
         return bad("must not end with '-' or contain \"--\"");
     }
+    if KEYWORDS.contains(&name) {
+        return bad("is a Rust keyword: the generated crate would not compile");
+    }
+    if WORKSPACE_CRATES.contains(&name) {
+        return bad(&format!(
+            "would make a crate flowlight-{name}, the name of one of Flowlight's own crates"
+        ));
+    }
+    let ty = type_name(name);
+    if PRELUDE.contains(&ty.as_str()) || template_identifiers().any(|w| w == ty) {
+        return bad(&format!(
+            "would name the plugin's type {ty}, which the generated code already uses: choose another name"
+        ));
+    }
     Ok(())
+}
+
+/// The words of the templates' code, comments left out (placeholders excluded): a type of
+/// the same name would clash with what the code imports or names.
+fn template_identifiers() -> impl Iterator<Item = &'static str> {
+    TEMPLATES.iter().flat_map(|t| {
+        t.lines()
+            .map(|line| line.split("//").next().unwrap_or(""))
+            .flat_map(|code| code.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_')))
+            .filter(|w| !w.is_empty() && !w.starts_with("__"))
+    })
 }
 
 /// `my-ao` → `MyAo`: the Rust type the skeleton defines.
@@ -83,32 +198,72 @@ fn toml_string(s: &str) -> String {
     toml::Value::String(s.to_string()).to_string()
 }
 
+/// The regeneration engine's crate beside the SDK at `sdk` (both live in `crates/`).
+fn mcmc_path(sdk: &Path) -> PathBuf {
+    sdk.parent()
+        .map(|p| p.join("flowlight-mcmc"))
+        .unwrap_or_else(|| PathBuf::from("flowlight-mcmc"))
+}
+
+/// The `Cargo.lock` of the workspace the SDK at `sdk` belongs to (`crates/flowlight-sdk` →
+/// the workspace root), if there is one.
+fn workspace_lock(sdk: &Path) -> Option<PathBuf> {
+    let lock = sdk.parent()?.parent()?.join("Cargo.lock");
+    lock.is_file().then_some(lock)
+}
+
+/// The `[dependencies]` lines: the SDK, and the engine's crate for an engine-based mutation.
+fn dependencies(kind: Kind, sdk: &SdkSource) -> Result<String> {
+    let with_engine = kind == Kind::Mutation;
+    Ok(match sdk {
+        SdkSource::Path(p) => {
+            let text = |p: &Path| {
+                p.to_str().map(toml_string).ok_or_else(|| {
+                    anyhow!(
+                        "SDK path {} is not valid UTF-8: pass --sdk-path",
+                        p.display()
+                    )
+                })
+            };
+            let mut deps = format!("flowlight-sdk = {{ path = {} }}", text(p)?);
+            if with_engine {
+                let mcmc = mcmc_path(p);
+                deps += &format!("\nflowlight-mcmc = {{ path = {} }}", text(&mcmc)?);
+            }
+            deps
+        }
+        SdkSource::Version(v) => {
+            let mut deps = format!("flowlight-sdk = {}", toml_string(v));
+            if with_engine {
+                deps += &format!("\nflowlight-mcmc = {}", toml_string(v));
+            }
+            deps
+        }
+    })
+}
+
 /// The files of the new crate: (path relative to DIR, contents).
 pub fn render_files(kind: Kind, name: &str, sdk: &SdkSource) -> Result<Vec<(PathBuf, String)>> {
     check_name(name)?;
-    let sdk_dep = match sdk {
-        SdkSource::Path(p) => {
-            let p = p.to_str().ok_or_else(|| {
-                anyhow!(
-                    "SDK path {} is not valid UTF-8: pass --sdk-path",
-                    p.display()
-                )
-            })?;
-            format!("flowlight-sdk = {{ path = {} }}", toml_string(p))
-        }
-        SdkSource::Version(v) => format!("flowlight-sdk = {}", toml_string(v)),
-    };
+    let sdk_dep = dependencies(kind, sdk)?;
     let (kind_word, lib_template, usage) = match kind {
         Kind::Integrator => (
             "integrator",
-            include_str!("../templates/integrator.rs.tmpl"),
+            TEMPLATES[0],
             format!(
                 "and name it in the config:\n\n```toml\n[integrator]\nplugin = \"{name}\"\nlight_samples = 1\n```"
             ),
         ),
         Kind::Mutation => (
             "mutation",
-            include_str!("../templates/mutation.rs.tmpl"),
+            TEMPLATES[1],
+            format!(
+                "and list it among an integrator's mutations:\n\n```toml\n[integrator]\nplugin = \"erpt\"\n\n[[integrator.mutations]]\nplugin = \"{name}\"\np_reconnect = 0.5\n```"
+            ),
+        ),
+        Kind::RawMutation => (
+            "raw-mutation",
+            TEMPLATES[2],
             format!(
                 "and list it among an integrator's mutations:\n\n```toml\n[integrator]\nplugin = \"erpt\"\n\n[[integrator.mutations]]\nplugin = \"{name}\"\nsize = 2.0\n```"
             ),
@@ -159,11 +314,29 @@ pub fn run(kind: Kind, name: &str, dir: &Path, sdk: SdkSource) -> Result<()> {
                     p.display()
                 ));
             }
-            SdkSource::Path(std::fs::canonicalize(&p).with_context(|| p.display().to_string())?)
+            let p = std::fs::canonicalize(&p).with_context(|| p.display().to_string())?;
+            if kind == Kind::Mutation && !mcmc_path(&p).join("Cargo.toml").is_file() {
+                return Err(anyhow!(
+                    "no flowlight-mcmc crate at {} beside the SDK (an engine-based mutation needs it; --kind raw-mutation does not)",
+                    mcmc_path(&p).display()
+                ));
+            }
+            SdkSource::Path(p)
         }
         v => v,
     };
-    let files = render_files(kind, name, &sdk)?;
+    let mut files = render_files(kind, name, &sdk)?;
+    // The workspace's resolution, so that the plugin builds against the versions the host was
+    // built with; Cargo drops the entries the plugin does not need on its first build.
+    let lock = match &sdk {
+        SdkSource::Path(p) => workspace_lock(p),
+        SdkSource::Version(_) => workspace_lock(&default_sdk_path()),
+    };
+    if let Some(lock) = lock {
+        let text = std::fs::read_to_string(&lock)
+            .with_context(|| format!("cannot read {}", lock.display()))?;
+        files.push(("Cargo.lock".into(), text));
+    }
     for (rel, text) in &files {
         let path = dir.join(rel);
         if let Some(parent) = path.parent() {
@@ -220,9 +393,47 @@ mod tests {
     }
 
     #[test]
+    fn names_whose_crate_would_not_compile_are_refused() {
+        // Each of these generated a crate that failed to build: `Self` is a keyword, the
+        // others clash with the prelude or with what the templates import.
+        let clashing = [
+            "self",
+            "scene",
+            "film",
+            "ray",
+            "integrator",
+            "mutation",
+            "result",
+            "string",
+            "option",
+            "tracer",
+            "params",
+            "proposal",
+            "strategy",
+            "policy",
+            "rng",
+            "path",
+        ];
+        for bad in clashing
+            .iter()
+            .chain(["fn", "type", "async", "sdk", "mcmc", "core"].iter())
+        {
+            let e = check_name(bad).unwrap_err().to_string();
+            assert!(
+                e.starts_with(&format!("plugin name {bad:?} ")) && !e.contains('\n'),
+                "{bad:?}: {e}"
+            );
+        }
+        // Words of the templates' comments are no identifiers.
+        for good in ["markov", "rules", "my-scene", "scene-2", "film-grain"] {
+            check_name(good).unwrap_or_else(|e| panic!("{good}: {e}"));
+        }
+    }
+
+    #[test]
     fn templates_are_filled_completely() {
         let sdk = SdkSource::Path("/x/flowlight-sdk".into());
-        for kind in [Kind::Integrator, Kind::Mutation] {
+        for kind in [Kind::Integrator, Kind::Mutation, Kind::RawMutation] {
             let files = render_files(kind, "my-thing", &sdk).unwrap();
             for (rel, text) in &files {
                 assert!(!text.contains("__"), "{}: placeholder left", rel.display());
@@ -240,6 +451,11 @@ mod tests {
             );
             assert!(parsed["workspace"].as_table().unwrap().is_empty());
             assert!(files[1].1.contains("struct MyThing"));
+            let engine = parsed["dependencies"].get("flowlight-mcmc");
+            assert_eq!(
+                engine.and_then(|d| d["path"].as_str()),
+                (kind == Kind::Mutation).then_some("/x/flowlight-mcmc")
+            );
         }
         let files = render_files(Kind::Mutation, "j", &SdkSource::Version("0.1".into())).unwrap();
         let parsed: toml::Table = toml::from_str(&files[0].1).unwrap();

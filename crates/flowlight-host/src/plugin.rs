@@ -3,8 +3,8 @@
 use crate::params::build_params;
 use flowlight_sdk::abi::{
     self, ErrorBuf, FilmTable, IntegratorInfo, IntegratorTable, MutationRef, MutationTable,
-    ParamRole, ParamSpec, PluginDeclaration, ResolvedList, SceneView, StatList, StatSpec, Status,
-    StrRef, TracerTable, WorkUnit,
+    ParamRole, ParamSpec, PluginDeclaration, ResolvedList, SceneView, StatList, StatMerge,
+    StatSpec, Status, StrRef, TracerTable, WorkUnit,
 };
 use flowlight_sdk::stats::MAX_COUNTERS;
 use flowlight_sdk::{ParamKind, PluginKind, MAX_MUTATIONS};
@@ -405,6 +405,8 @@ pub struct MutationInstance {
     /// The parameter values the instance resolved (owned by the instance, valid until
     /// `destroy`).
     resolved: ResolvedList,
+    /// The counters the instance declared (owned by the instance, valid until `destroy`).
+    stats: StatList,
 }
 
 // SAFETY: the SDK requires mutations to be Send + Sync.
@@ -433,6 +435,7 @@ impl MutationInstance {
         })?;
         let mut instance = std::ptr::null_mut();
         let mut resolved = ResolvedList::EMPTY;
+        let mut stats = StatList::EMPTY;
         let mut err = ErrorBuf::default();
         // SAFETY: the table is a checked mutation plugin's; the parameter list and `view` are
         // valid for the call, and the caller keeps `view`'s data alive for the instance.
@@ -442,6 +445,7 @@ impl MutationInstance {
                 list.as_slice().len(),
                 view,
                 &mut instance,
+                &mut stats,
                 &mut resolved,
                 &mut err,
             )
@@ -450,14 +454,36 @@ impl MutationInstance {
             return Err(plugin.call_error(status, &err));
         }
         let name = plugin.name.clone();
-        Ok(MutationInstance {
+        let inst = MutationInstance {
             plugin,
             table,
             instance,
             name,
             weight,
             resolved,
-        })
+            stats,
+        };
+        // The SDK's builder refuses more; a plugin that wrote its own glue might not.
+        if stats.count > MAX_COUNTERS || (stats.count > 0 && stats.specs.is_null()) {
+            return Err(PluginError::Call {
+                name: inst.plugin.name.clone(),
+                path: inst.plugin.path.clone(),
+                message: format!(
+                    "declares {} statistics counters, at most {MAX_COUNTERS} are supported",
+                    stats.count
+                ),
+            });
+        }
+        Ok(inst)
+    }
+
+    /// The statistics counters the mutation declared.
+    pub fn stat_specs(&self) -> &[StatSpec] {
+        if self.stats.specs.is_null() || self.stats.count == 0 {
+            return &[];
+        }
+        // SAFETY: owned by the instance until `destroy` (in our Drop), `count` entries.
+        unsafe { std::slice::from_raw_parts(self.stats.specs, self.stats.count) }
     }
 
     pub fn plugin(&self) -> &PluginLibrary {
@@ -551,6 +577,10 @@ pub struct IntegratorInstance {
     stats: StatList,
     /// The parameter values the instance resolved (owned likewise).
     resolved: ResolvedList,
+    /// The integrator's counters, then each mutation's as `NAME.counter` (names owned by
+    /// `_stat_names`): what a unit's slots hold and what is reported.
+    all_stats: Vec<StatSpec>,
+    _stat_names: Vec<Box<str>>,
     // The plugin may keep pointers into these for its whole life; dropped after `destroy`.
     _view: Box<SceneView>,
     _mutation_refs: Vec<MutationRef>,
@@ -589,13 +619,20 @@ impl IntegratorInstance {
                 m.name
             )));
         }
+        let mut stat_offset = 0u32;
         let refs: Vec<MutationRef> = mutations
             .iter()
-            .map(|m| MutationRef {
-                name: StrRef::new(&m.name),
-                weight: m.weight,
-                table: &*m.table,
-                instance: m.instance,
+            .map(|m| {
+                let stat_count = m.stats.count as u32;
+                stat_offset += stat_count;
+                MutationRef {
+                    name: StrRef::new(&m.name),
+                    weight: m.weight,
+                    table: &*m.table,
+                    instance: m.instance,
+                    stat_offset: stat_offset - stat_count,
+                    stat_count,
+                }
             })
             .collect();
         let view = Box::new(view);
@@ -624,13 +661,15 @@ impl IntegratorInstance {
         if status != Status::Ok {
             return Err(plugin.call_error(status, &err));
         }
-        let inst = IntegratorInstance {
+        let mut inst = IntegratorInstance {
             plugin,
             table,
             instance,
             info,
             stats,
             resolved,
+            all_stats: Vec::new(),
+            _stat_names: Vec::new(),
             _view: view,
             _mutation_refs: refs,
             mutations,
@@ -647,7 +686,61 @@ impl IntegratorInstance {
                 ),
             });
         }
+        inst.append_mutation_stats()
+            .map_err(|message| PluginError::Call {
+                name: inst.plugin.name.clone(),
+                path: inst.plugin.path.clone(),
+                message,
+            })?;
         Ok(inst)
+    }
+
+    /// Builds [`IntegratorInstance::stat_specs`]: the integrator's counters, then each
+    /// mutation's renamed `NAME.counter` (`NAME#k` for the k-th entry of a plugin listed
+    /// more than once), ratios pointing at the shifted indices.
+    fn append_mutation_stats(&mut self) -> Result<(), String> {
+        let own: Vec<StatSpec> = self.own_stat_specs().to_vec();
+        let mut names: Vec<Box<str>> = Vec::new();
+        let mut specs = own.clone();
+        let mut seen: Vec<&str> = Vec::new();
+        for m in &self.mutations {
+            let entry = seen.iter().filter(|n| **n == m.name).count();
+            seen.push(&m.name);
+            let group = if entry == 0 {
+                m.name.clone()
+            } else {
+                format!("{}#{}", m.name, entry + 1)
+            };
+            let base = specs.len() as u32;
+            for s in m.stat_specs() {
+                // SAFETY: the mutation instance owns its names until `destroy`.
+                let name = format!("{group}.{}", unsafe { s.name.as_str() });
+                if own.iter().any(|o| unsafe { o.name.as_str() } == name) {
+                    return Err(format!(
+                        "counter '{name}' of mutation '{}' has the name of one of the integrator's own",
+                        m.name
+                    ));
+                }
+                names.push(name.into_boxed_str());
+                let shifted = |i: u32| {
+                    if s.merge == StatMerge::Ratio {
+                        i + base
+                    } else {
+                        i
+                    }
+                };
+                specs.push(StatSpec {
+                    name: StrRef::new(names.last().expect("just pushed")),
+                    merge: s.merge,
+                    numerator: shifted(s.numerator),
+                    denominator: shifted(s.denominator),
+                    display: s.display,
+                });
+            }
+        }
+        self.all_stats = specs;
+        self._stat_names = names;
+        Ok(())
     }
 
     pub fn plugin(&self) -> &PluginLibrary {
@@ -681,8 +774,14 @@ impl IntegratorInstance {
         &self._view
     }
 
-    /// The statistics counters the integrator declared.
+    /// The statistics counters a unit's slots hold: the integrator's own, then its mutation
+    /// strategies' (named `NAME.counter`).
     pub fn stat_specs(&self) -> &[StatSpec] {
+        &self.all_stats
+    }
+
+    /// The statistics counters the integrator itself declared.
+    fn own_stat_specs(&self) -> &[StatSpec] {
         if self.stats.specs.is_null() || self.stats.count == 0 {
             return &[];
         }
@@ -717,14 +816,14 @@ impl IntegratorInstance {
         film: &FilmTable,
         stats: &mut [f64],
     ) -> Result<(), PluginError> {
-        if stats.len() < self.stats.count {
+        if stats.len() < self.all_stats.len() {
             return Err(PluginError::Call {
                 name: self.plugin.name.clone(),
                 path: self.plugin.path.clone(),
                 message: format!(
                     "render was given {} statistics slots for {} counters",
                     stats.len(),
-                    self.stats.count
+                    self.all_stats.len()
                 ),
             });
         }

@@ -172,8 +172,8 @@ pub struct RenderStats {
     /// When the last work unit started, measured from the start of the render (the clock
     /// the budget runs on): never after the budget.
     pub last_unit_start: Option<Duration>,
-    /// The integrator's own counters (declared on its `StatsBuilder`), merged over units,
-    /// ratios resolved, in declaration order.
+    /// The integrator's counters (declared on its `StatsBuilder`), then its mutations' as
+    /// `NAME.counter`, merged over units, ratios resolved, in declaration order.
     pub integrator: Vec<(String, f64)>,
     /// The accumulation style, its memory and its flushes (`None` before any render).
     pub accumulation: Option<AccumulationReport>,

@@ -49,15 +49,20 @@ use std::borrow::Cow;
 /// Node type as mutations must preserve it (the weak type, thesis §3.3).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum WeakNode {
+    /// The camera vertex x₀.
     Eye,
+    /// The last vertex: on a light (an emitter, a punctual light or the environment).
     Light,
     /// Diffuse or glossy: a free vertex that can be connected to.
     Smooth,
+    /// A mirror-like (Dirac) reflection.
     DiracReflection,
+    /// A Dirac transmission (refraction through glass).
     DiracTransmission,
 }
 
 impl WeakNode {
+    /// The weak type of a stored vertex.
     pub fn of(v: &PathVertex) -> WeakNode {
         match v.node {
             NodeType::Eye => WeakNode::Eye,
@@ -68,6 +73,7 @@ impl WeakNode {
         }
     }
 
+    /// True for the two Dirac types.
     pub fn is_dirac(self) -> bool {
         matches!(
             self,

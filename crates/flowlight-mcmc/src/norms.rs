@@ -9,15 +9,21 @@
 /// The four events.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Event {
+    /// The chain moved to the proposal.
     Accept = 0,
+    /// The proposal was valid but not taken.
     Reject = 1,
+    /// A valid proposal (a domain hit).
     Hit = 2,
+    /// No proposal (a domain miss).
     Miss = 3,
 }
 
+/// The four events in counter order.
 pub const EVENTS: [Event; 4] = [Event::Accept, Event::Reject, Event::Hit, Event::Miss];
 
 impl Event {
+    /// The event's name in statistics counters.
     pub fn name(self) -> &'static str {
         match self {
             Event::Accept => "acceptance",
@@ -32,10 +38,15 @@ impl Event {
 /// streaks, their total length and the longest.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Tally {
+    /// Steps recorded.
     pub steps: u64,
+    /// Steps with each event.
     pub events: [u64; 4],
+    /// Streaks (maximal runs within a chain) of each event.
     pub streaks: [u64; 4],
+    /// Total length of each event's streaks.
     pub streak_total: [u64; 4],
+    /// Longest streak of each event.
     pub streak_max: [u64; 4],
     /// Length of the run in progress per event (0 when the last step had another event).
     run: [u64; 4],
@@ -72,6 +83,7 @@ impl Tally {
         }
     }
 
+    /// Share of the steps with event `e` (0 before any step).
     pub fn strength(&self, e: Event) -> f64 {
         if self.steps == 0 {
             0.0
@@ -80,6 +92,7 @@ impl Tally {
         }
     }
 
+    /// Mean length of event `e`'s streaks (0 when there is none).
     pub fn mean_streak(&self, e: Event) -> f64 {
         let i = e as usize;
         if self.streaks[i] == 0 {

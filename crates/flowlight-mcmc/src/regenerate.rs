@@ -77,7 +77,10 @@ pub enum Extension {
     Bsdf,
     /// Uniform in the cap of half-angle acos(`cos_max`) around the direction to the original
     /// path's next vertex (soft reconnection).
-    Cap { cos_max: f32 },
+    Cap {
+        /// Cosine of the cap's half-angle.
+        cos_max: f32,
+    },
     /// Veach's exponential cone around the direction to the original path's next vertex
     /// (the multi-chain perturbation, [`crate::perturbation`]).
     Cone(ExpCone),
@@ -91,6 +94,23 @@ pub enum Extension {
     ConeAlong(ExpCone),
 }
 
+/// A move of the raster position: the first step of every proposal the engine builds
+/// ([`propose_with`], [`density_with`]). The engine treats it as *symmetric* — its density
+/// satisfies T(u → u') = T(u' → u) for the window K a chain carries — and leaves the film
+/// term out of the transition ratio; it enters the density, which a mixture of strategies
+/// needs. [`FilmMove`] is the engine's own; a plugin may bring its own (a Gaussian jump,
+/// say) by implementing this trait.
+pub trait RasterMove {
+    /// The moved raster position of path `x` (`x.raster`, chain window `x.film_window`) on a
+    /// `width` × `height` film; `None` for a move off the film or outside the window (a
+    /// domain miss).
+    fn sample(&self, x: &Path, width: u32, height: u32, rng: &mut Rng) -> Option<glam::Vec2>;
+
+    /// Density per unit raster area of moving `x.raster` to `y.raster` (0 where `sample`
+    /// cannot land).
+    fn density(&self, x: &Path, y: &Path, width: u32, height: u32) -> f64;
+}
+
 /// How the raster position moves at the start of a proposal.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum FilmMove {
@@ -100,7 +120,7 @@ pub enum FilmMove {
     Lens(LensJump),
 }
 
-impl FilmMove {
+impl RasterMove for FilmMove {
     fn sample(&self, x: &Path, w: u32, h: u32, rng: &mut Rng) -> Option<glam::Vec2> {
         match self {
             FilmMove::Window => migration::migrate(x.raster, x.film_window, w, h, rng),
@@ -417,10 +437,7 @@ fn film_size(scene: &Scene) -> (u32, u32) {
     (scene.camera.width, scene.camera.height)
 }
 
-const MISS: Proposal = Proposal {
-    valid: 0,
-    transition_ratio: 0.0,
-};
+const MISS: Proposal = Proposal::Miss;
 
 /// Builds a proposal `y` from `x` under `policy`. Returns the proposal's validity and its
 /// transition ratio T(y→x)/T(x→y), computed from the densities the sampling routines
@@ -436,13 +453,14 @@ pub fn propose(
     propose_with(scene, tracer, rng, policy, FilmMove::Window, x, y)
 }
 
-/// [`propose`] with the raster position moved by `film` instead of film-plane migration.
+/// [`propose`] with the raster position moved by `film` instead of film-plane migration
+/// (a [`FilmMove`] or a plugin's own symmetric [`RasterMove`]).
 pub fn propose_with(
     scene: &Scene,
     tracer: &Tracer,
     rng: &mut Rng,
     policy: &Policy,
-    film: FilmMove,
+    film: impl RasterMove,
     x: &Path,
     y: &mut Path,
 ) -> Proposal {
@@ -500,13 +518,11 @@ fn finish(fwd: f64, rev: f64) -> Proposal {
     let ratio = rev / fwd;
     if !(ratio.is_finite() && ratio >= 0.0) {
         // A valid path with a degenerate density: reported, and rejected by the integrator.
-        return Proposal {
-            valid: 1,
+        return Proposal::Move {
             transition_ratio: f32::NAN,
         };
     }
-    Proposal {
-        valid: 1,
+    Proposal::Move {
         transition_ratio: ratio as f32,
     }
 }
@@ -772,7 +788,13 @@ pub fn density(scene: &Scene, policy: &Policy, x: &Path, y: &Path) -> f64 {
 
 /// [`density`] with the raster position moved by `film`: the steps of [`propose_with`] read
 /// back from the two paths.
-pub fn density_with(scene: &Scene, policy: &Policy, film: FilmMove, x: &Path, y: &Path) -> f64 {
+pub fn density_with(
+    scene: &Scene,
+    policy: &Policy,
+    film: impl RasterMove,
+    x: &Path,
+    y: &Path,
+) -> f64 {
     let (xv, yv) = (x.vertices(), y.vertices());
     if xv.len() < 2 || yv.len() < 2 || x.film_window != y.film_window {
         return 0.0;

@@ -73,10 +73,7 @@ use flowlight_core::rng::Rng;
 use flowlight_sdk::{Proposal, Scene, Tracer};
 use glam::{DVec3, Vec3};
 
-const MISS: Proposal = Proposal {
-    valid: 0,
-    transition_ratio: 0.0,
-};
+const MISS: Proposal = Proposal::Miss;
 
 /// Whether `v` is a point on an area light.
 fn on_area_light(scene: &Scene, v: &PathVertex) -> bool {
@@ -223,8 +220,7 @@ pub fn propose(
     let forward = density(scene, cone, x, y);
     let reverse = density(scene, cone, y, x);
     let ratio = reverse / forward;
-    Proposal {
-        valid: 1,
+    Proposal::Move {
         transition_ratio: if ratio.is_finite() && ratio >= 0.0 {
             ratio as f32
         } else {

@@ -32,7 +32,9 @@ pub const DECLARATION_SYMBOL: &[u8] = b"flowlight_plugin_declaration\0";
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct StrRef {
+    /// Start of the bytes (null or dangling when `len` is 0).
     pub ptr: *const u8,
+    /// Length in bytes.
     pub len: usize,
 }
 
@@ -41,11 +43,13 @@ unsafe impl Sync for StrRef {}
 unsafe impl Send for StrRef {}
 
 impl StrRef {
+    /// The empty string.
     pub const EMPTY: StrRef = StrRef {
         ptr: std::ptr::null(),
         len: 0,
     };
 
+    /// Borrows `s` (the caller keeps it alive while the reference is read).
     pub const fn new(s: &str) -> StrRef {
         StrRef {
             ptr: s.as_ptr(),
@@ -72,6 +76,7 @@ impl StrRef {
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Status {
+    /// The call succeeded.
     Ok = 0,
     /// The callee returned an error; its message is in the [`ErrorBuf`].
     Error = 1,
@@ -82,7 +87,9 @@ pub enum Status {
 /// Host-owned buffer a callee copies an error message into (truncated to fit).
 #[repr(C)]
 pub struct ErrorBuf {
+    /// Bytes of the message written (at most 1024).
     pub len: usize,
+    /// The message, UTF-8, its first `len` bytes valid.
     pub bytes: [u8; 1024],
 }
 
@@ -96,6 +103,7 @@ impl Default for ErrorBuf {
 }
 
 impl ErrorBuf {
+    /// Copies `msg` in, truncated at a character boundary to the buffer's 1024 bytes.
     pub fn set(&mut self, msg: &str) {
         let mut n = msg.len().min(self.bytes.len());
         while !msg.is_char_boundary(n) {
@@ -105,6 +113,7 @@ impl ErrorBuf {
         self.len = n;
     }
 
+    /// The message written so far.
     pub fn message(&self) -> String {
         String::from_utf8_lossy(&self.bytes[..self.len.min(self.bytes.len())]).into_owned()
     }
@@ -114,7 +123,9 @@ impl ErrorBuf {
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PluginKind {
+    /// Implements [`crate::Integrator`]; the declaration's `integrator` table is set.
     Integrator = 0,
+    /// Implements [`crate::Mutation`]; the declaration's `mutation` table is set.
     Mutation = 1,
 }
 
@@ -209,22 +220,32 @@ pub struct ParamValue {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct SceneView {
+    /// The camera, with the image size it renders.
     pub camera: Camera,
+    /// The materials, `material_count` of them (a hit's `material` indexes them).
     pub materials: *const Material,
+    /// Number of materials.
     pub material_count: usize,
+    /// The textures the materials sample, `texture_count` of them.
     pub textures: *const Texture,
+    /// Number of textures.
     pub texture_count: usize,
+    /// The emissive triangles' emitters, `emitter_count` of them.
     pub emitters: *const Emitter,
+    /// Number of emitters.
     pub emitter_count: usize,
     /// `KHR_lights_punctual` lights.
     pub punctual_lights: *const PunctualLight,
+    /// Number of punctual lights.
     pub punctual_count: usize,
     /// The environment (kind `None` when the config has none).
     pub environment: Environment,
     /// CDF over the power of all lights: emitters, punctual lights, then the environment when
     /// present (`emitter_count + punctual_count + 0 or 1` entries).
     pub light_power_cdf: *const f32,
+    /// Lower corner of the scene's bounding box (world space).
     pub bounds_min: Vec3,
+    /// Upper corner of the scene's bounding box (world space).
     pub bounds_max: Vec3,
     /// The vertex and triangle buffers (ABI 4), for surface data built plugin-side from
     /// [`CompactHit`]s.
@@ -240,24 +261,41 @@ pub struct SceneView {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct MeshTables {
+    /// Vertex positions, `vertex_count` entries.
     pub positions: *const Vec3,
+    /// Number of vertices.
     pub vertex_count: usize,
+    /// Per-vertex shading normals, `normals_count` entries.
     pub normals: *const Vec3,
+    /// `vertex_count` or 0.
     pub normals_count: usize,
+    /// Per-vertex TEXCOORD_0, `uvs_count` entries.
     pub uvs: *const glam::Vec2,
+    /// `vertex_count` or 0.
     pub uvs_count: usize,
+    /// Per-vertex TEXCOORD_1, `uvs1_count` entries.
     pub uvs1: *const glam::Vec2,
+    /// `vertex_count` or 0.
     pub uvs1_count: usize,
+    /// Per-vertex COLOR_0 (RGBA), `colors_count` entries.
     pub colors: *const [f32; 4],
+    /// `vertex_count` or 0.
     pub colors_count: usize,
+    /// Per-vertex tangents (xyz and handedness w), `tangents_count` entries.
     pub tangents: *const [f32; 4],
+    /// `vertex_count` or 0.
     pub tangents_count: usize,
+    /// Vertex indices of each triangle.
     pub triangles: *const [u32; 3],
+    /// Material index of each triangle.
     pub triangle_material: *const u32,
+    /// Emitter rank of each triangle (read only where its material is emissive).
     pub triangle_emitter: *const i32,
+    /// Number of triangles.
     pub triangle_count: usize,
     /// Sorted by `first_virtual`; 0 entries: one identity instance of all triangles.
     pub instances: *const MeshInstance,
+    /// Number of instances.
     pub instance_count: usize,
 }
 
@@ -298,6 +336,7 @@ pub mod batch {
 pub struct HitRecord {
     /// 1 when `surface` is valid.
     pub hit: u32,
+    /// The hit's surface data when `hit` is 1.
     pub surface: SurfaceHit,
 }
 
@@ -311,6 +350,7 @@ pub struct HitRecord {
 #[repr(C)]
 #[derive(Clone, Copy)]
 pub struct TracerTable {
+    /// The host's context for the calls below.
     pub ctx: *mut c_void,
     /// Writes the closest hit of `ray` into `hit` (`hit.hit = 0` when it escapes).
     pub intersect: unsafe extern "C" fn(ctx: *mut c_void, ray: *const Ray, hit: *mut HitRecord),
@@ -335,9 +375,13 @@ pub struct TracerTable {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Deposit {
+    /// Raster x of the deposit (pixels, 0 at the left edge).
     pub x: f32,
+    /// Raster y of the deposit (pixels, 0 at the top edge).
     pub y: f32,
+    /// Lighting layer (its path depth), besides the main image.
     pub layer: u32,
+    /// The radiance deposited.
     pub value: Rgb,
 }
 
@@ -345,7 +389,9 @@ pub struct Deposit {
 #[repr(C)]
 #[derive(Clone, Copy)]
 pub struct FilmTable {
+    /// The accumulator's context for `deposit`.
     pub ctx: *mut c_void,
+    /// Accumulates `deposits[0..n]`.
     pub deposit: unsafe extern "C" fn(ctx: *mut c_void, deposits: *const Deposit, n: usize),
 }
 
@@ -365,7 +411,9 @@ pub enum AccumulationStyle {
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum StatMerge {
+    /// Values and units are added.
     Sum = 0,
+    /// The largest value is kept.
     Max = 1,
     /// Not accumulated: the host reports `counter[numerator] / counter[denominator]`.
     Ratio = 2,
@@ -393,10 +441,13 @@ pub enum StatDisplay {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct StatSpec {
+    /// The counter's name as reported.
     pub name: StrRef,
+    /// How it is merged.
     pub merge: StatMerge,
     /// For [`StatMerge::Ratio`]: indices of the counters divided.
     pub numerator: u32,
+    /// See `numerator`.
     pub denominator: u32,
     /// How the summary shows it (ABI 6).
     pub display: StatDisplay,
@@ -408,6 +459,7 @@ pub struct StatSpec {
 pub struct IntegratorInfo {
     /// Number of extra per-depth lighting layers (0 = main image only).
     pub layer_count: u32,
+    /// How the deposits are accumulated.
     pub accumulation: AccumulationStyle,
     /// Flange width in pixels for [`AccumulationStyle::FlangedTile`].
     pub flange: u32,
@@ -421,7 +473,9 @@ pub struct IntegratorInfo {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct StatList {
+    /// The specs, `count` of them (null for none).
     pub specs: *const StatSpec,
+    /// Number of specs.
     pub count: usize,
 }
 
@@ -450,25 +504,39 @@ impl IntegratorInfo {
 #[repr(C)]
 #[derive(Clone, Copy)]
 pub struct MutationRef {
+    /// The plugin's name.
     pub name: StrRef,
     /// Selection weight: the config's, validated and normalised by the host so that the
     /// weights of a list are finite, ≥ 0 and sum to 1.
     pub weight: f64,
+    /// The plugin's function table.
     pub table: *const MutationTable,
+    /// The instance `table.create` made.
     pub instance: *const c_void,
+    /// Where the mutation's counters start among the counters the host appends after the
+    /// integrator's own (ABI 6): its slots in a unit are `integrator count + stat_offset ..
+    /// + stat_count` of the array `render` receives.
+    pub stat_offset: u32,
+    /// Number of counters the mutation declared.
+    pub stat_count: u32,
 }
 
 /// A coarse piece of work: `sample_count` samples per pixel for the pixels of a tile.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct WorkUnit {
+    /// Left edge of the tile (first pixel column).
     pub x0: u32,
+    /// Top edge of the tile (first pixel row).
     pub y0: u32,
+    /// Right edge of the tile (one past its last column).
     pub x1: u32,
+    /// Bottom edge of the tile (one past its last row).
     pub y1: u32,
     /// Index of the first sample of each pixel in this unit (samples of a pixel are numbered
     /// 0, 1, … across the whole render).
     pub sample_begin: u32,
+    /// Samples per pixel in this unit.
     pub sample_count: u32,
     /// Render seed; combine with pixel and sample indices for per-sample generators.
     pub seed: u64,
@@ -478,6 +546,9 @@ pub struct WorkUnit {
 #[repr(C)]
 #[derive(Clone, Copy)]
 pub struct IntegratorTable {
+    /// Creates an instance from the checked parameters, the mutation strategies, and the scene
+    /// view (valid for the instance's life); writes the instance, its info and its counter
+    /// list.
     pub create: unsafe extern "C" fn(
         params: *const ParamValue,
         param_count: usize,
@@ -490,6 +561,7 @@ pub struct IntegratorTable {
         resolved: *mut ResolvedList,
         err: *mut ErrorBuf,
     ) -> Status,
+    /// Frees an instance made by `create` (null is ignored).
     pub destroy: unsafe extern "C" fn(instance: *mut c_void),
     /// Called once before the first unit, on one thread, with ray queries available
     /// (e.g. ERPT's whole-image deposition quantum pre-pass).
@@ -512,14 +584,15 @@ pub struct IntegratorTable {
     ) -> Status,
 }
 
-/// What a mutation proposed.
+/// What a mutation proposed, as it crosses the boundary ([`crate::Proposal`] is the Rust
+/// side: [`ProposalRecord::from`] and [`crate::Proposal::from`] convert).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Proposal {
+pub struct ProposalRecord {
     /// 1 when a proposal of the same path length and weak type was built; 0 for a domain
     /// miss (the chain stays where it is and deposits there).
     pub valid: u32,
-    /// Tentative transition density ratio T(y→x) / T(x→y) (thesis §5.4).
+    /// Tentative transition density ratio T(y→x) / T(x→y) (thesis §5.4); 0 for a miss.
     pub transition_ratio: f32,
 }
 
@@ -527,23 +600,31 @@ pub struct Proposal {
 #[repr(C)]
 #[derive(Clone, Copy)]
 pub struct MutationTable {
+    /// Creates an instance from the checked parameters and the scene view (valid for the
+    /// instance's life); writes the instance and its counter list.
     pub create: unsafe extern "C" fn(
         params: *const ParamValue,
         param_count: usize,
         scene: *const SceneView,
         instance: *mut *mut c_void,
+        stats: *mut StatList,
         resolved: *mut ResolvedList,
         err: *mut ErrorBuf,
     ) -> Status,
+    /// Frees an instance made by `create` (null is ignored).
     pub destroy: unsafe extern "C" fn(instance: *mut c_void),
     /// Proposes `proposal` from `current`. Called concurrently with the same instance.
+    /// `stats` points to `stat_count` counters of the current work unit, one per spec of the
+    /// instance's [`StatList`] (ABI 6; null when it declared none).
     pub propose: unsafe extern "C" fn(
         instance: *const c_void,
         tracer: *const TracerTable,
         rng: *mut Rng,
         current: *const Path,
         proposal: *mut Path,
-        out: *mut Proposal,
+        out: *mut ProposalRecord,
+        stats: *mut f64,
+        stat_count: usize,
         err: *mut ErrorBuf,
     ) -> Status,
     /// Transition density T(from → to) of this strategy (0 when it cannot propose `to`).
@@ -561,14 +642,23 @@ pub struct MutationTable {
 /// their place in every ABI version, so a host can read them from any plugin.
 #[repr(C)]
 pub struct PluginDeclaration {
+    /// [`ABI_VERSION`] of the SDK the plugin was built with (first field in every version).
     pub abi_version: u32,
+    /// What the plugin implements.
     pub kind: PluginKind,
+    /// [`layout_hash`] of the SDK the plugin was built with (second field in every version).
     pub layout_hash: u64,
+    /// [`SDK_VERSION`] of the SDK the plugin was built with.
     pub sdk_version: StrRef,
+    /// [`RUSTC_VERSION`] of the compiler that built the plugin.
     pub rustc_version: StrRef,
+    /// The plugin's name (what configs write).
     pub name: StrRef,
+    /// One line for `flowlight plugins`.
     pub description: StrRef,
+    /// The parameters it accepts, `param_count` of them.
     pub params: *const ParamSpec,
+    /// Number of parameters.
     pub param_count: usize,
     /// Non-null for [`PluginKind::Integrator`].
     pub integrator: *const IntegratorTable,
@@ -613,7 +703,7 @@ pub const fn layout_hash() -> u64 {
         size_of::<MutationRef>(),
         size_of::<WorkUnit>(),
         size_of::<IntegratorTable>(),
-        size_of::<Proposal>(),
+        size_of::<ProposalRecord>(),
         size_of::<MutationTable>(),
         size_of::<PathVertex>(),
         size_of::<Path>(),

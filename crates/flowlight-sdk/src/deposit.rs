@@ -13,8 +13,10 @@ pub struct Film<'a> {
 }
 
 impl<'a> Film<'a> {
+    /// Deposits buffered before they are handed to the host in one call.
     pub const BATCH: usize = 256;
 
+    /// A film over the host's accumulator `table`.
     pub fn new(table: &'a FilmTable) -> Self {
         Film {
             table,
@@ -42,6 +44,7 @@ impl<'a> Film<'a> {
         }
     }
 
+    /// Hands the buffered deposits to the host (also done when full and on drop).
     pub fn flush(&mut self) {
         if self.len > 0 {
             // SAFETY: the buffer holds `len` initialised deposits for the call's duration.
@@ -60,6 +63,7 @@ impl Drop for Film<'_> {
 /// The host side of a film: anything that can take a batch of deposits. The host implements
 /// it for its accumulators and exposes them through [`Accumulator::table`].
 pub trait Accumulator {
+    /// Accumulates a batch of deposits.
     fn deposit(&mut self, deposits: &[Deposit]);
 
     /// A C-ABI table pointing at `self`, valid while `self` is borrowed.

@@ -167,13 +167,16 @@ unsafe extern "C" fn render<T: Integrator>(
                 "the host passed {stat_count} statistics slots for {declared} declared counters"
             ));
             }
+            // The integrator's own counters, then the mutations' (ABI 6), which it hands
+            // on through `MutationSet::propose`.
             let slots = if stats.is_null() || stat_count == 0 {
                 &mut [][..]
             } else {
-                std::slice::from_raw_parts_mut(stats, declared)
+                std::slice::from_raw_parts_mut(stats, stat_count)
             };
+            let mut stats = Stats::with_mutation_slots(slots, declared);
             inst.integrator
-                .render(&*unit, &tracer, &mut film, &mut Stats::new(slots))
+                .render(&*unit, &tracer, &mut film, &mut stats)
         })
     }
 }

@@ -90,12 +90,18 @@
 //!
 //! where WHAT is `ABI version`, `type layout`, `SDK version` or `rustc version`.
 
+// Every public item is documented; `cargo clippy -- -D warnings` makes a gap an error.
+#![warn(missing_docs)]
+
 pub mod abi;
 pub mod declare;
 pub mod deposit;
 mod guard;
 pub mod integrator;
 pub mod mutation;
+// The parameter declarations are being redesigned (one declaration per parameter, from which
+// parsing and the docs tables come); its remaining undocumented items go with that change.
+#[allow(missing_docs)]
 pub mod params;
 pub mod scene;
 pub mod stats;
@@ -103,13 +109,13 @@ pub mod tracer;
 
 pub use abi::{
     AccumulationStyle, Deposit, IntegratorInfo, ParamRole, ParamSpec, PluginDeclaration,
-    PluginKind, Proposal, StatDisplay, StatMerge, WorkUnit,
+    PluginKind, StatDisplay, StatMerge, WorkUnit,
 };
 pub use declare::{BoolParam, ChoiceParam, FloatParam, IntParam, StringParam};
 pub use deposit::{Accumulator, Film};
 pub use flowlight_core as core;
 pub use integrator::Integrator;
-pub use mutation::{Mutation, MutationSet, MAX_MUTATIONS};
+pub use mutation::{Mutation, MutationSet, Proposal, MAX_MUTATIONS};
 pub use params::{param, ParamKind, Params};
 pub use scene::Scene;
 pub use stats::{Counter, Ratio, Stats, StatsBuilder};

@@ -1,37 +1,128 @@
 //! The `Mutation` trait: an ERPT/MCMC perturbation strategy, loadable as its own plugin.
+//!
+//! A strategy either implements [`Mutation`] by hand (the raw tier: it builds the proposal
+//! itself and reports its transition ratio) or, far shorter, describes itself as a policy of
+//! the regeneration engine in the `flowlight-mcmc` crate (`flowlight_mcmc::Strategy`, or
+//! `flowlight_mcmc::regenerate::propose_with` with a film move of its own), which computes
+//! the proposal, its ratio and its density; docs/writing-a-plugin.md shows both.
+//!
+//! What a strategy returns is a [`Proposal`]: a domain miss, or a move with its transition
+//! ratio T(y→x)/T(x→y). It crosses the C ABI as an [`abi::ProposalRecord`](ProposalRecord).
 
 use crate::abi::{
-    ErrorBuf, MutationRef, MutationTable, ParamSpec, ParamValue, Proposal, ResolvedList, SceneView,
-    Status, TracerTable,
+    ErrorBuf, MutationRef, MutationTable, ParamSpec, ParamValue, ProposalRecord, ResolvedList,
+    SceneView, StatList, Status, TracerTable,
 };
 use crate::guard::guard;
 use crate::params::{Params, ResolvedTable};
 use crate::scene::Scene;
+use crate::stats::{StatTable, Stats, StatsBuilder};
 use crate::tracer::Tracer;
 use flowlight_core::bsdf::Bsdf;
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
 use std::ffi::c_void;
 
+/// What a mutation proposed from the current path x.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Proposal {
+    /// A domain miss: no path of x's length and weak type was found (the chain stays where
+    /// it is and deposits there); the proposal path's contents are meaningless.
+    Miss,
+    /// A proposal y of x's length and weak type was written.
+    Move {
+        /// Tentative transition density ratio T(y→x) / T(x→y) (thesis §5.4): 0 for a move
+        /// the strategy cannot reverse (always rejected), NaN for a degenerate density
+        /// (rejected and counted by the integrator).
+        transition_ratio: f32,
+    },
+}
+
+impl Proposal {
+    /// A move with ratio 1: a symmetric strategy's.
+    pub const SYMMETRIC: Proposal = Proposal::Move {
+        transition_ratio: 1.0,
+    };
+
+    /// True for [`Proposal::Move`].
+    pub fn is_move(self) -> bool {
+        matches!(self, Proposal::Move { .. })
+    }
+
+    /// The transition ratio of a move; `None` for a miss.
+    pub fn transition_ratio(self) -> Option<f32> {
+        match self {
+            Proposal::Miss => None,
+            Proposal::Move { transition_ratio } => Some(transition_ratio),
+        }
+    }
+}
+
+impl From<Proposal> for ProposalRecord {
+    fn from(p: Proposal) -> ProposalRecord {
+        match p {
+            Proposal::Miss => ProposalRecord {
+                valid: 0,
+                transition_ratio: 0.0,
+            },
+            Proposal::Move { transition_ratio } => ProposalRecord {
+                valid: 1,
+                transition_ratio,
+            },
+        }
+    }
+}
+
+impl From<ProposalRecord> for Proposal {
+    /// `valid = 0` is a miss; any other value a move.
+    fn from(r: ProposalRecord) -> Proposal {
+        if r.valid == 0 {
+            Proposal::Miss
+        } else {
+            Proposal::Move {
+                transition_ratio: r.transition_ratio,
+            }
+        }
+    }
+}
+
 /// Proposes a new path from the current state of a Markov chain (thesis §5.4).
 ///
 /// A mutation keeps the path length and the weak path type; otherwise it reports a domain
-/// miss. The returned ratio is T(y→x)/T(x→y); [`Mutation::density`] gives T itself so that
-/// an integrator can form the mixture density Σ p(sᵢ)·T^{sᵢ} of several strategies.
+/// miss. (The regeneration engine of `flowlight-mcmc` may change the length of a chain of
+/// mirrors where every Dirac vertex of both paths is one, its "free chain lengths"; the
+/// conformance kit accepts that.) A move's ratio is T(y→x)/T(x→y); [`Mutation::density`] gives T itself so that an
+/// integrator can form the mixture density Σ p(sᵢ)·T^{sᵢ} of several strategies.
+///
+/// `propose` and `density` are called from many threads at once with the same instance:
+/// keep `self` read-only and draw every random number from the `rng` given (the chain's own
+/// stream).
 pub trait Mutation: Sized + Send + Sync + 'static {
+    /// Name the config uses (`plugin = "NAME"` in `[[integrator.mutations]]`).
     const NAME: &'static str;
+    /// One line for `flowlight plugins`.
     const DESCRIPTION: &'static str;
+    /// Parameters the plugin accepts; the host refuses others.
     const PARAMS: &'static [ParamSpec];
 
-    fn create(params: &Params, scene: Scene<'static>) -> Result<Self, String>;
+    /// Builds an instance; `scene` stays valid for its whole life. Counters the strategy
+    /// reports are declared on `stats` (reported as `NAME.counter`); keep the handles for
+    /// [`Mutation::propose`].
+    fn create(
+        params: &Params,
+        scene: Scene<'static>,
+        stats: &mut StatsBuilder,
+    ) -> Result<Self, String>;
 
-    /// Fills `proposal` from `current`. Returns the proposal's validity and transition ratio.
+    /// Fills `proposal` from `current` and says whether it is a move, with its ratio.
+    /// `stats` holds the counters declared in `create`, for the integrator's work unit.
     fn propose(
         &self,
         tracer: &Tracer,
         rng: &mut Rng,
         current: &Path,
         proposal: &mut Path,
+        stats: &mut Stats,
     ) -> Result<Proposal, String>;
 
     /// Transition density T(from → to) of this strategy, in the measure of the integrator's
@@ -45,6 +136,8 @@ struct MutationInstance<T> {
     mutation: T,
     /// The parameter values `create` read, for the host's metadata.
     resolved: ResolvedTable,
+    /// The counters the mutation declared, read by the host through [`StatList`].
+    stats: StatTable,
     _bsdfs: Box<[Option<Bsdf>]>,
 }
 
@@ -53,6 +146,7 @@ unsafe extern "C" fn create<T: Mutation>(
     param_count: usize,
     scene: *const SceneView,
     instance: *mut *mut c_void,
+    stats: *mut StatList,
     resolved: *mut ResolvedList,
     err: *mut ErrorBuf,
 ) -> Status {
@@ -64,14 +158,17 @@ unsafe extern "C" fn create<T: Mutation>(
             let mut scene = Scene::from_view(&*scene);
             // The instance keeps the table and drops it after the mutation, the scene's only holder.
             let bsdfs = scene.attach_constant_bsdfs();
-            let mutation = T::create(&params, scene)?;
+            let mut builder = StatsBuilder::new();
+            let mutation = T::create(&params, scene, &mut builder)?;
             let inst = Box::new(MutationInstance {
                 mutation,
                 resolved: ResolvedTable::new(params.resolved()),
+                stats: builder.finish()?,
                 _bsdfs: bsdfs,
             });
-            // The entries live in the box, which does not move until `destroy`.
+            // The entries and specs live in the box, which does not move until `destroy`.
             *resolved = inst.resolved.list();
+            *stats = inst.stats.list();
             *instance = Box::into_raw(inst) as *mut c_void;
             Ok(())
         })
@@ -96,15 +193,36 @@ unsafe extern "C" fn propose<T: Mutation>(
     rng: *mut Rng,
     current: *const Path,
     proposal: *mut Path,
-    out: *mut Proposal,
+    out: *mut ProposalRecord,
+    stats: *mut f64,
+    stat_count: usize,
     err: *mut ErrorBuf,
 ) -> Status {
     // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
     // ABI rules in `abi.rs` for the C entry points).
     unsafe {
         guard(err, || {
-            let inst = &(*(instance as *const MutationInstance<T>)).mutation;
-            *out = inst.propose(&Tracer::new(&*tracer), &mut *rng, &*current, &mut *proposal)?;
+            let inst = &*(instance as *const MutationInstance<T>);
+            let declared = inst.stats.specs().len();
+            if stat_count < declared || (declared > 0 && stats.is_null()) {
+                return Err(format!(
+                    "the integrator passed {stat_count} statistics slots for {declared} declared counters"
+                ));
+            }
+            let slots = if stats.is_null() || declared == 0 {
+                &mut [][..]
+            } else {
+                std::slice::from_raw_parts_mut(stats, declared)
+            };
+            let tracer = Tracer::new(&*tracer);
+            let p = inst.mutation.propose(
+                &tracer,
+                &mut *rng,
+                &*current,
+                &mut *proposal,
+                &mut Stats::new(slots),
+            )?;
+            *out = p.into();
             Ok(())
         })
     }
@@ -175,10 +293,12 @@ impl<'a> MutationSet<'a> {
         MutationSet { refs: &[] }
     }
 
+    /// Number of strategies.
     pub fn len(&self) -> usize {
         self.refs.len()
     }
 
+    /// True when the set holds no strategy.
     pub fn is_empty(&self) -> bool {
         self.refs.is_empty()
     }
@@ -203,7 +323,7 @@ impl<'a> MutationSet<'a> {
     /// ```
     /// # use flowlight_sdk::abi::{MutationRef, StrRef};
     /// # use flowlight_sdk::MutationSet;
-    /// # let r = |weight| MutationRef { name: StrRef::EMPTY, weight, table: std::ptr::null(), instance: std::ptr::null() };
+    /// # let r = |weight| MutationRef { name: StrRef::EMPTY, weight, table: std::ptr::null(), instance: std::ptr::null(), stat_offset: 0, stat_count: 0 };
     /// let refs = [r(0.25), r(0.0), r(0.75)];
     /// // SAFETY (of this example): `choose` reads only the weights.
     /// let set = unsafe { MutationSet::from_raw(refs.as_ptr(), refs.len()) };
@@ -233,7 +353,10 @@ impl<'a> MutationSet<'a> {
         }
     }
 
-    /// Strategy `i` proposes from `current` into `proposal`.
+    /// Strategy `i` proposes from `current` into `proposal`, adding to its counters in
+    /// `stats` (the integrator's [`Stats`] for the unit, which carries the strategies' slots
+    /// after the integrator's own; a [`Stats`] without them, as a test builds, gives the
+    /// strategy scratch counters).
     pub fn propose(
         &self,
         i: usize,
@@ -241,13 +364,19 @@ impl<'a> MutationSet<'a> {
         rng: &mut Rng,
         current: &Path,
         proposal: &mut Path,
+        stats: &mut Stats,
     ) -> Result<Proposal, String> {
         let r = &self.refs[i];
-        let mut out = Proposal {
-            valid: 0,
-            transition_ratio: 0.0,
-        };
+        let mut out = ProposalRecord::from(Proposal::Miss);
         let mut err = ErrorBuf::default();
+        let mut scratch = Vec::new();
+        let slots = match stats.mutation_slots(r.stat_offset, r.stat_count) {
+            Some(s) => s,
+            None => {
+                scratch.resize(r.stat_count as usize, 0.0);
+                &mut scratch[..]
+            }
+        };
         // SAFETY: the table and instance are alive; all pointers are valid for the call.
         let status = unsafe {
             ((*r.table).propose)(
@@ -257,10 +386,12 @@ impl<'a> MutationSet<'a> {
                 current,
                 proposal,
                 &mut out,
+                slots.as_mut_ptr(),
+                slots.len(),
                 &mut err,
             )
         };
-        self.check(i, status, &err).map(|_| out)
+        self.check(i, status, &err).map(|_| out.into())
     }
 
     /// T^{sᵢ}(from → to) of strategy `i`.
@@ -287,6 +418,8 @@ mod tests {
                 weight,
                 table: std::ptr::null(),
                 instance: std::ptr::null(),
+                stat_offset: 0,
+                stat_count: 0,
             })
             .collect()
     }
@@ -315,6 +448,32 @@ mod tests {
             counts[set.choose((k as f64 + 0.5) / n as f64)] += 1;
         }
         assert_eq!(counts, [20_000, 30_000, 50_000]);
+    }
+
+    #[test]
+    fn a_proposal_round_trips_through_its_abi_record() {
+        for p in [
+            Proposal::Miss,
+            Proposal::SYMMETRIC,
+            Proposal::Move {
+                transition_ratio: 0.0,
+            },
+            Proposal::Move {
+                transition_ratio: 2.5,
+            },
+        ] {
+            assert_eq!(Proposal::from(ProposalRecord::from(p)), p);
+        }
+        let miss = ProposalRecord::from(Proposal::Miss);
+        assert_eq!((miss.valid, miss.transition_ratio), (0, 0.0));
+        // Any non-zero flag from a foreign plugin is a move; NaN ratios pass through.
+        let r = ProposalRecord {
+            valid: 7,
+            transition_ratio: f32::NAN,
+        };
+        assert!(Proposal::from(r).transition_ratio().unwrap().is_nan());
+        assert_eq!(Proposal::Miss.transition_ratio(), None);
+        assert!(!Proposal::Miss.is_move() && Proposal::SYMMETRIC.is_move());
     }
 
     #[test]

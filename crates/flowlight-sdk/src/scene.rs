@@ -22,11 +22,17 @@ pub const SURFACE_PREFETCH_VERTICES: usize = 4;
 /// The scene as plugins see it. Borrowed from the host for the plugin instance's lifetime.
 #[derive(Clone, Copy)]
 pub struct Scene<'a> {
+    /// The camera, with the image size it renders.
     pub camera: Camera,
+    /// The materials (a hit's `material` indexes them).
     pub materials: &'a [Material],
+    /// The textures the materials sample.
     pub textures: &'a [Texture],
+    /// Every light: emitters, punctual lights and the environment, with their power CDF.
     pub lights: Lights<'a>,
+    /// Lower corner of the scene's bounding box (world space).
     pub bounds_min: Vec3,
+    /// Upper corner of the scene's bounding box (world space).
     pub bounds_max: Vec3,
     /// The vertex and triangle buffers: [`Scene::surface`] builds surface data from the
     /// compact hits of batched queries. Empty in scenes built by hand for shading tests.
@@ -248,6 +254,7 @@ impl<'a> Scene<'a> {
         vertices(k + SURFACE_PREFETCH_VERTICES);
     }
 
+    /// The material of a hit, its textures not applied.
     #[inline]
     pub fn material(&self, hit: &SurfaceHit) -> &'a Material {
         &self.materials[hit.material as usize]

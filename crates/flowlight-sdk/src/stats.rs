@@ -3,7 +3,9 @@
 //! image).
 //!
 //! An integrator declares its counters in [`Integrator::create`](crate::Integrator::create)
-//! through the [`StatsBuilder`] it is handed, which returns a typed handle per counter:
+//! through the [`StatsBuilder`] it is handed, and a mutation in
+//! [`Mutation::create`](crate::Mutation::create) the same way (ABI 6); the builder returns a
+//! typed handle per counter:
 //!
 //! | declaration | per-unit value | merged over units | reported |
 //! |---|---|---|---|
@@ -18,7 +20,12 @@
 //! ones.
 //!
 //! The SDK keeps the declared names and specs alive with the instance and hands the host the
-//! raw [`StatSpec`] list itself; a plugin never sees a pointer or an index.
+//! raw [`StatSpec`] list itself; a plugin never sees a pointer or an index. The host reports
+//! a mutation's counter `c` as `NAME.c` (NAME the mutation's plugin name, `NAME#2` for its
+//! second entry in the list) after the integrator's own, in the group an integrator such as
+//! ERPT gives the strategy's own counters; a name the integrator already declared there
+//! (ERPT: `NAME.mutations`, `NAME.acceptance`, …) is refused when the render is created, with a
+//! one-line error naming the counter.
 //!
 //! ```
 //! use flowlight_sdk::stats::{Stats, StatsBuilder};
@@ -40,7 +47,7 @@
 //! assert_eq!(stats.get(longest), 16.0);
 //! ```
 
-use crate::abi::{StatDisplay, StatMerge, StatSpec, StrRef};
+use crate::abi::{StatDisplay, StatList, StatMerge, StatSpec, StrRef};
 
 /// Most counters (sums, maxima and ratios together) one integrator may declare. The host
 /// allocates one `f64` per counter per work unit in flight and merges them under a lock, so
@@ -256,32 +263,67 @@ impl StatTable {
     pub(crate) fn specs(&self) -> &[StatSpec] {
         &self.specs
     }
+
+    /// The list the host reads (null for no counters); valid while the table lives.
+    pub(crate) fn list(&self) -> StatList {
+        StatList {
+            specs: if self.specs.is_empty() {
+                std::ptr::null()
+            } else {
+                self.specs.as_ptr()
+            },
+            count: self.specs.len(),
+        }
+    }
 }
 
 /// One work unit's counters, zeroed by the host; handed to
-/// [`Integrator::render`](crate::Integrator::render).
+/// [`Integrator::render`](crate::Integrator::render) and
+/// [`Mutation::propose`](crate::Mutation::propose).
+///
+/// An integrator's `Stats` also carries, after its own counters, the slots of the counters
+/// its mutation strategies declared; [`MutationSet::propose`](crate::MutationSet::propose)
+/// hands each strategy its own part.
 #[derive(Debug)]
 pub struct Stats<'a> {
     slots: &'a mut [f64],
+    /// Slots of the owner's own counters; those after it belong to its mutations.
+    own: usize,
 }
 
 impl<'a> Stats<'a> {
     /// Counters over `slots` (one per declared counter). The host, and tests that drive an
-    /// integrator directly, build it; a plugin only receives it.
+    /// integrator or a mutation directly, build it; a plugin only receives it.
     pub fn new(slots: &'a mut [f64]) -> Stats<'a> {
-        Stats { slots }
+        let own = slots.len();
+        Stats { slots, own }
+    }
+
+    /// Counters over `slots` whose first `own` belong to the integrator and the rest to its
+    /// mutation strategies (the SDK's glue builds it from what the host passes).
+    pub(crate) fn with_mutation_slots(slots: &'a mut [f64], own: usize) -> Stats<'a> {
+        let own = own.min(slots.len());
+        Stats { slots, own }
+    }
+
+    /// The slots of a mutation's counters: `count` from `offset` on among the mutation slots;
+    /// `None` when this unit carries none for it (an integrator driven by a test with only
+    /// its own slots).
+    pub(crate) fn mutation_slots(&mut self, offset: u32, count: u32) -> Option<&mut [f64]> {
+        let begin = self.own.checked_add(offset as usize)?;
+        let end = begin.checked_add(count as usize)?;
+        self.slots.get_mut(begin..end)
     }
 
     /// Adds `x` to a counter: summed for [`StatsBuilder::sum`], the larger kept for
     /// [`StatsBuilder::max`].
     ///
     /// # Panics
-    /// With a handle from another integrator's builder that is out of range (the SDK's glue
+    /// With a handle from another plugin's builder that is out of range (the SDK's glue
     /// turns the panic into an error naming the plugin).
     #[inline]
     pub fn add(&mut self, counter: Counter, x: f64) {
-        let slot = self
-            .slots
+        let slot = self.slots[..self.own]
             .get_mut(counter.index as usize)
             .expect("statistics counter from another integrator's StatsBuilder");
         counter.merge.combine(slot, x);
@@ -289,7 +331,7 @@ impl<'a> Stats<'a> {
 
     /// The counter's value in this unit so far.
     pub fn get(&self, counter: Counter) -> f64 {
-        self.slots
+        self.slots[..self.own]
             .get(counter.index as usize)
             .copied()
             .unwrap_or(0.0)
@@ -419,6 +461,30 @@ mod tests {
         b.sum("one_more");
         let e = b.finish().unwrap_err();
         assert!(e.contains("'one_more'") && e.contains("1024"), "{e}");
+    }
+
+    #[test]
+    fn a_mutation_gets_the_slots_after_the_integrators_own() {
+        // The integrator declared 2 counters; two mutations declared 1 and 2.
+        let mut slots = vec![0.0; 5];
+        let mut stats = Stats::with_mutation_slots(&mut slots, 2);
+        let mut b = StatsBuilder::new();
+        let own = b.sum("own");
+        stats.add(own, 1.0);
+        stats.mutation_slots(1, 2).unwrap()[1] = 9.0;
+        stats.mutation_slots(0, 1).unwrap()[0] = 4.0;
+        assert!(stats.mutation_slots(2, 2).is_none(), "past the end");
+        assert_eq!(slots, [1.0, 0.0, 4.0, 0.0, 9.0]);
+        // An integrator's own handle never reaches the mutations' slots.
+        let mut slots = vec![0.0; 3];
+        let mut stats = Stats::with_mutation_slots(&mut slots, 1);
+        let mut b = StatsBuilder::new();
+        b.sum("a");
+        let second = b.sum("b");
+        let caught = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            stats.add(second, 1.0);
+        }));
+        assert!(caught.is_err());
     }
 
     #[test]

@@ -18,10 +18,12 @@ pub struct Tracer<'a> {
 }
 
 impl<'a> Tracer<'a> {
+    /// Ray queries through the host's `table` (the SDK's glue builds it).
     pub fn new(table: &'a TracerTable) -> Self {
         Tracer { table }
     }
 
+    /// The raw table, to hand on to another plugin (e.g. a mutation).
     pub fn table(&self) -> &'a TracerTable {
         self.table
     }

@@ -15,12 +15,17 @@
 //! ## What is checked
 //!
 //! On seed paths x traced by the untangled path tracer (ERPT's own seed sampler) through
-//! the Cornell box, with the film window K = 8 ERPT gives its chains, every proposal y the
-//! strategy reports valid must satisfy (thesis §5.4, Veach 1997 §11.2):
+//! the scenes of [`DENSITY_SCENES`] — the Cornell box, a chain of mirrors, a glass sphere, a
+//! sky-lit model and the same model under point, spot and sun lights, so that a strategy's
+//! code for Dirac chains, lights at infinity and Dirac lights is exercised — with the film
+//! window K = 8 ERPT gives its chains, every proposal y the strategy reports as a move must
+//! satisfy (thesis §5.4, Veach 1997 §11.2):
 //!
 //! 1. **Types kept**: y has x's number of vertices and every vertex keeps its weak type
 //!    (eye, light, smooth, Dirac reflection, Dirac transmission) — the promise of
-//!    `Mutation::propose`.
+//!    `Mutation::propose` — except that where every Dirac vertex of both paths is a mirror
+//!    (forced), a chain of mirrors may change length, or appear or vanish (the regeneration
+//!    engine's free chain lengths, `flowlight_mcmc::regenerate`).
 //! 2. **Reachable**: T(x → y) > 0 ([`flowlight_sdk::Mutation::density`]): the strategy
 //!    can produce what it produced.
 //! 3. **Consistent ratio**: the reported `transition_ratio` equals T(y → x)/T(x → y) from
@@ -33,7 +38,7 @@
 //!    balance f(x)T(x→y)a(x→y) = f(y)T(y→x)a(y→x) then holds with both sides 0.
 //! 4. **Finite**: the ratio and f(y) are finite and non-negative.
 //!
-//! At least [`MIN_VALID`] proposals must be valid with a ratio above 0 (a strategy that
+//! At least [`MIN_VALID`] proposals (over all scenes) must be valid with a ratio above 0 (a strategy that
 //! always misses, or only proposes moves it cannot reverse, passes nothing). Then **unbiasedness in the furnace**: ERPT with this strategy alone renders
 //! the white furnace (a closed sphere of albedo ½ emitting 1, seen from inside, path-space
 //! depth N = 8), whose every pixel is 2·(1 − 0.5⁹) exactly; over eight independent renders
@@ -44,14 +49,15 @@
 //! but both differ from the distribution it actually samples passes 1–4; the furnace and a
 //! comparison with path tracing on a scene of your own catch that.
 
-use flowlight_core::path::Path;
+use flowlight_core::path::{Path, PathVertex};
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
 use flowlight_host::intersector::UnitTracer;
 use flowlight_host::session::{Overrides, Session};
+use flowlight_mcmc::regenerate::all_forced;
 use flowlight_mcmc::{measurement, WeakNode};
 use flowlight_pathtrace::{untangled, PathSettings, Variant};
-use flowlight_sdk::{Scene, Tracer};
+use flowlight_sdk::{Scene, Stats, Tracer};
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
@@ -77,6 +83,8 @@ pub struct MutationReport {
     pub irreversible: usize,
     /// Largest relative difference between the reported ratio and T(y→x)/T(x→y).
     pub worst_ratio_error: f64,
+    /// What was counted on each scene of [`DENSITY_SCENES`], in order.
+    pub scenes: Vec<SceneCounts>,
     /// Furnace: mean of ERPT's pixel means over the runs, its standard error, and the exact value.
     pub furnace_mean: f64,
     pub furnace_stderr: f64,
@@ -96,7 +104,15 @@ impl std::fmt::Display for MutationReport {
             self.furnace_mean,
             self.furnace_stderr,
             self.furnace_expected
-        )
+        )?;
+        for c in &self.scenes {
+            write!(
+                f,
+                "\n  {:<18} {:>5} of {:>5} valid, {:>5} through mirrors or glass, {:>4} irreversible, worst ratio error {:.2e}",
+                c.scene, c.valid, c.proposals, c.through_dirac, c.irreversible, c.worst_ratio_error
+            )?;
+        }
+        Ok(())
     }
 }
 
@@ -163,13 +179,104 @@ pub fn assert_mutation_conforms(plugin: &str, params: &[(&str, toml::Value)]) ->
     check_mutation(plugin, params).unwrap_or_else(|e| panic!("mutation {plugin}: {e}"))
 }
 
-/// Checks 1–4 of the crate docs on seed paths of the Cornell box.
+/// The scenes whose seed paths the density checks draw from: (label, config under
+/// `scenes/`). Between them they hold diffuse interreflection under an area light, chains of
+/// mirrors (Dirac reflection, with free chain lengths), a glass sphere (Dirac transmission
+/// and reflection, caustics), a sky (environment light, whose vertex is a direction) and
+/// point, spot and sun lights (Dirac lights, which no mutation may move).
+pub const DENSITY_SCENES: [(&str, &str); 5] = [
+    ("Cornell box", "cornell-box/erpt.toml"),
+    ("mirror chain", "mirror-chain/erpt.toml"),
+    ("glass caustic", "glass-caustic/erpt.toml"),
+    ("sky-lit showcase", "blender-showcase/showcase.toml"),
+    ("punctual lights", "blender-showcase/lit.toml"),
+];
+
+/// What [`check_densities`] counted on one scene of [`DENSITY_SCENES`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SceneCounts {
+    /// The scene's label.
+    pub scene: String,
+    /// Proposals asked for.
+    pub proposals: usize,
+    /// Proposals the strategy reported as moves.
+    pub valid: usize,
+    /// Moves it cannot reverse (ratio 0).
+    pub irreversible: usize,
+    /// Moves from a path with a Dirac (mirror or glass) vertex.
+    pub through_dirac: usize,
+    /// Largest relative ratio error on the scene.
+    pub worst_ratio_error: f64,
+}
+
+/// Checks 1–4 of the crate docs on seed paths of every scene of [`DENSITY_SCENES`].
 pub fn check_densities(
     plugin: &str,
     params: &[(&str, toml::Value)],
 ) -> Result<MutationReport, String> {
+    let mut report = MutationReport {
+        name: String::new(),
+        proposals: 0,
+        valid: 0,
+        irreversible: 0,
+        worst_ratio_error: 0.0,
+        scenes: Vec::new(),
+        furnace_mean: 0.0,
+        furnace_stderr: 0.0,
+        furnace_expected: 0.0,
+    };
+    for (label, config) in DENSITY_SCENES {
+        let (name, counts) = check_scene(plugin, params, label, config)?;
+        report.name = name;
+        report.proposals += counts.proposals;
+        report.valid += counts.valid;
+        report.irreversible += counts.irreversible;
+        report.worst_ratio_error = report.worst_ratio_error.max(counts.worst_ratio_error);
+        report.scenes.push(counts);
+    }
+    if report.valid - report.irreversible < MIN_VALID {
+        return Err(format!(
+            "{}: only {} of {} proposals were valid and reversible (at least {MIN_VALID} needed to judge it)",
+            report.name,
+            report.valid - report.irreversible,
+            report.proposals
+        ));
+    }
+    Ok(report)
+}
+
+/// Check 1: `y` has `x`'s length and weak types, except that where every Dirac vertex of
+/// both is forced (mirrors: `flowlight_mcmc::regenerate::all_forced`) a chain of them may
+/// have another length, 0 included — the engine's free chain lengths ("Dirac chains of any length" in
+/// `flowlight_mcmc::regenerate`), under which paths that differ only by the number of
+/// mirror bounces in a chain are points of one space.
+fn same_weak_types(scene: &Scene, x: &[PathVertex], y: &[PathVertex]) -> bool {
+    let types = |v: &[PathVertex]| v.iter().map(WeakNode::of).collect::<Vec<_>>();
+    let (tx, ty) = (types(x), types(y));
+    if tx == ty {
+        return true;
+    }
+    if !(all_forced(scene, x) && all_forced(scene, y)) {
+        return false;
+    }
+    // A chain of mirrors is a function of the ray entering it, of any length, none included.
+    let free = |mut t: Vec<WeakNode>| {
+        t.retain(|w| !w.is_dirac());
+        t
+    };
+    free(tx) == free(ty)
+}
+
+/// Checks 1–4 on the seed paths of one scene: the plugin's name and what was counted.
+fn check_scene(
+    plugin: &str,
+    params: &[(&str, toml::Value)],
+    label: &str,
+    config: &str,
+) -> Result<(String, SceneCounts), String> {
     let size = 48;
-    let s = erpt_session("cornell-box/erpt.toml", size, 1, plugin, params, &[])?;
+    let s = erpt_session(config, size, 1, plugin, params, &[])
+        .map_err(|e| format!("scene {label} ({config}): {e}"))?;
     let set = s.instance.mutation_set();
     let name = set.name(0).to_string();
     // SAFETY: the session keeps the view's data alive while `scene` is used.
@@ -184,7 +291,10 @@ pub fn check_densities(
     let mut rng = Rng::new(0x7e57_c0de, 5);
     let mut x = Box::new(Path::empty());
     let mut y = Box::new(Path::empty());
-    let (mut proposals, mut valid, mut irreversible, mut worst) = (0usize, 0usize, 0usize, 0.0f64);
+    let mut counts = SceneCounts {
+        scene: label.to_string(),
+        ..SceneCounts::default()
+    };
     for _ in 0..SEED_PATHS {
         let raster = glam::Vec2::new(rng.uniform(), rng.uniform()) * size as f32;
         let sample = untangled::trace(&scene, &tracer, &settings, &mut rng, raster, Some(&mut x));
@@ -197,27 +307,26 @@ pub fn check_densities(
         if f_x.luminance().partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
             continue;
         }
+        let dirac = x.vertices().iter().any(|v| WeakNode::of(v).is_dirac());
         for _ in 0..2 {
-            proposals += 1;
-            let p = set.propose(0, &tracer, &mut rng, &x, &mut y)?;
-            if p.valid == 0 {
+            counts.proposals += 1;
+            let Some(ratio) = set
+                .propose(0, &tracer, &mut rng, &x, &mut y, &mut Stats::new(&mut []))?
+                .transition_ratio()
+            else {
                 continue;
-            }
-            valid += 1;
-            let what = || format!("{} → {}", x.heckbert(), y.heckbert());
-            if y.vertex_count != x.vertex_count
-                || x.vertices()
-                    .iter()
-                    .zip(y.vertices())
-                    .any(|(a, b)| WeakNode::of(a) != WeakNode::of(b))
-            {
+            };
+            counts.valid += 1;
+            counts.through_dirac += dirac as usize;
+            let what = || format!("{} → {} in the {label}", x.heckbert(), y.heckbert());
+            if !same_weak_types(&scene, x.vertices(), y.vertices()) {
                 return Err(format!(
                     "{name}: a valid proposal changed the path length or a vertex type ({})",
                     what()
                 ));
             }
             let f_y = measurement(&scene, &y);
-            let ratio = p.transition_ratio as f64;
+            let ratio = ratio as f64;
             if !ratio.is_finite() || ratio < 0.0 || !f_y.is_valid_radiance() {
                 return Err(format!(
                     "{name}: invalid ratio {ratio} or contribution {f_y:?} ({})",
@@ -234,7 +343,7 @@ pub fn check_densities(
             }
             let expected = reverse / forward;
             if expected == 0.0 {
-                irreversible += 1;
+                counts.irreversible += 1;
                 if ratio != 0.0 {
                     return Err(format!(
                         "{name}: cannot move back (T(y→x) = 0) but reports ratio {ratio}: detailed balance fails ({})",
@@ -248,7 +357,7 @@ pub fn check_densities(
             if (ratio - expected).abs() <= 1e-30 {
                 continue;
             }
-            worst = worst.max(err);
+            counts.worst_ratio_error = counts.worst_ratio_error.max(err);
             if err > 2e-3 {
                 return Err(format!(
                     "{name}: ratio {ratio} but T(y→x)/T(x→y) = {reverse}/{forward} = {expected} ({})",
@@ -257,22 +366,7 @@ pub fn check_densities(
             }
         }
     }
-    if valid - irreversible < MIN_VALID {
-        return Err(format!(
-            "{name}: only {} of {proposals} proposals were valid and reversible (at least {MIN_VALID} needed to judge it)",
-            valid - irreversible
-        ));
-    }
-    Ok(MutationReport {
-        name,
-        proposals,
-        valid,
-        irreversible,
-        worst_ratio_error: worst,
-        furnace_mean: 0.0,
-        furnace_stderr: 0.0,
-        furnace_expected: 0.0,
-    })
+    Ok((name, counts))
 }
 
 /// ERPT with `plugin` alone in the white furnace, 32×32 pixels: (image mean, its standard

@@ -41,7 +41,9 @@ use flowlight_mcmc::specular_chain;
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::core::path::Path;
 use flowlight_sdk::core::rng::Rng;
-use flowlight_sdk::{export_mutation, Mutation, Params, Proposal, Scene, Tracer};
+use flowlight_sdk::{
+    export_mutation, Mutation, Params, Proposal, Scene, Stats, StatsBuilder, Tracer,
+};
 
 pub struct CausticPerturbation {
     scene: Scene<'static>,
@@ -54,7 +56,11 @@ impl Mutation for CausticPerturbation {
         "Veach's caustic perturbation: turn the light-side direction of a specular chain, retrace it, connect to the eye";
     const PARAMS: &'static [ParamSpec] = &[THETA1.spec(), THETA2.spec()];
 
-    fn create(params: &Params, scene: Scene<'static>) -> Result<Self, String> {
+    fn create(
+        params: &Params,
+        scene: Scene<'static>,
+        _stats: &mut StatsBuilder,
+    ) -> Result<Self, String> {
         let cone = exp_cone(params)?;
         Ok(CausticPerturbation { scene, cone })
     }
@@ -65,6 +71,7 @@ impl Mutation for CausticPerturbation {
         rng: &mut Rng,
         current: &Path,
         proposal: &mut Path,
+        _stats: &mut Stats,
     ) -> Result<Proposal, String> {
         Ok(specular_chain::propose(
             &self.scene,

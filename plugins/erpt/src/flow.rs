@@ -274,14 +274,19 @@ impl<'a> Flow<'a> {
                 };
                 let timed = self.timer.next();
                 let start = StepTimer::start(timed);
-                let proposal =
-                    self.mutations
-                        .propose(s, self.tracer, rng, &self.state, &mut self.proposal)?;
+                let proposal = self.mutations.propose(
+                    s,
+                    self.tracer,
+                    rng,
+                    &self.state,
+                    &mut self.proposal,
+                    stats,
+                )?;
                 StepTimer::credit(start, &mut self.costs[s].propose_seconds);
                 // A proposal outside the chains' part of path space, or beyond the seeds' depth
                 // limits (a mutation with free chain lengths can make a path longer), has
                 // f = 0 in their target: a domain miss, counted.
-                let outside = proposal.valid != 0
+                let outside = proposal.is_move()
                     && !(within_depth(
                         self.proposal.vertex_count,
                         self.proposal.layer,
@@ -291,12 +296,13 @@ impl<'a> Flow<'a> {
                 if outside {
                     self.part_misses += 1;
                 }
-                if proposal.valid == 0 || outside {
+                let Some(transition_ratio) = proposal.transition_ratio().filter(|_| !outside)
+                else {
                     dep.deposit(&self.state, colour(f_y) * e);
                     self.total.record(false, false);
                     self.per_strategy[s].record(false, false);
                     continue;
-                }
+                };
                 let start = StepTimer::start(timed);
                 let f_z = measurement(self.scene, &self.proposal);
                 StepTimer::credit(start, &mut self.measure_seconds);
@@ -309,7 +315,7 @@ impl<'a> Flow<'a> {
                         let reverse = Self::mixture_density(m, costs, timed, z, y)?;
                         reverse / forward
                     }
-                    _ => proposal.transition_ratio as f64,
+                    _ => transition_ratio as f64,
                 };
                 let a = acceptance(f_y, f_z, ratio).unwrap_or_else(|| {
                     // Never deposit at, or move to, an invalid state: a counted rejection.

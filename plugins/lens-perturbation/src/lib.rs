@@ -38,7 +38,9 @@ use flowlight_mcmc::{FilmMove, Policy};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::core::path::Path;
 use flowlight_sdk::core::rng::Rng;
-use flowlight_sdk::{export_mutation, Mutation, Params, Proposal, Scene, Tracer};
+use flowlight_sdk::{
+    export_mutation, Mutation, Params, Proposal, Scene, Stats, StatsBuilder, Tracer,
+};
 
 /// Strict reconnection at the first smooth vertex: the eye end of the lens perturbation.
 fn reconnect(free_chains: bool) -> Policy {
@@ -63,7 +65,11 @@ impl Mutation for LensPerturbation {
         "Veach's lens perturbation: log-uniform raster jump, Dirac chain followed, reconnect (ratio 1)";
     const PARAMS: &'static [ParamSpec] = &[R1.spec(), R2.spec(), FREE_CHAINS.spec()];
 
-    fn create(params: &Params, scene: Scene<'static>) -> Result<Self, String> {
+    fn create(
+        params: &Params,
+        scene: Scene<'static>,
+        _stats: &mut StatsBuilder,
+    ) -> Result<Self, String> {
         let jump = LensJump::from_params(params, scene.camera.width, scene.camera.height)?;
         let policy = reconnect(FREE_CHAINS.get(params)?);
         Ok(LensPerturbation {
@@ -79,6 +85,7 @@ impl Mutation for LensPerturbation {
         rng: &mut Rng,
         current: &Path,
         proposal: &mut Path,
+        _stats: &mut Stats,
     ) -> Result<Proposal, String> {
         Ok(propose_with(
             &self.scene,

@@ -45,7 +45,9 @@ use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::core::path::Path;
 use flowlight_sdk::core::rng::Rng;
 use flowlight_sdk::declare::ChoiceParam;
-use flowlight_sdk::{choice_param, export_mutation, Mutation, Params, Proposal, Scene, Tracer};
+use flowlight_sdk::{
+    choice_param, export_mutation, Mutation, Params, Proposal, Scene, Stats, StatsBuilder, Tracer,
+};
 
 /// `axis`: the exponential cone's centre at a smooth vertex.
 const AXIS: ChoiceParam = choice_param!(
@@ -74,7 +76,11 @@ impl Mutation for MultichainPerturbation {
         FREE_CHAINS.spec(),
     ];
 
-    fn create(params: &Params, scene: Scene<'static>) -> Result<Self, String> {
+    fn create(
+        params: &Params,
+        scene: Scene<'static>,
+        _stats: &mut StatsBuilder,
+    ) -> Result<Self, String> {
         let jump = LensJump::from_params(params, scene.camera.width, scene.camera.height)?;
         let cone = exp_cone(params)?;
         let policy = Policy {
@@ -100,6 +106,7 @@ impl Mutation for MultichainPerturbation {
         rng: &mut Rng,
         current: &Path,
         proposal: &mut Path,
+        _stats: &mut Stats,
     ) -> Result<Proposal, String> {
         Ok(propose_with(
             &self.scene,

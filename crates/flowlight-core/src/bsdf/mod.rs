@@ -150,7 +150,12 @@ impl Component {
         }
     }
     /// Samples with an extra uniform `uc` for the discrete reflect/refract choice (only the
-    /// dielectric uses it).
+    /// dielectric lobes use it): the lobe **reflects when `uc` < R/(R + T)** (R, T its Fresnel
+    /// reflectance and transmittance at `wo`, about the sampled microfacet normal for a rough
+    /// lobe) and refracts otherwise. So `uc = 0` always follows the reflection and `uc` just
+    /// below 1 the refraction (unless total internal reflection leaves only the reflection);
+    /// the sample's `node` says which was taken. `flowlight_mcmc::measure::dirac_scatter`
+    /// follows a given Dirac lobe this way.
     #[inline]
     pub fn sample_with(&self, wo: Vec3, uc: f32, u: Vec2) -> Option<BsdfSample> {
         match self {

@@ -14,7 +14,7 @@
 //!    mirrors), y_n must lie on an area light that shines back along the chain.
 //!
 //! Path length and every vertex's weak type (Dirac reflection, Dirac transmission, smooth,
-//! light) are kept; anything else is a domain miss (`valid = 0`), and the chain stays.
+//! light) are kept; anything else is a domain miss (`Proposal::Miss`), and the chain stays.
 //!
 //! **Density.** The target function's measure is the film measure for the eye ray times the
 //! area measure of each free vertex (a vertex after a Dirac vertex is not free:
@@ -36,6 +36,9 @@
 //! mutation alone against path tracing on the Cornell box, and the conformance kit
 //! (`flowlight-testkit`) checks the density, the ratio and the furnace.
 //!
+//! It counts its moves that leave the film (`film-perturbation.off_film` in the render's
+//! statistics, beside `proposals`).
+//!
 //! | name | type | default | meaning |
 //! |---|---|---|---|
 //! | `radius` | float | 2 | radius r of the film-plane disk, in pixels |
@@ -47,18 +50,18 @@ use flowlight_sdk::core::path::{NodeType, Path, PathVertex};
 use flowlight_sdk::core::rng::Rng;
 use flowlight_sdk::core::sampling::concentric_disk;
 use flowlight_sdk::core::{Vec2, Vec3};
+use flowlight_sdk::stats::{Counter, Stats, StatsBuilder};
 use flowlight_sdk::{export_mutation, param, Mutation, ParamKind, Params, Proposal, Scene, Tracer};
 
-/// The mutation: its disk radius and the scene it regenerates paths in.
+/// The mutation: its disk radius, the scene it regenerates paths in and its counters.
 pub struct FilmPerturbation {
     scene: Scene<'static>,
     radius: f32,
+    proposals: Counter,
+    off_film: Counter,
 }
 
-const MISS: Proposal = Proposal {
-    valid: 0,
-    transition_ratio: 0.0,
-};
+const MISS: Proposal = Proposal::Miss;
 
 /// Float slack (pixels) of the disk test in [`disk_density`]: a sampled point may land a
 /// rounding error outside the exact disk, and must still get a positive density.
@@ -168,7 +171,11 @@ impl Mutation for FilmPerturbation {
         "radius of the film-plane disk, in pixels",
     )];
 
-    fn create(params: &Params, scene: Scene<'static>) -> Result<Self, String> {
+    fn create(
+        params: &Params,
+        scene: Scene<'static>,
+        stats: &mut StatsBuilder,
+    ) -> Result<Self, String> {
         let radius = params.float("radius", 2.0)?;
         if !(radius > 0.0 && radius <= 4096.0) {
             return Err(format!(
@@ -178,6 +185,8 @@ impl Mutation for FilmPerturbation {
         Ok(FilmPerturbation {
             scene,
             radius: radius as f32,
+            proposals: stats.sum("proposals"),
+            off_film: stats.sum("off_film"),
         })
     }
 
@@ -188,7 +197,9 @@ impl Mutation for FilmPerturbation {
         rng: &mut Rng,
         x: &Path,
         y: &mut Path,
+        stats: &mut Stats,
     ) -> Result<Proposal, String> {
+        stats.add(self.proposals, 1.0);
         let xv = x.vertices();
         if xv.len() < 2 {
             return Ok(MISS);
@@ -200,6 +211,7 @@ impl Mutation for FilmPerturbation {
         }
         let camera = &self.scene.camera;
         let Some(raster) = perturb(x.raster, self.radius, camera.width, camera.height, rng) else {
+            stats.add(self.off_film, 1.0);
             return Ok(MISS);
         };
         *y = *x;
@@ -233,10 +245,7 @@ impl Mutation for FilmPerturbation {
             }
         }
         // y_{j+1} … y_n are x's (copied above); the move is symmetric (module docs).
-        Ok(Proposal {
-            valid: 1,
-            transition_ratio: 1.0,
-        })
+        Ok(Proposal::SYMMETRIC)
     }
     // endregion: propose
 
