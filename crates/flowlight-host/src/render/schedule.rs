@@ -103,49 +103,17 @@ pub fn render(
     let style = opts
         .accumulation
         .unwrap_or_else(|| choose_style(instance.info.accumulation));
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(effective_threads(opts.threads))
-        .thread_name(|i| format!("flowlight-worker-{i}"))
-        .build()
-        .map_err(|e| format!("cannot start the thread pool: {e}"))?;
+    let (pool, shared, cache_slots) = accumulation_plan(style, opts, layer_count)?;
     let threads = pool.current_num_threads();
-    let planes = layer_count as u64 + 1;
-    let private_plan = match style {
-        Style::Blasting => 0,
-        Style::Buffering => (width as u64 * height as u64)
-            .saturating_mul(planes * precision.partial_cell_bytes())
-            .saturating_mul(threads as u64),
-        Style::Caching => opts.cache_bytes,
-    };
-    check_memory(width, height, layer_count, precision, private_plan)?;
-    let shared = SharedFrame::new(width, height, layer_count, precision);
-    let cache_slots = MicroTileCache::slots_for(opts.cache_bytes / threads as u64, &shared);
-    if style == Style::Caching && cache_slots == 0 {
-        let need = MicroTileCache::slot_bytes(shared.plane_count(), precision) * threads as u64;
-        return Err(format!(
-            "render.accumulation_cache_mib = {:.3} MiB holds no micro-tile for {threads} threads ({} framebuffers): give it at least {:.3} MiB",
-            opts.cache_bytes as f64 / 1048576.0,
-            shared.plane_count(),
-            need as f64 / 1048576.0
-        ));
-    }
     let private: Vec<Mutex<Option<ThreadAccumulator>>> =
         (0..threads).map(|_| Mutex::new(None)).collect();
-    let mut tile_size = opts.tile_size.max(1);
-    if opts.time.is_some() && instance.info.accumulation == AccumulationStyle::FlangedTile {
-        tile_size = tile_size.min(FLANGED_TIME_TILE);
-    }
-    let flange = opts.flange.unwrap_or(match instance.info.accumulation {
-        AccumulationStyle::Tile => 0,
-        AccumulationStyle::FlangedTile => instance.info.flange,
-    });
-    let tiles = tiles(width, height, tile_size);
+    let (tiles, flange) = unit_tiles(instance, opts);
     let start = Instant::now();
     let specs = instance.stat_specs();
     // The integrator's one-time preparation counts against a time budget.
-    let prepare_rays = {
-        let mut tracer = UnitTracer::new(scene, intersector);
-        if let Err(e) = instance.prepare_once(&tracer.table()) {
+    let prepare_rays = match prepare(instance, scene, intersector) {
+        Ok(rays) => rays,
+        Err(e) => {
             return Ok(RenderOutcome {
                 frame: Frame::with_precision(width, height, layer_count, precision),
                 stats: RenderStats {
@@ -153,23 +121,10 @@ pub fn render(
                     ..Default::default()
                 },
                 error: Some(e),
-            });
+            })
         }
-        (tracer.counts.closest, tracer.counts.shadow)
     };
-    let counters = Counters {
-        done: AtomicU64::new(0),
-        closest: AtomicU64::new(0),
-        shadow: AtomicU64::new(0),
-        invalid: AtomicU64::new(0),
-        stray: AtomicU64::new(0),
-        units: AtomicU64::new(0),
-        blast_bytes: AtomicU64::new(0),
-        last_start: AtomicU64::new(0),
-        error: Mutex::new(None),
-        halted: AtomicBool::new(false),
-        merged_stats: Mutex::new(vec![0.0f64; specs.len()]),
-    };
+    let counters = Counters::new(specs.len());
     let run = Run {
         instance,
         scene,
@@ -201,22 +156,12 @@ pub fn render(
     let (tiled, planned) = (run.tiled, run.planned);
     drop(run);
 
-    // Buffering and Caching flush what the threads still hold (a failed unit's partial
-    // deposits too: a render a plugin failed is reported, never written).
-    let mut private_bytes = counters.blast_bytes.load(Ordering::Relaxed) * threads as u64;
-    for slot in private {
-        match slot.into_inner().unwrap_or_else(|e| e.into_inner()) {
-            Some(ThreadAccumulator::Buffer(b)) => {
-                private_bytes += b.bytes();
-                b.flush_into(&shared);
-            }
-            Some(ThreadAccumulator::Cache(mut c)) => {
-                private_bytes += c.bytes();
-                c.flush();
-            }
-            None => {}
-        }
-    }
+    let private_bytes = flush_private(
+        private,
+        &shared,
+        counters.blast_bytes.load(Ordering::Relaxed),
+        threads,
+    );
     let flush_counts = shared.counts();
     let mut frame = shared.into_frame();
     if !tiled {
@@ -235,9 +180,7 @@ pub fn render(
         specs,
         counters,
         tally,
-        start,
-        threads,
-        planned,
+        (start, threads, planned),
         prepare_rays,
         report,
     );
@@ -248,6 +191,135 @@ pub fn render(
     })
 }
 
+/// The work units' tiles and the flange of their buffers: a flanged integrator under a time
+/// budget runs units of at most [`FLANGED_TIME_TILE`]² pixels (module documentation).
+fn unit_tiles(
+    instance: &IntegratorInstance,
+    opts: &RenderOptions,
+) -> (Vec<(u32, u32, u32, u32)>, u32) {
+    let mut tile_size = opts.tile_size.max(1);
+    if opts.time.is_some() && instance.info.accumulation == AccumulationStyle::FlangedTile {
+        tile_size = tile_size.min(FLANGED_TIME_TILE);
+    }
+    let flange = opts.flange.unwrap_or(match instance.info.accumulation {
+        AccumulationStyle::Tile => 0,
+        AccumulationStyle::FlangedTile => instance.info.flange,
+    });
+    (tiles(opts.width, opts.height, tile_size), flange)
+}
+
+/// The integrator's one-time preparation; the (closest, shadow) rays it traced.
+fn prepare(
+    instance: &IntegratorInstance,
+    scene: &Scene,
+    intersector: &dyn Intersector,
+) -> Result<(u64, u64), PluginError> {
+    let mut tracer = UnitTracer::new(scene, intersector);
+    instance.prepare_once(&tracer.table())?;
+    Ok((tracer.counts.closest, tracer.counts.shadow))
+}
+
+/// The render's thread pool, its frame and the micro-tiles per thread's cache, once the
+/// memory they and the style's private buffers need is known to be available.
+fn accumulation_plan(
+    style: Style,
+    opts: &RenderOptions,
+    layer_count: u32,
+) -> Result<(rayon::ThreadPool, SharedFrame, usize), String> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(effective_threads(opts.threads))
+        .thread_name(|i| format!("flowlight-worker-{i}"))
+        .build()
+        .map_err(|e| format!("cannot start the thread pool: {e}"))?;
+    let threads = pool.current_num_threads();
+    let (width, height, precision) = (opts.width, opts.height, opts.precision);
+    let private = private_plan(style, opts, layer_count, threads);
+    check_memory(width, height, layer_count, precision, private)?;
+    let shared = SharedFrame::new(width, height, layer_count, precision);
+    let cache_slots = cache_slots(style, opts, &shared, threads)?;
+    Ok((pool, shared, cache_slots))
+}
+
+/// Bytes of private accumulation buffers the style will hold at most: Buffering's whole-image
+/// buffer per thread, Caching's cap (Blasting's unit buffers are small and counted after).
+fn private_plan(style: Style, opts: &RenderOptions, layer_count: u32, threads: usize) -> u64 {
+    let planes = layer_count as u64 + 1;
+    match style {
+        Style::Blasting => 0,
+        Style::Buffering => (opts.width as u64 * opts.height as u64)
+            .saturating_mul(planes * opts.precision.partial_cell_bytes())
+            .saturating_mul(threads as u64),
+        Style::Caching => opts.cache_bytes,
+    }
+}
+
+/// Micro-tiles each thread's cache holds within its share of the cap; an error when Caching
+/// would get none.
+fn cache_slots(
+    style: Style,
+    opts: &RenderOptions,
+    shared: &SharedFrame,
+    threads: usize,
+) -> Result<usize, String> {
+    let cache_slots = MicroTileCache::slots_for(opts.cache_bytes / threads as u64, shared);
+    if style == Style::Caching && cache_slots == 0 {
+        let need =
+            MicroTileCache::slot_bytes(shared.plane_count(), opts.precision) * threads as u64;
+        return Err(format!(
+            "render.accumulation_cache_mib = {:.3} MiB holds no micro-tile for {threads} threads ({} framebuffers): give it at least {:.3} MiB",
+            opts.cache_bytes as f64 / 1048576.0,
+            shared.plane_count(),
+            need as f64 / 1048576.0
+        ));
+    }
+    Ok(cache_slots)
+}
+
+/// Buffering and Caching flush what the threads still hold (a failed unit's partial
+/// deposits too: a render a plugin failed is reported, never written). Returns the most
+/// bytes of private buffers held: the threads' accumulators, or for Blasting the largest
+/// unit buffer (`blast_bytes`) times the threads.
+fn flush_private(
+    private: Vec<Mutex<Option<ThreadAccumulator>>>,
+    shared: &SharedFrame,
+    blast_bytes: u64,
+    threads: usize,
+) -> u64 {
+    let mut private_bytes = blast_bytes * threads as u64;
+    for slot in private {
+        match slot.into_inner().unwrap_or_else(|e| e.into_inner()) {
+            Some(ThreadAccumulator::Buffer(b)) => {
+                private_bytes += b.bytes();
+                b.flush_into(shared);
+            }
+            Some(ThreadAccumulator::Cache(mut c)) => {
+                private_bytes += c.bytes();
+                c.flush();
+            }
+            None => {}
+        }
+    }
+    private_bytes
+}
+
+impl Counters {
+    fn new(stat_count: usize) -> Counters {
+        Counters {
+            done: AtomicU64::new(0),
+            closest: AtomicU64::new(0),
+            shadow: AtomicU64::new(0),
+            invalid: AtomicU64::new(0),
+            stray: AtomicU64::new(0),
+            units: AtomicU64::new(0),
+            blast_bytes: AtomicU64::new(0),
+            last_start: AtomicU64::new(0),
+            error: Mutex::new(None),
+            halted: AtomicBool::new(false),
+            merged_stats: Mutex::new(vec![0.0f64; stat_count]),
+        }
+    }
+}
+
 /// The render's counters once every unit has finished, and the plugin error if one failed.
 #[allow(clippy::too_many_arguments)]
 fn finish_stats(
@@ -256,9 +328,7 @@ fn finish_stats(
     specs: &[StatSpec],
     counters: Counters,
     tally: PassTally,
-    start: Instant,
-    threads: usize,
-    planned: u64,
+    (start, threads, planned): (Instant, usize, u64),
     (closest_prepare_rays, shadow_prepare_rays): (u64, u64),
     accumulation: AccumulationReport,
 ) -> (RenderStats, Option<PluginError>) {
