@@ -210,7 +210,7 @@ impl Loader<'_> {
     fn triangle_list(&mut self, what: &str, mode: Mode, indices: &[u32]) -> Vec<[u32; 3]> {
         match mode {
             Mode::Triangles => {
-                if indices.len() % 3 != 0 {
+                if !indices.len().is_multiple_of(3) {
                     tracing::warn!(file = %self.src.file.display(), "{what}: {} indices is not a multiple of 3; the rest is ignored", indices.len());
                 }
                 indices
