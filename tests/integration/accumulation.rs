@@ -3,7 +3,7 @@
 //! layers) and MCPT; f32 precision agrees to rounding; the host's choice and the config's
 //! errors.
 
-mod common;
+use crate::common;
 
 use flowlight_host::accumulation::{Frame, MicroTileCache, Precision, Style};
 use flowlight_host::session::{Overrides, Session};

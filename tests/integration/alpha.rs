@@ -3,7 +3,7 @@
 //! left see the lamp (exactly 1: nothing else reflects), pixels on the right see through the
 //! cut into the empty background (exactly 0), with both intersectors.
 
-mod common;
+use crate::common;
 
 use common::{render, scratch};
 use flowlight_host::session::{Overrides, Session};

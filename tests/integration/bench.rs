@@ -2,7 +2,7 @@
 //! suite machinery works end to end (CSV, summary and plots appear, numbers are finite). The
 //! real numbers come from `flowlight bench scenes/suite.toml` (docs/results.md).
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::{Command, Output};

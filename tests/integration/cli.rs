@@ -1,6 +1,6 @@
 //! The `flowlight` command line, run as a user would.
 
-mod common;
+use crate::common;
 
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};

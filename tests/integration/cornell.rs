@@ -1,7 +1,7 @@
 //! Cornell box: the two MCPT variants estimate the same image, lighting layers sum to it, and
 //! nothing invalid is produced.
 
-mod common;
+use crate::common;
 
 use common::{render, session_at};
 use flowlight_core::Rgb;

@@ -1,7 +1,7 @@
 //! Distributed renders (issue 14, docs/distributed.md): `render --part/--samples` and
 //! `flowlight merge`, run as a user would, and the recipes under docs/distributed/.
 
-mod common;
+use crate::common;
 
 use flowlight_core::Rgb;
 use flowlight_host::output::{read_exr_metadata, read_exr_rgb};

@@ -2,7 +2,7 @@
 //! closed mesh (rays through shared edges and vertices, grazing rays), and a Cornell box
 //! render with each backend. The Stanford dragon must have been fetched (`bash .ci/setup`).
 
-mod common;
+use crate::common;
 
 use common::*;
 use flowlight_core::geometry::Ray;

@@ -2,7 +2,7 @@
 //! path-traced reference (each strategy alone and a mixture), the colour test that caught
 //! Batty's bug, and strategy swapping by config.
 
-mod common;
+use crate::common;
 
 use common::{
     assert_image_mean, assert_regions_unbiased, assert_same_wall_hues, independent_runs, mutations,

@@ -9,7 +9,7 @@
 //! -p flowlight-multichain-perturbation -p flowlight-blow -p flowlight-drill
 //! -p flowlight-hard-reconnection`.
 
-mod common;
+use crate::common;
 
 use common::{
     assert_image_mean, assert_regions_unbiased, independent_runs, render, scratch, session_at,

@@ -4,7 +4,7 @@
 //! unbiased (per-region z-tests against MCPT or the exact furnace), and keeps red and blue
 //! apart.
 
-mod common;
+use crate::common;
 
 use common::{
     assert_image_mean, assert_regions_unbiased, assert_same_wall_hues, independent_runs, mutations,

@@ -3,7 +3,7 @@
 //! infinity may reach the image, no invalid state may be deposited, and what was thrown away
 //! is counted.
 
-mod common;
+use crate::common;
 
 use common::{render, session_at};
 use flowlight_host::render::RenderOutcome;

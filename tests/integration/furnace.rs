@@ -5,7 +5,7 @@
 //! §3.8: "too aggressive"): layer 1 gets a share of 2^-(N-1), so the untangled estimator's
 //! variance grows like 2^N; that case runs at N = 6 with more samples.
 
-mod common;
+use crate::common;
 
 use common::{mean_and_stderr, render, session};
 

@@ -6,7 +6,7 @@
 //! in docs/gltf.md's corpus table, so the table cannot drift from what the renderer does, and
 //! every model of the corpus must be listed there.
 
-mod common;
+use crate::common;
 
 use flowlight_host::output::read_exr_rgb;
 use std::collections::BTreeMap;

@@ -4,7 +4,7 @@
 //! path-space depth N the radiance is Le·(N + 1) everywhere: more means the material creates
 //! energy (the spec's literal `fresnel_mix` does at grazing angles), less that it loses some.
 
-mod common;
+use crate::common;
 
 use common::{mean_and_stderr, render, scene_config, scratch, session_at};
 

@@ -3,7 +3,7 @@
 //! `flowlight` binary as a user would. Every scene is copied into a scratch folder first, so
 //! that a regression overwrites a copy, never the repository's scenes.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

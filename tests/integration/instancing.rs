@@ -3,7 +3,7 @@
 //! entry per node), with both intersectors. Each instance is its own light and they light
 //! each other (white diffuse base, path depth 3).
 
-mod common;
+use crate::common;
 
 use common::{mean_and_stderr, render, session_from};
 use flowlight_testkit::gltf::{octahedra_gltf, octahedra_placements};

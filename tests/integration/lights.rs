@@ -14,7 +14,7 @@
 //! - constant environment of radiance L_env over the open floor: L = ρ · L_env (and L_env
 //!   where the camera sees the sky).
 
-mod common;
+use crate::common;
 
 use common::{mean_and_stderr, quads_gltf, render, session_from, FLOOR, LAMBERT};
 use flowlight_core::Rgb;

@@ -2,7 +2,7 @@
 //! every ERPT mutation keeps the eye vertex on the film plane where its raster position
 //! puts it, and ERPT agrees with path tracing through an orthographic view.
 
-mod common;
+use crate::common;
 
 use common::{mean_and_stderr, render, toml_params};
 use flowlight_core::camera::{Camera, Projection};

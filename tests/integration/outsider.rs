@@ -17,7 +17,7 @@
 //! come from Cargo's cache, which the workspace build filled). Plugins the workspace builds
 //! (`erpt`, `mcpt`) must be built first, as for every integration test.
 
-mod common;
+use crate::common;
 
 use common::{mean_and_stderr, render, scene_config, session_at, toml_params};
 use flowlight_core::Rgb;

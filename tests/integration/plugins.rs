@@ -1,7 +1,7 @@
 //! The plugin boundary: real plugins load from disk, mismatches and missing plugins are
 //! refused with clear errors.
 
-mod common;
+use crate::common;
 
 use flowlight_host::plugin::{
     find_plugin, plugin_file_name, search_dirs, PluginError, PluginLibrary,

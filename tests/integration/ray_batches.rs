@@ -3,7 +3,7 @@
 //! the wavefront path tracer gives every sample bit for bit the contributions of the
 //! path-at-a-time one.
 
-mod common;
+use crate::common;
 
 use common::{scene_config, scratch, session, session_from};
 use flowlight_core::geometry::Ray;

@@ -1,7 +1,7 @@
 //! MCPT's two samplers (`sampler = "sobol"`, the default, and `"independent"`): both
 //! unbiased region by region, and the stratified one with less error at equal samples.
 
-mod common;
+use crate::common;
 
 use common::{
     assert_image_mean, assert_regions_unbiased, independent_runs, render, session_at, MeanRule,

@@ -7,7 +7,7 @@
 //! Scenes are written as glTF into a scratch folder by the small builder below (one buffer,
 //! embedded as base64), with the camera given by the config's `[camera]` table.
 
-mod common;
+use crate::common;
 
 use common::{mean_and_stderr, render, scratch, session_at};
 use flowlight_core::Rgb;

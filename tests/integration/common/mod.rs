@@ -7,7 +7,7 @@ use flowlight_core::Rgb;
 use flowlight_host::render::RenderOutcome;
 use flowlight_host::session::{Overrides, Session};
 use std::path::PathBuf;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 // Not every test file uses both.
 #[allow(unused_imports)]
@@ -22,9 +22,15 @@ pub fn scene_config(rel: &str) -> PathBuf {
 }
 
 /// A fresh scratch directory under the system temp dir, removed when dropped (unless the
-/// test fails).
+/// test fails). Numbered, because all the tests share one process and two of them may pick
+/// the same name.
 pub fn scratch(name: &str) -> TempDir {
-    TempDir::new(&format!("flowlight-test-{}-{name}", std::process::id()))
+    static N: AtomicUsize = AtomicUsize::new(0);
+    TempDir::new(&format!(
+        "flowlight-test-{}-{}-{name}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::Relaxed)
+    ))
 }
 
 pub fn toml_params(pairs: &[(&str, toml::Value)]) -> Vec<(String, toml::Value)> {

@@ -2,7 +2,7 @@
 //! same watertight test: same hit/miss, same `t`, same triangle (or, on ties such as shared
 //! edges, another triangle at the same `t`), and `occluded` agreeing with the closest hit.
 
-mod common;
+use crate::common;
 
 use common::*;
 use flowlight_bvh::{intersect_triangle, is_degenerate, Bvh};

@@ -1,7 +1,7 @@
 //! The two-level BVH against a flat BVH over the same triangles transformed to world space:
 //! same hits (up to the rounding of the ray transform), and one stored copy per mesh.
 
-mod common;
+use crate::common;
 
 use common::*;
 use flowlight_bvh::{Bvh, Instance, TwoLevelBvh};

@@ -1,6 +1,6 @@
 //! Watertightness, grazing and axis-aligned rays, ray ranges, empty input.
 
-mod common;
+use crate::common;
 
 use common::*;
 use flowlight_bvh::{intersect_triangle, Bvh};

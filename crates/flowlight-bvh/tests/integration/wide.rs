@@ -3,7 +3,7 @@
 //! find the closest *accepted* hit, on random soups large enough for the parallel build,
 //! closed meshes, a pile of identical triangles, and scenes at tiny and huge scales.
 
-mod common;
+use crate::common;
 
 use common::*;
 use flowlight_bvh::{intersect_triangle, BinaryBvh, Bvh};

@@ -1,7 +1,7 @@
 //! Camera selection, orthographic cameras, the config's own camera and the automatic camera
 //! (crate `config` module docs, "Cameras"), on tiny synthetic glTF files.
 
-mod common;
+use crate::common;
 
 use common::*;
 use flowlight_core::camera::{Camera, Projection};

@@ -1,6 +1,6 @@
 //! The TOML render configuration.
 
-mod common;
+use crate::common;
 
 use common::*;
 use flowlight_scene::{

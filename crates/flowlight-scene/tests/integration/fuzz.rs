@@ -8,7 +8,7 @@
 //! run (docs/testing.md):
 //!
 //! ```sh
-//! FLOWLIGHT_FUZZ_CASES=20000 FLOWLIGHT_FUZZ_SEED=$RANDOM cargo test -p flowlight-scene --test fuzz --release
+//! FLOWLIGHT_FUZZ_CASES=20000 FLOWLIGHT_FUZZ_SEED=$RANDOM cargo test -p flowlight-scene --test integration fuzz:: --release
 //! ```
 
 use flowlight_scene::config::parse_config;

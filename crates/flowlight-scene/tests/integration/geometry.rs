@@ -1,7 +1,7 @@
 //! Geometry, compression and instancing: KHR_mesh_quantization, EXT_meshopt_compression,
 //! KHR_draco_mesh_compression, the extension table, EXT_mesh_gpu_instancing.
 
-mod common;
+use crate::common;
 
 use common::*;
 use flowlight_core::geometry::Ray;

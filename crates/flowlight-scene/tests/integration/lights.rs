@@ -1,6 +1,6 @@
 //! `KHR_lights_punctual` loading, the emitter table and the `[environment]` config.
 
-mod common;
+use crate::common;
 
 use common::{embedded_gltf, temp_dir};
 use flowlight_core::light::{Environment, PunctualKind};

@@ -1,6 +1,6 @@
 //! Malformed inputs give errors that name the file and the cause, never a panic.
 
-mod common;
+use crate::common;
 
 use common::*;
 use flowlight_scene::{load_gltf, SceneError};

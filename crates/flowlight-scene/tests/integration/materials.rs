@@ -1,7 +1,7 @@
 //! glTF material extensions reach `Material` with their values, and bad values are errors that
 //! name the field.
 
-mod common;
+use crate::common;
 
 use common::*;
 use flowlight_scene::load_gltf;

@@ -1,6 +1,6 @@
 //! Loading the project's scenes, and hit reconstruction on known triangles.
 
-mod common;
+use crate::common;
 
 use common::*;
 use flowlight_core::geometry::Ray;
