@@ -98,33 +98,39 @@ fn mcpt_gives_the_same_bits_in_every_style() {
 /// all 40, and one thread gives the same exact sums.
 #[test]
 fn mcpt_passes_run_without_a_barrier_between_them() {
-    use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-    use std::time::{Duration, Instant};
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::{Condvar, Mutex};
+    use std::time::Duration;
     let mut s = common::session_at("cornell-box/cornell-box.toml", 40, 40, 40, &[]);
     s.options.tile_size = 16; // 3 × 3 tiles of at most 16² pixels
     let one_thread = render_with(&mut s, None, 1, 0);
     s.options.threads = 2;
     let first_pass = 40 * 40; // pixel samples of the 1-sample pass
     let held = AtomicBool::new(false);
-    let most = AtomicU64::new(0);
+    // The most pixel samples any progress report has counted, and a signal on each report.
+    let most = Mutex::new(0u64);
+    let reported = Condvar::new();
     let overlapped = AtomicBool::new(false);
     let stop = AtomicBool::new(false);
     let out = s
         .render(&stop, &|p| {
-            most.fetch_max(p.pixel_samples, Ordering::SeqCst);
+            {
+                let mut most = most.lock().unwrap();
+                *most = (*most).max(p.pixel_samples);
+            }
+            reported.notify_all();
             if held.swap(true, Ordering::SeqCst) {
                 return;
             }
             // This thread's unit is done but the thread stays in it until the other thread
             // has finished a unit beyond the first pass (or 30 s have gone by).
-            let t = Instant::now();
-            while t.elapsed() < Duration::from_secs(30) {
-                if most.load(Ordering::SeqCst) > first_pass {
-                    overlapped.store(true, Ordering::SeqCst);
-                    return;
-                }
-                std::thread::sleep(Duration::from_millis(1));
-            }
+            let guard = most.lock().unwrap();
+            let (guard, _) = reported
+                .wait_timeout_while(guard, Duration::from_secs(30), |most| {
+                    *most <= first_pass
+                })
+                .unwrap();
+            overlapped.store(*guard > first_pass, Ordering::SeqCst);
         })
         .unwrap();
     assert!(out.error.is_none());

@@ -85,11 +85,14 @@ fn plugins_lists_versions_and_parameters_and_refuses_mismatches() {
     );
 }
 
+/// Ctrl-C once: the render finishes the units in flight and writes what has accumulated.
+/// The signal goes out when the CLI's debug log reports the first finished work unit, so
+/// the handler is installed and the image cannot be empty, however slow the machine.
 #[test]
 fn interrupt_saves_what_has_accumulated() {
     let dir = common::scratch("cli-interrupt");
     let out = dir.join("partial.exr");
-    let child = flowlight()
+    let mut child = flowlight()
         .args([
             "render",
             common::scene_config("furnace/furnace.toml")
@@ -103,12 +106,17 @@ fn interrupt_saves_what_has_accumulated() {
             "--out",
         ])
         .arg(&out)
+        .env("FLOWLIGHT_LOG", "warn,flowlight_cli=debug")
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    // Let it render for a moment, then press Ctrl-C.
-    std::thread::sleep(Duration::from_millis(1500));
+    let (lines, stderr) = forward_lines(child.stderr.take().unwrap());
+    let first_unit = wait_for_line(&lines, "first work unit finished", Duration::from_secs(60));
+    if first_unit.is_err() {
+        let _ = child.kill();
+    }
+    first_unit.unwrap_or_else(|seen| panic!("no work unit finished within 60 s:\n{seen}"));
     let kill = Command::new("kill")
         .args(["-INT", &child.id().to_string()])
         .status()
@@ -120,17 +128,61 @@ fn interrupt_saves_what_has_accumulated() {
         start.elapsed() < Duration::from_secs(30),
         "render did not stop promptly"
     );
+    let stderr = stderr.join().unwrap();
     let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    assert!(o.status.success(), "{stdout}\n{stderr}");
+    assert!(stderr.contains("interrupted: finishing"), "{stderr}");
     assert!(stdout.contains("interrupted"), "{stdout}");
     let (_, _, layers) = flowlight_host::output::read_exr_rgb(&out).unwrap();
     let lit = layers[0].1.iter().filter(|c| c.luminance() > 0.0).count();
     assert!(lit > 0, "the partial image is empty");
     assert!(layers[0].1.iter().all(|c| c.is_valid_radiance()));
+}
+
+/// Forwards `stream`'s lines, as they come, to the receiver; the thread returns all of them.
+fn forward_lines(
+    stream: impl std::io::Read + Send + 'static,
+) -> (
+    std::sync::mpsc::Receiver<String>,
+    std::thread::JoinHandle<String>,
+) {
+    use std::io::BufRead;
+    let (send, receive) = std::sync::mpsc::channel();
+    let all = std::thread::spawn(move || {
+        let mut all = String::new();
+        for line in std::io::BufReader::new(stream).lines() {
+            let Ok(line) = line else { break };
+            all.push_str(&line);
+            all.push('\n');
+            // The receiver stops listening once it has what it waited for.
+            let _ = send.send(line);
+        }
+        all
+    });
+    (receive, all)
+}
+
+/// Waits until a line containing `needle` arrives, at most `limit`; on failure, the lines
+/// seen so far.
+fn wait_for_line(
+    lines: &std::sync::mpsc::Receiver<String>,
+    needle: &str,
+    limit: Duration,
+) -> Result<(), String> {
+    let deadline = Instant::now() + limit;
+    let mut seen = String::new();
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        match lines.recv_timeout(left) {
+            Ok(line) if line.contains(needle) => return Ok(()),
+            Ok(line) => {
+                seen.push_str(&line);
+                seen.push('\n');
+            }
+            // Timed out, or the process closed its stderr (it exited).
+            Err(_) => return Err(seen),
+        }
+    }
 }
 
 /// The furnace scene copied into `dir` with a config `f.toml` that writes `f.exr` and a PNG
