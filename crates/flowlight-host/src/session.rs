@@ -122,6 +122,174 @@ fn frame_precision(config: &RenderConfig) -> Precision {
     }
 }
 
+/// Applies the command line's `--set KEY=VALUE`s: `render.*` keys to the render settings
+/// that may be set so, every other key to the integrator's parameters (replaced or added).
+fn apply_set_overrides(
+    config: &mut RenderConfig,
+    params: &[(String, toml::Value)],
+) -> Result<(), String> {
+    for (k, v) in params {
+        // `--set render.accumulation=caching` and its siblings set the render's keys.
+        if let Some(key) = k.strip_prefix("render.") {
+            if config.set_render_key(key, v).map_err(|e| e.to_string())? {
+                continue;
+            }
+            return Err(format!(
+                "{}: --set {k}: only render.accumulation, render.precision, render.accumulation_cache_mib and render.flange can be set from the command line",
+                config.path.display()
+            ));
+        }
+        match config
+            .integrator_params
+            .iter_mut()
+            .find(|(name, _)| name == k)
+        {
+            Some(entry) => entry.1 = v.clone(),
+            None => config.integrator_params.push((k.clone(), v.clone())),
+        }
+    }
+    Ok(())
+}
+
+/// The config's intersector over `scene` and its build time, Embree with the config's robust
+/// mode and build quality (the benchmark's variables are named when set, and ignored).
+fn build_intersector(
+    config: &RenderConfig,
+    scene: &Scene,
+) -> Result<(Box<dyn Intersector>, Duration), String> {
+    for warning in ignored_embree_variables(|v| std::env::var_os(v).is_some(), &config.path) {
+        tracing::warn!("{warning}");
+    }
+    let options = flowlight_embree::SceneOptions {
+        robust: config.robust,
+        quality: flowlight_embree::BuildQuality::parse(&config.build_quality)
+            .map_err(|e| format!("{}: render.build_quality: {e}", config.path.display()))?,
+        packets: flowlight_embree::Packets::from_env()?,
+        ..Default::default()
+    };
+    build_intersector_with(config.intersector, scene, options)
+        .map_err(|e| format!("{}: {e}", config.path.display()))
+}
+
+/// The integrator's mutation list, taken out of its parameters: the name of the parameter
+/// the integrator declares as a mutation list, and its entries, whose weights are checked
+/// here, before any mutation plugin loads.
+fn mutation_list(
+    plugin: &PluginLibrary,
+    config: &mut RenderConfig,
+) -> Result<(Option<String>, Vec<MutationEntry>), String> {
+    let list_name = plugin
+        .mutation_list_param()
+        .map_err(|e| format!("{}: {e}", config.path.display()))?;
+    let mutation_entries = match &list_name {
+        Some(list) => take_mutations(&mut config.integrator_params, list, &config.path)?,
+        None => Vec::new(),
+    };
+    if let Some(list) = &list_name {
+        let weights: Vec<(&str, f64)> = mutation_entries
+            .iter()
+            .map(|e| (e.plugin.as_str(), e.weight))
+            .collect();
+        normalised_weights(list, &weights)
+            .map_err(|e| format!("{}: {e}", config.path.display()))?;
+    }
+    Ok((list_name, mutation_entries))
+}
+
+/// The view of the scene the plugins read: pointers into `scene`, `textures` and
+/// `light_cdf`, which must outlive every plugin instance made over it. Without a light the
+/// environment is left out, as the power CDF is empty.
+fn scene_view(
+    scene: &Scene,
+    camera: Camera,
+    textures: &[Texture],
+    env_view: flowlight_core::light::Environment,
+    light_cdf: &[f32],
+) -> SceneView {
+    let (bounds_min, bounds_max) = scene.bounds().unwrap_or((Vec3::ZERO, Vec3::ZERO));
+    SceneView {
+        camera,
+        materials: scene.materials.as_ptr(),
+        material_count: scene.materials.len(),
+        textures: textures.as_ptr(),
+        texture_count: textures.len(),
+        emitters: scene.emitters.as_ptr(),
+        emitter_count: scene.emitters.len(),
+        punctual_lights: scene.punctual_lights.as_ptr(),
+        punctual_count: scene.punctual_lights.len(),
+        environment: if light_cdf.is_empty() {
+            flowlight_core::light::Environment::none()
+        } else {
+            env_view
+        },
+        light_power_cdf: light_cdf.as_ptr(),
+        bounds_min,
+        bounds_max,
+        mesh: flowlight_sdk::scene::mesh_tables(&scene.mesh()),
+    }
+}
+
+/// Loads and creates the mutation plugins of `entries` over `view`, adding their files to
+/// `plugin_files`.
+fn create_mutations(
+    config: &RenderConfig,
+    dirs: &[PathBuf],
+    list_name: Option<&str>,
+    entries: &[MutationEntry],
+    view: &SceneView,
+    plugin_files: &mut Vec<PathBuf>,
+) -> Result<Vec<MutationInstance>, String> {
+    let mut mutations = Vec::new();
+    for entry in entries {
+        let path =
+            find_plugin(&relative_to(&entry.plugin, &config.base_dir), dirs).map_err(|e| {
+                format!(
+                    "{}: integrator.{}: {e}",
+                    config.path.display(),
+                    list_name.unwrap_or_default()
+                )
+            })?;
+        plugin_files.push(path.clone());
+        let lib = Arc::new(PluginLibrary::load(&path).map_err(|e| e.to_string())?);
+        // SAFETY: as for the integrator: the view points into data the session owns and
+        // drops after every instance.
+        let m = unsafe { MutationInstance::create(lib, &entry.params, entry.weight, view) }
+            .map_err(|e| format!("{}: {e}", config.path.display()))?;
+        mutations.push(m);
+    }
+    Ok(mutations)
+}
+
+/// The render options of `config` at the camera's resolution; the command line replaces the
+/// config's budget (`--time`, else `--spp`, else the file's), threads and seed.
+fn render_options(config: &RenderConfig, camera: &Camera, ov: &Overrides) -> RenderOptions {
+    let (spp, time) = match (ov.time, ov.spp, config.budget) {
+        (Some(t), _, _) => (0, Some(t)),
+        (None, Some(n), _) => (n, None),
+        (None, None, SampleBudget::Spp(n)) => (n, None),
+        (None, None, SampleBudget::Time(t)) => (0, Some(t)),
+    };
+    RenderOptions {
+        width: camera.width,
+        height: camera.height,
+        spp,
+        sample_begin: 0,
+        time: time.map(Duration::from_secs_f64),
+        threads: ov.threads.unwrap_or(config.threads),
+        tile_size: config.tile_size,
+        seed: ov.seed.unwrap_or(config.seed),
+        accumulation: match config.accumulation {
+            Accumulation::Auto => None,
+            Accumulation::Blasting => Some(Style::Blasting),
+            Accumulation::Buffering => Some(Style::Buffering),
+            Accumulation::Caching => Some(Style::Caching),
+        },
+        precision: frame_precision(config),
+        cache_bytes: (config.accumulation_cache_mib * 1048576.0) as u64,
+        flange: config.flange,
+    }
+}
+
 impl Session {
     /// Loads `config_path` and everything it names. Errors are one line naming the file,
     /// field or plugin at fault.
@@ -130,27 +298,10 @@ impl Session {
         Session::from_config(config, ov)
     }
 
+    /// [`Session::prepare`] for a config already read: `ov` applied, the scene loaded, the
+    /// intersector built, the integrator (and its mutations) created over the scene's view.
     pub fn from_config(mut config: RenderConfig, ov: &Overrides) -> Result<Session, String> {
-        for (k, v) in &ov.params {
-            // `--set render.accumulation=caching` and its siblings set the render's keys.
-            if let Some(key) = k.strip_prefix("render.") {
-                if config.set_render_key(key, v).map_err(|e| e.to_string())? {
-                    continue;
-                }
-                return Err(format!(
-                    "{}: --set {k}: only render.accumulation, render.precision, render.accumulation_cache_mib and render.flange can be set from the command line",
-                    config.path.display()
-                ));
-            }
-            match config
-                .integrator_params
-                .iter_mut()
-                .find(|(name, _)| name == k)
-            {
-                Some(entry) => entry.1 = v.clone(),
-                None => config.integrator_params.push((k.clone(), v.clone())),
-            }
-        }
+        apply_set_overrides(&mut config, &ov.params)?;
         let (exr_path, png_path) = output_paths(&config, ov.out.as_deref())?;
         // Refuse an image that cannot fit before anything big is loaded (layers are known
         // once the integrator exists; checked again then).
@@ -163,18 +314,7 @@ impl Session {
         let load_time = t0.elapsed();
         let camera = config.camera(&scene).map_err(|e| e.to_string())?;
         tracing::debug!(?camera, "camera");
-        for warning in ignored_embree_variables(|v| std::env::var_os(v).is_some(), &config.path) {
-            tracing::warn!("{warning}");
-        }
-        let options = flowlight_embree::SceneOptions {
-            robust: config.robust,
-            quality: flowlight_embree::BuildQuality::parse(&config.build_quality)
-                .map_err(|e| format!("{}: render.build_quality: {e}", config.path.display()))?,
-            packets: flowlight_embree::Packets::from_env()?,
-            ..Default::default()
-        };
-        let (intersector, build_time) = build_intersector_with(config.intersector, &scene, options)
-            .map_err(|e| format!("{}: {e}", config.path.display()))?;
+        let (intersector, build_time) = build_intersector(&config, &scene)?;
 
         let dirs = search_dirs(&config.plugin_search_paths);
         let plugin_path = find_plugin(
@@ -187,24 +327,7 @@ impl Session {
         let textures = scene.texture_views();
         // Hashed with the mutations still among the parameters.
         let config_text = crate::parts::config_text(&config, &camera, &config.integrator_params);
-        // The mutation list lives under the name of the parameter the integrator declares as
-        // a mutation list; weights are checked here, before any mutation plugin loads.
-        let list_name = plugin
-            .mutation_list_param()
-            .map_err(|e| format!("{}: {e}", config.path.display()))?;
-        let mutation_entries = match &list_name {
-            Some(list) => take_mutations(&mut config.integrator_params, list, &config.path)?,
-            None => Vec::new(),
-        };
-        if let Some(list) = &list_name {
-            let weights: Vec<(&str, f64)> = mutation_entries
-                .iter()
-                .map(|e| (e.plugin.as_str(), e.weight))
-                .collect();
-            normalised_weights(list, &weights)
-                .map_err(|e| format!("{}: {e}", config.path.display()))?;
-        }
-        let (bounds_min, bounds_max) = scene.bounds().unwrap_or((Vec3::ZERO, Vec3::ZERO));
+        let (list_name, mutation_entries) = mutation_list(&plugin, &mut config)?;
         let environment = match &config.environment {
             Some(e) => load_environment(&config.path, e).map_err(|e| e.to_string())?,
             None => EnvironmentData::default(),
@@ -217,51 +340,22 @@ impl Session {
                 config.path.display()
             );
         }
-        let view = SceneView {
-            camera,
-            materials: scene.materials.as_ptr(),
-            material_count: scene.materials.len(),
-            textures: textures.as_ptr(),
-            texture_count: textures.len(),
-            emitters: scene.emitters.as_ptr(),
-            emitter_count: scene.emitters.len(),
-            punctual_lights: scene.punctual_lights.as_ptr(),
-            punctual_count: scene.punctual_lights.len(),
-            environment: if light_cdf.is_empty() {
-                flowlight_core::light::Environment::none()
-            } else {
-                env_view
-            },
-            light_power_cdf: light_cdf.as_ptr(),
-            bounds_min,
-            bounds_max,
-            mesh: flowlight_sdk::scene::mesh_tables(&scene.mesh()),
-        };
-        let mut mutations = Vec::new();
+        let view = scene_view(&scene, camera, &textures, env_view, &light_cdf);
         let mut plugin_files = vec![plugin_path.clone()];
-        for entry in &mutation_entries {
-            let path =
-                find_plugin(&relative_to(&entry.plugin, &config.base_dir), &dirs).map_err(|e| {
-                    format!(
-                        "{}: integrator.{}: {e}",
-                        config.path.display(),
-                        list_name.as_deref().unwrap_or_default()
-                    )
-                })?;
-            plugin_files.push(path.clone());
-            let lib = Arc::new(PluginLibrary::load(&path).map_err(|e| e.to_string())?);
-            // SAFETY: as for the integrator below.
-            let m = unsafe { MutationInstance::create(lib, &entry.params, entry.weight, &view) }
-                .map_err(|e| format!("{}: {e}", config.path.display()))?;
-            mutations.push(m);
-        }
+        let mutations = create_mutations(
+            &config,
+            &dirs,
+            list_name.as_deref(),
+            &mutation_entries,
+            &view,
+            &mut plugin_files,
+        )?;
         // SAFETY: the view points into `scene` and `textures`, which the session owns and
         // drops after the instance (field order); their heap buffers never move.
         let instance = unsafe {
             IntegratorInstance::create(plugin, &config.integrator_params, mutations, view)
         }
         .map_err(|e| format!("{}: {e}", config.path.display()))?;
-        let precision = frame_precision(&config);
         crate::render::check_memory(
             config.width,
             config.height,
@@ -270,33 +364,7 @@ impl Session {
             0,
         )
         .map_err(|e| format!("{}: {e}", config.path.display()))?;
-
-        // The command line replaces the config's budget: --time, else --spp, else the file's.
-        let (spp, time) = match (ov.time, ov.spp, config.budget) {
-            (Some(t), _, _) => (0, Some(t)),
-            (None, Some(n), _) => (n, None),
-            (None, None, SampleBudget::Spp(n)) => (n, None),
-            (None, None, SampleBudget::Time(t)) => (0, Some(t)),
-        };
-        let options = RenderOptions {
-            width: camera.width,
-            height: camera.height,
-            spp,
-            sample_begin: 0,
-            time: time.map(Duration::from_secs_f64),
-            threads: ov.threads.unwrap_or(config.threads),
-            tile_size: config.tile_size,
-            seed: ov.seed.unwrap_or(config.seed),
-            accumulation: match config.accumulation {
-                Accumulation::Auto => None,
-                Accumulation::Blasting => Some(Style::Blasting),
-                Accumulation::Buffering => Some(Style::Buffering),
-                Accumulation::Caching => Some(Style::Caching),
-            },
-            precision,
-            cache_bytes: (config.accumulation_cache_mib * 1048576.0) as u64,
-            flange: config.flange,
-        };
+        let options = render_options(&config, &camera, ov);
         let session = Session {
             instance,
             intersector,
