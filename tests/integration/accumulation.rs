@@ -6,7 +6,9 @@
 use crate::common;
 
 use flowlight_host::accumulation::{Frame, MicroTileCache, Precision, Style};
+use flowlight_host::error::{HostError, PartRefusal};
 use flowlight_host::session::{Overrides, Session};
+use flowlight_scene::ConfigError;
 use std::sync::atomic::AtomicBool;
 
 fn erpt(size: u32, layers: bool) -> Session {
@@ -126,9 +128,7 @@ fn mcpt_passes_run_without_a_barrier_between_them() {
             // has finished a unit beyond the first pass (or 30 s have gone by).
             let guard = most.lock().unwrap();
             let (guard, _) = reported
-                .wait_timeout_while(guard, Duration::from_secs(30), |most| {
-                    *most <= first_pass
-                })
+                .wait_timeout_while(guard, Duration::from_secs(30), |most| *most <= first_pass)
                 .unwrap();
             overlapped.store(*guard > first_pass, Ordering::SeqCst);
         })
@@ -244,8 +244,14 @@ fn bad_accumulation_settings_are_one_line_errors_naming_the_key() {
         let e = Session::prepare(&cfg, &Overrides::default())
             .err()
             .expect(render);
+        let (named, reason) = match &e {
+            HostError::Config(ConfigError::Invalid { key, reason, .. }) => (key, reason),
+            HostError::Config(ConfigError::Parse { key, message, .. }) => (key, message),
+            e => panic!("not a config value's error: {e:?}"),
+        };
+        assert_eq!(named, key);
         assert!(
-            e.contains(key) && e.contains(says) && !e.contains('\n'),
+            reason.contains(says) && !e.to_string().contains('\n'),
             "{e}"
         );
     }
@@ -258,6 +264,9 @@ fn bad_accumulation_settings_are_one_line_errors_naming_the_key() {
         .render(&AtomicBool::new(false), &|_| {})
         .err()
         .expect("cache too small");
+    let HostError::Render(e) = e else {
+        panic!("not the render's refusal: {e:?}")
+    };
     assert!(
         e.contains("render.accumulation_cache_mib") && e.contains("at least"),
         "{e}"
@@ -275,10 +284,26 @@ fn bad_accumulation_settings_are_one_line_errors_naming_the_key() {
     let e = Session::prepare(&cfg, &set("render.width", 8.into()))
         .err()
         .unwrap();
-    assert!(e.contains("render.width"), "{e}");
+    assert!(
+        matches!(&e, HostError::NotSettable { key, .. } if key == "render.width"),
+        "{e:?}"
+    );
     // Distributed parts need exact sums.
     let mut s = Session::prepare(&cfg, &set("render.precision", "f32".into())).unwrap();
     let spec = flowlight_host::parts::PartSpec::part(0, 2, 4).unwrap();
     let e = s.set_part(spec).unwrap_err();
-    assert!(e.contains("render.precision") && e.contains("exact"), "{e}");
+    assert!(
+        matches!(
+            e,
+            HostError::Part {
+                refusal: PartRefusal::NotExact,
+                ..
+            }
+        ),
+        "{e:?}"
+    );
+    assert!(
+        e.to_string().contains("render.precision = \"exact\""),
+        "{e}"
+    );
 }

@@ -224,7 +224,8 @@ fn swapping_strategies_in_the_config_changes_the_loaded_plugins() {
     )
     .err()
     .expect("bad strategy parameter accepted");
-    assert!(err.contains("drill") && err.contains("width"), "{err}");
+    let err = common::plugin_refusal(&err, "drill");
+    assert!(err.contains("width"), "{err}");
     let err = flowlight_host::session::Session::prepare(
         &common::scene_config("cornell-box/erpt.toml"),
         &flowlight_host::session::Overrides {
@@ -234,7 +235,21 @@ fn swapping_strategies_in_the_config_changes_the_loaded_plugins() {
     )
     .err()
     .expect("missing strategy accepted");
-    assert!(err.contains("no-such-mutation"), "{err}");
+    let flowlight_host::error::HostError::Plugin {
+        field: Some(field),
+        error,
+        ..
+    } = &err
+    else {
+        panic!("not a plugin's error: {err:?}")
+    };
+    let flowlight_host::PluginError::NotFound { name, .. } = error.as_ref() else {
+        panic!("not a missing mutation plugin: {err:?}")
+    };
+    assert_eq!(
+        (field.as_str(), name.as_str()),
+        ("integrator.mutations", "no-such-mutation")
+    );
 }
 
 // ---------------------------------------------------------------------------------------------

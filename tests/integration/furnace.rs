@@ -244,6 +244,7 @@ fn bad_branches_are_named() {
         let err = Session::prepare(&common::scene_config("furnace/furnace.toml"), &ov)
             .err()
             .unwrap_or_else(|| panic!("{params:?} accepted"));
+        let err = common::plugin_refusal(&err, "mcpt");
         assert!(err.contains("branches") && err.contains(shown), "{err}");
     }
 }
@@ -264,6 +265,7 @@ fn bad_roulette_settings_are_named() {
         let err = Session::prepare(&common::scene_config("furnace/furnace.toml"), &ov)
             .err()
             .unwrap_or_else(|| panic!("{key} accepted"));
+        let err = common::plugin_refusal(&err, "mcpt");
         assert!(err.contains(key) && err.contains(shown), "{err}");
     }
 }

@@ -3,6 +3,7 @@
 
 use crate::common;
 
+use flowlight_host::error::HostError;
 use flowlight_host::plugin::{
     find_plugin, plugin_file_name, search_dirs, PluginError, PluginLibrary,
 };
@@ -92,7 +93,20 @@ fn missing_plugin_is_a_clear_error() {
     let err = Session::prepare(&cfg, &Overrides::default())
         .err()
         .expect("missing plugin accepted");
-    assert!(err.contains("no-such-integrator"), "{err}");
+    let HostError::Plugin {
+        file: Some(file),
+        field: Some(field),
+        error,
+    } = &err
+    else {
+        panic!("not a plugin's error named in the config: {err:?}")
+    };
+    let PluginError::NotFound { name, .. } = error.as_ref() else {
+        panic!("not a missing plugin: {err:?}")
+    };
+    assert_eq!(file, &cfg);
+    assert_eq!(field, "integrator.plugin");
+    assert_eq!(name, "no-such-integrator");
 }
 
 #[test]
@@ -118,7 +132,8 @@ fn unknown_integrator_parameter_names_the_key() {
     let err = Session::prepare(&common::scene_config("furnace/furnace.toml"), &ov)
         .err()
         .expect("typo accepted");
-    assert!(err.contains("path_dpeth") && err.contains("mcpt"), "{err}");
+    let err = common::plugin_refusal(&err, "mcpt");
+    assert!(err.contains("path_dpeth"), "{err}");
     let ov = Overrides {
         params: common::toml_params(&[("variant", "sideways".into())]),
         ..Default::default()
@@ -126,6 +141,7 @@ fn unknown_integrator_parameter_names_the_key() {
     let err = Session::prepare(&common::scene_config("furnace/furnace.toml"), &ov)
         .err()
         .expect("bad value accepted");
+    let err = common::plugin_refusal(&err, "mcpt");
     assert!(err.contains("variant") && err.contains("sideways"), "{err}");
 }
 
@@ -156,10 +172,8 @@ fn plugin_errors_and_panics_come_back_as_errors() {
     let err = Session::from_config(cfg.clone(), &ov)
         .err()
         .expect("create error ignored");
-    assert!(
-        err.contains("test-panic") && err.contains("asked to fail in create"),
-        "{err}"
-    );
+    let err = common::plugin_refusal(&err, "test-panic");
+    assert!(err.contains("asked to fail in create"), "{err}");
 
     let ov = Overrides {
         spp: Some(1),
@@ -488,20 +502,25 @@ fn erpt_counters_arrive_merged_and_consistent() {
 /// error is one line naming the entry.
 #[test]
 fn bad_mutation_weights_are_refused_naming_the_entry() {
+    let config = common::scene_config("cornell-box/erpt.toml");
+    // The list's error (`file` the config), as the CLI prints it.
     let prepare = |list: toml::Value| {
-        Session::prepare(
-            &common::scene_config("cornell-box/erpt.toml"),
+        let e = Session::prepare(
+            &config,
             &Overrides {
                 params: common::toml_params(&[("mutations", list)]),
                 ..Default::default()
             },
         )
         .err()
-        .expect("bad weights accepted")
+        .expect("bad weights accepted");
+        match &e {
+            HostError::Mutations { file, .. } => assert_eq!(file, &config),
+            e => panic!("not the mutation list's error: {e:?}"),
+        }
+        e.to_string()
     };
-    let cfg = common::scene_config("cornell-box/erpt.toml")
-        .display()
-        .to_string();
+    let cfg = config.display().to_string();
     let e = prepare(weighted(&[("drill", 1.into()), ("blow", (-0.5).into())]));
     assert_eq!(
         e,
@@ -534,6 +553,7 @@ fn mutations_for_an_integrator_without_a_list_are_an_unknown_parameter() {
     )
     .err()
     .expect("mutations accepted by mcpt");
+    let err = common::plugin_refusal(&err, "mcpt");
     assert!(
         err.contains("unknown parameter 'mutations' for plugin 'mcpt'"),
         "{err}"
@@ -566,6 +586,7 @@ fn the_mutation_list_is_read_under_the_declared_name() {
     let err = Session::from_config(cfg, &Overrides::default())
         .err()
         .expect("a list under an undeclared name was read");
+    let err = common::plugin_refusal(&err, "test-panic");
     assert!(
         err.contains("unknown parameter 'mutations' for plugin 'test-panic'"),
         "{err}"

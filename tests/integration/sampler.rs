@@ -136,12 +136,12 @@ fn untangled_refuses_sobol_and_defaults_to_independent() {
         params: common::toml_params(params),
         ..Default::default()
     };
-    // The error names the parameter and what it needs.
-    let refused = |config: &str, params: &[(&str, toml::Value)]| {
+    // The plugin refuses it, naming the parameter and what it needs.
+    let refused = |config: &str, plugin: &str, params: &[(&str, toml::Value)]| {
         let err = Session::prepare(&common::scene_config(config), &ov(params))
             .err()
-            .unwrap_or_else(|| panic!("{config} {params:?} must be refused"))
-            .to_string();
+            .unwrap_or_else(|| panic!("{config} {params:?} must be refused"));
+        let err = common::plugin_refusal(&err, plugin);
         assert!(
             err.contains("'sampler'") && err.contains("entangled"),
             "unclear error: {err}"
@@ -150,6 +150,7 @@ fn untangled_refuses_sobol_and_defaults_to_independent() {
     let sobol = ("sampler", toml::Value::from("sobol"));
     refused(
         "cornell-box/cornell-box.toml",
+        "mcpt",
         &[("variant", "untangled".into()), sobol.clone()],
     );
     let config = common::scene_config("cornell-box/cornell-box.toml");
@@ -157,6 +158,7 @@ fn untangled_refuses_sobol_and_defaults_to_independent() {
     // ERPT's untangled seeds likewise.
     refused(
         "glass-caustic/erpt.toml",
+        "erpt",
         &[("seeds", "untangled".into()), sobol],
     );
 }

@@ -2,11 +2,12 @@
 //! integrator plugin, render, write the outputs.
 
 use crate::accumulation::{Frame, Precision, Style};
+use crate::error::{HostError, PartRefusal};
 use crate::intersector::{build_intersector_with, Intersector};
 use crate::output::{ExrMetadata, PngPreview};
 use crate::plugin::{
     find_plugin, normalised_weights, search_dirs, IntegratorInstance, MutationInstance,
-    PluginLibrary,
+    PluginError, PluginLibrary,
 };
 use crate::render::{render, Progress, RenderOptions, RenderOutcome};
 use flowlight_core::camera::Camera;
@@ -122,22 +123,40 @@ fn frame_precision(config: &RenderConfig) -> Precision {
     }
 }
 
+/// A plugin's error while the session was prepared, said of the config (and of the config
+/// key that named the plugin, if given).
+fn plugin_error(config: &RenderConfig, field: Option<String>, error: PluginError) -> HostError {
+    HostError::Plugin {
+        file: Some(config.path.clone()),
+        field,
+        error: Box::new(error),
+    }
+}
+
+/// The image of `config` would not fit in memory.
+fn memory_error(config: &RenderConfig, msg: String) -> HostError {
+    HostError::Memory {
+        file: Some(config.path.clone()),
+        msg,
+    }
+}
+
 /// Applies the command line's `--set KEY=VALUE`s: `render.*` keys to the render settings
 /// that may be set so, every other key to the integrator's parameters (replaced or added).
 fn apply_set_overrides(
     config: &mut RenderConfig,
     params: &[(String, toml::Value)],
-) -> Result<(), String> {
+) -> Result<(), HostError> {
     for (k, v) in params {
         // `--set render.accumulation=caching` and its siblings set the render's keys.
         if let Some(key) = k.strip_prefix("render.") {
-            if config.set_render_key(key, v).map_err(|e| e.to_string())? {
+            if config.set_render_key(key, v)? {
                 continue;
             }
-            return Err(format!(
-                "{}: --set {k}: only render.accumulation, render.precision, render.accumulation_cache_mib and render.flange can be set from the command line",
-                config.path.display()
-            ));
+            return Err(HostError::NotSettable {
+                file: config.path.clone(),
+                key: k.clone(),
+            });
         }
         match config
             .integrator_params
@@ -156,19 +175,28 @@ fn apply_set_overrides(
 fn build_intersector(
     config: &RenderConfig,
     scene: &Scene,
-) -> Result<(Box<dyn Intersector>, Duration), String> {
+) -> Result<(Box<dyn Intersector>, Duration), HostError> {
     for warning in ignored_embree_variables(|v| std::env::var_os(v).is_some(), &config.path) {
         tracing::warn!("{warning}");
     }
     let options = flowlight_embree::SceneOptions {
         robust: config.robust,
-        quality: flowlight_embree::BuildQuality::parse(&config.build_quality)
-            .map_err(|e| format!("{}: render.build_quality: {e}", config.path.display()))?,
-        packets: flowlight_embree::Packets::from_env()?,
+        quality: flowlight_embree::BuildQuality::parse(&config.build_quality).map_err(|msg| {
+            HostError::Field {
+                file: config.path.clone(),
+                field: "render.build_quality".into(),
+                msg,
+            }
+        })?,
+        packets: flowlight_embree::Packets::from_env().map_err(HostError::Variable)?,
         ..Default::default()
     };
-    build_intersector_with(config.intersector, scene, options)
-        .map_err(|e| format!("{}: {e}", config.path.display()))
+    build_intersector_with(config.intersector, scene, options).map_err(|msg| {
+        HostError::Intersector {
+            file: config.path.clone(),
+            msg,
+        }
+    })
 }
 
 /// The integrator's mutation list, taken out of its parameters: the name of the parameter
@@ -177,10 +205,10 @@ fn build_intersector(
 fn mutation_list(
     plugin: &PluginLibrary,
     config: &mut RenderConfig,
-) -> Result<(Option<String>, Vec<MutationEntry>), String> {
+) -> Result<(Option<String>, Vec<MutationEntry>), HostError> {
     let list_name = plugin
         .mutation_list_param()
-        .map_err(|e| format!("{}: {e}", config.path.display()))?;
+        .map_err(|error| plugin_error(config, None, error))?;
     let mutation_entries = match &list_name {
         Some(list) => take_mutations(&mut config.integrator_params, list, &config.path)?,
         None => Vec::new(),
@@ -190,8 +218,10 @@ fn mutation_list(
             .iter()
             .map(|e| (e.plugin.as_str(), e.weight))
             .collect();
-        normalised_weights(list, &weights)
-            .map_err(|e| format!("{}: {e}", config.path.display()))?;
+        normalised_weights(list, &weights).map_err(|msg| HostError::Mutations {
+            file: config.path.clone(),
+            msg,
+        })?;
     }
     Ok((list_name, mutation_entries))
 }
@@ -238,23 +268,20 @@ fn create_mutations(
     entries: &[MutationEntry],
     view: &SceneView,
     plugin_files: &mut Vec<PathBuf>,
-) -> Result<Vec<MutationInstance>, String> {
+) -> Result<Vec<MutationInstance>, HostError> {
     let mut mutations = Vec::new();
     for entry in entries {
         let path =
-            find_plugin(&relative_to(&entry.plugin, &config.base_dir), dirs).map_err(|e| {
-                format!(
-                    "{}: integrator.{}: {e}",
-                    config.path.display(),
-                    list_name.unwrap_or_default()
-                )
+            find_plugin(&relative_to(&entry.plugin, &config.base_dir), dirs).map_err(|error| {
+                let field = format!("integrator.{}", list_name.unwrap_or_default());
+                plugin_error(config, Some(field), error)
             })?;
         plugin_files.push(path.clone());
-        let lib = Arc::new(PluginLibrary::load(&path).map_err(|e| e.to_string())?);
+        let lib = Arc::new(PluginLibrary::load(&path)?);
         // SAFETY: as for the integrator: the view points into data the session owns and
         // drops after every instance.
         let m = unsafe { MutationInstance::create(lib, &entry.params, entry.weight, view) }
-            .map_err(|e| format!("{}: {e}", config.path.display()))?;
+            .map_err(|error| plugin_error(config, None, error))?;
         mutations.push(m);
     }
     Ok(mutations)
@@ -293,26 +320,25 @@ fn render_options(config: &RenderConfig, camera: &Camera, ov: &Overrides) -> Ren
 impl Session {
     /// Loads `config_path` and everything it names. Errors are one line naming the file,
     /// field or plugin at fault.
-    pub fn prepare(config_path: &Path, ov: &Overrides) -> Result<Session, String> {
-        let config = load_config(config_path).map_err(|e| e.to_string())?;
+    pub fn prepare(config_path: &Path, ov: &Overrides) -> Result<Session, HostError> {
+        let config = load_config(config_path)?;
         Session::from_config(config, ov)
     }
 
     /// [`Session::prepare`] for a config already read: `ov` applied, the scene loaded, the
     /// intersector built, the integrator (and its mutations) created over the scene's view.
-    pub fn from_config(mut config: RenderConfig, ov: &Overrides) -> Result<Session, String> {
+    pub fn from_config(mut config: RenderConfig, ov: &Overrides) -> Result<Session, HostError> {
         apply_set_overrides(&mut config, &ov.params)?;
         let (exr_path, png_path) = output_paths(&config, ov.out.as_deref())?;
         // Refuse an image that cannot fit before anything big is loaded (layers are known
         // once the integrator exists; checked again then).
         let precision = frame_precision(&config);
         crate::render::check_memory(config.width, config.height, 0, precision, 0)
-            .map_err(|e| format!("{}: {e}", config.path.display()))?;
+            .map_err(|msg| memory_error(&config, msg))?;
         let t0 = Instant::now();
-        let scene =
-            load_gltf(&config.scene, &config.material_overrides).map_err(|e| e.to_string())?;
+        let scene = load_gltf(&config.scene, &config.material_overrides)?;
         let load_time = t0.elapsed();
-        let camera = config.camera(&scene).map_err(|e| e.to_string())?;
+        let camera = config.camera(&scene)?;
         tracing::debug!(?camera, "camera");
         let (intersector, build_time) = build_intersector(&config, &scene)?;
 
@@ -321,15 +347,15 @@ impl Session {
             &relative_to(&config.integrator_plugin, &config.base_dir),
             &dirs,
         )
-        .map_err(|e| format!("{}: integrator.plugin: {e}", config.path.display()))?;
-        let plugin = Arc::new(PluginLibrary::load(&plugin_path).map_err(|e| e.to_string())?);
+        .map_err(|error| plugin_error(&config, Some("integrator.plugin".into()), error))?;
+        let plugin = Arc::new(PluginLibrary::load(&plugin_path)?);
 
         let textures = scene.texture_views();
         // Hashed with the mutations still among the parameters.
         let config_text = crate::parts::config_text(&config, &camera, &config.integrator_params);
         let (list_name, mutation_entries) = mutation_list(&plugin, &mut config)?;
         let environment = match &config.environment {
-            Some(e) => load_environment(&config.path, e).map_err(|e| e.to_string())?,
+            Some(e) => load_environment(&config.path, e)?,
             None => EnvironmentData::default(),
         };
         let env_view = environment.view();
@@ -355,7 +381,7 @@ impl Session {
         let instance = unsafe {
             IntegratorInstance::create(plugin, &config.integrator_params, mutations, view)
         }
-        .map_err(|e| format!("{}: {e}", config.path.display()))?;
+        .map_err(|error| plugin_error(&config, None, error))?;
         crate::render::check_memory(
             config.width,
             config.height,
@@ -363,7 +389,7 @@ impl Session {
             precision,
             0,
         )
-        .map_err(|e| format!("{}: {e}", config.path.display()))?;
+        .map_err(|msg| memory_error(&config, msg))?;
         let options = render_options(&config, &camera, ov);
         let session = Session {
             instance,
@@ -390,20 +416,19 @@ impl Session {
     /// part of a distributed render: [`crate::parts`]); the EXR then records the range, the
     /// config hash and the exact sums. Refused under a time budget (a part needs a fixed
     /// number of samples).
-    pub fn set_part(&mut self, spec: crate::parts::PartSpec) -> Result<(), String> {
+    pub fn set_part(&mut self, spec: crate::parts::PartSpec) -> Result<(), HostError> {
+        let refuse = |refusal| HostError::Part {
+            file: self.config.path.clone(),
+            refusal,
+        };
         if self.options.time.is_some() {
-            return Err(format!(
-                "{}: --part/--samples need a sample budget (render.spp or --spp), not a time budget",
-                self.config.path.display()
-            ));
+            return Err(refuse(PartRefusal::TimeBudget));
         }
         if self.options.precision != Precision::Exact {
-            return Err(format!(
-                "{}: --part/--samples need render.precision = \"exact\": parts merge exact sums, and f32 sums would not add up to the full render",
-                self.config.path.display()
-            ));
+            return Err(refuse(PartRefusal::NotExact));
         }
-        let hash = crate::parts::config_hash(&self.config_text, &self.config)?;
+        let hash = crate::parts::config_hash(&self.config_text, &self.config)
+            .map_err(HostError::PartFile)?;
         self.options.sample_begin = spec.begin;
         self.options.spp = spec.end - spec.begin;
         self.part = Some((spec, hash));
@@ -427,8 +452,8 @@ impl Session {
     /// config, the scene, a plugin) or another output, and each one's folder must accept a
     /// new file. The CLI calls it before rendering, after the outputs are final; sessions
     /// that write nothing (benchmarks, tests) need not.
-    pub fn check_outputs(&self) -> Result<(), String> {
-        let cfg = self.config.path.display();
+    pub fn check_outputs(&self) -> Result<(), HostError> {
+        let file = &self.config.path;
         let mut inputs: Vec<(&str, PathBuf)> = vec![
             ("the config", self.config.path.clone()),
             ("the scene", self.config.scene.clone()),
@@ -438,18 +463,26 @@ impl Session {
         for (i, (what, out)) in outputs.iter().enumerate() {
             let key = comparable_path(out);
             if let Some((input, _)) = inputs.iter().find(|(_, p)| comparable_path(p) == key) {
-                return Err(format!(
-                    "{cfg}: {what} {} is {input}; refusing to overwrite an input",
-                    out.display()
-                ));
+                return Err(HostError::OutputIsInput {
+                    file: file.clone(),
+                    what,
+                    output: out.clone(),
+                    input,
+                });
             }
             if let Some((other, _)) = outputs[..i].iter().find(|(_, p)| comparable_path(p) == key) {
-                return Err(format!(
-                    "{cfg}: {what} and {other} are the same file {}; give them different paths",
-                    out.display()
-                ));
+                return Err(HostError::SameOutput {
+                    file: file.clone(),
+                    what,
+                    other,
+                    output: out.clone(),
+                });
             }
-            crate::output::check_writable(out).map_err(|e| format!("{cfg}: {what}: {e}"))?;
+            crate::output::check_writable(out).map_err(|error| HostError::Output {
+                file: Some(file.clone()),
+                what: Some(what),
+                error,
+            })?;
         }
         Ok(())
     }
@@ -459,7 +492,7 @@ impl Session {
         &self,
         stop: &AtomicBool,
         progress: &(dyn Fn(&Progress) + Sync),
-    ) -> Result<RenderOutcome, String> {
+    ) -> Result<RenderOutcome, HostError> {
         render(
             &self.instance,
             &self.scene,
@@ -468,6 +501,7 @@ impl Session {
             stop,
             progress,
         )
+        .map_err(HostError::Render)
     }
 
     /// Writes the EXR (main image plus lighting layers) and the PNG preview, each atomically.
@@ -479,7 +513,7 @@ impl Session {
         &self,
         mut frame: Frame,
         outcome_stats: &crate::RenderStats,
-    ) -> Result<Vec<PathBuf>, String> {
+    ) -> Result<Vec<PathBuf>, HostError> {
         let mut written = Vec::new();
         let (w, h) = (frame.width as usize, frame.height as usize);
         // The preview keeps 8-bit pixels (3 bytes a pixel), made from the EXR's main channels
@@ -490,7 +524,7 @@ impl Session {
             if let Some((spec, hash)) = &self.part {
                 meta.entries
                     .extend(crate::parts::part_entries(spec, *hash, &frame));
-                crate::parts::write_part_exr(path, &frame, &meta)?;
+                crate::parts::write_part_exr(path, &frame, &meta).map_err(HostError::PartFile)?;
             } else {
                 let layers: Vec<_> = (0..=frame.layer_count as usize)
                     .map(|k| crate::output::PlanarLayer {
@@ -503,13 +537,15 @@ impl Session {
                     })
                     .collect();
                 if let Some(png) = &self.png_path {
-                    preview = Some(
-                        PngPreview::from_planar(png, w, h, &layers[0].channels, 0.0)
-                            .map_err(|e| e.to_string())?,
-                    );
+                    preview = Some(PngPreview::from_planar(
+                        png,
+                        w,
+                        h,
+                        &layers[0].channels,
+                        0.0,
+                    )?);
                 }
-                crate::output::write_exr_planar(path, w, h, layers, &[], &meta)
-                    .map_err(|e| e.to_string())?;
+                crate::output::write_exr_planar(path, w, h, layers, &[], &meta)?;
             }
             written.push(path.clone());
             if !outcome_stats.integrator.is_empty() {
@@ -524,8 +560,7 @@ impl Session {
                         path: json_path.clone(),
                         source: e,
                     })
-                })
-                .map_err(|e| e.to_string())?;
+                })?;
                 written.push(json_path);
             }
         }
@@ -533,11 +568,9 @@ impl Session {
             let preview = match preview {
                 Some(p) => p,
                 // No EXR, or a part's (which keeps the frame): from the resolved image.
-                None => {
-                    PngPreview::new(path, w, h, &frame.image(), 0.0).map_err(|e| e.to_string())?
-                }
+                None => PngPreview::new(path, w, h, &frame.image(), 0.0)?,
             };
-            preview.write(path).map_err(|e| e.to_string())?;
+            preview.write(path)?;
             written.push(path.clone());
         }
         Ok(written)
@@ -600,7 +633,7 @@ impl Session {
 pub fn output_paths(
     config: &RenderConfig,
     out: Option<&Path>,
-) -> Result<(Option<PathBuf>, Option<PathBuf>), String> {
+) -> Result<(Option<PathBuf>, Option<PathBuf>), HostError> {
     let Some(out) = out else {
         return Ok((Some(config.output_exr.clone()), config.output_png.clone()));
     };
@@ -608,10 +641,9 @@ pub fn output_paths(
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("png"))
     {
-        return Err(format!(
-            "--out {}: --out names the EXR image (e.g. x.exr); the PNG preview is written beside it",
-            out.display()
-        ));
+        return Err(HostError::OutNotExr {
+            out: out.to_path_buf(),
+        });
     }
     let png = config
         .output_png
@@ -637,17 +669,20 @@ fn take_mutations(
     params: &mut Vec<(String, toml::Value)>,
     list: &str,
     config: &Path,
-) -> Result<Vec<MutationEntry>, String> {
+) -> Result<Vec<MutationEntry>, HostError> {
     let Some(pos) = params.iter().position(|(k, _)| k == list) else {
         return Ok(Vec::new());
     };
     let (_, value) = params.remove(pos);
-    let at = |i: usize, msg: &str| format!("{}: integrator.{list}[{i}]: {msg}", config.display());
+    let in_list = |msg: String| HostError::Mutations {
+        file: config.to_path_buf(),
+        msg,
+    };
+    let at = |i: usize, msg: &str| in_list(format!("integrator.{list}[{i}]: {msg}"));
     let toml::Value::Array(items) = value else {
-        return Err(format!(
-            "{}: integrator.{list} must be an array of tables ([[integrator.{list}]])",
-            config.display()
-        ));
+        return Err(in_list(format!(
+            "integrator.{list} must be an array of tables ([[integrator.{list}]])"
+        )));
     };
     let mut out = Vec::with_capacity(items.len());
     for (i, item) in items.into_iter().enumerate() {

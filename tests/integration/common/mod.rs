@@ -4,8 +4,10 @@
 #![allow(dead_code)]
 
 use flowlight_core::Rgb;
+use flowlight_host::error::HostError;
 use flowlight_host::render::RenderOutcome;
 use flowlight_host::session::{Overrides, Session};
+use flowlight_host::PluginError;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
@@ -31,6 +33,20 @@ pub fn scratch(name: &str) -> TempDir {
         std::process::id(),
         N.fetch_add(1, Ordering::Relaxed)
     ))
+}
+
+/// What `plugin` said when it refused a session (its `create`, or the host checking the
+/// parameters it declares): the message of the [`PluginError::Call`]. Panics, naming the
+/// error, on any other error.
+pub fn plugin_refusal<'e>(e: &'e HostError, plugin: &str) -> &'e str {
+    if let HostError::Plugin { error, .. } = e {
+        if let PluginError::Call { name, message, .. } = error.as_ref() {
+            if name == plugin {
+                return message;
+            }
+        }
+    }
+    panic!("not a refusal by plugin '{plugin}': {e:?}")
 }
 
 pub fn toml_params(pairs: &[(&str, toml::Value)]) -> Vec<(String, toml::Value)> {
