@@ -1,6 +1,6 @@
 //! The root package's integration tests, one binary: each file of this folder is a module
-//! (`cargo test --test integration cli::` runs one of them), `common` holds their shared
-//! helpers. One binary instead of one per file, because each binary links the whole
+//! (`cargo test --test integration cli::` runs one of them), `common` holds the functions
+//! they share. One binary instead of one per file, because each binary links the whole
 //! workspace again after any change to a crate below the host.
 //!
 //! The plugins must have been built first (`cargo build --workspace`): the host loads them

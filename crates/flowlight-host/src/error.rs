@@ -49,7 +49,7 @@ pub enum HostError {
     Variable(String),
     /// A plugin could not be found, loaded or created; `file` and `field` say where the
     /// config named it, when the message gives them. Boxed: the other variants are small,
-    /// and every `Result` of the session carries the largest.
+    /// and every `Result` of a `Session` carries the largest.
     Plugin {
         file: Option<PathBuf>,
         field: Option<String>,

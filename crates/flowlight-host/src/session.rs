@@ -123,7 +123,7 @@ fn frame_precision(config: &RenderConfig) -> Precision {
     }
 }
 
-/// A plugin's error while the session was prepared, said of the config (and of the config
+/// A plugin's error while preparing a `Session`, said of the config (and of the config
 /// key that named the plugin, if given).
 fn plugin_error(config: &RenderConfig, field: Option<String>, error: PluginError) -> HostError {
     HostError::Plugin {

@@ -35,7 +35,7 @@ pub fn scratch(name: &str) -> TempDir {
     ))
 }
 
-/// What `plugin` said when it refused a session (its `create`, or the host checking the
+/// What `plugin` said when it refused to prepare a `Session` (its `create`, or the host checking the
 /// parameters it declares): the message of the [`PluginError::Call`]. Panics, naming the
 /// error, on any other error.
 pub fn plugin_refusal<'e>(e: &'e HostError, plugin: &str) -> &'e str {
