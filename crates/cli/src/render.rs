@@ -88,7 +88,16 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
         w,
         h
     );
+    // How long preparation and the first unit took, and for scripts and tests a sign that the
+    // render is under way (FLOWLIGHT_LOG=flowlight_cli=debug).
+    let first_unit = std::sync::Once::new();
     let progress = |p: &flowlight_host::render::Progress| {
+        first_unit.call_once(|| {
+            tracing::debug!(
+                "first work unit finished after {:.3} s",
+                p.elapsed.as_secs_f64()
+            )
+        });
         let spp = p.pixel_samples as f64 / (w * h) as f64;
         bar.set_message(format!("{spp:.1} spp"));
         if p.budget.is_some() {

@@ -3,9 +3,11 @@
 //! The host loads plugins ([`plugin`]), owns the one rayon thread pool and schedules work
 //! units on it ([`render`](mod@render)), answers ray queries through an intersector ([`intersector`]),
 //! owns the accumulators ([`accumulation`]), counts statistics, and writes images atomically
-//! ([`output`]); [`parts`] splits a render into sample ranges and merges them back.
+//! ([`output`]); [`parts`] splits a render into sample ranges and merges them back. A
+//! [`session::Session`] fails with a [`HostError`] ([`error`]).
 
 pub mod accumulation;
+pub mod error;
 pub mod intersector;
 pub mod metrics;
 pub mod output;
@@ -16,5 +18,6 @@ pub mod plugin;
 pub mod render;
 pub mod session;
 
+pub use error::HostError;
 pub use plugin::{IntegratorInstance, PluginError, PluginLibrary};
 pub use render::{render, RenderOptions, RenderStats};

@@ -5,7 +5,8 @@
 use super::Overrides;
 use crate::accumulation::{Precision, Style};
 use crate::intersector::{build_intersector_with, Intersector};
-use crate::plugin::{find_plugin, normalised_weights, MutationInstance, PluginLibrary};
+use crate::error::HostError;
+use crate::plugin::{find_plugin, normalised_weights, MutationInstance, PluginError, PluginLibrary};
 use crate::render::RenderOptions;
 use flowlight_core::camera::Camera;
 use flowlight_core::material::Texture;
@@ -33,10 +34,13 @@ pub(super) fn relative_to(name: &str, base: &Path) -> String {
 /// `FLOWLIGHT_EMBREE_QUALITY`, a render takes `[render] robust` and `build_quality` from its
 /// config only. Said aloud because a render timed with one of them set measures the config's
 /// mode, not the variable's (earlier measurements of the robust mode's cost were void so).
-pub(super) fn ignored_embree_variables(
-    is_set: impl Fn(&str) -> bool,
-    config: &Path,
-) -> Vec<String> {
+
+/// One warning per Embree variable of the ray benchmark that is set (`is_set`) while a render
+/// of `config` runs: the benchmark has no config and reads `FLOWLIGHT_EMBREE_ROBUST` and
+/// `FLOWLIGHT_EMBREE_QUALITY`, a render takes `[render] robust` and `build_quality` from its
+/// config only. Said aloud because a render timed with one of them set measures the config's
+/// mode, not the variable's (earlier measurements of the robust mode's cost were void so).
+pub(super) fn ignored_embree_variables(is_set: impl Fn(&str) -> bool, config: &Path) -> Vec<String> {
     [
         ("FLOWLIGHT_EMBREE_ROBUST", "robust"),
         ("FLOWLIGHT_EMBREE_QUALITY", "build_quality"),
@@ -60,22 +64,40 @@ pub(super) fn frame_precision(config: &RenderConfig) -> Precision {
     }
 }
 
+/// A plugin's error while preparing a `Session`, said of the config (and of the config
+/// key that named the plugin, if given).
+pub(super) fn plugin_error(config: &RenderConfig, field: Option<String>, error: PluginError) -> HostError {
+    HostError::Plugin {
+        file: Some(config.path.clone()),
+        field,
+        error: Box::new(error),
+    }
+}
+
+/// The image of `config` would not fit in memory.
+pub(super) fn memory_error(config: &RenderConfig, msg: String) -> HostError {
+    HostError::Memory {
+        file: Some(config.path.clone()),
+        msg,
+    }
+}
+
 /// Applies the command line's `--set KEY=VALUE`s: `render.*` keys to the render settings
 /// that may be set so, every other key to the integrator's parameters (replaced or added).
 pub(super) fn apply_set_overrides(
     config: &mut RenderConfig,
     params: &[(String, toml::Value)],
-) -> Result<(), String> {
+) -> Result<(), HostError> {
     for (k, v) in params {
         // `--set render.accumulation=caching` and its siblings set the render's keys.
         if let Some(key) = k.strip_prefix("render.") {
-            if config.set_render_key(key, v).map_err(|e| e.to_string())? {
+            if config.set_render_key(key, v)? {
                 continue;
             }
-            return Err(format!(
-                "{}: --set {k}: only render.accumulation, render.precision, render.accumulation_cache_mib and render.flange can be set from the command line",
-                config.path.display()
-            ));
+            return Err(HostError::NotSettable {
+                file: config.path.clone(),
+                key: k.clone(),
+            });
         }
         match config
             .integrator_params
@@ -94,19 +116,28 @@ pub(super) fn apply_set_overrides(
 pub(super) fn build_intersector(
     config: &RenderConfig,
     scene: &Scene,
-) -> Result<(Box<dyn Intersector>, Duration), String> {
+) -> Result<(Box<dyn Intersector>, Duration), HostError> {
     for warning in ignored_embree_variables(|v| std::env::var_os(v).is_some(), &config.path) {
         tracing::warn!("{warning}");
     }
     let options = flowlight_embree::SceneOptions {
         robust: config.robust,
-        quality: flowlight_embree::BuildQuality::parse(&config.build_quality)
-            .map_err(|e| format!("{}: render.build_quality: {e}", config.path.display()))?,
-        packets: flowlight_embree::Packets::from_env()?,
+        quality: flowlight_embree::BuildQuality::parse(&config.build_quality).map_err(|msg| {
+            HostError::Field {
+                file: config.path.clone(),
+                field: "render.build_quality".into(),
+                msg,
+            }
+        })?,
+        packets: flowlight_embree::Packets::from_env().map_err(HostError::Variable)?,
         ..Default::default()
     };
-    build_intersector_with(config.intersector, scene, options)
-        .map_err(|e| format!("{}: {e}", config.path.display()))
+    build_intersector_with(config.intersector, scene, options).map_err(|msg| {
+        HostError::Intersector {
+            file: config.path.clone(),
+            msg,
+        }
+    })
 }
 
 /// The integrator's mutation list, taken out of its parameters: the name of the parameter
@@ -115,10 +146,10 @@ pub(super) fn build_intersector(
 pub(super) fn mutation_list(
     plugin: &PluginLibrary,
     config: &mut RenderConfig,
-) -> Result<(Option<String>, Vec<MutationEntry>), String> {
+) -> Result<(Option<String>, Vec<MutationEntry>), HostError> {
     let list_name = plugin
         .mutation_list_param()
-        .map_err(|e| format!("{}: {e}", config.path.display()))?;
+        .map_err(|error| plugin_error(config, None, error))?;
     let mut mutation_entries = match &list_name {
         Some(list) => take_mutations(&mut config.integrator_params, list, &config.path)?,
         None => Vec::new(),
@@ -130,7 +161,10 @@ pub(super) fn mutation_list(
         .map(|e| (e.plugin.as_str(), e.weight))
         .collect();
     let probabilities = normalised_weights(list_name.as_deref().unwrap_or("mutations"), &weights)
-        .map_err(|e| format!("{}: {e}", config.path.display()))?;
+        .map_err(|msg| HostError::Mutations {
+            file: config.path.clone(),
+            msg,
+        })?;
     for (entry, probability) in mutation_entries.iter_mut().zip(probabilities) {
         entry.weight = probability;
     }
@@ -179,23 +213,20 @@ pub(super) fn create_mutations(
     entries: &[MutationEntry],
     view: &SceneView,
     plugin_files: &mut Vec<PathBuf>,
-) -> Result<Vec<MutationInstance>, String> {
+) -> Result<Vec<MutationInstance>, HostError> {
     let mut mutations = Vec::new();
     for entry in entries {
         let path =
-            find_plugin(&relative_to(&entry.plugin, &config.base_dir), dirs).map_err(|e| {
-                format!(
-                    "{}: integrator.{}: {e}",
-                    config.path.display(),
-                    list_name.unwrap_or_default()
-                )
+            find_plugin(&relative_to(&entry.plugin, &config.base_dir), dirs).map_err(|error| {
+                let field = format!("integrator.{}", list_name.unwrap_or_default());
+                plugin_error(config, Some(field), error)
             })?;
         plugin_files.push(path.clone());
-        let lib = Arc::new(PluginLibrary::load(&path).map_err(|e| e.to_string())?);
+        let lib = Arc::new(PluginLibrary::load(&path)?);
         // SAFETY: as for the integrator: the view points into data the session owns and
         // drops after every instance.
         let m = unsafe { MutationInstance::create(lib, &entry.params, entry.weight, view) }
-            .map_err(|e| format!("{}: {e}", config.path.display()))?;
+            .map_err(|error| plugin_error(config, None, error))?;
         mutations.push(m);
     }
     Ok(mutations)
@@ -203,11 +234,7 @@ pub(super) fn create_mutations(
 
 /// The render options of `config` at the camera's resolution; the command line replaces the
 /// config's budget (`--time`, else `--spp`, else the file's), threads and seed.
-pub(super) fn render_options(
-    config: &RenderConfig,
-    camera: &Camera,
-    ov: &Overrides,
-) -> RenderOptions {
+pub(super) fn render_options(config: &RenderConfig, camera: &Camera, ov: &Overrides) -> RenderOptions {
     let (spp, time) = match (ov.time, ov.spp, config.budget) {
         (Some(t), _, _) => (0, Some(t)),
         (None, Some(n), _) => (n, None),
@@ -234,6 +261,8 @@ pub(super) fn render_options(
         flange: config.flange,
     }
 }
+
+
 /// One `[[integrator.mutations]]` entry.
 pub(super) struct MutationEntry {
     pub(super) plugin: String,
@@ -251,17 +280,20 @@ pub(super) fn take_mutations(
     params: &mut Vec<(String, toml::Value)>,
     list: &str,
     config: &Path,
-) -> Result<Vec<MutationEntry>, String> {
+) -> Result<Vec<MutationEntry>, HostError> {
     let Some(pos) = params.iter().position(|(k, _)| k == list) else {
         return Ok(Vec::new());
     };
     let (_, value) = params.remove(pos);
-    let at = |i: usize, msg: &str| format!("{}: integrator.{list}[{i}]: {msg}", config.display());
+    let in_list = |msg: String| HostError::Mutations {
+        file: config.to_path_buf(),
+        msg,
+    };
+    let at = |i: usize, msg: &str| in_list(format!("integrator.{list}[{i}]: {msg}"));
     let toml::Value::Array(items) = value else {
-        return Err(format!(
-            "{}: integrator.{list} must be an array of tables ([[integrator.{list}]])",
-            config.display()
-        ));
+        return Err(in_list(format!(
+            "integrator.{list} must be an array of tables ([[integrator.{list}]])"
+        )));
     };
     let mut out = Vec::with_capacity(items.len());
     for (i, item) in items.into_iter().enumerate() {
@@ -298,6 +330,7 @@ pub(super) fn take_mutations(
     }
     Ok(out)
 }
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -2,6 +2,7 @@
 //! integrator plugin, render, write the outputs.
 
 use crate::accumulation::{Frame, Precision};
+use crate::error::{HostError, PartRefusal};
 use crate::intersector::Intersector;
 use crate::output::{ExrMetadata, PngPreview};
 use crate::plugin::{find_plugin, search_dirs, IntegratorInstance, PluginLibrary};
@@ -19,8 +20,8 @@ use std::time::{Duration, Instant};
 mod load;
 
 use load::{
-    apply_set_overrides, build_intersector, create_mutations, frame_precision, mutation_list,
-    relative_to, render_options, scene_view,
+    apply_set_overrides, build_intersector, create_mutations, frame_precision, memory_error,
+    mutation_list, plugin_error, relative_to, render_options, scene_view,
 };
 
 /// Command-line settings that take precedence over the config file.
@@ -82,26 +83,25 @@ fn comparable_path(p: &Path) -> PathBuf {
 impl Session {
     /// Loads `config_path` and everything it names. Errors are one line naming the file,
     /// field or plugin at fault.
-    pub fn prepare(config_path: &Path, ov: &Overrides) -> Result<Session, String> {
-        let config = load_config(config_path).map_err(|e| e.to_string())?;
+    pub fn prepare(config_path: &Path, ov: &Overrides) -> Result<Session, HostError> {
+        let config = load_config(config_path)?;
         Session::from_config(config, ov)
     }
 
     /// [`Session::prepare`] for a config already read: `ov` applied, the scene loaded, the
     /// intersector built, the integrator (and its mutations) created over the scene's view.
-    pub fn from_config(mut config: RenderConfig, ov: &Overrides) -> Result<Session, String> {
+    pub fn from_config(mut config: RenderConfig, ov: &Overrides) -> Result<Session, HostError> {
         apply_set_overrides(&mut config, &ov.params)?;
         let (exr_path, png_path) = output_paths(&config, ov.out.as_deref())?;
         // Refuse an image that cannot fit before anything big is loaded (layers are known
         // once the integrator exists; checked again then).
         let precision = frame_precision(&config);
         crate::render::check_memory(config.width, config.height, 0, precision, 0)
-            .map_err(|e| format!("{}: {e}", config.path.display()))?;
+            .map_err(|msg| memory_error(&config, msg))?;
         let t0 = Instant::now();
-        let scene =
-            load_gltf(&config.scene, &config.material_overrides).map_err(|e| e.to_string())?;
+        let scene = load_gltf(&config.scene, &config.material_overrides)?;
         let load_time = t0.elapsed();
-        let camera = config.camera(&scene).map_err(|e| e.to_string())?;
+        let camera = config.camera(&scene)?;
         tracing::debug!(?camera, "camera");
         let (intersector, build_time) = build_intersector(&config, &scene)?;
 
@@ -110,15 +110,15 @@ impl Session {
             &relative_to(&config.integrator_plugin, &config.base_dir),
             &dirs,
         )
-        .map_err(|e| format!("{}: integrator.plugin: {e}", config.path.display()))?;
-        let plugin = Arc::new(PluginLibrary::load(&plugin_path).map_err(|e| e.to_string())?);
+        .map_err(|error| plugin_error(&config, Some("integrator.plugin".into()), error))?;
+        let plugin = Arc::new(PluginLibrary::load(&plugin_path)?);
 
         let textures = scene.texture_views();
         // Hashed with the mutations still among the parameters.
         let config_text = crate::parts::config_text(&config, &camera, &config.integrator_params);
         let (list_name, mutation_entries) = mutation_list(&plugin, &mut config)?;
         let environment = match &config.environment {
-            Some(e) => load_environment(&config.path, e).map_err(|e| e.to_string())?,
+            Some(e) => load_environment(&config.path, e)?,
             None => EnvironmentData::default(),
         };
         let env_view = environment.view();
@@ -144,7 +144,7 @@ impl Session {
         let instance = unsafe {
             IntegratorInstance::create(plugin, &config.integrator_params, mutations, view)
         }
-        .map_err(|e| format!("{}: {e}", config.path.display()))?;
+        .map_err(|error| plugin_error(&config, None, error))?;
         crate::render::check_memory(
             config.width,
             config.height,
@@ -152,7 +152,7 @@ impl Session {
             precision,
             0,
         )
-        .map_err(|e| format!("{}: {e}", config.path.display()))?;
+        .map_err(|msg| memory_error(&config, msg))?;
         let options = render_options(&config, &camera, ov);
         let session = Session {
             instance,
@@ -179,20 +179,19 @@ impl Session {
     /// part of a distributed render: [`crate::parts`]); the EXR then records the range, the
     /// config hash and the exact sums. Refused under a time budget (a part needs a fixed
     /// number of samples).
-    pub fn set_part(&mut self, spec: crate::parts::PartSpec) -> Result<(), String> {
+    pub fn set_part(&mut self, spec: crate::parts::PartSpec) -> Result<(), HostError> {
+        let refuse = |refusal| HostError::Part {
+            file: self.config.path.clone(),
+            refusal,
+        };
         if self.options.time.is_some() {
-            return Err(format!(
-                "{}: --part/--samples need a sample budget (render.spp or --spp), not a time budget",
-                self.config.path.display()
-            ));
+            return Err(refuse(PartRefusal::TimeBudget));
         }
         if self.options.precision != Precision::Exact {
-            return Err(format!(
-                "{}: --part/--samples need render.precision = \"exact\": parts merge exact sums, and f32 sums would not add up to the full render",
-                self.config.path.display()
-            ));
+            return Err(refuse(PartRefusal::NotExact));
         }
-        let hash = crate::parts::config_hash(&self.config_text, &self.config)?;
+        let hash = crate::parts::config_hash(&self.config_text, &self.config)
+            .map_err(HostError::PartFile)?;
         self.options.sample_begin = spec.begin;
         self.options.spp = spec.end - spec.begin;
         self.part = Some((spec, hash));
@@ -216,8 +215,8 @@ impl Session {
     /// config, the scene, a plugin) or another output, and each one's folder must accept a
     /// new file. The CLI calls it before rendering, after the outputs are final; sessions
     /// that write nothing (benchmarks, tests) need not.
-    pub fn check_outputs(&self) -> Result<(), String> {
-        let cfg = self.config.path.display();
+    pub fn check_outputs(&self) -> Result<(), HostError> {
+        let file = &self.config.path;
         let mut inputs: Vec<(&str, PathBuf)> = vec![
             ("the config", self.config.path.clone()),
             ("the scene", self.config.scene.clone()),
@@ -227,18 +226,26 @@ impl Session {
         for (i, (what, out)) in outputs.iter().enumerate() {
             let key = comparable_path(out);
             if let Some((input, _)) = inputs.iter().find(|(_, p)| comparable_path(p) == key) {
-                return Err(format!(
-                    "{cfg}: {what} {} is {input}; refusing to overwrite an input",
-                    out.display()
-                ));
+                return Err(HostError::OutputIsInput {
+                    file: file.clone(),
+                    what,
+                    output: out.clone(),
+                    input,
+                });
             }
             if let Some((other, _)) = outputs[..i].iter().find(|(_, p)| comparable_path(p) == key) {
-                return Err(format!(
-                    "{cfg}: {what} and {other} are the same file {}; give them different paths",
-                    out.display()
-                ));
+                return Err(HostError::SameOutput {
+                    file: file.clone(),
+                    what,
+                    other,
+                    output: out.clone(),
+                });
             }
-            crate::output::check_writable(out).map_err(|e| format!("{cfg}: {what}: {e}"))?;
+            crate::output::check_writable(out).map_err(|error| HostError::Output {
+                file: Some(file.clone()),
+                what: Some(what),
+                error,
+            })?;
         }
         Ok(())
     }
@@ -248,7 +255,7 @@ impl Session {
         &self,
         stop: &AtomicBool,
         progress: &(dyn Fn(&Progress) + Sync),
-    ) -> Result<RenderOutcome, String> {
+    ) -> Result<RenderOutcome, HostError> {
         render(
             &self.instance,
             &self.scene,
@@ -257,6 +264,7 @@ impl Session {
             stop,
             progress,
         )
+        .map_err(HostError::Render)
     }
 
     /// Writes the EXR (main image plus lighting layers) and the PNG preview, each atomically.
@@ -268,7 +276,7 @@ impl Session {
         &self,
         mut frame: Frame,
         outcome_stats: &crate::RenderStats,
-    ) -> Result<Vec<PathBuf>, String> {
+    ) -> Result<Vec<PathBuf>, HostError> {
         let mut written = Vec::new();
         let (w, h) = (frame.width as usize, frame.height as usize);
         // The preview keeps 8-bit pixels (3 bytes a pixel), made from the EXR's main channels
@@ -279,7 +287,7 @@ impl Session {
             if let Some((spec, hash)) = &self.part {
                 meta.entries
                     .extend(crate::parts::part_entries(spec, *hash, &frame));
-                crate::parts::write_part_exr(path, &frame, &meta)?;
+                crate::parts::write_part_exr(path, &frame, &meta).map_err(HostError::PartFile)?;
             } else {
                 let layers: Vec<_> = (0..=frame.layer_count as usize)
                     .map(|k| crate::output::PlanarLayer {
@@ -292,13 +300,15 @@ impl Session {
                     })
                     .collect();
                 if let Some(png) = &self.png_path {
-                    preview = Some(
-                        PngPreview::from_planar(png, w, h, &layers[0].channels, 0.0)
-                            .map_err(|e| e.to_string())?,
-                    );
+                    preview = Some(PngPreview::from_planar(
+                        png,
+                        w,
+                        h,
+                        &layers[0].channels,
+                        0.0,
+                    )?);
                 }
-                crate::output::write_exr_planar(path, w, h, layers, &[], &meta)
-                    .map_err(|e| e.to_string())?;
+                crate::output::write_exr_planar(path, w, h, layers, &[], &meta)?;
             }
             written.push(path.clone());
             if !outcome_stats.integrator.is_empty() {
@@ -313,8 +323,7 @@ impl Session {
                         path: json_path.clone(),
                         source: e,
                     })
-                })
-                .map_err(|e| e.to_string())?;
+                })?;
                 written.push(json_path);
             }
         }
@@ -322,11 +331,9 @@ impl Session {
             let preview = match preview {
                 Some(p) => p,
                 // No EXR, or a part's (which keeps the frame): from the resolved image.
-                None => {
-                    PngPreview::new(path, w, h, &frame.image(), 0.0).map_err(|e| e.to_string())?
-                }
+                None => PngPreview::new(path, w, h, &frame.image(), 0.0)?,
             };
-            preview.write(path).map_err(|e| e.to_string())?;
+            preview.write(path)?;
             written.push(path.clone());
         }
         Ok(written)
@@ -389,7 +396,7 @@ impl Session {
 pub fn output_paths(
     config: &RenderConfig,
     out: Option<&Path>,
-) -> Result<(Option<PathBuf>, Option<PathBuf>), String> {
+) -> Result<(Option<PathBuf>, Option<PathBuf>), HostError> {
     let Some(out) = out else {
         return Ok((Some(config.output_exr.clone()), config.output_png.clone()));
     };
@@ -397,10 +404,9 @@ pub fn output_paths(
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("png"))
     {
-        return Err(format!(
-            "--out {}: --out names the EXR image (e.g. x.exr); the PNG preview is written beside it",
-            out.display()
-        ));
+        return Err(HostError::OutNotExr {
+            out: out.to_path_buf(),
+        });
     }
     let png = config
         .output_png
