@@ -290,10 +290,14 @@ pub fn parse_precision(s: &str) -> Result<FramePrecision, String> {
 
 /// Parses `render.accumulation_cache_mib`: a positive, finite number of MiB.
 pub fn parse_cache_mib(v: f64) -> Result<f64, String> {
-    if v > 0.0 && v.is_finite() && v <= 1.0e9 {
-        Ok(v)
-    } else {
+    if !(v > 0.0 && v.is_finite()) {
         Err(format!("must be a positive number of MiB, got {v}"))
+    } else if v > 1.0e9 {
+        Err(format!(
+            "{v} MiB is beyond the limit of 1e9 MiB (about 1 PiB); the caches need only a few MiB per thread"
+        ))
+    } else {
+        Ok(v)
     }
 }
 
@@ -612,8 +616,9 @@ pub fn parse_config(path: &Path, text: &str) -> Result<RenderConfig, ConfigError
                     "give either `look_at` or `forward`, not both".into(),
                 ));
             }
+            // In f64: the squared length of [0, 0, 1e-30] underflows f32 to 0.
             if c.forward
-                .is_some_and(|f| Vec3::from_array(f).length_squared() == 0.0)
+                .is_some_and(|f| Vec3::from_array(f).as_dvec3().length_squared() == 0.0)
             {
                 return Err(invalid("camera.forward", "must not be zero".into()));
             }
@@ -834,17 +839,27 @@ impl RenderConfig {
             .position
             .or(g.map(|g| g.position))
             .ok_or_else(|| missing("position"))?;
-        let forward = match (o.look_at, o.forward) {
-            (Some(l), _) => l - position,
-            (None, Some(f)) => f,
-            (None, None) => g.map(|g| g.forward).ok_or_else(|| missing("look_at"))?,
+        let (forward, key) = match (o.look_at, o.forward) {
+            (Some(l), _) => (l.as_dvec3() - position.as_dvec3(), "look_at"),
+            (None, Some(f)) => (f.as_dvec3(), "forward"),
+            (None, None) => (
+                g.map(|g| g.forward)
+                    .ok_or_else(|| missing("look_at"))?
+                    .as_dvec3(),
+                "look_at",
+            ),
         };
         let up = o.up.or(g.map(|g| g.up)).unwrap_or(Vec3::Y);
-        let f = forward.normalize_or_zero();
+        // Normalised in f64: a direction such as [0, 0, 1e30] overflows f32's squared length.
+        let f = forward.normalize_or_zero().as_vec3();
         if f == Vec3::ZERO {
             return Err(invalid(
-                "look_at",
-                "the camera looks at its own position".into(),
+                key,
+                if key == "forward" {
+                    "has no direction (too short)".into()
+                } else {
+                    "the camera looks at its own position".into()
+                },
             ));
         }
         if f.cross(up.normalize_or_zero()).length_squared() < 1e-12 {
