@@ -11,8 +11,14 @@
 //!
 //! A render with a time budget `T` starts no work unit after `T` (the clock starts before the
 //! integrator's one-time `prepare`, which counts against the budget); units in flight finish,
-//! so the overrun is at most one unit per thread. How the samples finished by then are
-//! normalised depends on where a unit deposits:
+//! so the overrun is at most one unit per thread. A unit that can run long asks the host
+//! (`Tracer::should_stop`, ABI 6) whether the budget is spent or Ctrl-C was pressed, and
+//! returns at once when it is (ERPT asks before each seed and every 256 chain steps): a
+//! Blasting unit told so is discarded, as if it had not started; a Buffering or Caching
+//! unit's deposits are already shared, so it counts as finished with the chains it ran —
+//! a unit per thread of the cut pass holds less than its share of energy, the price of
+//! stopping within milliseconds rather than after seconds. How the samples finished by then
+//! are normalised depends on where a unit deposits:
 //!
 //! * tile-local integrators (MCPT): every pixel's value is the mean of its own finished
 //!   samples, sum / nᵢ, so stopping between any two units leaves every pixel unbiased;
@@ -50,7 +56,8 @@
 //!   warning (they only add scheduling and contention).
 //! * Memory: [`frame_bytes_with`] estimates the frame and output buffers, [`check_memory`]
 //!   adds the accumulation style's private buffers; a render that would need more than
-//!   `MemAvailable` (`/proc/meminfo`) is refused before allocating.
+//!   the memory available (`MemAvailable`, the memory cgroup's limit, `RLIMIT_AS`:
+//!   [`flowlight_scene::memory`]) is refused before allocating.
 //!
 //! # Accumulation
 //!
@@ -63,7 +70,7 @@ use crate::accumulation::{
     FlushCounts, Frame, MicroTileCache, Precision, SharedFrame, Style, ThreadBuffer,
     TileAccumulator,
 };
-use crate::intersector::{Intersector, UnitTracer};
+use crate::intersector::{Intersector, StopSignal, UnitTracer};
 use crate::plugin::{IntegratorInstance, PluginError};
 use flowlight_scene::Scene;
 use flowlight_sdk::{AccumulationStyle, Accumulator, WorkUnit};
@@ -312,12 +319,11 @@ pub fn frame_bytes_with(width: u32, height: u32, layers: u32, precision: Precisi
         .checked_mul(per_pixel)
 }
 
-/// `MemAvailable` of `/proc/meminfo` in bytes, where there is one.
+/// The bytes this process may still allocate: the least of the host's `MemAvailable`, the
+/// room under its memory cgroup's limit (v2 `memory.max`, v1 `memory.limit_in_bytes`) and
+/// the address space left under `RLIMIT_AS` ([`flowlight_scene::memory`]).
 pub fn available_memory() -> Option<u64> {
-    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    kb.checked_mul(1024)
+    flowlight_scene::memory::available_memory()
 }
 
 fn human_bytes(b: u64) -> String {
@@ -586,7 +592,14 @@ pub fn render(
                 sample_count: count,
                 seed: opts.seed,
             };
-            let mut tracer = UnitTracer::new(scene, intersector);
+            // The plugin may ask whether to stop inside a long unit (ERPT's chains): a
+            // Blasting unit then ends early and its tile is discarded, as if it had not
+            // started; a Buffering or Caching unit's deposits are already shared, so it is
+            // kept as a finished unit with the chains it ran.
+            let mut tracer = UnitTracer::new(scene, intersector).with_stop(StopSignal {
+                interrupt: stop,
+                deadline,
+            });
             let mut unit_stats = vec![0.0f64; specs.len()];
             let (result, counts) = if style == Style::Blasting {
                 let mut tile = TileAccumulator::with_precision(
@@ -599,7 +612,7 @@ pub fn render(
                 blast_bytes.fetch_max(tile.bytes(), Ordering::Relaxed);
                 let result =
                     instance.render(&unit, &tracer.table(), &tile.table(), &mut unit_stats);
-                if result.is_ok() {
+                if result.is_ok() && !tracer.stop_answered {
                     shared.merge_tile(&tile, count);
                 }
                 (result, tile.counts)
@@ -642,6 +655,11 @@ pub fn render(
                 halted.store(true, Ordering::Relaxed);
                 skipped.store(true, Ordering::Relaxed);
                 error.lock().unwrap().get_or_insert(e);
+                return;
+            }
+            if tracer.stop_answered && style == Style::Blasting {
+                // Abandoned and discarded: the pass is cut before this unit.
+                skipped.store(true, Ordering::Relaxed);
                 return;
             }
             if !specs.is_empty() {

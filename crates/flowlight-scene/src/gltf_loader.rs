@@ -9,7 +9,7 @@
 //!   placement becomes a [`MeshInstance`] (see [`crate::scene`]). The instance and
 //!   virtual-triangle limits are checked from the accessors' counts before any geometry is
 //!   decoded ([`MAX_INSTANCES`], [`MAX_VIRTUAL_TRIANGLES`], and the memory estimate against
-//!   `MemAvailable`).
+//!   the memory available: [`crate::memory`]).
 //! - Only triangle primitives are loaded: TRIANGLES as they are, TRIANGLE_STRIP and
 //!   TRIANGLE_FAN converted to lists; points and lines are skipped with a warning and counted.
 //! - Primitives without NORMAL are flat shaded (the glTF spec asks for flat normals then):
@@ -1037,6 +1037,7 @@ impl Loader<'_> {
                 s.instanced_placements, scene.meshes.len() - usize::from(scene.instances[0].identity), s.virtual_triangles
             );
         }
+        self.scene.files = self.src.referenced_files();
         Ok(self.scene)
     }
 }
@@ -1184,7 +1185,8 @@ fn primitive_triangles(prim: &gltf::Primitive) -> u64 {
 /// Refuses, before any geometry is decoded, a scene whose instance count or instanced
 /// (virtual) triangle count exceeds [`MAX_INSTANCES`] / [`MAX_VIRTUAL_TRIANGLES`], or whose
 /// estimated geometry memory (stored triangles × [`BYTES_PER_STORED_TRIANGLE`] + instances ×
-/// [`BYTES_PER_INSTANCE`]) exceeds `MemAvailable` (issue 12, "Limits").
+/// [`BYTES_PER_INSTANCE`]) exceeds the memory available ([`crate::memory`]: `MemAvailable`,
+/// the memory cgroup's limit, `RLIMIT_AS`).
 fn check_instancing_limits(
     file: &Path,
     doc: &gltf::Document,
@@ -1232,14 +1234,7 @@ fn check_instancing_limits(
     Ok(())
 }
 
-/// `MemAvailable` of `/proc/meminfo` in bytes, where there is one (as the host's image-size
-/// check reads it).
-fn available_memory() -> Option<u64> {
-    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    kib.checked_mul(1024)
-}
+use crate::memory::available_memory;
 
 /// Largest coordinate magnitude the ray/triangle arithmetic takes without overflow: the
 /// watertight test and the error bounds multiply three coordinates (x³ < f32::MAX ≈ 3.4e38).
