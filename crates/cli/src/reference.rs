@@ -18,6 +18,15 @@ pub fn run(
 ) -> Result<()> {
     use flowlight_bench::{self as bench, Budget, RenderRequest};
     let t0 = std::time::Instant::now();
+    let scene = match &config {
+        Some(c) if from.is_empty() => Some(
+            flowlight_scene::config::load_config(c)
+                .map_err(|e| anyhow!("{e}"))?
+                .scene,
+        ),
+        _ => None,
+    };
+    let config_path = config.clone();
     let (r, out) = if !from.is_empty() {
         let out = out.ok_or_else(|| anyhow!("--from needs --out"))?;
         (
@@ -65,9 +74,22 @@ pub fn run(
         ));
         (r, out)
     };
+    let png = out.with_extension("png");
+    let mut inputs: Vec<(&str, &std::path::Path)> = from
+        .iter()
+        .map(|f| ("a --from image", f.as_path()))
+        .collect();
+    if let Some(c) = &config_path {
+        inputs.push(("the config", c.as_path()));
+    }
+    if let Some(s) = &scene {
+        inputs.push(("the scene", s.as_path()));
+    }
+    for o in [&out, &png] {
+        crate::refuse_input_as_output(o, &inputs)?;
+    }
     bench::write_reference(&out, &r).map_err(|e| anyhow!(e))?;
     // An sRGB preview beside it, to look at the reference without an EXR viewer.
-    let png = out.with_extension("png");
     flowlight_host::output::write_png_preview(&png, r.width, r.height, &r.image, 0.0)
         .map_err(|e| anyhow!("{e}"))?;
     println!("reference summary");
