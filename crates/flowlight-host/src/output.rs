@@ -585,10 +585,65 @@ fn smallvec_of_channels(capacity: usize) -> exr::prelude::SmallVec<[AnyChannel<F
 /// Integer channels by name, as [`read_exr_u32`] returns them.
 pub type U32Channels = BTreeMap<String, Vec<u32>>;
 
+/// Refuses an EXR whose headers claim more pixels than the file or this process's memory
+/// can hold, before the decoder allocates them: a 1 KB file whose header claims
+/// 100000×100000 made the decoder abort on a 160 GB allocation. The file must hold at least
+/// its offset tables (8 bytes a chunk), and the samples decoded (with the copies the
+/// readers make) must fit in the memory available.
+pub fn check_exr_size(path: &Path) -> Result<(), OutputError> {
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|source| {
+        OutputError::ExrDecode {
+            path: path.to_owned(),
+            source,
+        }
+    })?;
+    let file_len = fs::metadata(path)
+        .map_err(|source| OutputError::Io {
+            path: path.to_owned(),
+            source,
+        })?
+        .len();
+    let (mut chunks, mut bytes) = (0u64, 0u64);
+    for h in &meta.headers {
+        let pixels = h.layer_size.0 as u64 * h.layer_size.1 as u64;
+        chunks = chunks.saturating_add(h.chunk_count as u64);
+        bytes = bytes.saturating_add(pixels.saturating_mul(h.channels.bytes_per_pixel as u64));
+    }
+    let size = meta
+        .headers
+        .first()
+        .map_or((0, 0), |h| (h.layer_size.0, h.layer_size.1));
+    let unsupported = |reason: String| OutputError::Unsupported {
+        path: path.to_owned(),
+        reason,
+    };
+    if chunks.saturating_mul(8) > file_len {
+        return Err(unsupported(format!(
+            "its header claims {}x{} pixels in {chunks} chunks, but the file's {file_len} bytes cannot even hold their offset table: it is truncated or corrupt",
+            size.0, size.1
+        )));
+    }
+    // The decoded samples, their f32 copies and the RGB pixels: about three times the data.
+    let need = bytes.saturating_mul(3);
+    if let Some(avail) = flowlight_scene::memory::available_memory() {
+        if need > avail {
+            return Err(unsupported(format!(
+                "its header claims {}x{} pixels, about {} MiB to decode, but {} MiB is available",
+                size.0,
+                size.1,
+                need >> 20,
+                avail >> 20
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// The 32-bit unsigned integer channels of an EXR file ([`RawChannel`]) as
 /// `(width, height, name → samples)`; float channels are skipped.
 pub fn read_exr_u32(path: &Path) -> Result<(usize, usize, U32Channels), OutputError> {
     use exr::prelude::traits::*;
+    check_exr_size(path)?;
     let image = exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()
@@ -622,6 +677,7 @@ pub type NamedLayers = Vec<(String, Vec<Rgb>)>;
 /// converted to `f32`.
 pub fn read_exr_rgb(path: &Path) -> Result<(usize, usize, NamedLayers), OutputError> {
     use exr::prelude::traits::*;
+    check_exr_size(path)?;
     let image = exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()
@@ -906,7 +962,8 @@ fn temp_prefix(path: &Path) -> Option<String> {
     Some(format!(".{name}.tmp-"))
 }
 
-/// Whether process `pid` is alive, where that can be told (Linux: `/proc/PID`).
+/// Whether process `pid` is alive in this PID namespace, where that can be told (Linux:
+/// `/proc/PID`). A PID that is not alive here may still be a live writer elsewhere.
 fn process_alive(pid: u32) -> Option<bool> {
     if !Path::new("/proc/self").exists() {
         return None;
@@ -915,9 +972,15 @@ fn process_alive(pid: u32) -> Option<bool> {
 }
 
 /// Removes temporary files `.{file name}.tmp-{pid}-{n}` of this output left by writes that
-/// never finished (a process killed during the write, a second Ctrl-C): those whose process
-/// is no longer alive. Files of live processes (this one included) and anything that does
-/// not match the pattern are left alone. Returns the files removed.
+/// never finished (a process killed during the write, a second Ctrl-C): those no live writer
+/// holds. A writer holds an exclusive lock (`flock`) on its temporary file from its creation
+/// to its rename ([`write_atomically`]), and the kernel releases it when the writer dies, so
+/// a temp file that can be locked belongs to no live writer — whatever PID namespace or
+/// machine the writer ran in (a container on a shared volume sees other PIDs, or none, in
+/// its `/proc`, so a PID that is not alive here proves nothing). Removed: the files whose PID
+/// is not alive here and which this cleaner can lock. Files of live local PIDs, locked
+/// files, and anything that does not match the pattern are left alone. Returns the files
+/// removed.
 pub fn clean_stale_temps(path: &Path) -> Vec<PathBuf> {
     let Some(prefix) = temp_prefix(path) else {
         return Vec::new();
@@ -944,14 +1007,46 @@ pub fn clean_stale_temps(path: &Path) -> Vec<PathBuf> {
         ) else {
             continue;
         };
+        // A writer of this PID namespace that is alive keeps its files whether or not it
+        // locked them (a version that did not lock, or one between creation and lock).
         if pid == std::process::id() || process_alive(pid) != Some(false) {
             continue;
         }
-        if e.file_type().is_ok_and(|t| t.is_file()) && fs::remove_file(e.path()).is_ok() {
+        if !e.file_type().is_ok_and(|t| t.is_file()) {
+            continue;
+        }
+        // Removed while locked: a writer that opened it just now and waits for the lock
+        // finds it gone and starts another ([`write_atomically`]).
+        let Ok(file) = fs::OpenOptions::new().read(true).open(e.path()) else {
+            continue;
+        };
+        if file.try_lock().is_ok() && fs::remove_file(e.path()).is_ok() {
             removed.push(e.path());
         }
     }
     removed
+}
+
+/// Creates the temporary file `tmp` and holds an exclusive lock on it (see
+/// [`clean_stale_temps`]): `None` when a cleaner removed it between its creation and the
+/// lock, so that the caller takes another name.
+fn create_locked(tmp: &Path) -> io::Result<Option<fs::File>> {
+    let file = fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(tmp)?;
+    file.lock()?;
+    // Locked: still the file under that name, or a cleaner got there first.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        let ours = file.metadata()?;
+        match fs::metadata(tmp) {
+            Ok(m) if m.ino() == ours.ino() && m.dev() == ours.dev() => {}
+            _ => return Ok(None),
+        }
+    }
+    Ok(Some(file))
 }
 
 /// Checks, without leaving anything behind, that `path` can be written later: it is not a
@@ -1064,17 +1159,27 @@ pub fn write_atomically(
         source,
     })?;
 
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(file_name);
-    tmp_name.push(format!(
-        ".tmp-{}-{}",
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let tmp = dir.join(tmp_name);
     for stale in clean_stale_temps(path) {
         tracing::info!("removed {}, left by an interrupted write", stale.display());
     }
+    // The temporary file is created and locked before it is written, and stays locked until
+    // it is renamed: a cleaner elsewhere removes only unlocked ones.
+    let (tmp, _lock) = loop {
+        let mut tmp_name = std::ffi::OsString::from(".");
+        tmp_name.push(file_name);
+        tmp_name.push(format!(
+            ".tmp-{}-{}",
+            std::process::id(),
+            COUNTER.fetch_add(1, Ordering::Relaxed)
+        ));
+        let tmp = dir.join(tmp_name);
+        match create_locked(&tmp) {
+            Ok(Some(lock)) => break (tmp, lock),
+            Ok(None) => continue,
+            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(io_err(e)),
+        }
+    };
     let mut guard = TempGuard {
         path: &tmp,
         armed: true,
