@@ -192,37 +192,18 @@ pub fn false_colour(errors: &[f64]) -> Vec<[u8; 3]> {
         .collect()
 }
 
-/// Writes `pixels` (8-bit RGB, row-major) as a PNG, atomically.
+/// Writes `pixels` (8-bit RGB, row-major; e.g. a [`false_colour`] image) as an
+/// sRGB-tagged PNG, atomically, through the host's one PNG encoder
+/// ([`crate::output::PngPreview`]).
 pub fn write_rgb8_png(
     path: &std::path::Path,
     width: usize,
     height: usize,
     pixels: &[[u8; 3]],
 ) -> Result<(), String> {
-    if pixels.len() != width * height || width == 0 || height == 0 {
-        return Err(format!(
-            "{}: {} pixels for a {width}x{height} image",
-            path.display(),
-            pixels.len()
-        ));
-    }
-    let data: Vec<u8> = pixels.iter().flatten().copied().collect();
-    crate::output::write_atomically(path, |tmp| {
-        let io = |e: std::io::Error| crate::output::OutputError::Io {
-            path: path.to_owned(),
-            source: e,
-        };
-        let file = std::fs::File::create(tmp).map_err(io)?;
-        let mut enc = png::Encoder::new(std::io::BufWriter::new(file), width as u32, height as u32);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        let png_err = |e: png::EncodingError| io(std::io::Error::other(e.to_string()));
-        let mut w = enc.write_header().map_err(png_err)?;
-        w.write_image_data(&data).map_err(png_err)?;
-        w.finish().map_err(png_err)?;
-        Ok(())
-    })
-    .map_err(|e| e.to_string())
+    crate::output::PngPreview::from_rgb8(path, width, height, pixels)
+        .and_then(|png| png.write(path))
+        .map_err(|e| e.to_string())
 }
 
 #[cfg(test)]

@@ -1,27 +1,27 @@
 //! One render from a config file: load the scene, build the intersector, load and create the
 //! integrator plugin, render, write the outputs.
 
-use crate::accumulation::{Frame, Precision, Style};
-use crate::intersector::{build_intersector_with, Intersector};
+use crate::accumulation::{Frame, Precision};
+use crate::intersector::Intersector;
 use crate::output::{ExrMetadata, PngPreview};
-use crate::plugin::{
-    find_plugin, normalised_weights, search_dirs, IntegratorInstance, MutationInstance,
-    PluginLibrary,
-};
+use crate::plugin::{find_plugin, search_dirs, IntegratorInstance, PluginLibrary};
 use crate::render::{render, Progress, RenderOptions, RenderOutcome};
 use flowlight_core::camera::Camera;
 use flowlight_core::material::Texture;
-use flowlight_scene::config::{
-    load_config, Accumulation, FramePrecision, RenderConfig, SampleBudget,
-};
+use flowlight_scene::config::{load_config, RenderConfig};
 use flowlight_scene::lights::{light_power_cdf, light_presence, load_environment, EnvironmentData};
 use flowlight_scene::{load_gltf, Scene};
-use flowlight_sdk::abi::SceneView;
-use glam::Vec3;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
+
+mod load;
+
+use load::{
+    apply_set_overrides, build_intersector, create_mutations, frame_precision, mutation_list,
+    relative_to, render_options, scene_view,
+};
 
 /// Command-line settings that take precedence over the config file.
 #[derive(Clone, Debug, Default)]
@@ -61,19 +61,6 @@ pub struct Session {
     /// ([`Session::set_part`]); `None` for a whole render.
     pub part: Option<(crate::parts::PartSpec, u64)>,
 }
-
-/// A plugin named by a relative file path is relative to the config's folder, like every
-/// other path in the config; a bare name is looked up on the search path.
-fn relative_to(name: &str, base: &Path) -> String {
-    let looks_like_path =
-        name.contains(std::path::MAIN_SEPARATOR) || name.ends_with(std::env::consts::DLL_SUFFIX);
-    if looks_like_path && Path::new(name).is_relative() {
-        base.join(name).display().to_string()
-    } else {
-        name.to_string()
-    }
-}
-
 /// `p` in a form two names of one file share: canonical where the file (or its folder)
 /// exists, else absolute.
 fn comparable_path(p: &Path) -> PathBuf {
@@ -92,36 +79,6 @@ fn comparable_path(p: &Path) -> PathBuf {
     }
     std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf())
 }
-
-/// One warning per Embree variable of the ray benchmark that is set (`is_set`) while a render
-/// of `config` runs: the benchmark has no config and reads `FLOWLIGHT_EMBREE_ROBUST` and
-/// `FLOWLIGHT_EMBREE_QUALITY`, a render takes `[render] robust` and `build_quality` from its
-/// config only. Said aloud because a render timed with one of them set measures the config's
-/// mode, not the variable's (earlier measurements of the robust mode's cost were void so).
-fn ignored_embree_variables(is_set: impl Fn(&str) -> bool, config: &Path) -> Vec<String> {
-    [
-        ("FLOWLIGHT_EMBREE_ROBUST", "robust"),
-        ("FLOWLIGHT_EMBREE_QUALITY", "build_quality"),
-    ]
-    .into_iter()
-    .filter(|(var, _)| is_set(var))
-    .map(|(var, key)| {
-        format!(
-            "{var} is read by the ray benchmark and tests, not by renders: set [render] {key} in {}",
-            config.display()
-        )
-    })
-    .collect()
-}
-
-/// The host's precision for the config's `render.precision`.
-fn frame_precision(config: &RenderConfig) -> Precision {
-    match config.precision {
-        FramePrecision::Exact => Precision::Exact,
-        FramePrecision::F32 => Precision::F32,
-    }
-}
-
 impl Session {
     /// Loads `config_path` and everything it names. Errors are one line naming the file,
     /// field or plugin at fault.
@@ -130,27 +87,10 @@ impl Session {
         Session::from_config(config, ov)
     }
 
+    /// [`Session::prepare`] for a config already read: `ov` applied, the scene loaded, the
+    /// intersector built, the integrator (and its mutations) created over the scene's view.
     pub fn from_config(mut config: RenderConfig, ov: &Overrides) -> Result<Session, String> {
-        for (k, v) in &ov.params {
-            // `--set render.accumulation=caching` and its siblings set the render's keys.
-            if let Some(key) = k.strip_prefix("render.") {
-                if config.set_render_key(key, v).map_err(|e| e.to_string())? {
-                    continue;
-                }
-                return Err(format!(
-                    "{}: --set {k}: only render.accumulation, render.precision, render.accumulation_cache_mib and render.flange can be set from the command line",
-                    config.path.display()
-                ));
-            }
-            match config
-                .integrator_params
-                .iter_mut()
-                .find(|(name, _)| name == k)
-            {
-                Some(entry) => entry.1 = v.clone(),
-                None => config.integrator_params.push((k.clone(), v.clone())),
-            }
-        }
+        apply_set_overrides(&mut config, &ov.params)?;
         let (exr_path, png_path) = output_paths(&config, ov.out.as_deref())?;
         // Refuse an image that cannot fit before anything big is loaded (layers are known
         // once the integrator exists; checked again then).
@@ -163,18 +103,7 @@ impl Session {
         let load_time = t0.elapsed();
         let camera = config.camera(&scene).map_err(|e| e.to_string())?;
         tracing::debug!(?camera, "camera");
-        for warning in ignored_embree_variables(|v| std::env::var_os(v).is_some(), &config.path) {
-            tracing::warn!("{warning}");
-        }
-        let options = flowlight_embree::SceneOptions {
-            robust: config.robust,
-            quality: flowlight_embree::BuildQuality::parse(&config.build_quality)
-                .map_err(|e| format!("{}: render.build_quality: {e}", config.path.display()))?,
-            packets: flowlight_embree::Packets::from_env()?,
-            ..Default::default()
-        };
-        let (intersector, build_time) = build_intersector_with(config.intersector, &scene, options)
-            .map_err(|e| format!("{}: {e}", config.path.display()))?;
+        let (intersector, build_time) = build_intersector(&config, &scene)?;
 
         let dirs = search_dirs(&config.plugin_search_paths);
         let plugin_path = find_plugin(
@@ -187,24 +116,7 @@ impl Session {
         let textures = scene.texture_views();
         // Hashed with the mutations still among the parameters.
         let config_text = crate::parts::config_text(&config, &camera, &config.integrator_params);
-        // The mutation list lives under the name of the parameter the integrator declares as
-        // a mutation list; weights are checked here, before any mutation plugin loads.
-        let list_name = plugin
-            .mutation_list_param()
-            .map_err(|e| format!("{}: {e}", config.path.display()))?;
-        let mutation_entries = match &list_name {
-            Some(list) => take_mutations(&mut config.integrator_params, list, &config.path)?,
-            None => Vec::new(),
-        };
-        if let Some(list) = &list_name {
-            let weights: Vec<(&str, f64)> = mutation_entries
-                .iter()
-                .map(|e| (e.plugin.as_str(), e.weight))
-                .collect();
-            normalised_weights(list, &weights)
-                .map_err(|e| format!("{}: {e}", config.path.display()))?;
-        }
-        let (bounds_min, bounds_max) = scene.bounds().unwrap_or((Vec3::ZERO, Vec3::ZERO));
+        let (list_name, mutation_entries) = mutation_list(&plugin, &mut config)?;
         let environment = match &config.environment {
             Some(e) => load_environment(&config.path, e).map_err(|e| e.to_string())?,
             None => EnvironmentData::default(),
@@ -216,51 +128,22 @@ impl Session {
             tracing::warn!("{}: {why}", config.path.display());
         }
         let light_cdf = light_power_cdf(&scene, &env_view);
-        let view = SceneView {
-            camera,
-            materials: scene.materials.as_ptr(),
-            material_count: scene.materials.len(),
-            textures: textures.as_ptr(),
-            texture_count: textures.len(),
-            emitters: scene.emitters.as_ptr(),
-            emitter_count: scene.emitters.len(),
-            punctual_lights: scene.punctual_lights.as_ptr(),
-            punctual_count: scene.punctual_lights.len(),
-            environment: if light_cdf.is_empty() {
-                flowlight_core::light::Environment::none()
-            } else {
-                env_view
-            },
-            light_power_cdf: light_cdf.as_ptr(),
-            bounds_min,
-            bounds_max,
-            mesh: flowlight_sdk::scene::mesh_tables(&scene.mesh()),
-        };
-        let mut mutations = Vec::new();
+        let view = scene_view(&scene, camera, &textures, env_view, &light_cdf);
         let mut plugin_files = vec![plugin_path.clone()];
-        for entry in &mutation_entries {
-            let path =
-                find_plugin(&relative_to(&entry.plugin, &config.base_dir), &dirs).map_err(|e| {
-                    format!(
-                        "{}: integrator.{}: {e}",
-                        config.path.display(),
-                        list_name.as_deref().unwrap_or_default()
-                    )
-                })?;
-            plugin_files.push(path.clone());
-            let lib = Arc::new(PluginLibrary::load(&path).map_err(|e| e.to_string())?);
-            // SAFETY: as for the integrator below.
-            let m = unsafe { MutationInstance::create(lib, &entry.params, entry.weight, &view) }
-                .map_err(|e| format!("{}: {e}", config.path.display()))?;
-            mutations.push(m);
-        }
+        let mutations = create_mutations(
+            &config,
+            &dirs,
+            list_name.as_deref(),
+            &mutation_entries,
+            &view,
+            &mut plugin_files,
+        )?;
         // SAFETY: the view points into `scene` and `textures`, which the session owns and
         // drops after the instance (field order); their heap buffers never move.
         let instance = unsafe {
             IntegratorInstance::create(plugin, &config.integrator_params, mutations, view)
         }
         .map_err(|e| format!("{}: {e}", config.path.display()))?;
-        let precision = frame_precision(&config);
         crate::render::check_memory(
             config.width,
             config.height,
@@ -269,33 +152,7 @@ impl Session {
             0,
         )
         .map_err(|e| format!("{}: {e}", config.path.display()))?;
-
-        // The command line replaces the config's budget: --time, else --spp, else the file's.
-        let (spp, time) = match (ov.time, ov.spp, config.budget) {
-            (Some(t), _, _) => (0, Some(t)),
-            (None, Some(n), _) => (n, None),
-            (None, None, SampleBudget::Spp(n)) => (n, None),
-            (None, None, SampleBudget::Time(t)) => (0, Some(t)),
-        };
-        let options = RenderOptions {
-            width: camera.width,
-            height: camera.height,
-            spp,
-            sample_begin: 0,
-            time: time.map(Duration::from_secs_f64),
-            threads: ov.threads.unwrap_or(config.threads),
-            tile_size: config.tile_size,
-            seed: ov.seed.unwrap_or(config.seed),
-            accumulation: match config.accumulation {
-                Accumulation::Auto => None,
-                Accumulation::Blasting => Some(Style::Blasting),
-                Accumulation::Buffering => Some(Style::Buffering),
-                Accumulation::Caching => Some(Style::Caching),
-            },
-            precision,
-            cache_bytes: (config.accumulation_cache_mib * 1048576.0) as u64,
-            flange: config.flange,
-        };
+        let options = render_options(&config, &camera, ov);
         let session = Session {
             instance,
             intersector,
@@ -605,72 +462,6 @@ pub fn output_paths(
         .map(|_| out.with_extension("png"));
     Ok((Some(out.to_path_buf()), png))
 }
-
-/// One `[[integrator.mutations]]` entry.
-struct MutationEntry {
-    plugin: String,
-    weight: f64,
-    params: Vec<(String, toml::Value)>,
-}
-
-/// Removes the mutation list `list` (the integrator's [`ParamKind::MutationList`]
-/// parameter, e.g. `mutations`) from the integrator's parameters and reads each entry: a
-/// `plugin` name, a numeric `weight` (default 1; its value is checked with the list's other
-/// weights by [`normalised_weights`]), the rest are the plugin's parameters.
-///
-/// [`ParamKind::MutationList`]: flowlight_sdk::ParamKind::MutationList
-fn take_mutations(
-    params: &mut Vec<(String, toml::Value)>,
-    list: &str,
-    config: &Path,
-) -> Result<Vec<MutationEntry>, String> {
-    let Some(pos) = params.iter().position(|(k, _)| k == list) else {
-        return Ok(Vec::new());
-    };
-    let (_, value) = params.remove(pos);
-    let at = |i: usize, msg: &str| format!("{}: integrator.{list}[{i}]: {msg}", config.display());
-    let toml::Value::Array(items) = value else {
-        return Err(format!(
-            "{}: integrator.{list} must be an array of tables ([[integrator.{list}]])",
-            config.display()
-        ));
-    };
-    let mut out = Vec::with_capacity(items.len());
-    for (i, item) in items.into_iter().enumerate() {
-        let toml::Value::Table(table) = item else {
-            return Err(at(i, "must be a table with a `plugin` key"));
-        };
-        let mut plugin = None;
-        let mut weight = 1.0;
-        let mut rest = Vec::new();
-        for (k, v) in table {
-            match k.as_str() {
-                "plugin" => {
-                    plugin = Some(
-                        v.as_str()
-                            .ok_or_else(|| at(i, "`plugin` must be a string"))?
-                            .to_string(),
-                    )
-                }
-                "weight" => {
-                    weight = v
-                        .as_float()
-                        .or_else(|| v.as_integer().map(|n| n as f64))
-                        .ok_or_else(|| at(i, "`weight` must be a number"))?;
-                }
-                _ => rest.push((k, v)),
-            }
-        }
-        let plugin = plugin.ok_or_else(|| at(i, "missing `plugin`"))?;
-        out.push(MutationEntry {
-            plugin,
-            weight,
-            params: rest,
-        });
-    }
-    Ok(out)
-}
-
 /// The render's counters as JSON: host statistics and the integrator's own (e.g. ERPT's
 /// quality norms), written next to the image.
 pub fn stats_json(integrator: &str, s: &crate::RenderStats) -> String {
@@ -716,30 +507,4 @@ pub fn stats_json(integrator: &str, s: &crate::RenderStats) -> String {
     }
     out += "\n  }\n}\n";
     out
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn embree_variables_set_for_a_render_are_named_with_the_config_key() {
-        let cfg = Path::new("scenes/cornell-box/cornell-box.toml");
-        assert!(ignored_embree_variables(|_| false, cfg).is_empty());
-        let both = ignored_embree_variables(|_| true, cfg);
-        assert_eq!(both.len(), 2, "{both:?}");
-        assert!(
-            both[0].starts_with("FLOWLIGHT_EMBREE_ROBUST ")
-                && both[0].contains("[render] robust in scenes/cornell-box/cornell-box.toml"),
-            "{both:?}"
-        );
-        assert!(
-            both[1].starts_with("FLOWLIGHT_EMBREE_QUALITY ")
-                && both[1].contains("[render] build_quality in"),
-            "{both:?}"
-        );
-        let one = ignored_embree_variables(|v| v == "FLOWLIGHT_EMBREE_QUALITY", cfg);
-        assert_eq!(one.len(), 1);
-        assert!(one[0].starts_with("FLOWLIGHT_EMBREE_QUALITY "));
-    }
 }

@@ -1,0 +1,322 @@
+//! Loading what a session renders with, step by step as [`Session::from_config`](super::Session::from_config) runs them:
+//! the command line's `--set`s, the intersector, the mutation list, the view of the scene the
+//! plugins read, the mutation plugins and the render options.
+
+use super::Overrides;
+use crate::accumulation::{Precision, Style};
+use crate::intersector::{build_intersector_with, Intersector};
+use crate::plugin::{find_plugin, normalised_weights, MutationInstance, PluginLibrary};
+use crate::render::RenderOptions;
+use flowlight_core::camera::Camera;
+use flowlight_core::material::Texture;
+use flowlight_scene::config::{Accumulation, FramePrecision, RenderConfig, SampleBudget};
+use flowlight_scene::Scene;
+use flowlight_sdk::abi::SceneView;
+use glam::Vec3;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
+
+/// A plugin named by a relative file path is relative to the config's folder, like every
+/// other path in the config; a bare name is looked up on the search path.
+pub(super) fn relative_to(name: &str, base: &Path) -> String {
+    let looks_like_path =
+        name.contains(std::path::MAIN_SEPARATOR) || name.ends_with(std::env::consts::DLL_SUFFIX);
+    if looks_like_path && Path::new(name).is_relative() {
+        base.join(name).display().to_string()
+    } else {
+        name.to_string()
+    }
+}
+/// One warning per Embree variable of the ray benchmark that is set (`is_set`) while a render
+/// of `config` runs: the benchmark has no config and reads `FLOWLIGHT_EMBREE_ROBUST` and
+/// `FLOWLIGHT_EMBREE_QUALITY`, a render takes `[render] robust` and `build_quality` from its
+/// config only. Said aloud because a render timed with one of them set measures the config's
+/// mode, not the variable's (earlier measurements of the robust mode's cost were void so).
+pub(super) fn ignored_embree_variables(
+    is_set: impl Fn(&str) -> bool,
+    config: &Path,
+) -> Vec<String> {
+    [
+        ("FLOWLIGHT_EMBREE_ROBUST", "robust"),
+        ("FLOWLIGHT_EMBREE_QUALITY", "build_quality"),
+    ]
+    .into_iter()
+    .filter(|(var, _)| is_set(var))
+    .map(|(var, key)| {
+        format!(
+            "{var} is read by the ray benchmark and tests, not by renders: set [render] {key} in {}",
+            config.display()
+        )
+    })
+    .collect()
+}
+
+/// The host's precision for the config's `render.precision`.
+pub(super) fn frame_precision(config: &RenderConfig) -> Precision {
+    match config.precision {
+        FramePrecision::Exact => Precision::Exact,
+        FramePrecision::F32 => Precision::F32,
+    }
+}
+
+/// Applies the command line's `--set KEY=VALUE`s: `render.*` keys to the render settings
+/// that may be set so, every other key to the integrator's parameters (replaced or added).
+pub(super) fn apply_set_overrides(
+    config: &mut RenderConfig,
+    params: &[(String, toml::Value)],
+) -> Result<(), String> {
+    for (k, v) in params {
+        // `--set render.accumulation=caching` and its siblings set the render's keys.
+        if let Some(key) = k.strip_prefix("render.") {
+            if config.set_render_key(key, v).map_err(|e| e.to_string())? {
+                continue;
+            }
+            return Err(format!(
+                "{}: --set {k}: only render.accumulation, render.precision, render.accumulation_cache_mib and render.flange can be set from the command line",
+                config.path.display()
+            ));
+        }
+        match config
+            .integrator_params
+            .iter_mut()
+            .find(|(name, _)| name == k)
+        {
+            Some(entry) => entry.1 = v.clone(),
+            None => config.integrator_params.push((k.clone(), v.clone())),
+        }
+    }
+    Ok(())
+}
+
+/// The config's intersector over `scene` and its build time, Embree with the config's robust
+/// mode and build quality (the benchmark's variables are named when set, and ignored).
+pub(super) fn build_intersector(
+    config: &RenderConfig,
+    scene: &Scene,
+) -> Result<(Box<dyn Intersector>, Duration), String> {
+    for warning in ignored_embree_variables(|v| std::env::var_os(v).is_some(), &config.path) {
+        tracing::warn!("{warning}");
+    }
+    let options = flowlight_embree::SceneOptions {
+        robust: config.robust,
+        quality: flowlight_embree::BuildQuality::parse(&config.build_quality)
+            .map_err(|e| format!("{}: render.build_quality: {e}", config.path.display()))?,
+        packets: flowlight_embree::Packets::from_env()?,
+        ..Default::default()
+    };
+    build_intersector_with(config.intersector, scene, options)
+        .map_err(|e| format!("{}: {e}", config.path.display()))
+}
+
+/// The integrator's mutation list, taken out of its parameters: the name of the parameter
+/// the integrator declares as a mutation list, and its entries, whose weights are checked
+/// here, before any mutation plugin loads.
+pub(super) fn mutation_list(
+    plugin: &PluginLibrary,
+    config: &mut RenderConfig,
+) -> Result<(Option<String>, Vec<MutationEntry>), String> {
+    let list_name = plugin
+        .mutation_list_param()
+        .map_err(|e| format!("{}: {e}", config.path.display()))?;
+    let mutation_entries = match &list_name {
+        Some(list) => take_mutations(&mut config.integrator_params, list, &config.path)?,
+        None => Vec::new(),
+    };
+    if let Some(list) = &list_name {
+        let weights: Vec<(&str, f64)> = mutation_entries
+            .iter()
+            .map(|e| (e.plugin.as_str(), e.weight))
+            .collect();
+        normalised_weights(list, &weights)
+            .map_err(|e| format!("{}: {e}", config.path.display()))?;
+    }
+    Ok((list_name, mutation_entries))
+}
+
+/// The view of the scene the plugins read: pointers into `scene`, `textures` and
+/// `light_cdf`, which must outlive every plugin instance made over it. Without a light the
+/// environment is left out, as the power CDF is empty.
+pub(super) fn scene_view(
+    scene: &Scene,
+    camera: Camera,
+    textures: &[Texture],
+    env_view: flowlight_core::light::Environment,
+    light_cdf: &[f32],
+) -> SceneView {
+    let (bounds_min, bounds_max) = scene.bounds().unwrap_or((Vec3::ZERO, Vec3::ZERO));
+    SceneView {
+        camera,
+        materials: scene.materials.as_ptr(),
+        material_count: scene.materials.len(),
+        textures: textures.as_ptr(),
+        texture_count: textures.len(),
+        emitters: scene.emitters.as_ptr(),
+        emitter_count: scene.emitters.len(),
+        punctual_lights: scene.punctual_lights.as_ptr(),
+        punctual_count: scene.punctual_lights.len(),
+        environment: if light_cdf.is_empty() {
+            flowlight_core::light::Environment::none()
+        } else {
+            env_view
+        },
+        light_power_cdf: light_cdf.as_ptr(),
+        bounds_min,
+        bounds_max,
+        mesh: flowlight_sdk::scene::mesh_tables(&scene.mesh()),
+    }
+}
+
+/// Loads and creates the mutation plugins of `entries` over `view`, adding their files to
+/// `plugin_files`.
+pub(super) fn create_mutations(
+    config: &RenderConfig,
+    dirs: &[PathBuf],
+    list_name: Option<&str>,
+    entries: &[MutationEntry],
+    view: &SceneView,
+    plugin_files: &mut Vec<PathBuf>,
+) -> Result<Vec<MutationInstance>, String> {
+    let mut mutations = Vec::new();
+    for entry in entries {
+        let path =
+            find_plugin(&relative_to(&entry.plugin, &config.base_dir), dirs).map_err(|e| {
+                format!(
+                    "{}: integrator.{}: {e}",
+                    config.path.display(),
+                    list_name.unwrap_or_default()
+                )
+            })?;
+        plugin_files.push(path.clone());
+        let lib = Arc::new(PluginLibrary::load(&path).map_err(|e| e.to_string())?);
+        // SAFETY: as for the integrator: the view points into data the session owns and
+        // drops after every instance.
+        let m = unsafe { MutationInstance::create(lib, &entry.params, entry.weight, view) }
+            .map_err(|e| format!("{}: {e}", config.path.display()))?;
+        mutations.push(m);
+    }
+    Ok(mutations)
+}
+
+/// The render options of `config` at the camera's resolution; the command line replaces the
+/// config's budget (`--time`, else `--spp`, else the file's), threads and seed.
+pub(super) fn render_options(
+    config: &RenderConfig,
+    camera: &Camera,
+    ov: &Overrides,
+) -> RenderOptions {
+    let (spp, time) = match (ov.time, ov.spp, config.budget) {
+        (Some(t), _, _) => (0, Some(t)),
+        (None, Some(n), _) => (n, None),
+        (None, None, SampleBudget::Spp(n)) => (n, None),
+        (None, None, SampleBudget::Time(t)) => (0, Some(t)),
+    };
+    RenderOptions {
+        width: camera.width,
+        height: camera.height,
+        spp,
+        sample_begin: 0,
+        time: time.map(Duration::from_secs_f64),
+        threads: ov.threads.unwrap_or(config.threads),
+        tile_size: config.tile_size,
+        seed: ov.seed.unwrap_or(config.seed),
+        accumulation: match config.accumulation {
+            Accumulation::Auto => None,
+            Accumulation::Blasting => Some(Style::Blasting),
+            Accumulation::Buffering => Some(Style::Buffering),
+            Accumulation::Caching => Some(Style::Caching),
+        },
+        precision: frame_precision(config),
+        cache_bytes: (config.accumulation_cache_mib * 1048576.0) as u64,
+        flange: config.flange,
+    }
+}
+/// One `[[integrator.mutations]]` entry.
+pub(super) struct MutationEntry {
+    pub(super) plugin: String,
+    pub(super) weight: f64,
+    pub(super) params: Vec<(String, toml::Value)>,
+}
+
+/// Removes the mutation list `list` (the integrator's [`ParamKind::MutationList`]
+/// parameter, e.g. `mutations`) from the integrator's parameters and reads each entry: a
+/// `plugin` name, a numeric `weight` (default 1; its value is checked with the list's other
+/// weights by [`normalised_weights`]), the rest are the plugin's parameters.
+///
+/// [`ParamKind::MutationList`]: flowlight_sdk::ParamKind::MutationList
+pub(super) fn take_mutations(
+    params: &mut Vec<(String, toml::Value)>,
+    list: &str,
+    config: &Path,
+) -> Result<Vec<MutationEntry>, String> {
+    let Some(pos) = params.iter().position(|(k, _)| k == list) else {
+        return Ok(Vec::new());
+    };
+    let (_, value) = params.remove(pos);
+    let at = |i: usize, msg: &str| format!("{}: integrator.{list}[{i}]: {msg}", config.display());
+    let toml::Value::Array(items) = value else {
+        return Err(format!(
+            "{}: integrator.{list} must be an array of tables ([[integrator.{list}]])",
+            config.display()
+        ));
+    };
+    let mut out = Vec::with_capacity(items.len());
+    for (i, item) in items.into_iter().enumerate() {
+        let toml::Value::Table(table) = item else {
+            return Err(at(i, "must be a table with a `plugin` key"));
+        };
+        let mut plugin = None;
+        let mut weight = 1.0;
+        let mut rest = Vec::new();
+        for (k, v) in table {
+            match k.as_str() {
+                "plugin" => {
+                    plugin = Some(
+                        v.as_str()
+                            .ok_or_else(|| at(i, "`plugin` must be a string"))?
+                            .to_string(),
+                    )
+                }
+                "weight" => {
+                    weight = v
+                        .as_float()
+                        .or_else(|| v.as_integer().map(|n| n as f64))
+                        .ok_or_else(|| at(i, "`weight` must be a number"))?;
+                }
+                _ => rest.push((k, v)),
+            }
+        }
+        let plugin = plugin.ok_or_else(|| at(i, "missing `plugin`"))?;
+        out.push(MutationEntry {
+            plugin,
+            weight,
+            params: rest,
+        });
+    }
+    Ok(out)
+}
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn embree_variables_set_for_a_render_are_named_with_the_config_key() {
+        let cfg = Path::new("scenes/cornell-box/cornell-box.toml");
+        assert!(ignored_embree_variables(|_| false, cfg).is_empty());
+        let both = ignored_embree_variables(|_| true, cfg);
+        assert_eq!(both.len(), 2, "{both:?}");
+        assert!(
+            both[0].starts_with("FLOWLIGHT_EMBREE_ROBUST ")
+                && both[0].contains("[render] robust in scenes/cornell-box/cornell-box.toml"),
+            "{both:?}"
+        );
+        assert!(
+            both[1].starts_with("FLOWLIGHT_EMBREE_QUALITY ")
+                && both[1].contains("[render] build_quality in"),
+            "{both:?}"
+        );
+        let one = ignored_embree_variables(|v| v == "FLOWLIGHT_EMBREE_QUALITY", cfg);
+        assert_eq!(one.len(), 1);
+        assert!(one[0].starts_with("FLOWLIGHT_EMBREE_QUALITY "));
+    }
+}
