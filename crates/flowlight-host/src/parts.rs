@@ -1021,16 +1021,18 @@ mod tests {
         {
             let path = dir.join(format!("p{i}.exr"));
             let json = stats_json_with_kinds(&crate::session::stats_json("erpt", s), &kinds);
-            std::fs::write(path.with_extension("stats.json"), json).unwrap();
+            std::fs::write(path.with_extension("stats.json"), &json).unwrap();
+            // The part's record of its statistics file (written with it).
+            let checksum = format!("{:016x}", fnv1a(FNV_OFFSET, json.as_bytes()));
             parts.push(PartFile {
                 path,
-                meta: BTreeMap::new(),
+                meta: BTreeMap::from([(KEY_STATS_CHECKSUM.to_string(), checksum)]),
                 ranges: vec![],
                 total: 0,
                 frame: Frame::new(1, 1, 0),
             });
         }
-        let (json, warn) = merge_stats_files(&parts);
+        let (json, warn) = merge_stats_files(&parts).unwrap();
         assert!(warn.is_none(), "{warn:?}");
         let flat = parse_stats_json(&json.unwrap()).unwrap();
         let c = |k: &str| {
