@@ -405,3 +405,61 @@ fn d16_reference_with_an_odd_sample_count_renders_all_of_them() {
     let meta = flowlight_host::output::read_exr_metadata(&reference).unwrap();
     assert_eq!(meta.get("flowlight.spp"), Some("3"));
 }
+
+#[test]
+fn d2_compare_and_reference_never_write_over_an_input() {
+    let dir = common::scratch("bench-d2");
+    let cfg = dir.join("furnace.toml");
+    std::fs::copy(common::scene_config("furnace/furnace.toml"), &cfg).unwrap();
+    std::fs::copy(
+        common::scene_config("furnace/furnace.gltf"),
+        dir.join("furnace.gltf"),
+    )
+    .unwrap();
+    let a = dir.join("a.exr");
+    let b = dir.join("b.exr");
+    for (out, seed) in [(&a, "1"), (&b, "2")] {
+        flowlight(&[
+            "render",
+            cfg.to_str().unwrap(),
+            "--spp",
+            "2",
+            "--seed",
+            seed,
+            "-q",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+    }
+    let before = std::fs::read(&a).unwrap();
+    let e = flowlight_error(&[
+        "compare",
+        a.to_str().unwrap(),
+        b.to_str().unwrap(),
+        "--out",
+        a.to_str().unwrap(),
+    ]);
+    assert!(e.contains("refusing to overwrite"), "{e}");
+    let e = flowlight_error(&[
+        "reference",
+        "--from",
+        a.to_str().unwrap(),
+        "--from",
+        b.to_str().unwrap(),
+        "--out",
+        b.to_str().unwrap(),
+    ]);
+    assert!(e.contains("refusing to overwrite"), "{e}");
+    let cfg_before = std::fs::read(&cfg).unwrap();
+    let e = flowlight_error(&[
+        "reference",
+        cfg.to_str().unwrap(),
+        "--spp",
+        "2",
+        "--out",
+        cfg.to_str().unwrap(),
+    ]);
+    assert!(e.contains("the config"), "{e}");
+    assert_eq!(std::fs::read(&a).unwrap(), before);
+    assert_eq!(std::fs::read(&cfg).unwrap(), cfg_before);
+}
