@@ -329,3 +329,137 @@ fn reference_and_compare() {
     assert_eq!(r.spp, 8.0);
     assert!(r.variance.is_some());
 }
+
+/// Runs `flowlight args` expecting it to fail with one `error:` line, which it returns.
+fn flowlight_error(args: &[&str]) -> String {
+    let o = Command::new(env!("CARGO_BIN_EXE_flowlight"))
+        .args(args)
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(o.status.code(), Some(1), "flowlight {args:?}: {e}");
+    let lines: Vec<&str> = e.lines().filter(|l| l.starts_with("error:")).collect();
+    assert_eq!(lines.len(), 1, "{e}");
+    lines[0].to_string()
+}
+
+#[test]
+fn d14_reference_from_the_same_render_twice_is_refused() {
+    let dir = common::scratch("bench-ref-twice");
+    let cfg = common::scene_config("furnace/furnace.toml");
+    let a = dir.join("a.exr");
+    let render = |out: &Path, seed: &str| {
+        flowlight(&[
+            "render",
+            cfg.to_str().unwrap(),
+            "--spp",
+            "2",
+            "--seed",
+            seed,
+            "-q",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+    };
+    render(&a, "3");
+    let copy = dir.join("copy.exr");
+    std::fs::copy(&a, &copy).unwrap();
+    let same_seed = dir.join("same-seed.exr");
+    render(&same_seed, "3");
+    let out = dir.join("ref.exr");
+    for (b, names) in [
+        (&a, "given twice"),
+        (&copy, "same seed"),
+        (&same_seed, "same seed"),
+    ] {
+        let e = flowlight_error(&[
+            "reference",
+            "--from",
+            a.to_str().unwrap(),
+            "--from",
+            b.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(e.contains(names), "{e}");
+    }
+    assert!(!out.exists());
+}
+
+#[test]
+fn d16_reference_with_an_odd_sample_count_renders_all_of_them() {
+    let dir = common::scratch("bench-ref-odd");
+    let cfg = common::scene_config("furnace/furnace.toml");
+    let reference = dir.join("ref.exr");
+    let o = flowlight(&[
+        "reference",
+        cfg.to_str().unwrap(),
+        "--spp",
+        "3",
+        "--threads",
+        "2",
+        "--out",
+        reference.to_str().unwrap(),
+    ]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains(" 3 spp"));
+    let meta = flowlight_host::output::read_exr_metadata(&reference).unwrap();
+    assert_eq!(meta.get("flowlight.spp"), Some("3"));
+}
+
+#[test]
+fn d2_compare_and_reference_never_write_over_an_input() {
+    let dir = common::scratch("bench-d2");
+    let cfg = dir.join("furnace.toml");
+    std::fs::copy(common::scene_config("furnace/furnace.toml"), &cfg).unwrap();
+    std::fs::copy(
+        common::scene_config("furnace/furnace.gltf"),
+        dir.join("furnace.gltf"),
+    )
+    .unwrap();
+    let a = dir.join("a.exr");
+    let b = dir.join("b.exr");
+    for (out, seed) in [(&a, "1"), (&b, "2")] {
+        flowlight(&[
+            "render",
+            cfg.to_str().unwrap(),
+            "--spp",
+            "2",
+            "--seed",
+            seed,
+            "-q",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+    }
+    let before = std::fs::read(&a).unwrap();
+    let e = flowlight_error(&[
+        "compare",
+        a.to_str().unwrap(),
+        b.to_str().unwrap(),
+        "--out",
+        a.to_str().unwrap(),
+    ]);
+    assert!(e.contains("refusing to overwrite"), "{e}");
+    let e = flowlight_error(&[
+        "reference",
+        "--from",
+        a.to_str().unwrap(),
+        "--from",
+        b.to_str().unwrap(),
+        "--out",
+        b.to_str().unwrap(),
+    ]);
+    assert!(e.contains("refusing to overwrite"), "{e}");
+    let cfg_before = std::fs::read(&cfg).unwrap();
+    let e = flowlight_error(&[
+        "reference",
+        cfg.to_str().unwrap(),
+        "--spp",
+        "2",
+        "--out",
+        cfg.to_str().unwrap(),
+    ]);
+    assert!(e.contains("the config"), "{e}");
+    assert_eq!(std::fs::read(&a).unwrap(), before);
+    assert_eq!(std::fs::read(&cfg).unwrap(), cfg_before);
+}

@@ -454,3 +454,180 @@ fn parts_of_an_enormously_bright_scene_keep_their_energy_through_the_merge() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn d7_a_part_without_out_never_replaces_the_final_image() {
+    let dir = common::scratch("dist-d7");
+    let cfg = small_config(&dir, "furnace/furnace.toml", 16, 4, "");
+    common::run_ok(
+        flowlight()
+            .current_dir(&dir)
+            .arg("render")
+            .arg(&cfg)
+            .args(["-q", "--part", "1/2"]),
+    );
+    assert!(
+        !dir.join("furnace.exr").exists(),
+        "the part took the final name"
+    );
+    let part = dir.join("furnace.part-1-of-2.exr");
+    assert_eq!(meta(&part, "flowlight.part"), "1/2");
+}
+
+#[test]
+fn d15_samples_beyond_the_renders_spp_are_refused() {
+    let dir = common::scratch("dist-d15");
+    let cfg = small_config(&dir, "furnace/furnace.toml", 16, 8, "");
+    let err = run_err(
+        flowlight()
+            .arg("render")
+            .arg(&cfg)
+            .args(["-q", "--samples", "8..12", "--out"])
+            .arg(dir.join("p.exr")),
+    );
+    assert!(err.contains("8..12") && err.contains("0..8"), "{err}");
+    assert!(!dir.join("p.exr").exists());
+}
+
+#[test]
+fn d16_a_part_of_a_timed_render_names_the_time_budget() {
+    let dir = common::scratch("dist-d16");
+    let cfg = small_config(&dir, "furnace/furnace.toml", 16, 8, "");
+    let text = std::fs::read_to_string(&cfg).unwrap();
+    std::fs::write(&cfg, text.replace("spp = 8\n", "time = 1.0\n")).unwrap();
+    let err = run_err(
+        flowlight()
+            .arg("render")
+            .arg(&cfg)
+            .args(["-q", "--part", "0/2", "--out"])
+            .arg(dir.join("p.exr")),
+    );
+    assert!(
+        err.contains("time budget") && !err.contains("0 parts"),
+        "{err}"
+    );
+}
+
+/// Rewrites part `from` as `to` with its `samples` channel scaled by `factor`, keeping its
+/// metadata (checksum included), as another tool might.
+fn scale_samples(from: &Path, to: &Path, factor: u32) {
+    use flowlight_host::output::{read_exr_u32, write_exr_with_raw, ImageLayer, RawChannel};
+    let (w, h, channels) = read_exr_u32(from).unwrap();
+    let (_, _, layers) = read_exr_rgb(from).unwrap();
+    let raw: Vec<RawChannel> = channels
+        .into_iter()
+        .map(|(name, samples)| RawChannel {
+            samples: if name == "samples" {
+                samples.iter().map(|s| s * factor).collect()
+            } else {
+                samples
+            },
+            name,
+        })
+        .collect();
+    let image_layers: Vec<ImageLayer> = layers
+        .iter()
+        .map(|(n, px)| ImageLayer {
+            name: n.clone(),
+            pixels: px,
+        })
+        .collect();
+    let meta = read_exr_metadata(from).unwrap();
+    write_exr_with_raw(to, w, h, &image_layers, &raw, &meta).unwrap();
+}
+
+#[test]
+fn d13_merge_refuses_parts_whose_sums_or_statistics_changed() {
+    let dir = common::scratch("dist-d13");
+    let cfg = small_config(&dir, "furnace/erpt.toml", 16, 2, "");
+    let parts: Vec<PathBuf> = (0..2).map(|k| dir.join(format!("p{k}.exr"))).collect();
+    for (k, p) in parts.iter().enumerate() {
+        render_part(&cfg, p, &["--part", &format!("{k}/2")]);
+    }
+    let stats = |p: &Path| p.with_extension("stats.json");
+    let out = dir.join("merged.exr");
+    // The untouched parts merge.
+    common::run_ok(&mut merge(&out, &parts, &[]));
+    // Samples doubled or zeroed by another tool.
+    for factor in [2, 0] {
+        let bad = dir.join(format!("scaled{factor}.exr"));
+        scale_samples(&parts[0], &bad, factor);
+        std::fs::copy(stats(&parts[0]), stats(&bad)).unwrap();
+        let err = run_err(&mut merge(&out, &[bad.clone(), parts[1].clone()], &[]));
+        assert!(err.contains("scaled") && err.contains("checksum"), "{err}");
+    }
+    // A truncated statistics file, and another part's.
+    let text = std::fs::read_to_string(stats(&parts[0])).unwrap();
+    let cut: String = text
+        .lines()
+        .take(text.lines().count() / 2)
+        .collect::<Vec<_>>()
+        .join("\n");
+    for (name, json) in [
+        ("truncated", cut),
+        (
+            "foreign",
+            std::fs::read_to_string(stats(&parts[1])).unwrap(),
+        ),
+    ] {
+        let p = dir.join(format!("{name}.exr"));
+        std::fs::copy(&parts[0], &p).unwrap();
+        std::fs::write(stats(&p), json).unwrap();
+        let err = run_err(&mut merge(&out, &[p.clone(), parts[1].clone()], &[]));
+        assert!(err.contains(&format!("{name}.stats.json")), "{err}");
+    }
+}
+
+#[test]
+fn d2_merge_never_overwrites_the_config_or_scene_of_its_parts() {
+    let dir = common::scratch("dist-d2");
+    let cfg = small_config(&dir, "furnace/furnace.toml", 16, 2, "");
+    let parts: Vec<PathBuf> = (0..2).map(|k| dir.join(format!("p{k}.exr"))).collect();
+    for (k, p) in parts.iter().enumerate() {
+        render_part(&cfg, p, &["--part", &format!("{k}/2")]);
+    }
+    let before = std::fs::read(&cfg).unwrap();
+    let err = run_err(&mut merge(&cfg, &parts, &[]));
+    assert!(err.contains("is the config"), "{err}");
+    assert_eq!(std::fs::read(&cfg).unwrap(), before);
+}
+
+/// docs/distributed.md's Slurm recipe on a real one-node cluster (tests/slurm/one-node.sh):
+/// a job array of four parts under a per-task memory limit, one task killed and
+/// resubmitted, merged, and equal bit for bit to the single-machine render. Skipped, with
+/// the reason printed, where it cannot run (not root, Slurm or munge not installed).
+#[test]
+fn slurm_job_array_with_a_killed_task_merges_to_the_full_render() {
+    let dir = common::scratch("dist-slurm");
+    let cfg = small_config(&dir, "cornell-box/cornell-box.toml", 16, 8, "");
+    let full = dir.join("full.exr");
+    render_part(&cfg, &full, &[]);
+    let out = dir.join("slurm.exr");
+    let script = common::repo().join("tests/slurm/one-node.sh");
+    // Bounded: the script's own waits end in minutes, and `timeout` ends it regardless.
+    let o = Command::new("timeout")
+        .args(["-k", "10", "900", "bash"])
+        .arg(&script)
+        .env("FLOWLIGHT", env!("CARGO_BIN_EXE_flowlight"))
+        .env("CONFIG", &cfg)
+        .env("OUT", &out)
+        .env("WORK", dir.join("cluster"))
+        .env("PARTS", "4")
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    if o.status.code() == Some(77) {
+        eprintln!("slurm test {}", stdout.trim());
+        return;
+    }
+    assert!(o.status.success(), "{stdout}\n{stderr}");
+    assert!(
+        stdout.contains("killed task") && stdout.contains("resubmitted task 2"),
+        "{stdout}"
+    );
+    assert_eq!(
+        bits(&read_exr_rgb(&out).unwrap().2),
+        bits(&read_exr_rgb(&full).unwrap().2)
+    );
+}

@@ -713,3 +713,299 @@ fn unknown_embree_packet_policy_is_refused_by_name() {
         assert!(o.status.success(), "{ok}: {}", stderr(&o));
     }
 }
+
+/// Runs `cmd` to its end or for at most `limit`, then kills it: a test of something that
+/// used to hang must stop by itself. `None` when it had to be killed.
+fn output_within(cmd: &mut Command, limit: std::time::Duration) -> Option<Output> {
+    use std::process::Stdio;
+    let mut child = cmd
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = std::time::Instant::now();
+    while start.elapsed() < limit {
+        if child.try_wait().unwrap().is_some() {
+            return Some(child.wait_with_output().unwrap());
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    None
+}
+
+/// The furnace scene of `c` with its buffer read from `buffer_uri` (when given) and a base
+/// colour texture read from `image_uri` (when given).
+fn furnace_with_uris(c: &Case, buffer_uri: Option<&str>, image_uri: Option<&str>) {
+    let path = c.dir.join("furnace.gltf");
+    let mut text = std::fs::read_to_string(&path).unwrap();
+    if let Some(uri) = buffer_uri {
+        let at = text.find("\"uri\": \"data:").unwrap() + "\"uri\": \"".len();
+        let end = at + text[at..].find('"').unwrap();
+        text.replace_range(at..end, uri);
+    }
+    if let Some(uri) = image_uri {
+        text = text.replacen(
+            "\"baseColorFactor\": [",
+            "\"baseColorTexture\": {\"index\": 0},\n    \"baseColorFactor\": [",
+            1,
+        );
+        text = text.replacen(
+            '{',
+            &format!(
+                "{{\n \"images\": [{{\"uri\": \"{uri}\"}}],\n \"textures\": [{{\"source\": 0}}],"
+            ),
+            1,
+        );
+    }
+    std::fs::write(&path, text).unwrap();
+}
+
+fn mkfifo(path: &Path) -> bool {
+    Command::new("mkfifo")
+        .arg(path)
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+#[test]
+fn d11_devices_and_fifos_as_inputs_are_refused_at_once() {
+    let limit = std::time::Duration::from_secs(60);
+    for (name, buffer, image, expected) in [
+        ("buffer-zero", Some("/dev/zero"), None, "character device"),
+        ("texture-zero", None, Some("/dev/zero"), "character device"),
+        ("texture-fifo", None, Some("pipe.png"), "FIFO"),
+        ("texture-folder", None, Some("."), "folder"),
+    ] {
+        let c = case(
+            &format!("d11-{name}"),
+            "",
+            "plugin = \"mcpt\"",
+            "exr = \"a.exr\"",
+        );
+        if image == Some("pipe.png") && !mkfifo(&c.dir.join("pipe.png")) {
+            eprintln!("skipped {name}: mkfifo is not available");
+            continue;
+        }
+        furnace_with_uris(&c, buffer, image);
+        let o = output_within(
+            flowlight()
+                .arg("render")
+                .arg(&c.config)
+                .args(["-q", "--threads", "2"]),
+            limit,
+        )
+        .unwrap_or_else(|| panic!("{name}: still running after {limit:?}"));
+        let line = one_error_line(&o);
+        assert!(line.contains(expected), "{name}: {line}");
+    }
+    // A FIFO named like a plugin on the plugin path: listed and refused, never opened.
+    let dir = common::scratch("hardening-d11-plugin-fifo");
+    if mkfifo(&dir.join(flowlight_host::plugin::plugin_file_name("x"))) {
+        let o = output_within(
+            flowlight()
+                .arg("plugins")
+                .env("FLOWLIGHT_PLUGIN_PATH", dir.as_os_str()),
+            limit,
+        )
+        .expect("`flowlight plugins` blocked on a FIFO");
+        let all = format!("{}{}", stdout(&o), stderr(&o));
+        assert!(all.contains("not a regular file"), "{all}");
+    }
+}
+
+/// Writes a 4×2 equirectangular EXR map whose texel (1, 0) is `hot`, the others 1.
+fn env_map(path: &Path, hot: f32) {
+    let mut px = vec![flowlight_core::Rgb::splat(1.0); 8];
+    px[1] = flowlight_core::Rgb::splat(hot);
+    flowlight_host::output::write_exr(
+        path,
+        4,
+        2,
+        &[flowlight_host::output::ImageLayer {
+            name: String::new(),
+            pixels: &px,
+        }],
+        &Default::default(),
+    )
+    .unwrap();
+}
+
+#[test]
+fn d8_environments_beyond_f32_are_refused_not_rendered_black() {
+    for (name, environment, hot) in [
+        ("hot-texel", "map = \"sky.exr\"", 3e38f32),
+        ("strength", "map = \"sky.exr\"\nstrength = 1e38", 1.0),
+        ("constant", "color = [1.0, 1.0, 1.0]\nstrength = 1e38", 1.0),
+    ] {
+        let c = case(
+            &format!("d8-{name}"),
+            "",
+            "plugin = \"mcpt\"",
+            &format!("exr = \"a.exr\"\n[environment]\n{environment}"),
+        );
+        env_map(&c.dir.join("sky.exr"), hot);
+        let line = one_error_line(&render(&c, &[]));
+        assert!(
+            line.contains("[environment]") && line.contains("overflows"),
+            "{name}: {line}"
+        );
+        assert!(!c.dir.join("a.exr").exists(), "{name}");
+    }
+}
+
+#[test]
+fn d5_ulimit_v_refuses_a_render_too_large_for_the_address_space() {
+    // 5000² exact-precision pixels need about 2.1 GiB of image buffers: more than a
+    // 1.5 GB address space holds, whatever MemAvailable says.
+    let c = case("d5-ulimit", "", "plugin = \"mcpt\"", "exr = \"a.exr\"");
+    let text = std::fs::read_to_string(&c.config)
+        .unwrap()
+        .replace("width = 16", "width = 5000")
+        .replace("height = 16", "height = 5000");
+    std::fs::write(&c.config, text).unwrap();
+    let o = output_within(
+        Command::new("sh").arg("-c").arg(format!(
+            "ulimit -v 1500000 && exec '{}' render '{}' -q --threads 2",
+            env!("CARGO_BIN_EXE_flowlight"),
+            c.config.display()
+        )),
+        std::time::Duration::from_secs(120),
+    )
+    .expect("the render under ulimit -v did not stop");
+    let line = one_error_line(&o);
+    assert!(
+        line.contains("5000x5000") && line.contains("needs about"),
+        "{line}"
+    );
+}
+
+#[test]
+fn d2_outputs_never_overwrite_any_input() {
+    for (name, output, expected) in [
+        ("exr-env", "exr = \"sky.exr\"", "environment map"),
+        ("exr-texture", "exr = \"tex.png\"", "scene file"),
+        ("png-texture", "png = \"tex.png\"", "scene file"),
+        ("exr-bin", "exr = \"furnace.bin\"", "scene file"),
+    ] {
+        let c = case(
+            &format!("d2-{name}"),
+            "",
+            "plugin = \"mcpt\"",
+            &format!("{output}\n[environment]\nmap = \"sky.exr\""),
+        );
+        env_map(&c.dir.join("sky.exr"), 1.0);
+        std::fs::write(
+            c.dir.join("tex.png"),
+            flowlight_testkit::gltf::png8(1, 1, 3, &[200, 100, 50]),
+        )
+        .unwrap();
+        // The buffer moves out to furnace.bin.
+        let path = c.dir.join("furnace.gltf");
+        let text = std::fs::read_to_string(&path).unwrap();
+        let at = text.find("base64,").unwrap() + "base64,".len();
+        let end = at + text[at..].find('"').unwrap();
+        let bin = flowlight_scene::source::decode_base64(&text[at..end]).unwrap();
+        std::fs::write(c.dir.join("furnace.bin"), &bin).unwrap();
+        std::fs::write(
+            &path,
+            text.replacen(
+                &text[at - "data:application/octet-stream;base64,".len()..end],
+                "furnace.bin",
+                1,
+            ),
+        )
+        .unwrap();
+        furnace_with_uris(&c, None, Some("tex.png"));
+        let inputs = [
+            "sky.exr",
+            "tex.png",
+            "furnace.bin",
+            "furnace.gltf",
+            "c.toml",
+        ];
+        let before: Vec<Vec<u8>> = inputs
+            .iter()
+            .map(|f| std::fs::read(c.dir.join(f)).unwrap())
+            .collect();
+        let line = one_error_line(&render(&c, &[]));
+        assert!(
+            line.contains(expected) && line.contains("refusing to overwrite"),
+            "{name}: {line}"
+        );
+        for (f, b) in inputs.iter().zip(&before) {
+            assert_eq!(&std::fs::read(c.dir.join(f)).unwrap(), b, "{name}: {f}");
+        }
+    }
+}
+
+/// ERPT settings under which one 8×8 unit holds tens of millions of mutations (seconds of
+/// work): a million mutations per camera sample.
+const SLOW_ERPT: &str = "plugin = \"erpt\"\npath_depth = 4\nmutations_per_sample = 1000000\nchain_length = 1000\nmax_chains_per_seed = 1000000\n[[integrator.mutations]]\nplugin = \"blow\"";
+
+#[test]
+fn d12_erpt_stops_inside_a_unit_at_the_deadline_and_on_ctrl_c() {
+    for accumulation in ["", "accumulation = \"blasting\""] {
+        let c = case("d12-time", accumulation, SLOW_ERPT, "exr = \"a.exr\"");
+        let start = std::time::Instant::now();
+        let o = output_within(
+            flowlight()
+                .arg("render")
+                .arg(&c.config)
+                .args(["-q", "--threads", "2", "--time", "1"]),
+            std::time::Duration::from_secs(120),
+        )
+        .expect("the timed render did not stop");
+        let wall = start.elapsed().as_secs_f64();
+        assert!(o.status.success(), "{accumulation}: {}", stderr(&o));
+        assert!(wall < 4.0, "{accumulation}: --time 1 took {wall:.1} s");
+        assert!(c.dir.join("a.exr").exists());
+    }
+    // Ctrl-C without a budget: honoured within a few seconds, and what accumulated is saved.
+    let c = case("d12-interrupt", "", SLOW_ERPT, "exr = \"a.exr\"");
+    let mut child = flowlight()
+        .arg("render")
+        .arg(&c.config)
+        .args(["-q", "--threads", "2"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    let sent = std::time::Instant::now();
+    Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    let mut status = None;
+    while sent.elapsed().as_secs() < 60 {
+        if let Some(s) = child.try_wait().unwrap() {
+            status = Some(s);
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let Some(status) = status else {
+        child.kill().unwrap();
+        child.wait().unwrap();
+        panic!("Ctrl-C was not honoured within 60 s");
+    };
+    let waited = sent.elapsed().as_secs_f64();
+    assert!(waited < 3.0, "Ctrl-C took {waited:.1} s");
+    assert!(status.success(), "{status:?}");
+    let meta = flowlight_host::output::read_exr_metadata(&c.dir.join("a.exr")).unwrap();
+    assert_eq!(meta.get("flowlight.interrupted"), Some("true"));
+}
+
+#[test]
+fn d16_an_output_named_in_another_format_is_refused() {
+    for (output, expected) in [
+        ("exr = \"image.png\"", ".exr"),
+        ("exr = \"a.exr\"\npng = \"preview.exr\"", ".png"),
+    ] {
+        let c = case("d16-format", "", "plugin = \"mcpt\"", output);
+        let line = one_error_line(&render(&c, &[]));
+        assert!(line.contains(expected), "{output}: {line}");
+    }
+}

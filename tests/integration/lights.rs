@@ -453,3 +453,68 @@ width = "wide"
     // land on a point, so they may not.
     assert!(valid[0] > 100, "hard reconnection: {valid:?}");
 }
+
+/// A scene whose only light carries no power — a lamp switched off in Blender (intensity 0),
+/// a black lamp, a spot whose cone is closed to nothing — renders black with every
+/// integrator, says so in one warning that names the cause, and does not crash: the light
+/// tables given to the plugins hold one CDF entry per light even then.
+#[test]
+fn d1_switched_off_only_light_renders_black() {
+    let dir = common::scratch("d1-dark-lights");
+    let dark_lights = [
+        (
+            "off",
+            r#"[{"type": "point", "intensity": 0.0, "color": [1.0, 1.0, 1.0]}]"#,
+        ),
+        (
+            "black",
+            r#"[{"type": "point", "intensity": 10.0, "color": [0.0, 0.0, 0.0]}]"#,
+        ),
+        (
+            "closed-spot",
+            r#"[{"type": "spot", "intensity": 10.0, "spot": {"innerConeAngle": 0.0, "outerConeAngle": 1e-30}}]"#,
+        ),
+    ];
+    for (name, lights) in dark_lights {
+        let gltf = quads_gltf(
+            &[FLOOR],
+            LAMBERT,
+            &[light_node(0, [0.2, 2.0, -0.1], down_tilted(0.0))],
+            lights,
+        );
+        let scene = dir.join(format!("{name}.gltf"));
+        std::fs::write(&scene, gltf).unwrap();
+        for integrator in [
+            "plugin = \"mcpt\"\nvariant = \"entangled\"",
+            "plugin = \"mcpt\"\nvariant = \"untangled\"",
+            "plugin = \"erpt\"",
+        ] {
+            let cfg = dir.join(format!("{name}.toml"));
+            let mut body = config("entangled", 2, "")
+                .replace("plugin = \"mcpt\"\nvariant = \"entangled\"", integrator);
+            if integrator.contains("erpt") {
+                body += "\n[[integrator.mutations]]\nplugin = \"blow\"\n";
+            }
+            std::fs::write(&cfg, format!("scene = \"{name}.gltf\"\n{body}")).unwrap();
+            let out = dir.join(format!("{name}.exr"));
+            let o = std::process::Command::new(env!("CARGO_BIN_EXE_flowlight"))
+                .args(["render", cfg.to_str().unwrap(), "--spp", "2", "-q", "--out"])
+                .arg(&out)
+                .output()
+                .unwrap();
+            let stderr = String::from_utf8_lossy(&o.stderr);
+            assert!(o.status.success(), "{name} / {integrator}: {o:?}\n{stderr}");
+            assert_eq!(
+                stderr.matches("carry no power").count(),
+                1,
+                "{name} / {integrator}: {stderr}"
+            );
+            assert!(!stderr.contains("has no light"), "{stderr}");
+            let (_, _, layers) = flowlight_host::output::read_exr_rgb(&out).unwrap();
+            assert!(
+                layers[0].1.iter().all(|c| c.is_black()),
+                "{name} / {integrator}"
+            );
+        }
+    }
+}

@@ -10,6 +10,9 @@ pub fn run(
 ) -> Result<()> {
     use flowlight_bench as bench;
     use flowlight_host::metrics;
+    if let Some(out) = out {
+        crate::refuse_input_as_output(out, &[("the image", a), ("the reference", b)])?;
+    }
     let ra = bench::read_reference(a).map_err(|e| anyhow!(e))?;
     let rb = bench::read_reference(b).map_err(|e| anyhow!(e))?;
     if (ra.width, ra.height) != (rb.width, rb.height) {

@@ -209,6 +209,42 @@ enum Command {
 }
 
 /// Parses the command line, runs the subcommand, and exits with status 1 on an error.
+/// The same file under any spelling: canonical where the file (or its folder) exists.
+fn comparable(p: &std::path::Path) -> std::path::PathBuf {
+    if let Ok(c) = p.canonicalize() {
+        return c;
+    }
+    match (p.parent(), p.file_name()) {
+        (Some(dir), Some(name)) => {
+            let dir = if dir.as_os_str().is_empty() {
+                std::path::Path::new(".")
+            } else {
+                dir
+            };
+            dir.canonicalize()
+                .map(|d| d.join(name))
+                .unwrap_or_else(|_| p.to_path_buf())
+        }
+        _ => p.to_path_buf(),
+    }
+}
+
+/// Refuses an output path that is one of the command's `inputs` (named by what they are).
+pub(crate) fn refuse_input_as_output(
+    out: &std::path::Path,
+    inputs: &[(&str, &std::path::Path)],
+) -> anyhow::Result<()> {
+    let key = comparable(out);
+    match inputs.iter().find(|(_, p)| comparable(p) == key) {
+        Some((what, p)) => Err(anyhow::anyhow!(
+            "{}: the output is {what} {}; refusing to overwrite an input",
+            out.display(),
+            p.display()
+        )),
+        None => Ok(()),
+    }
+}
+
 pub fn main() {
     tracing_subscriber::fmt()
         .with_env_filter(

@@ -18,8 +18,35 @@ pub fn run(
 ) -> Result<()> {
     use flowlight_bench::{self as bench, Budget, RenderRequest};
     let t0 = std::time::Instant::now();
+    let scene = match &config {
+        Some(c) if from.is_empty() => Some(
+            flowlight_scene::config::load_config(c)
+                .map_err(|e| anyhow!("{e}"))?
+                .scene,
+        ),
+        _ => None,
+    };
+    let config_path = config.clone();
+    // The reference and its preview must not be one of the inputs: checked before rendering.
+    let check_out = |out: &std::path::Path| -> Result<()> {
+        let mut inputs: Vec<(&str, &std::path::Path)> = from
+            .iter()
+            .map(|f| ("a --from image", f.as_path()))
+            .collect();
+        if let Some(c) = &config_path {
+            inputs.push(("the config", c.as_path()));
+        }
+        if let Some(s) = &scene {
+            inputs.push(("the scene", s.as_path()));
+        }
+        for o in [out.to_path_buf(), out.with_extension("png")] {
+            crate::refuse_input_as_output(&o, &inputs)?;
+        }
+        Ok(())
+    };
     let (r, out) = if !from.is_empty() {
         let out = out.ok_or_else(|| anyhow!("--from needs --out"))?;
+        check_out(&out)?;
         (
             bench::reference_from_exrs(from).map_err(|e| anyhow!(e))?,
             out,
@@ -45,6 +72,7 @@ pub fn run(
                 .unwrap_or_else(|| "reference".into());
             cfg.base_dir.join(format!("{stem}.ref.exr"))
         });
+        check_out(&out)?;
         let req = RenderRequest {
             config,
             plugin: None,
@@ -65,9 +93,9 @@ pub fn run(
         ));
         (r, out)
     };
+    let png = out.with_extension("png");
     bench::write_reference(&out, &r).map_err(|e| anyhow!(e))?;
     // An sRGB preview beside it, to look at the reference without an EXR viewer.
-    let png = out.with_extension("png");
     flowlight_host::output::write_png_preview(&png, r.width, r.height, &r.image, 0.0)
         .map_err(|e| anyhow!("{e}"))?;
     println!("reference summary");

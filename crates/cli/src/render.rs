@@ -27,7 +27,7 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
         return Err(anyhow!("--spp must be at least 1"));
     }
     let mut session = Session::prepare(config, ov).map_err(|e| anyhow!(e))?;
-    crate::part_args::apply(&mut session, part.part, part.samples)?;
+    crate::part_args::apply(&mut session, part.part, part.samples, ov.out.is_some())?;
     // Before any work: the outputs must be writable and must not overwrite an input.
     session.check_outputs().map_err(|e| anyhow!(e))?;
     let stop = Arc::new(AtomicBool::new(false));

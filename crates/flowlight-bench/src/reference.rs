@@ -79,14 +79,17 @@ fn weighted_mean(a: &[Rgb], na: f64, b: &[Rgb], nb: f64) -> Vec<Rgb> {
 /// Renders a reference: two independent halves of `budget` (seeds `seed`, `seed + 1`).
 /// `progress` is told about each half as it starts.
 pub fn render_reference(req: &RenderRequest, progress: &dyn Fn(&str)) -> Result<Reference, String> {
-    let half = match req.budget {
-        Budget::Spp(n) if n >= 2 => Budget::Spp(n / 2),
+    // An odd sample count gives the first half the extra sample: the halves add up to the
+    // budget asked for (combine_halves weighs them by their counts).
+    let (first, second) = match req.budget {
+        Budget::Spp(n) if n >= 2 => (Budget::Spp(n - n / 2), Budget::Spp(n / 2)),
         Budget::Spp(n) => return Err(format!("a reference needs at least 2 spp, got {n}")),
-        Budget::Time(t) => Budget::Time(t / 2.0),
+        Budget::Time(t) => (Budget::Time(t / 2.0), Budget::Time(t / 2.0)),
     };
     let mut a_req = req.clone();
-    a_req.budget = half;
+    a_req.budget = first;
     let mut b_req = a_req.clone();
+    b_req.budget = second;
     b_req.seed = req.seed.wrapping_add(1);
     progress(&format!("first half (seed {})", a_req.seed));
     let a = render_request(&a_req)?;
@@ -211,8 +214,16 @@ pub fn reference_from_exrs(paths: &[PathBuf]) -> Result<Reference, String> {
             })
         }
         [p, q] => {
+            check_independent(p, q)?;
             let (w, h, mut la, na) = load(p)?;
             let (w2, h2, mut lb, nb) = load(q)?;
+            if la.first().map(|l| &l.1) == lb.first().map(|l| &l.1) {
+                return Err(format!(
+                    "{} and {} hold the same image: a reference's variance comes from two independent renders (render the second with another --seed)",
+                    p.display(),
+                    q.display()
+                ));
+            }
             if (w, h) != (w2, h2) {
                 return Err(format!(
                     "{} is {w}x{h}, {} is {w2}x{h2}",
@@ -252,6 +263,34 @@ pub fn reference_from_exrs(paths: &[PathBuf]) -> Result<Reference, String> {
         }
         _ => Err("--from takes one EXR, or two independent renders of the same scene".into()),
     }
+}
+
+/// Refuses two `--from` files that cannot be independent renders: the same file (under any
+/// name), or two renders of the same seed. Their difference would estimate a variance of
+/// 0 and a floor of 0.
+fn check_independent(p: &Path, q: &Path) -> Result<(), String> {
+    let canonical = |x: &Path| x.canonicalize().unwrap_or_else(|_| x.to_path_buf());
+    if canonical(p) == canonical(q) {
+        return Err(format!(
+            "--from {} is given twice (also as {}): a reference's variance comes from two independent renders",
+            p.display(),
+            q.display()
+        ));
+    }
+    let seed = |x: &Path| -> Result<Option<String>, String> {
+        let meta = read_exr_metadata(x).map_err(|e| e.to_string())?;
+        Ok(meta.get("flowlight.seed").map(str::to_string))
+    };
+    if let (Some(a), Some(b)) = (seed(p)?, seed(q)?) {
+        if a == b {
+            return Err(format!(
+                "{} and {} were rendered with the same seed ({a}): they are not independent; render the second with another --seed",
+                p.display(),
+                q.display()
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Writes a reference EXR: main image, `variance` (when known), lighting layers, and metadata

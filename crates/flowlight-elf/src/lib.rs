@@ -290,11 +290,38 @@ pub fn check_bytes(data: &[u8], symbol: &str) -> Result<(), ElfError> {
     err(format!("does not export `{symbol}`"))
 }
 
+/// Largest library file read for the check: Embree's own is about 20 MB, a plugin a few.
+pub const MAX_LIBRARY_BYTES: u64 = 1 << 30;
+
+/// The bytes of the library at `path`: only a regular file (a FIFO named like a plugin would
+/// block the read forever, a device would never end it) of at most [`MAX_LIBRARY_BYTES`].
+fn read_library(path: &Path) -> Result<Vec<u8>, ElfError> {
+    use std::io::Read;
+    let meta = std::fs::metadata(path).map_err(|e| ElfError(format!("cannot read: {e}")))?;
+    if !meta.is_file() {
+        return Err(ElfError(
+            "not a regular file (a FIFO, a device or a folder): cannot be a library".into(),
+        ));
+    }
+    if meta.len() > MAX_LIBRARY_BYTES {
+        return Err(ElfError(format!(
+            "{} bytes, beyond the {MAX_LIBRARY_BYTES} a library may have",
+            meta.len()
+        )));
+    }
+    let file = std::fs::File::open(path).map_err(|e| ElfError(format!("cannot read: {e}")))?;
+    let mut data = Vec::with_capacity(meta.len() as usize);
+    file.take(meta.len())
+        .read_to_end(&mut data)
+        .map_err(|e| ElfError(format!("cannot read: {e}")))?;
+    Ok(data)
+}
+
 /// Reads the file at `path` and checks it with [`check_bytes`]. The message names the cause
 /// but not the file (callers prefix it). On platforms whose libraries are not ELF, only that
 /// the file can be read is checked.
 pub fn check_library(path: &Path, symbol: &str) -> Result<(), ElfError> {
-    let data = std::fs::read(path).map_err(|e| ElfError(format!("cannot read: {e}")))?;
+    let data = read_library(path)?;
     if cfg!(target_os = "linux")
         && cfg!(target_endian = "little")
         && cfg!(target_pointer_width = "64")

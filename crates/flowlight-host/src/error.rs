@@ -67,6 +67,13 @@ pub enum HostError {
         output: PathBuf,
         input: &'static str,
     },
+    /// An output's name does not end in its format's extension (`wanted`).
+    WrongExtension {
+        file: PathBuf,
+        what: &'static str,
+        output: PathBuf,
+        wanted: &'static str,
+    },
     /// Two outputs are one file.
     SameOutput {
         file: PathBuf,
@@ -144,6 +151,17 @@ impl fmt::Display for HostError {
                 };
                 write!(f, "{}: --part/--samples {why}", file.display())
             }
+            HostError::WrongExtension {
+                file,
+                what,
+                output,
+                wanted,
+            } => write!(
+                f,
+                "{}: {what} {} must end in .{wanted}: the file is written in that format whatever its name",
+                file.display(),
+                output.display()
+            ),
             HostError::OutputIsInput {
                 file,
                 what,

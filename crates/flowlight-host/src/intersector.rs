@@ -409,6 +409,26 @@ pub struct UnitTracer<'a> {
     pub intersector: &'a dyn Intersector,
     pub counts: RayCounts,
     alpha: bool,
+    /// What `should_stop` answers from: set only for units whose deposits the host can
+    /// discard ([`UnitTracer::with_stop`]).
+    stop: Option<StopSignal<'a>>,
+    /// Whether `should_stop` has answered true: the unit's deposits must then be discarded.
+    pub stop_answered: bool,
+}
+
+/// Ctrl-C and the time budget, as a unit sees them.
+#[derive(Clone, Copy)]
+pub struct StopSignal<'a> {
+    pub interrupt: &'a std::sync::atomic::AtomicBool,
+    pub deadline: Option<Instant>,
+}
+
+impl StopSignal<'_> {
+    /// Whether Ctrl-C was pressed or the deadline has passed.
+    pub fn is_set(&self) -> bool {
+        self.interrupt.load(std::sync::atomic::Ordering::Relaxed)
+            || self.deadline.is_some_and(|d| Instant::now() >= d)
+    }
 }
 
 impl<'a> UnitTracer<'a> {
@@ -418,7 +438,25 @@ impl<'a> UnitTracer<'a> {
             intersector,
             counts: RayCounts::default(),
             alpha: scene.has_alpha(),
+            stop: None,
+            stop_answered: false,
         }
+    }
+
+    /// A tracer whose `should_stop` answers from `stop`: for units whose deposits the host
+    /// holds apart until the unit ends, and discards when the answer was true.
+    pub fn with_stop(mut self, stop: StopSignal<'a>) -> Self {
+        self.stop = Some(stop);
+        self
+    }
+
+    /// The `should_stop` answer (ABI 6): true once the budget or Ctrl-C stops the render,
+    /// and only for a tracer made [`UnitTracer::with_stop`]; remembered in
+    /// [`UnitTracer::stop_answered`].
+    pub fn should_stop(&mut self) -> bool {
+        let stop = self.stop.is_some_and(|s| s.is_set());
+        self.stop_answered |= stop;
+        stop
     }
 
     /// The closest hit of `ray`, alpha-tested when the scene needs it.
@@ -455,6 +493,7 @@ impl<'a> UnitTracer<'a> {
             occluded: occluded_cb,
             intersect_batch: intersect_batch_cb,
             occluded_batch: occluded_batch_cb,
+            should_stop: should_stop_cb,
         }
     }
 
@@ -559,6 +598,14 @@ unsafe extern "C" fn occluded_batch_cb(ctx: *mut c_void, rays: *const Ray, n: us
         let rays = std::slice::from_raw_parts(rays, n);
         let out = std::slice::from_raw_parts_mut(out, n);
         tracer.occluded_batch(rays, out);
+    }
+}
+
+unsafe extern "C" fn should_stop_cb(ctx: *mut c_void) -> u8 {
+    // SAFETY: as for `intersect_cb`.
+    unsafe {
+        let tracer = &mut *(ctx as *mut UnitTracer);
+        tracer.should_stop() as u8
     }
 }
 

@@ -73,6 +73,12 @@ pub const KEY_UNIFORM_SPP: &str = "flowlight.uniform_spp";
 pub const KEY_LAYERS: &str = "flowlight.layers";
 pub const KEY_PARTIAL: &str = "flowlight.partial";
 pub const KEY_MISSING: &str = "flowlight.missing";
+/// FNV-1a 64 of a part's exact sums, sample counts and the metadata that says how they
+/// resolve ([`sums_checksum`]): another tool's edit of a channel is refused by the merge.
+pub const KEY_CHECKSUM: &str = "flowlight.sums_fnv1a";
+/// FNV-1a 64 of the part's `.stats.json` text, so that a truncated, edited or foreign
+/// statistics file is refused by the merge rather than summed.
+pub const KEY_STATS_CHECKSUM: &str = "flowlight.stats_fnv1a";
 
 /// The share of a render's samples one part computes.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -113,6 +119,11 @@ impl PartSpec {
         if end <= begin {
             return Err(format!(
                 "--samples {begin}..{end}: the range is empty (the end is exclusive and must exceed the start)"
+            ));
+        }
+        if end > total {
+            return Err(format!(
+                "--samples {begin}..{end}: the render has {total} samples per pixel (render.spp or --spp), so the range must lie within 0..{total}"
             ));
         }
         Ok(PartSpec {
@@ -315,8 +326,33 @@ pub fn sum_channels(frame: &Frame) -> Vec<RawChannel> {
     out
 }
 
+/// FNV-1a 64 over the `u32` channels (by name, then their little-endian words) and the
+/// metadata values that say what the sums are (`flowlight.samples`, `.spp_total`, `.layers`,
+/// `.uniform_spp`), as 16 hex digits.
+pub fn sums_checksum<'c>(
+    channels: impl IntoIterator<Item = (&'c str, &'c [u32])>,
+    meta: &BTreeMap<String, String>,
+) -> String {
+    let mut sorted: Vec<(&str, &[u32])> = channels.into_iter().collect();
+    sorted.sort_by_key(|c| c.0);
+    let mut h = FNV_OFFSET;
+    for (name, words) in sorted {
+        h = fnv1a(h, name.as_bytes());
+        h = fnv1a(h, &[0]);
+        for w in words {
+            h = fnv1a(h, &w.to_le_bytes());
+        }
+    }
+    for key in [KEY_SAMPLES, KEY_SPP_TOTAL, KEY_LAYERS, KEY_UNIFORM_SPP] {
+        h = fnv1a(h, key.as_bytes());
+        h = fnv1a(h, meta.get(key).map_or("", |v| v.as_str()).as_bytes());
+        h = fnv1a(h, &[0]);
+    }
+    format!("{h:016x}")
+}
+
 /// Writes a part's (or a merge's) EXR: the resolved image and layers, the exact sums, and
-/// `meta`.
+/// `meta` plus the sums' checksum ([`KEY_CHECKSUM`]).
 pub fn write_part_exr(path: &Path, frame: &Frame, meta: &ExrMetadata) -> Result<(), String> {
     let (w, h) = (frame.width as usize, frame.height as usize);
     let image = frame.image();
@@ -324,8 +360,16 @@ pub fn write_part_exr(path: &Path, frame: &Frame, meta: &ExrMetadata) -> Result<
         .map(|k| frame.layer(k))
         .collect();
     let exr_layers = crate::output::frame_layers(&image, &layers);
-    write_exr_with_raw(path, w, h, &exr_layers, &sum_channels(frame), meta)
-        .map_err(|e| e.to_string())
+    let raw = sum_channels(frame);
+    let mut meta = meta.clone();
+    meta.entries.retain(|(k, _)| k != KEY_CHECKSUM);
+    let values: BTreeMap<String, String> = meta.entries.iter().cloned().collect();
+    let checksum = sums_checksum(
+        raw.iter().map(|c| (c.name.as_str(), c.samples.as_slice())),
+        &values,
+    );
+    meta.entries.push((KEY_CHECKSUM.into(), checksum));
+    write_exr_with_raw(path, w, h, &exr_layers, &raw, &meta).map_err(|e| e.to_string())
 }
 
 /// A part read back.
@@ -380,7 +424,25 @@ pub fn read_part(path: &Path) -> Result<PartFile, String> {
             "{p}: this part was interrupted (flowlight.interrupted = true) and holds fewer samples than its range; render it again"
         ));
     }
+    if ranges.iter().any(|&(_, b)| b > total) {
+        return Err(format!(
+            "{p}: {KEY_SAMPLES} = {} reaches beyond the render's {total} samples per pixel ({KEY_SPP_TOTAL})",
+            meta[KEY_SAMPLES]
+        ));
+    }
     let (w, h, mut channels) = read_exr_u32(path).map_err(|e: OutputError| e.to_string())?;
+    let stored = meta.get(KEY_CHECKSUM).ok_or_else(|| {
+        format!("{p}: no {KEY_CHECKSUM} checksum of its sums in its metadata (written by an older Flowlight, or rewritten by another tool): render this part again")
+    })?;
+    let computed = sums_checksum(
+        channels.iter().map(|(n, v)| (n.as_str(), v.as_slice())),
+        &meta,
+    );
+    if *stored != computed {
+        return Err(format!(
+            "{p}: its exact sums or sample counts do not match the checksum it was written with ({KEY_CHECKSUM} = {stored}, the channels give {computed}): another tool changed them; render this part again"
+        ));
+    }
     let mut take_sums = |layer: Option<usize>| -> Result<Vec<[u128; 3]>, String> {
         let mut sums = vec![[0u128; 3]; w * h];
         for (c, words) in sum_channel_names(layer).into_iter().enumerate() {
@@ -509,6 +571,21 @@ pub fn merge(out: &Path, inputs: &[PathBuf], allow_missing: bool) -> Result<Merg
         .iter()
         .map(|p| read_part(p))
         .collect::<Result<Vec<_>, _>>()?;
+    // Nor the config or the scene the parts were rendered from.
+    for p in &parts {
+        for (key, what) in [
+            ("flowlight.config", "the config"),
+            ("flowlight.scene", "the scene"),
+        ] {
+            if let Some(input) = p.meta.get(key).filter(|i| same(out, Path::new(i))) {
+                return Err(format!(
+                    "{}: the merge output is {what} {input} that {} was rendered from; refusing to overwrite an input",
+                    out.display(),
+                    p.path.display()
+                ));
+            }
+        }
+    }
     let first = &parts[0];
     for p in &parts[1..] {
         let (a, b) = (first.path.display(), p.path.display());
@@ -588,6 +665,7 @@ pub fn merge(out: &Path, inputs: &[PathBuf], allow_missing: bool) -> Result<Merg
     let ranges = coalesce(&sorted);
     let spp: u64 = sorted.iter().map(|&(a, b)| (b - a) as u64).sum();
     let mut meta = first.meta.clone();
+    meta.remove(KEY_STATS_CHECKSUM);
     meta.insert(KEY_SAMPLES.into(), format_ranges(&ranges));
     meta.insert(KEY_PART.into(), "merged".into());
     meta.insert(KEY_UNIFORM_SPP.into(), uniform_text(uniform));
@@ -598,8 +676,16 @@ pub fn merge(out: &Path, inputs: &[PathBuf], allow_missing: bool) -> Result<Merg
         entries: meta.into_iter().collect(),
     };
 
-    // Statistics first (nothing is written if they fail to parse), then the image.
-    let (stats, stats_warning) = merge_stats_files(&parts);
+    // Statistics first (nothing is written if they fail to parse), then the image, which
+    // records the statistics' checksum.
+    let (stats, stats_warning) = merge_stats_files(&parts)?;
+    let mut meta = meta;
+    if let Some(json) = &stats {
+        meta.entries.push((
+            KEY_STATS_CHECKSUM.into(),
+            format!("{:016x}", fnv1a(FNV_OFFSET, json.as_bytes())),
+        ));
+    }
     write_part_exr(out, &frame, &meta)?;
     let mut written = vec![out.to_path_buf()];
     if let Some(json) = stats {
@@ -744,30 +830,55 @@ fn split_key(line: &str) -> Option<(&str, &str)> {
 /// Merges the parts' `.stats.json` files: host counters and `sum` counters add, `max`
 /// ones take the maximum, ratios are recomputed from the merged numerator and denominator;
 /// `wall_seconds` is the sum over the parts (machine time, not the elapsed time). `None`
-/// with a warning when a part has no statistics file, or one without `counter_kinds`.
-fn merge_stats_files(parts: &[PartFile]) -> (Option<String>, Option<String>) {
+/// with a warning when a part has no statistics file, or one without `counter_kinds`; an
+/// error when a statistics file is not the one its part was written with (its checksum,
+/// [`KEY_STATS_CHECKSUM`], differs: truncated, edited or another render's).
+type MergedStats = (Option<String>, Option<String>);
+
+fn merge_stats_files(parts: &[PartFile]) -> Result<MergedStats, String> {
     let mut files = Vec::new();
     for p in parts {
         let path = p.path.with_extension("stats.json");
         let Ok(text) = std::fs::read_to_string(&path) else {
-            return (
+            return Ok((
                 None,
                 Some(format!(
                     "{} is missing: statistics not merged",
                     path.display()
                 )),
-            );
+            ));
         };
+        let checksum = format!("{:016x}", fnv1a(FNV_OFFSET, text.as_bytes()));
+        match p.meta.get(KEY_STATS_CHECKSUM) {
+            Some(expected) if *expected != checksum => {
+                return Err(format!(
+                    "{}: not the statistics {} was written with ({KEY_STATS_CHECKSUM} = {expected}, the file gives {checksum}): it was truncated, edited or comes from another render; restore it, or delete it to merge without statistics",
+                    path.display(),
+                    p.path.display()
+                ))
+            }
+            Some(_) => {}
+            None => {
+                return Ok((
+                    None,
+                    Some(format!(
+                        "{} has no {KEY_STATS_CHECKSUM} for {}: statistics not merged",
+                        p.path.display(),
+                        path.display()
+                    )),
+                ))
+            }
+        }
         match parse_stats_json(&text) {
             Some(v) => files.push((path, v)),
             None => {
-                return (
+                return Ok((
                     None,
                     Some(format!(
                         "{}: cannot parse it: statistics not merged",
                         path.display()
                     )),
-                )
+                ))
             }
         }
     }
@@ -791,13 +902,13 @@ fn merge_stats_files(parts: &[PartFile]) -> (Option<String>, Option<String>) {
         .filter_map(|n| Some((n.clone(), get(first, Some("counter_kinds"), n)?)))
         .collect();
     if kinds.len() != names.len() {
-        return (
+        return Ok((
             None,
             Some(format!(
                 "{} has no counter_kinds for every counter (not written by a part render): statistics not merged",
                 first_path.display()
             )),
-        );
+        ));
     }
     let sum = |key: &str| files.iter().map(|(_, f)| num(f, None, key)).sum::<f64>();
     let mut counters: Vec<(String, f64)> = Vec::new();
@@ -835,7 +946,7 @@ fn merge_stats_files(parts: &[PartFile]) -> (Option<String>, Option<String>) {
         ..Default::default()
     };
     let json = crate::session::stats_json(&integrator, &stats);
-    (Some(stats_json_with_kinds(&json, &kinds)), None)
+    Ok((Some(stats_json_with_kinds(&json, &kinds)), None))
 }
 
 #[cfg(test)]
@@ -910,16 +1021,18 @@ mod tests {
         {
             let path = dir.join(format!("p{i}.exr"));
             let json = stats_json_with_kinds(&crate::session::stats_json("erpt", s), &kinds);
-            std::fs::write(path.with_extension("stats.json"), json).unwrap();
+            std::fs::write(path.with_extension("stats.json"), &json).unwrap();
+            // The part's record of its statistics file (written with it).
+            let checksum = format!("{:016x}", fnv1a(FNV_OFFSET, json.as_bytes()));
             parts.push(PartFile {
                 path,
-                meta: BTreeMap::new(),
+                meta: BTreeMap::from([(KEY_STATS_CHECKSUM.to_string(), checksum)]),
                 ranges: vec![],
                 total: 0,
                 frame: Frame::new(1, 1, 0),
             });
         }
-        let (json, warn) = merge_stats_files(&parts);
+        let (json, warn) = merge_stats_files(&parts).unwrap();
         assert!(warn.is_none(), "{warn:?}");
         let flat = parse_stats_json(&json.unwrap()).unwrap();
         let c = |k: &str| {

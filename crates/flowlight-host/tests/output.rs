@@ -494,3 +494,67 @@ fn check_writable_names_the_folder_and_leaves_nothing() {
     assert!(e.contains("is a directory"), "{e}");
     assert_eq!(dir_entries(dir.path()), vec!["file".to_string()]);
 }
+
+/// A writer in another PID namespace (a container on a shared volume) has a PID that is not
+/// alive here; its temporary file is kept while it holds the file's lock, and removed once
+/// the lock is gone (the writer died).
+#[test]
+fn d6_a_locked_temp_of_a_writer_elsewhere_is_kept() {
+    let dir = ScratchDir::new("d6-lock");
+    let out = dir.path().join("a.exr");
+    let mut child = std::process::Command::new("true").spawn().unwrap();
+    let elsewhere = child.id();
+    child.wait().unwrap();
+    let tmp = dir.path().join(format!(".a.exr.tmp-{elsewhere}-0"));
+    fs::write(&tmp, "being written").unwrap();
+    let writer = fs::OpenOptions::new().read(true).open(&tmp).unwrap();
+    writer.lock().unwrap();
+    let write_x = |p: &Path| {
+        fs::write(p, b"x").map_err(|source| OutputError::Io {
+            path: p.to_owned(),
+            source,
+        })
+    };
+    write_atomically(&out, write_x).unwrap();
+    assert!(tmp.exists(), "a live writer's temp file was removed");
+    drop(writer);
+    write_atomically(&out, write_x).unwrap();
+    assert!(!tmp.exists(), "a dead writer's temp file was kept");
+    assert_eq!(fs::read(&out).unwrap(), b"x");
+}
+
+/// A 1 KB EXR whose header claims 100000×100000 pixels is refused before the decoder
+/// allocates them.
+#[test]
+fn d4_an_exr_header_claiming_more_than_the_file_holds_is_refused() {
+    let dir = ScratchDir::new("d4-huge");
+    let path = dir.path().join("small.exr");
+    let px = vec![Rgb::splat(1.0); 4];
+    write_exr(
+        &path,
+        2,
+        2,
+        &[ImageLayer {
+            name: String::new(),
+            pixels: &px,
+        }],
+        &ExrMetadata::default(),
+    )
+    .unwrap();
+    // dataWindow and displayWindow: box2i of (xmin, ymin, xmax, ymax), i32 each.
+    let mut bytes = fs::read(&path).unwrap();
+    for name in [&b"dataWindow\0box2i\0"[..], &b"displayWindow\0box2i\0"[..]] {
+        let at = bytes.windows(name.len()).position(|w| w == name).unwrap() + name.len() + 4;
+        bytes[at + 8..at + 12].copy_from_slice(&99_999i32.to_le_bytes());
+        bytes[at + 12..at + 16].copy_from_slice(&99_999i32.to_le_bytes());
+    }
+    let huge = dir.path().join("huge.exr");
+    fs::write(&huge, &bytes).unwrap();
+    assert!(bytes.len() < 2048);
+    let e = read_exr_rgb(&huge).unwrap_err().to_string();
+    assert!(e.contains("huge.exr") && e.contains("100000x100000"), "{e}");
+    let e = flowlight_host::output::read_exr_u32(&huge)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("100000x100000"), "{e}");
+}

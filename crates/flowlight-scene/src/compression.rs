@@ -146,7 +146,34 @@ impl MeshoptView {
         if m.count.checked_mul(s).is_none() {
             return Err("count × byteStride overflows".into());
         }
+        // The decoders allocate `count × byteStride` bytes before reading the stream, so a
+        // count the stream cannot hold is refused here rather than allocated.
+        let most = m.most_decoded_bytes();
+        if m.decoded_len() > most {
+            return Err(format!(
+                "count {} × byteStride {s} = {} bytes cannot come from byteLength {} ({:?} decodes at most {most} bytes from it)",
+                m.count,
+                m.decoded_len(),
+                m.byte_length,
+                m.mode
+            ));
+        }
         Ok(m)
+    }
+
+    /// The most bytes `byteLength` compressed bytes can decode to (meshoptimizer's codecs,
+    /// `vertexcodec.cpp` and `indexcodec.cpp`): the vertex codec reads at least `byteStride/4`
+    /// control bytes (version 1; version 0 at least as many group headers) per block of at
+    /// most 256 vertices, so `count × byteStride ≤ 1024 × byteLength`; the triangle codec
+    /// reads at least one code byte per triangle; the sequence codec at least one byte per
+    /// index.
+    pub fn most_decoded_bytes(&self) -> usize {
+        let n = self.byte_length;
+        match self.mode {
+            Mode::Attributes => n.saturating_mul(1024),
+            Mode::Triangles => n.saturating_mul(3 * self.byte_stride),
+            Mode::Indices => n.saturating_mul(self.byte_stride),
+        }
     }
 
     /// Size of the decoded data in bytes.
@@ -391,6 +418,36 @@ mod tests {
             r#"{"byteLength":10,"byteStride":12,"count":3,"mode":"ATTRIBUTES"}"#,
         ] {
             assert!(view(bad).is_err(), "{bad} accepted");
+        }
+    }
+
+    #[test]
+    fn d3_count_beyond_what_the_stream_can_hold_is_refused_before_allocating() {
+        // 2³¹ vertices of 12 bytes (25.7 GB) from 2 KB of stream: refused by the parse.
+        for (bad, names) in [
+            (
+                r#"{"buffer":1,"byteLength":2048,"byteStride":12,"count":2147483648,"mode":"ATTRIBUTES"}"#,
+                "count 2147483648",
+            ),
+            (
+                r#"{"buffer":1,"byteLength":100,"byteStride":4,"count":3000,"mode":"TRIANGLES"}"#,
+                "byteLength 100",
+            ),
+            (
+                r#"{"buffer":1,"byteLength":100,"byteStride":2,"count":101,"mode":"INDICES"}"#,
+                "count 101",
+            ),
+        ] {
+            let err = view(bad).unwrap_err();
+            assert!(err.contains(names), "{bad}: {err}");
+        }
+        // At the codecs' best ratios, still accepted.
+        for ok in [
+            r#"{"buffer":1,"byteLength":3,"byteStride":4,"count":768,"mode":"ATTRIBUTES"}"#,
+            r#"{"buffer":1,"byteLength":100,"byteStride":4,"count":300,"mode":"TRIANGLES"}"#,
+            r#"{"buffer":1,"byteLength":100,"byteStride":2,"count":100,"mode":"INDICES"}"#,
+        ] {
+            assert!(view(ok).is_ok(), "{ok}");
         }
     }
 

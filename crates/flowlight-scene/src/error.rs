@@ -17,7 +17,7 @@ pub enum SceneError {
     Json { file: PathBuf, reason: String },
     #[error("{}: invalid glTF document: {reason}", file.display())]
     Validation { file: PathBuf, reason: String },
-    #[error("{}: buffer {buffer} refers to missing file {}: {source}", file.display(), missing.display())]
+    #[error("{}: buffer {buffer}: cannot read {}: {source}", file.display(), missing.display())]
     MissingBuffer {
         file: PathBuf,
         buffer: usize,

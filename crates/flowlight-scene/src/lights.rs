@@ -180,7 +180,18 @@ pub fn load_environment(
     let Some(map) = &env.map else {
         return Ok(EnvironmentData::default());
     };
-    let img = image::open(map)
+    // Read as any input file (a regular file, its size known first), then decoded without
+    // the decoder's own 512 MiB cap, which a valid 16k map exceeds.
+    let bytes = crate::files::read_regular_file(map, crate::files::MAX_INPUT_FILE_BYTES)
+        .map_err(|e| invalid("environment.map", format!("{}: {e}", map.display())))?;
+    let format = image::ImageFormat::from_path(map)
+        .map_err(|e| invalid("environment.map", format!("{}: {e}", map.display())))?;
+    let mut reader = image::ImageReader::with_format(std::io::Cursor::new(&bytes), format);
+    let mut limits = image::Limits::no_limits();
+    limits.max_alloc = crate::memory::available_memory();
+    reader.limits(limits);
+    let img = reader
+        .decode()
         .map_err(|e| invalid("environment.map", format!("{}: {e}", map.display())))?
         .into_rgb32f();
     let (width, height) = img.dimensions();
@@ -222,16 +233,78 @@ pub fn scene_radius(scene: &Scene) -> f32 {
         .map_or(1.0, |(lo, hi)| ((hi - lo).length() * 0.5).max(1e-6))
 }
 
-/// The power CDF over all lights (area emitters, punctual lights, environment); empty when
-/// there is no light or no light carries power.
+/// The power CDF over all lights (area emitters, punctual lights, environment); empty only
+/// when there is no light. Lights that all carry no power (a lamp switched off, a black
+/// colour, a spot cone closed to nothing) get a uniform CDF: the plugins' light tables hold
+/// one CDF entry per light, and sampling such a light adds nothing.
 pub fn light_power_cdf(scene: &Scene, environment: &Environment) -> Vec<f32> {
-    let powers = light_powers(
+    let powers = scene_light_powers(scene, environment);
+    build_cdf(&powers).unwrap_or_else(|| {
+        let n = powers.len();
+        (1..=n).map(|i| i as f32 / n as f32).collect()
+    })
+}
+
+fn scene_light_powers(scene: &Scene, environment: &Environment) -> Vec<f32> {
+    light_powers(
         &scene.emitters,
         &scene.punctual_lights,
         environment,
         scene_radius(scene),
-    );
-    build_cdf(&powers).unwrap_or_default()
+    )
+}
+
+/// What the scene's lights give the image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LightPresence {
+    /// No emissive triangle, punctual light or environment.
+    NoLight,
+    /// Lights, none of which carries power: the image is black.
+    NoPower,
+    /// At least one light carries power.
+    Lit,
+}
+
+impl LightPresence {
+    /// The warning a render of a scene without power gives, naming the cause.
+    pub fn warning(self) -> Option<&'static str> {
+        match self {
+            LightPresence::NoLight => Some("the scene has no light (no emissive triangle, no KHR_lights_punctual light, no [environment]): the image will be black; add e.g. `[environment] color = [1, 1, 1]` to the config"),
+            LightPresence::NoPower => Some("the scene's lights all carry no power (intensity 0, a black colour or a spot cone closed to nothing, as a lamp switched off in Blender): the image will be black"),
+            LightPresence::Lit => None,
+        }
+    }
+}
+
+/// Whether the scene has lights that carry power; an error naming the light whose power is
+/// not finite (radiance beyond what 32-bit floats hold once multiplied by its area, its
+/// cone or the scene's size), which would otherwise leave no usable light CDF and a black
+/// image.
+pub fn light_presence(scene: &Scene, environment: &Environment) -> Result<LightPresence, String> {
+    let powers = scene_light_powers(scene, environment);
+    let (na, np) = (scene.emitters.len(), scene.punctual_lights.len());
+    if let Some(i) = powers.iter().position(|p| !p.is_finite()) {
+        let what = if i < na {
+            format!(
+                "the emissive triangle {} (material {})",
+                scene.emitters[i].prim, scene.emitters[i].material
+            )
+        } else if i < na + np {
+            format!("KHR_lights_punctual light {} (in scene order)", i - na)
+        } else {
+            "[environment]".to_string()
+        };
+        return Err(format!(
+            "{what} carries an infinite power: its radiance times its extent overflows 32-bit floats (3.4e38); lower its strength or intensity"
+        ));
+    }
+    Ok(if powers.is_empty() {
+        LightPresence::NoLight
+    } else if powers.iter().all(|&p| p == 0.0) {
+        LightPresence::NoPower
+    } else {
+        LightPresence::Lit
+    })
 }
 
 #[cfg(test)]

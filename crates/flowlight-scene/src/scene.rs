@@ -173,6 +173,9 @@ pub struct Scene {
     /// `KHR_lights_punctual` lights of the default scene, placed by their nodes.
     pub punctual_lights: Vec<PunctualLight>,
     pub stats: LoadStats,
+    /// The files the scene was read from besides itself (buffers and images named by a
+    /// relative URI), for the check that no output overwrites one of them.
+    pub files: Vec<std::path::PathBuf>,
 }
 
 /// Area of the triangle, in double precision.

@@ -108,10 +108,11 @@ impl GltfSource {
     /// Reads and validates `file`.
     pub fn open(file: &Path) -> Result<GltfSource, SceneError> {
         let path = file.to_path_buf();
-        let data = std::fs::read(file).map_err(|source| SceneError::Io {
-            file: path.clone(),
-            source,
-        })?;
+        let data = crate::files::read_regular_file(file, crate::files::MAX_INPUT_FILE_BYTES)
+            .map_err(|source| SceneError::Io {
+                file: path.clone(),
+                source,
+            })?;
         let (json, blob) = if data.starts_with(GLB_MAGIC) {
             let (json, bin) = split_glb(&data).map_err(|reason| SceneError::Glb {
                 file: path.clone(),
@@ -432,6 +433,26 @@ impl GltfSource {
             .map_err(|r| err(&self.file, r))
     }
 
+    /// The files the document's buffers and images name by URI (not `data:` URIs), as
+    /// [`GltfSource::read_uri`] resolves them.
+    pub fn referenced_files(&self) -> Vec<PathBuf> {
+        let buffers = self.document.buffers().filter_map(|b| match b.source() {
+            gltf::buffer::Source::Uri(uri) => Some(uri),
+            gltf::buffer::Source::Bin => None,
+        });
+        let images = self
+            .document
+            .as_json()
+            .images
+            .iter()
+            .filter_map(|i| i.uri.as_deref());
+        buffers
+            .chain(images)
+            .filter(|uri| !uri.starts_with("data:") && !uri.contains("://"))
+            .map(|uri| self.base_dir.join(percent_decode(uri)))
+            .collect()
+    }
+
     /// Reads a URI relative to the asset: a `data:` URI or a (percent-encoded) relative path.
     pub fn read_uri(&self, uri: &str) -> Result<Vec<u8>, UriError> {
         if let Some(rest) = uri.strip_prefix("data:") {
@@ -449,7 +470,8 @@ impl GltfSource {
             )))
         } else {
             let path = self.base_dir.join(percent_decode(uri));
-            std::fs::read(&path).map_err(|e| UriError::Io(path, e))
+            crate::files::read_regular_file(&path, crate::files::MAX_INPUT_FILE_BYTES)
+                .map_err(|e| UriError::Io(path, e))
         }
     }
 }

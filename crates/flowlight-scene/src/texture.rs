@@ -135,7 +135,27 @@ impl TextureData {
 /// docs). No colour conversion happens here.
 pub fn decode_image(bytes: &[u8]) -> Result<ImageData, String> {
     use image::DynamicImage as D;
-    let img = image::load_from_memory(bytes).map_err(|e| e.to_string())?;
+    // The decoder's own default cap (512 MiB) refuses a valid 16k texture with a bare
+    // "Memory limit exceeded": the cap is the memory this process may allocate instead, and
+    // a refusal names the image's size and the cap.
+    let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| e.to_string())?;
+    let cap = crate::memory::available_memory().unwrap_or(u64::MAX);
+    let mut limits = image::Limits::no_limits();
+    limits.max_alloc = Some(cap);
+    reader.limits(limits);
+    let size = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .ok()
+        .and_then(|r| r.into_dimensions().ok());
+    let img = reader.decode().map_err(|e| match (e, size) {
+        (image::ImageError::Limits(_), Some((w, h))) => format!(
+            "a {w}x{h} image needs more than the {} MiB of memory available to decode it",
+            cap >> 20
+        ),
+        (e, _) => e.to_string(),
+    })?;
     let (width, height) = (img.width(), img.height());
     if width == 0 || height == 0 {
         return Err("image has zero size".into());
@@ -170,6 +190,15 @@ pub fn load_image(src: &mut GltfSource, image: &gltf::Image) -> Result<ImageData
         image: image.index(),
         reason,
     };
+    // `Image::source` unwraps the MIME type of an image in a buffer view, which the glTF
+    // spec requires there but a hand-written file may leave out.
+    let json = &src.document.as_json().images[image.index()];
+    if json.buffer_view.is_some() && json.mime_type.is_none() {
+        return Err(err(
+            src,
+            "it is stored in a bufferView but has no mimeType (the glTF spec requires \"image/png\" or \"image/jpeg\" there)".into(),
+        ));
+    }
     let bytes = match image.source() {
         gltf::image::Source::View { view, .. } => src.view_bytes(&view)?.to_vec(),
         gltf::image::Source::Uri { uri, .. } => {

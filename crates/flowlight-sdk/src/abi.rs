@@ -368,6 +368,11 @@ pub struct TracerTable {
     /// `blocked[i]` = 1 when `rays[i]` is blocked before its `t_max`, else 0.
     pub occluded_batch:
         unsafe extern "C" fn(ctx: *mut c_void, rays: *const Ray, n: usize, blocked: *mut u8),
+    /// 1 when the render's time budget has run out or Ctrl-C was pressed and this unit may
+    /// be abandoned (ABI 6): the host then discards everything the unit deposited, so the
+    /// plugin may return at once. 0 otherwise, always 0 where the host could not discard the
+    /// unit's deposits.
+    pub should_stop: unsafe extern "C" fn(ctx: *mut c_void) -> u8,
 }
 
 /// One contribution to the image: radiance `value` (already divided by its sample density)

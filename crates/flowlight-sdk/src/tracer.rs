@@ -28,6 +28,16 @@ impl<'a> Tracer<'a> {
         self.table
     }
 
+    /// Whether the render's budget ran out or Ctrl-C was pressed while this unit runs (ABI
+    /// 6). Once it answers true the host discards the unit's deposits: an integrator whose
+    /// units can run long (ERPT's chains) asks now and then and returns at once. A clock read
+    /// and an indirect call: ask every few hundred steps, not every ray.
+    #[inline]
+    pub fn should_stop(&self) -> bool {
+        // SAFETY: no arguments beyond the host's context.
+        unsafe { (self.table.should_stop)(self.table.ctx) != 0 }
+    }
+
     /// The closest surface `ray` hits before its `t_max`, or `None` when it escapes.
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceHit> {

@@ -26,6 +26,12 @@ use std::time::Instant;
 /// are unbiased estimates; call counts stay exact.
 pub const STEP_TIMING_STRIDE: u32 = 32;
 
+/// The flow asks the host whether to stop (time budget spent, Ctrl-C) before each seed and
+/// once every this many steps of a chain: one 8×8 unit can hold millions of steps (seconds),
+/// and a question is a clock read and an indirect call, about one small step's cost, so
+/// 1 in 256 costs under 0.5% and answers within about a millisecond.
+pub const STOP_CHECK_STRIDE: u32 = 256;
+
 /// Decides which steps [`Flow`] times (see [`STEP_TIMING_STRIDE`]).
 #[derive(Default)]
 struct StepTimer {
@@ -225,6 +231,10 @@ impl<'a> Flow<'a> {
         stats: &mut Stats,
     ) -> Result<(), String> {
         let c = self.counters;
+        if self.tracer.should_stop() {
+            // The host discards or keeps what the unit deposited so far (its doc).
+            return Ok(());
+        }
         stats.add(c.seeds, 1.0);
         let lum_seed = estimate.luminance() as f64;
         if !(estimate.is_valid_radiance() && lum_seed.is_finite()) {
@@ -260,6 +270,7 @@ impl<'a> Flow<'a> {
             run: 0,
             deposits: 0,
         };
+        let mut steps_to_check = STOP_CHECK_STRIDE;
         for _ in 0..chains {
             stats.add(c.chains, 1.0);
             *self.state = *seed;
@@ -267,6 +278,14 @@ impl<'a> Flow<'a> {
             dep.run = 0;
             dep.last_pixel = (i64::MIN, 0);
             for _ in 0..self.settings.chain_length {
+                steps_to_check -= 1;
+                if steps_to_check == 0 {
+                    steps_to_check = STOP_CHECK_STRIDE;
+                    if self.tracer.should_stop() {
+                        stats.add(c.deposits, dep.deposits as f64);
+                        return Ok(());
+                    }
+                }
                 let s = if self.mutations.len() > 1 {
                     self.mutations.choose(rng.uniform() as f64)
                 } else {

@@ -15,7 +15,8 @@ fn temp_prefix(path: &Path) -> Option<String> {
     Some(format!(".{name}.tmp-"))
 }
 
-/// Whether process `pid` is alive, where that can be told (Linux: `/proc/PID`).
+/// Whether process `pid` is alive in this PID namespace, where that can be told (Linux:
+/// `/proc/PID`). A PID that is not alive here may still be a live writer elsewhere.
 fn process_alive(pid: u32) -> Option<bool> {
     if !Path::new("/proc/self").exists() {
         return None;
@@ -24,9 +25,15 @@ fn process_alive(pid: u32) -> Option<bool> {
 }
 
 /// Removes temporary files `.{file name}.tmp-{pid}-{n}` of this output left by writes that
-/// never finished (a process killed during the write, a second Ctrl-C): those whose process
-/// is no longer alive. Files of live processes (this one included) and anything that does
-/// not match the pattern are left alone. Returns the files removed.
+/// never finished (a process killed during the write, a second Ctrl-C): those no live writer
+/// holds. A writer holds an exclusive lock (`flock`) on its temporary file from its creation
+/// to its rename ([`write_atomically`]), and the kernel releases it when the writer dies, so
+/// a temp file that can be locked belongs to no live writer — whatever PID namespace or
+/// machine the writer ran in (a container on a shared volume sees other PIDs, or none, in
+/// its `/proc`, so a PID that is not alive here proves nothing). Removed: the files whose PID
+/// is not alive here and which this cleaner can lock. Files of live local PIDs, locked
+/// files, and anything that does not match the pattern are left alone. Returns the files
+/// removed.
 pub fn clean_stale_temps(path: &Path) -> Vec<PathBuf> {
     let Some(prefix) = temp_prefix(path) else {
         return Vec::new();
@@ -53,14 +60,46 @@ pub fn clean_stale_temps(path: &Path) -> Vec<PathBuf> {
         ) else {
             continue;
         };
+        // A writer of this PID namespace that is alive keeps its files whether or not it
+        // locked them (a version that did not lock, or one between creation and lock).
         if pid == std::process::id() || process_alive(pid) != Some(false) {
             continue;
         }
-        if e.file_type().is_ok_and(|t| t.is_file()) && fs::remove_file(e.path()).is_ok() {
+        if !e.file_type().is_ok_and(|t| t.is_file()) {
+            continue;
+        }
+        // Removed while locked: a writer that opened it just now and waits for the lock
+        // finds it gone and starts another ([`write_atomically`]).
+        let Ok(file) = fs::OpenOptions::new().read(true).open(e.path()) else {
+            continue;
+        };
+        if file.try_lock().is_ok() && fs::remove_file(e.path()).is_ok() {
             removed.push(e.path());
         }
     }
     removed
+}
+
+/// Creates the temporary file `tmp` and holds an exclusive lock on it (see
+/// [`clean_stale_temps`]): `None` when a cleaner removed it between its creation and the
+/// lock, so that the caller takes another name.
+fn create_locked(tmp: &Path) -> io::Result<Option<fs::File>> {
+    let file = fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(tmp)?;
+    file.lock()?;
+    // Locked: still the file under that name, or a cleaner got there first.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        let ours = file.metadata()?;
+        match fs::metadata(tmp) {
+            Ok(m) if m.ino() == ours.ino() && m.dev() == ours.dev() => {}
+            _ => return Ok(None),
+        }
+    }
+    Ok(Some(file))
 }
 
 /// Checks, without leaving anything behind, that `path` can be written later: it is not a
@@ -173,17 +212,27 @@ pub fn write_atomically(
         source,
     })?;
 
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(file_name);
-    tmp_name.push(format!(
-        ".tmp-{}-{}",
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let tmp = dir.join(tmp_name);
     for stale in clean_stale_temps(path) {
         tracing::info!("removed {}, left by an interrupted write", stale.display());
     }
+    // The temporary file is created and locked before it is written, and stays locked until
+    // it is renamed: a cleaner elsewhere removes only unlocked ones.
+    let (tmp, _lock) = loop {
+        let mut tmp_name = std::ffi::OsString::from(".");
+        tmp_name.push(file_name);
+        tmp_name.push(format!(
+            ".tmp-{}-{}",
+            std::process::id(),
+            COUNTER.fetch_add(1, Ordering::Relaxed)
+        ));
+        let tmp = dir.join(tmp_name);
+        match create_locked(&tmp) {
+            Ok(Some(lock)) => break (tmp, lock),
+            Ok(None) => continue,
+            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(io_err(e)),
+        }
+    };
     let mut guard = TempGuard {
         path: &tmp,
         armed: true,

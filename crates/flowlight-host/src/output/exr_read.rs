@@ -14,10 +14,65 @@ use super::{ExrMetadata, OutputError};
 /// Integer channels by name, as [`read_exr_u32`] returns them.
 pub type U32Channels = BTreeMap<String, Vec<u32>>;
 
+/// Refuses an EXR whose headers claim more pixels than the file or this process's memory
+/// can hold, before the decoder allocates them: a 1 KB file whose header claims
+/// 100000×100000 made the decoder abort on a 160 GB allocation. The file must hold at least
+/// its offset tables (8 bytes a chunk), and the samples decoded (with the copies the
+/// readers make) must fit in the memory available.
+pub fn check_exr_size(path: &Path) -> Result<(), OutputError> {
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|source| {
+        OutputError::ExrDecode {
+            path: path.to_owned(),
+            source,
+        }
+    })?;
+    let file_len = std::fs::metadata(path)
+        .map_err(|source| OutputError::Io {
+            path: path.to_owned(),
+            source,
+        })?
+        .len();
+    let (mut chunks, mut bytes) = (0u64, 0u64);
+    for h in &meta.headers {
+        let pixels = h.layer_size.0 as u64 * h.layer_size.1 as u64;
+        chunks = chunks.saturating_add(h.chunk_count as u64);
+        bytes = bytes.saturating_add(pixels.saturating_mul(h.channels.bytes_per_pixel as u64));
+    }
+    let size = meta
+        .headers
+        .first()
+        .map_or((0, 0), |h| (h.layer_size.0, h.layer_size.1));
+    let unsupported = |reason: String| OutputError::Unsupported {
+        path: path.to_owned(),
+        reason,
+    };
+    if chunks.saturating_mul(8) > file_len {
+        return Err(unsupported(format!(
+            "its header claims {}x{} pixels in {chunks} chunks, but the file's {file_len} bytes cannot even hold their offset table: it is truncated or corrupt",
+            size.0, size.1
+        )));
+    }
+    // The decoded samples, their f32 copies and the RGB pixels: about three times the data.
+    let need = bytes.saturating_mul(3);
+    if let Some(avail) = flowlight_scene::memory::available_memory() {
+        if need > avail {
+            return Err(unsupported(format!(
+                "its header claims {}x{} pixels, about {} MiB to decode, but {} MiB is available",
+                size.0,
+                size.1,
+                need >> 20,
+                avail >> 20
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// The 32-bit unsigned integer channels of an EXR file ([`RawChannel`](super::RawChannel)) as
 /// `(width, height, name → samples)`; float channels are skipped.
 pub fn read_exr_u32(path: &Path) -> Result<(usize, usize, U32Channels), OutputError> {
     use exr::prelude::traits::*;
+    check_exr_size(path)?;
     let image = exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()
@@ -51,6 +106,7 @@ pub type NamedLayers = Vec<(String, Vec<Rgb>)>;
 /// converted to `f32`.
 pub fn read_exr_rgb(path: &Path) -> Result<(usize, usize, NamedLayers), OutputError> {
     use exr::prelude::traits::*;
+    check_exr_size(path)?;
     let image = exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()

@@ -28,7 +28,9 @@ pub use self::exr::{
     frame_layers, sort_header_attributes, write_exr, write_exr_planar, write_exr_with_raw,
     ExrMetadata, ImageLayer, PlanarLayer, RawChannel,
 };
-pub use self::exr_read::{read_exr_metadata, read_exr_rgb, read_exr_u32, NamedLayers, U32Channels};
+pub use self::exr_read::{
+    check_exr_size, read_exr_metadata, read_exr_rgb, read_exr_u32, NamedLayers, U32Channels,
+};
 pub use self::png::{write_png_preview, PngPreview};
 
 /// Everything that can go wrong while writing or reading an image. Every variant names the

@@ -1,5 +1,6 @@
 //! Memory limits of a render: what its frame and output buffers take, and the refusal of a
-//! render that would need more than `MemAvailable`, before anything is allocated.
+//! render that would need more than the memory available (`MemAvailable`, the memory
+//! cgroup's limit, `RLIMIT_AS`: [`flowlight_scene::memory`]), before anything is allocated.
 
 use crate::accumulation::Precision;
 
@@ -25,12 +26,11 @@ pub fn frame_bytes_with(width: u32, height: u32, layers: u32, precision: Precisi
         .checked_mul(per_pixel)
 }
 
-/// `MemAvailable` of `/proc/meminfo` in bytes, where there is one.
+/// The bytes this process may still allocate: the least of the host's `MemAvailable`, the
+/// room under its memory cgroup's limit (v2 `memory.max`, v1 `memory.limit_in_bytes`) and
+/// the address space left under `RLIMIT_AS` ([`flowlight_scene::memory`]).
 pub fn available_memory() -> Option<u64> {
-    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    kb.checked_mul(1024)
+    flowlight_scene::memory::available_memory()
 }
 
 fn human_bytes(b: u64) -> String {

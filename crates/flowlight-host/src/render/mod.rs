@@ -11,8 +11,14 @@
 //!
 //! A render with a time budget `T` starts no work unit after `T` (the clock starts before the
 //! integrator's one-time `prepare`, which counts against the budget); units in flight finish,
-//! so the overrun is at most one unit per thread. How the samples finished by then are
-//! normalised depends on where a unit deposits:
+//! so the overrun is at most one unit per thread. A unit that can run long asks the host
+//! (`Tracer::should_stop`, ABI 6) whether the budget is spent or Ctrl-C was pressed, and
+//! returns at once when it is (ERPT asks before each seed and every 256 chain steps): a
+//! Blasting unit told so is discarded, as if it had not started; a Buffering or Caching
+//! unit's deposits are already shared, so it counts as finished with the chains it ran —
+//! a unit per thread of the cut pass holds less than its share of energy, the price of
+//! stopping within milliseconds rather than after seconds. How the samples finished by then
+//! are normalised depends on where a unit deposits:
 //!
 //! * tile-local integrators (MCPT): every pixel's value is the mean of its own finished
 //!   samples, sum / nᵢ, so stopping between any two units leaves every pixel unbiased;
@@ -50,7 +56,8 @@
 //!   warning (they only add scheduling and contention).
 //! * Memory: [`frame_bytes_with`] estimates the frame and output buffers, [`check_memory`]
 //!   adds the accumulation style's private buffers; a render that would need more than
-//!   `MemAvailable` (`/proc/meminfo`) is refused before allocating.
+//!   the memory available (`MemAvailable`, the memory cgroup's limit, `RLIMIT_AS`:
+//!   [`flowlight_scene::memory`]) is refused before allocating.
 //!
 //! # Accumulation
 //!

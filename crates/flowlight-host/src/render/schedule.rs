@@ -13,7 +13,7 @@ use crate::accumulation::{
     DepositCounts, Frame, MicroTileCache, Precision, SharedFrame, Style, ThreadBuffer,
     TileAccumulator,
 };
-use crate::intersector::{Intersector, UnitTracer};
+use crate::intersector::{Intersector, StopSignal, UnitTracer};
 use crate::plugin::{IntegratorInstance, PluginError};
 use flowlight_scene::Scene;
 use flowlight_sdk::abi::StatSpec;
@@ -494,7 +494,8 @@ impl Run<'_, '_> {
     }
 
     /// Renders samples `[sample_begin, sample_begin + count)` of `tile` into the style's
-    /// accumulator and adds its counters; false when the plugin failed (the render halts).
+    /// accumulator and adds its counters; false when nothing of it counts: the plugin failed
+    /// (the render halts), or a Blasting unit stopped early and was discarded.
     fn unit(&self, tile: (u32, u32, u32, u32), sample_begin: u32, count: u32) -> bool {
         let (x0, y0, x1, y1) = tile;
         let unit = WorkUnit {
@@ -506,7 +507,14 @@ impl Run<'_, '_> {
             sample_count: count,
             seed: self.opts.seed,
         };
-        let mut tracer = UnitTracer::new(self.scene, self.intersector);
+        // The plugin may ask whether to stop inside a long unit (ERPT's chains): a Blasting
+        // unit then ends early and its tile is discarded, as if it had not started; a
+        // Buffering or Caching unit's deposits are already shared, so it is kept as a
+        // finished unit with the chains it ran (module documentation).
+        let mut tracer = UnitTracer::new(self.scene, self.intersector).with_stop(StopSignal {
+            interrupt: self.stop,
+            deadline: self.deadline,
+        });
         let mut unit_stats = vec![0.0f64; self.specs.len()];
         let (result, counts) = if self.style == Style::Blasting {
             self.blast(&unit, &mut tracer, &mut unit_stats)
@@ -527,6 +535,9 @@ impl Run<'_, '_> {
         if let Err(e) = result {
             counters.halted.store(true, Ordering::Relaxed);
             counters.error.lock().unwrap().get_or_insert(e);
+            return false;
+        }
+        if tracer.stop_answered && self.style == Style::Blasting {
             return false;
         }
         if !self.specs.is_empty() {
@@ -563,7 +574,7 @@ impl Run<'_, '_> {
         let result = self
             .instance
             .render(unit, &tracer.table(), &acc.table(), unit_stats);
-        if result.is_ok() {
+        if result.is_ok() && !tracer.stop_answered {
             shared.merge_tile(&acc, unit.sample_count);
         }
         (result, acc.counts)

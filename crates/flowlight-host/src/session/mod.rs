@@ -10,7 +10,7 @@ use crate::render::{render, Progress, RenderOptions, RenderOutcome};
 use flowlight_core::camera::Camera;
 use flowlight_core::material::Texture;
 use flowlight_scene::config::{load_config, RenderConfig};
-use flowlight_scene::lights::{light_power_cdf, load_environment, EnvironmentData};
+use flowlight_scene::lights::{light_power_cdf, light_presence, load_environment, EnvironmentData};
 use flowlight_scene::{load_gltf, Scene};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -122,13 +122,12 @@ impl Session {
             None => EnvironmentData::default(),
         };
         let env_view = environment.view();
-        let light_cdf = light_power_cdf(&scene, &env_view);
-        if light_cdf.is_empty() {
-            tracing::warn!(
-                "{}: the scene has no light (no emissive triangle, no KHR_lights_punctual light, no [environment]): the image will be black; add e.g. `[environment] color = [1, 1, 1]` to the config",
-                config.path.display()
-            );
+        let presence = light_presence(&scene, &env_view)
+            .map_err(|e| format!("{}: {e}", config.path.display()))?;
+        if let Some(why) = presence.warning() {
+            tracing::warn!("{}: {why}", config.path.display());
         }
+        let light_cdf = light_power_cdf(&scene, &env_view);
         let view = scene_view(&scene, camera, &textures, env_view, &light_cdf);
         let mut plugin_files = vec![plugin_path.clone()];
         let mutations = create_mutations(
@@ -180,6 +179,19 @@ impl Session {
     /// config hash and the exact sums. Refused under a time budget (a part needs a fixed
     /// number of samples).
     pub fn set_part(&mut self, spec: crate::parts::PartSpec) -> Result<(), HostError> {
+        self.check_part_budget()?;
+        let hash = crate::parts::config_hash(&self.config_text, &self.config)
+            .map_err(HostError::PartFile)?;
+        self.options.sample_begin = spec.begin;
+        self.options.spp = spec.end - spec.begin;
+        self.part = Some((spec, hash));
+        Ok(())
+    }
+
+    /// Whether this render can be split into parts: it needs a sample budget and exact
+    /// precision. Checked before the part is parsed, so that a time budget is named as the
+    /// cause rather than read as a render of 0 samples.
+    pub fn check_part_budget(&self) -> Result<(), HostError> {
         let refuse = |refusal| HostError::Part {
             file: self.config.path.clone(),
             refusal,
@@ -190,11 +202,6 @@ impl Session {
         if self.options.precision != Precision::Exact {
             return Err(refuse(PartRefusal::NotExact));
         }
-        let hash = crate::parts::config_hash(&self.config_text, &self.config)
-            .map_err(HostError::PartFile)?;
-        self.options.sample_begin = spec.begin;
-        self.options.spp = spec.end - spec.begin;
-        self.part = Some((spec, hash));
         Ok(())
     }
 
@@ -222,6 +229,10 @@ impl Session {
             ("the scene", self.config.scene.clone()),
         ];
         inputs.extend(self.plugin_files.iter().map(|p| ("a plugin", p.clone())));
+        if let Some(map) = self.config.environment.as_ref().and_then(|e| e.map.clone()) {
+            inputs.push(("the environment map", map));
+        }
+        inputs.extend(self.scene.files.iter().map(|p| ("a scene file", p.clone())));
         let outputs = self.output_paths();
         for (i, (what, out)) in outputs.iter().enumerate() {
             let key = comparable_path(out);
@@ -246,6 +257,22 @@ impl Session {
                 what: Some(what),
                 error,
             })?;
+            let ext = out.extension().map(|e| e.to_ascii_lowercase());
+            let wanted = if *what == "the PNG preview" {
+                "png"
+            } else if *what == "the EXR output" {
+                "exr"
+            } else {
+                "json"
+            };
+            if ext.as_deref() != Some(std::ffi::OsStr::new(wanted)) {
+                return Err(HostError::WrongExtension {
+                    file: file.clone(),
+                    what,
+                    output: out.clone(),
+                    wanted,
+                });
+            }
         }
         Ok(())
     }
@@ -284,9 +311,20 @@ impl Session {
         let mut preview = None;
         if let Some(path) = &self.exr_path {
             let mut meta = self.metadata(outcome_stats);
+            let stats_json = self.stats_json(outcome_stats);
             if let Some((spec, hash)) = &self.part {
                 meta.entries
                     .extend(crate::parts::part_entries(spec, *hash, &frame));
+                if let Some(json) = &stats_json {
+                    // The merge refuses a statistics file that is not this one.
+                    meta.entries.push((
+                        crate::parts::KEY_STATS_CHECKSUM.into(),
+                        format!(
+                            "{:016x}",
+                            crate::parts::fnv1a(crate::parts::FNV_OFFSET, json.as_bytes())
+                        ),
+                    ));
+                }
                 crate::parts::write_part_exr(path, &frame, &meta).map_err(HostError::PartFile)?;
             } else {
                 let layers: Vec<_> = (0..=frame.layer_count as usize)
@@ -311,13 +349,8 @@ impl Session {
                 crate::output::write_exr_planar(path, w, h, layers, &[], &meta)?;
             }
             written.push(path.clone());
-            if !outcome_stats.integrator.is_empty() {
+            if let Some(json) = stats_json {
                 let json_path = path.with_extension("stats.json");
-                let mut json = stats_json(&self.instance.plugin().name, outcome_stats);
-                if self.part.is_some() {
-                    let kinds = crate::parts::counter_kinds(self.instance.stat_specs());
-                    json = crate::parts::stats_json_with_kinds(&json, &kinds);
-                }
                 crate::output::write_atomically(&json_path, |tmp| {
                     std::fs::write(tmp, &json).map_err(|e| crate::output::OutputError::Io {
                         path: json_path.clone(),
@@ -337,6 +370,20 @@ impl Session {
             written.push(path.clone());
         }
         Ok(written)
+    }
+
+    /// The `.stats.json` text of a render with integrator statistics (with the counters'
+    /// merge kinds for a part).
+    fn stats_json(&self, outcome_stats: &crate::RenderStats) -> Option<String> {
+        if outcome_stats.integrator.is_empty() {
+            return None;
+        }
+        let json = stats_json(&self.instance.plugin().name, outcome_stats);
+        if self.part.is_none() {
+            return Some(json);
+        }
+        let kinds = crate::parts::counter_kinds(self.instance.stat_specs());
+        Some(crate::parts::stats_json_with_kinds(&json, &kinds))
     }
 
     fn metadata(&self, stats: &crate::RenderStats) -> ExrMetadata {
@@ -366,6 +413,15 @@ impl Session {
             ("flowlight.params".into(), params.join(" ")),
             ("flowlight.spp".into(), spp),
             ("flowlight.seed".into(), self.options.seed.to_string()),
+            // Inputs a later command must not overwrite (`flowlight merge`).
+            (
+                "flowlight.config".into(),
+                comparable_path(&self.config.path).display().to_string(),
+            ),
+            (
+                "flowlight.scene".into(),
+                comparable_path(&self.config.scene).display().to_string(),
+            ),
             (
                 "flowlight.intersector".into(),
                 self.intersector.name().into(),

@@ -96,17 +96,27 @@ impl RenderConfig {
             .position
             .or(g.map(|g| g.position))
             .ok_or_else(|| missing("position"))?;
-        let forward = match (o.look_at, o.forward) {
-            (Some(l), _) => l - position,
-            (None, Some(f)) => f,
-            (None, None) => g.map(|g| g.forward).ok_or_else(|| missing("look_at"))?,
+        let (forward, key) = match (o.look_at, o.forward) {
+            (Some(l), _) => (l.as_dvec3() - position.as_dvec3(), "look_at"),
+            (None, Some(f)) => (f.as_dvec3(), "forward"),
+            (None, None) => (
+                g.map(|g| g.forward)
+                    .ok_or_else(|| missing("look_at"))?
+                    .as_dvec3(),
+                "look_at",
+            ),
         };
         let up = o.up.or(g.map(|g| g.up)).unwrap_or(Vec3::Y);
-        let f = forward.normalize_or_zero();
+        // Normalised in f64: a direction such as [0, 0, 1e30] overflows f32's squared length.
+        let f = forward.normalize_or_zero().as_vec3();
         if f == Vec3::ZERO {
             return Err(invalid(
-                "look_at",
-                "the camera looks at its own position".into(),
+                key,
+                if key == "forward" {
+                    "has no direction (too short)".into()
+                } else {
+                    "the camera looks at its own position".into()
+                },
             ));
         }
         if f.cross(up.normalize_or_zero()).length_squared() < 1e-12 {

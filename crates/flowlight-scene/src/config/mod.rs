@@ -176,10 +176,14 @@ pub fn parse_precision(s: &str) -> Result<FramePrecision, String> {
 
 /// Parses `render.accumulation_cache_mib`: a positive, finite number of MiB.
 pub fn parse_cache_mib(v: f64) -> Result<f64, String> {
-    if v > 0.0 && v.is_finite() && v <= 1.0e9 {
-        Ok(v)
-    } else {
+    if !(v > 0.0 && v.is_finite()) {
         Err(format!("must be a positive number of MiB, got {v}"))
+    } else if v > 1.0e9 {
+        Err(format!(
+            "{v} MiB is beyond the limit of 1e9 MiB (about 1 PiB); the caches need only a few MiB per thread"
+        ))
+    } else {
+        Ok(v)
     }
 }
 

@@ -427,7 +427,8 @@ fn camera_override(
         ));
     }
     if c.forward
-        .is_some_and(|f| Vec3::from_array(f).length_squared() == 0.0)
+        // In f64: the squared length of [0, 0, 1e-30] underflows f32 to 0.
+        .is_some_and(|f| Vec3::from_array(f).as_dvec3().length_squared() == 0.0)
     {
         return Err(invalid("camera.forward", "must not be zero".into()));
     }

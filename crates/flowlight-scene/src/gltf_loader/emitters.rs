@@ -51,6 +51,7 @@ impl Loader<'_> {
             })?;
         }
         log_stats(&file, scene);
+        self.scene.files = self.src.referenced_files();
         Ok(self.scene)
     }
 }

@@ -1,6 +1,6 @@
 //! Limits checked before geometry is decoded (instance count, virtual triangle count, the
-//! memory estimate against `MemAvailable`) and the warning for coordinates beyond what f32
-//! ray/triangle arithmetic takes.
+//! memory estimate against the memory available, [`crate::memory`]) and the warning for
+//! coordinates beyond what f32 ray/triangle arithmetic takes.
 
 use crate::error::SceneError;
 use crate::scene::Scene;
@@ -41,7 +41,8 @@ fn primitive_triangles(prim: &gltf::Primitive) -> u64 {
 /// Refuses, before any geometry is decoded, a scene whose instance count or instanced
 /// (virtual) triangle count exceeds [`MAX_INSTANCES`] / [`MAX_VIRTUAL_TRIANGLES`], or whose
 /// estimated geometry memory (stored triangles × [`BYTES_PER_STORED_TRIANGLE`] + instances ×
-/// [`BYTES_PER_INSTANCE`]) exceeds `MemAvailable` (docs/config.md, "Limits and checks").
+/// [`BYTES_PER_INSTANCE`]) exceeds the memory available ([`crate::memory`]: `MemAvailable`,
+/// the memory cgroup's limit, `RLIMIT_AS`).
 pub(super) fn check_instancing_limits(
     file: &Path,
     doc: &gltf::Document,
@@ -89,14 +90,7 @@ pub(super) fn check_instancing_limits(
     Ok(())
 }
 
-/// `MemAvailable` of `/proc/meminfo` in bytes, where there is one (as the host's image-size
-/// check reads it).
-fn available_memory() -> Option<u64> {
-    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    kib.checked_mul(1024)
-}
+use crate::memory::available_memory;
 
 /// Largest coordinate magnitude the ray/triangle arithmetic takes without overflow: the
 /// watertight test and the error bounds multiply three coordinates (x³ < f32::MAX ≈ 3.4e38).

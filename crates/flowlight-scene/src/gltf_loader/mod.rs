@@ -9,7 +9,7 @@
 //!   placement becomes a [`MeshInstance`] (see [`crate::scene`]). The instance and
 //!   virtual-triangle limits are checked from the accessors' counts before any geometry is
 //!   decoded ([`MAX_INSTANCES`], [`MAX_VIRTUAL_TRIANGLES`], and the memory estimate against
-//!   `MemAvailable`).
+//!   the memory available: [`crate::memory`]).
 //! - Only triangle primitives are loaded: TRIANGLES as they are, TRIANGLE_STRIP and
 //!   TRIANGLE_FAN converted to lists; points and lines are skipped with a warning and counted.
 //! - Primitives without NORMAL are flat shaded (the glTF spec asks for flat normals then):

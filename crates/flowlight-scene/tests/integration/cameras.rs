@@ -324,3 +324,22 @@ fn a_camera_node_with_zero_scale_is_skipped_not_fatal() {
     let c = camera(&dir, &s, "").unwrap();
     assert!((c.position - Vec3::new(0.0, 0.0, 7.0)).length() < 1e-6);
 }
+
+#[test]
+fn d16_a_forward_of_any_finite_length_is_a_direction() {
+    // Its squared length overflowed (1e60) or underflowed (1e-60) f32, and the error blamed
+    // `camera.look_at`, which the config does not have.
+    let (dir, s) = scene_with("d16-forward", &[], "");
+    for f in ["-1e30", "-1e-30"] {
+        let c = camera(
+            &dir,
+            &s,
+            &format!("[camera]\nposition = [0, 0, 5]\nforward = [0, 0, {f}]\n"),
+        )
+        .unwrap_or_else(|e| panic!("{f}: {e}"));
+        assert!(
+            (c.forward - Vec3::new(0.0, 0.0, -1.0)).length() < 1e-6,
+            "{f}"
+        );
+    }
+}

@@ -161,3 +161,14 @@ fn camera_override_and_missing_camera() {
     let m = c.camera(&scene).unwrap_err().to_string();
     assert!(m.contains("camera.look_at"), "{m}");
 }
+
+#[test]
+fn d16_a_cache_beyond_its_limit_says_so() {
+    let (_, m) = parse_err(
+        "scene = \"s.gltf\"\n[render]\naccumulation_cache_mib = 1e12\n[integrator]\nplugin = \"mcpt\"\n",
+    );
+    assert!(
+        m.contains("accumulation_cache_mib") && m.contains("limit") && !m.contains("positive"),
+        "{m}"
+    );
+}
