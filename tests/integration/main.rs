@@ -16,6 +16,7 @@ mod alpha;
 mod bench;
 mod cli;
 mod cornell;
+mod depths;
 mod distributed;
 mod elf_mutations;
 mod embree;

@@ -703,6 +703,7 @@ fn values_outside_their_declared_range_are_refused() {
         .expect("an out-of-range value was accepted")
     };
     let e = refused("cornell-box/cornell-box.toml", &[("path_depth", 40.into())]);
+    let e = common::plugin_refusal(&e, "mcpt");
     assert!(
         e.contains("parameter 'path_depth' must be in 1..=32, got 40"),
         "{e}"
@@ -711,17 +712,20 @@ fn values_outside_their_declared_range_are_refused() {
         "cornell-box/cornell-box.toml",
         &[("wavefront", (-1).into())],
     );
+    let e = common::plugin_refusal(&e, "mcpt");
     assert!(
         e.contains("parameter 'wavefront' must be in 0..=65536, got -1"),
         "{e}"
     );
     let e = refused("cornell-box/erpt.toml", &[("max_ray_depth", 33.into())]);
+    let e = common::plugin_refusal(&e, "erpt");
     assert!(
         e.contains("parameter 'max_ray_depth' must be in 1..=32, got 33"),
         "{e}"
     );
     let list = common::mutations(&[("drill", &[("p_stop", 1.5.into())])]);
     let e = refused("cornell-box/erpt.toml", &[("mutations", list)]);
+    let e = e.to_string();
     assert!(
         e.contains("parameter 'p_stop' must be in [0.0, 1.0], got 1.5"),
         "{e}"

@@ -36,6 +36,9 @@ pub enum HostError {
     /// The integrator's mutation list (`{file}: {msg}`, the message naming
     /// `integrator.<list>` or its entry `integrator.<list>[i]`).
     Mutations { file: PathBuf, msg: String },
+    /// The scene's lights cannot be rendered (`{file}: {msg}`: an emission beyond what an
+    /// `f32` holds, named by the message).
+    Lights { file: PathBuf, msg: String },
     /// `--set render.{key}` for a render key the command line cannot set.
     NotSettable { file: PathBuf, key: String },
     /// `--out` names something other than the EXR image.
@@ -151,6 +154,7 @@ impl fmt::Display for HostError {
                 };
                 write!(f, "{}: --part/--samples {why}", file.display())
             }
+            HostError::Lights { file, msg } => write!(f, "{}: {msg}", file.display()),
             HostError::WrongExtension {
                 file,
                 what,

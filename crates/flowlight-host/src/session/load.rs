@@ -4,9 +4,11 @@
 
 use super::Overrides;
 use crate::accumulation::{Precision, Style};
-use crate::intersector::{build_intersector_with, Intersector};
 use crate::error::HostError;
-use crate::plugin::{find_plugin, normalised_weights, MutationInstance, PluginError, PluginLibrary};
+use crate::intersector::{build_intersector_with, Intersector};
+use crate::plugin::{
+    find_plugin, normalised_weights, MutationInstance, PluginError, PluginLibrary,
+};
 use crate::render::RenderOptions;
 use flowlight_core::camera::Camera;
 use flowlight_core::material::Texture;
@@ -29,18 +31,16 @@ pub(super) fn relative_to(name: &str, base: &Path) -> String {
         name.to_string()
     }
 }
-/// One warning per Embree variable of the ray benchmark that is set (`is_set`) while a render
-/// of `config` runs: the benchmark has no config and reads `FLOWLIGHT_EMBREE_ROBUST` and
-/// `FLOWLIGHT_EMBREE_QUALITY`, a render takes `[render] robust` and `build_quality` from its
-/// config only. Said aloud because a render timed with one of them set measures the config's
-/// mode, not the variable's (earlier measurements of the robust mode's cost were void so).
 
 /// One warning per Embree variable of the ray benchmark that is set (`is_set`) while a render
 /// of `config` runs: the benchmark has no config and reads `FLOWLIGHT_EMBREE_ROBUST` and
 /// `FLOWLIGHT_EMBREE_QUALITY`, a render takes `[render] robust` and `build_quality` from its
 /// config only. Said aloud because a render timed with one of them set measures the config's
 /// mode, not the variable's (earlier measurements of the robust mode's cost were void so).
-pub(super) fn ignored_embree_variables(is_set: impl Fn(&str) -> bool, config: &Path) -> Vec<String> {
+pub(super) fn ignored_embree_variables(
+    is_set: impl Fn(&str) -> bool,
+    config: &Path,
+) -> Vec<String> {
     [
         ("FLOWLIGHT_EMBREE_ROBUST", "robust"),
         ("FLOWLIGHT_EMBREE_QUALITY", "build_quality"),
@@ -66,7 +66,11 @@ pub(super) fn frame_precision(config: &RenderConfig) -> Precision {
 
 /// A plugin's error while preparing a `Session`, said of the config (and of the config
 /// key that named the plugin, if given).
-pub(super) fn plugin_error(config: &RenderConfig, field: Option<String>, error: PluginError) -> HostError {
+pub(super) fn plugin_error(
+    config: &RenderConfig,
+    field: Option<String>,
+    error: PluginError,
+) -> HostError {
     HostError::Plugin {
         file: Some(config.path.clone()),
         field,
@@ -162,9 +166,9 @@ pub(super) fn mutation_list(
         .collect();
     let probabilities = normalised_weights(list_name.as_deref().unwrap_or("mutations"), &weights)
         .map_err(|msg| HostError::Mutations {
-            file: config.path.clone(),
-            msg,
-        })?;
+        file: config.path.clone(),
+        msg,
+    })?;
     for (entry, probability) in mutation_entries.iter_mut().zip(probabilities) {
         entry.weight = probability;
     }
@@ -234,7 +238,11 @@ pub(super) fn create_mutations(
 
 /// The render options of `config` at the camera's resolution; the command line replaces the
 /// config's budget (`--time`, else `--spp`, else the file's), threads and seed.
-pub(super) fn render_options(config: &RenderConfig, camera: &Camera, ov: &Overrides) -> RenderOptions {
+pub(super) fn render_options(
+    config: &RenderConfig,
+    camera: &Camera,
+    ov: &Overrides,
+) -> RenderOptions {
     let (spp, time) = match (ov.time, ov.spp, config.budget) {
         (Some(t), _, _) => (0, Some(t)),
         (None, Some(n), _) => (n, None),
@@ -261,7 +269,6 @@ pub(super) fn render_options(config: &RenderConfig, camera: &Camera, ov: &Overri
         flange: config.flange,
     }
 }
-
 
 /// One `[[integrator.mutations]]` entry.
 pub(super) struct MutationEntry {

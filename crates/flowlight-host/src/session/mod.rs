@@ -122,8 +122,10 @@ impl Session {
             None => EnvironmentData::default(),
         };
         let env_view = environment.view();
-        let presence = light_presence(&scene, &env_view)
-            .map_err(|e| format!("{}: {e}", config.path.display()))?;
+        let presence = light_presence(&scene, &env_view).map_err(|msg| HostError::Lights {
+            file: config.path.clone(),
+            msg,
+        })?;
         if let Some(why) = presence.warning() {
             tracing::warn!("{}: {why}", config.path.display());
         }

@@ -5,7 +5,7 @@
 //! scattering vertex), so the image is the sky's radiance, for both MCPT variants. Before
 //! both counted the same, the untangled variant stopped at the mirror and rendered black.
 
-mod common;
+use crate::common;
 
 use common::{quads_gltf, render, session_from, FLOOR};
 
