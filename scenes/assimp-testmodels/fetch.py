@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Fetches the glTF 2.0 test models of Debian's `assimp-testmodels` package into glTF2/ here.
 
-The corpus is what `tests/gltf_corpus.rs` renders: every glTF2 model either renders with no
+The corpus is what `tests/integration/gltf_corpus.rs` renders: every glTF2 model either renders with no
 error or fails with an error naming the unsupported feature, and none renders black without a
 warning; docs/gltf.md keeps the list and the outcome. The models are not shipped with
 Flowlight (see SOURCE.md for their licences). The package is fetched with `apt-get download`

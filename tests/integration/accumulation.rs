@@ -7,12 +7,12 @@ use crate::common;
 
 use flowlight_host::accumulation::{Frame, MicroTileCache, Precision, Style};
 use flowlight_host::error::{HostError, PartRefusal};
-use flowlight_host::session::{Overrides, Session};
+use flowlight_host::renderer::{Overrides, Renderer};
 use flowlight_scene::ConfigError;
 use std::sync::atomic::AtomicBool;
 
-fn erpt(size: u32, layers: bool) -> Session {
-    common::session_at(
+fn erpt(size: u32, layers: bool) -> Renderer {
+    common::renderer_at(
         "cornell-box/erpt.toml",
         size,
         size,
@@ -30,7 +30,7 @@ fn exact_sums(f: &Frame) -> Vec<Vec<[u128; 3]>> {
         .collect()
 }
 
-fn render_with(s: &mut Session, style: Option<Style>, threads: usize, cache: u64) -> Frame {
+fn render_with(s: &mut Renderer, style: Option<Style>, threads: usize, cache: u64) -> Frame {
     s.options.accumulation = style;
     s.options.threads = threads;
     s.options.cache_bytes = cache;
@@ -79,7 +79,7 @@ fn erpt_gives_the_same_bits_in_every_style_thread_count_and_cache_size() {
 
 #[test]
 fn mcpt_gives_the_same_bits_in_every_style() {
-    let mut s = common::session_at("cornell-box/cornell-box.toml", 40, 40, 3, &[]);
+    let mut s = common::renderer_at("cornell-box/cornell-box.toml", 40, 40, 3, &[]);
     s.options.tile_size = 16;
     let reference = render_with(&mut s, None, 2, 0);
     let want = exact_sums(&reference);
@@ -103,7 +103,7 @@ fn mcpt_passes_run_without_a_barrier_between_them() {
     use std::sync::atomic::{AtomicBool, Ordering};
     use std::sync::{Condvar, Mutex};
     use std::time::Duration;
-    let mut s = common::session_at("cornell-box/cornell-box.toml", 40, 40, 40, &[]);
+    let mut s = common::renderer_at("cornell-box/cornell-box.toml", 40, 40, 40, &[]);
     s.options.tile_size = 16; // 3 × 3 tiles of at most 16² pixels
     let one_thread = render_with(&mut s, None, 1, 0);
     s.options.threads = 2;
@@ -151,7 +151,7 @@ fn mcpt_passes_run_without_a_barrier_between_them() {
 /// every sample is accounted for once.
 #[test]
 fn mcpt_passes_beyond_one_round_are_all_counted() {
-    let s = common::session_at("cornell-box/cornell-box.toml", 2, 2, 17_000, &[]);
+    let s = common::renderer_at("cornell-box/cornell-box.toml", 2, 2, 17_000, &[]);
     const { assert!(1066 > flowlight_host::render::PASSES_PER_ROUND) };
     let out = common::render(&s);
     let st = &out.stats;
@@ -163,7 +163,7 @@ fn mcpt_passes_beyond_one_round_are_all_counted() {
 
 #[test]
 fn the_host_chooses_blasting_for_path_tracing_and_caching_for_chains() {
-    let mut s = common::session_at("cornell-box/cornell-box.toml", 16, 16, 1, &[]);
+    let mut s = common::renderer_at("cornell-box/cornell-box.toml", 16, 16, 1, &[]);
     let out = common::render(&s);
     assert_eq!(out.stats.accumulation.unwrap().style, Style::Blasting);
     s = erpt(16, false);
@@ -241,7 +241,7 @@ fn bad_accumulation_settings_are_one_line_errors_naming_the_key() {
         ("flange = \"all\"", "render.flange", "\"screen\""),
     ] {
         write(render);
-        let e = Session::prepare(&cfg, &Overrides::default())
+        let e = Renderer::prepare(&cfg, &Overrides::default())
             .err()
             .expect(render);
         let (named, reason) = match &e {
@@ -257,7 +257,7 @@ fn bad_accumulation_settings_are_one_line_errors_naming_the_key() {
     }
     // A cache too small for one micro-tile per thread says how much it needs.
     write("accumulation = \"caching\"\naccumulation_cache_mib = 0.0001");
-    let mut s = Session::prepare(&cfg, &Overrides::default()).unwrap();
+    let mut s = Renderer::prepare(&cfg, &Overrides::default()).unwrap();
     s.exr_path = None;
     s.png_path = None;
     let e = s
@@ -277,11 +277,11 @@ fn bad_accumulation_settings_are_one_line_errors_naming_the_key() {
         params: vec![(k.to_string(), v)],
         ..Default::default()
     };
-    let s = Session::prepare(&cfg, &set("render.precision", "f32".into())).unwrap();
+    let s = Renderer::prepare(&cfg, &set("render.precision", "f32".into())).unwrap();
     assert_eq!(s.options.precision, Precision::F32);
-    let s = Session::prepare(&cfg, &set("render.flange", "screen".into())).unwrap();
+    let s = Renderer::prepare(&cfg, &set("render.flange", "screen".into())).unwrap();
     assert_eq!(s.options.flange, Some(u32::MAX));
-    let e = Session::prepare(&cfg, &set("render.width", 8.into()))
+    let e = Renderer::prepare(&cfg, &set("render.width", 8.into()))
         .err()
         .unwrap();
     assert!(
@@ -289,7 +289,7 @@ fn bad_accumulation_settings_are_one_line_errors_naming_the_key() {
         "{e:?}"
     );
     // Distributed parts need exact sums.
-    let mut s = Session::prepare(&cfg, &set("render.precision", "f32".into())).unwrap();
+    let mut s = Renderer::prepare(&cfg, &set("render.precision", "f32".into())).unwrap();
     let spec = flowlight_host::parts::PartSpec::part(0, 2, 4).unwrap();
     let e = s.set_part(spec).unwrap_err();
     assert!(

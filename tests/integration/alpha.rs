@@ -6,7 +6,7 @@
 use crate::common;
 
 use common::{render, scratch};
-use flowlight_host::session::{Overrides, Session};
+use flowlight_host::renderer::{Overrides, Renderer};
 use flowlight_testkit::gltf::{png8, Quad};
 
 fn render_cut(intersector: &str, mode: &str) -> Vec<Vec<f32>> {
@@ -45,7 +45,7 @@ path_depth = 2
         threads: Some(2),
         ..Default::default()
     };
-    let mut s = Session::prepare(&cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
+    let mut s = Renderer::prepare(&cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
     s.exr_path = None;
     s.png_path = None;
     let out = render(&s);

@@ -3,7 +3,7 @@
 
 use crate::common;
 
-use common::{render, session_at};
+use common::{render, renderer_at};
 use flowlight_core::Rgb;
 
 type Channel = fn(Rgb) -> f32;
@@ -35,14 +35,14 @@ fn block_stats(
 #[test]
 fn entangled_and_untangled_agree_per_region() {
     let (w, h) = (64usize, 64usize);
-    let ent = render(&session_at(
+    let ent = render(&renderer_at(
         "cornell-box/cornell-box.toml",
         w as u32,
         h as u32,
         64,
         &[("variant", "entangled".into())],
     ));
-    let mut unt = session_at(
+    let mut unt = renderer_at(
         "cornell-box/cornell-box.toml",
         w as u32,
         h as u32,
@@ -79,7 +79,7 @@ fn mean_lum(img: &[Rgb]) -> f64 {
 #[test]
 fn lighting_layers_sum_to_the_image() {
     for variant in ["entangled", "untangled"] {
-        let s = session_at(
+        let s = renderer_at(
             "cornell-box/cornell-box.toml",
             32,
             32,

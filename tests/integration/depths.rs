@@ -7,7 +7,7 @@
 
 use crate::common;
 
-use common::{quads_gltf, render, session_from, FLOOR};
+use common::{quads_gltf, render, renderer_from, FLOOR};
 
 const MIRROR: &str = r#"{"name": "mirror", "pbrMetallicRoughness": {"baseColorFactor": [1.0, 1.0, 1.0, 1.0], "metallicFactor": 1.0, "roughnessFactor": 0.0}}"#;
 
@@ -39,7 +39,7 @@ max_ray_depth = {max_ray_depth}
 fn max_ray_depth_counts_scattering_vertices_in_both_mcpt_variants() {
     let gltf = quads_gltf(&[FLOOR], MIRROR, &[], "");
     for variant in ["entangled", "untangled"] {
-        let s = session_from(&format!("depth-{variant}"), &gltf, &config(variant, 1), 4);
+        let s = renderer_from(&format!("depth-{variant}"), &gltf, &config(variant, 1), 4);
         let img = render(&s).frame.image();
         for (i, c) in img.iter().enumerate() {
             assert!(

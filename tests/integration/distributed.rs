@@ -208,7 +208,7 @@ fn erpt_parts_merge_to_the_full_render_and_agree_with_path_tracing() {
 
     // And unbiased: per region, the merged image against a path-traced reference, with the
     // noise of the mean estimated from the spread of the 8 one-sample parts.
-    let mut s = common::session_at("cornell-box/cornell-box.toml", size, size, 1024, &[]);
+    let mut s = common::renderer_at("cornell-box/cornell-box.toml", size, size, 1024, &[]);
     s.options.seed = 77;
     let reference = common::render(&s).frame.image();
     let refs = regions(&reference, size as usize);

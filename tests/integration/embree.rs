@@ -9,7 +9,7 @@ use flowlight_core::geometry::Ray;
 use flowlight_core::rng::Rng;
 use flowlight_embree::{Packets, SceneOptions};
 use flowlight_host::intersector::{BvhIntersector, EmbreeIntersector, Intersector};
-use flowlight_host::session::{Overrides, Session};
+use flowlight_host::renderer::{Overrides, Renderer};
 use flowlight_scene::config::{load_config, Intersector as Choice};
 use flowlight_scene::Scene;
 use glam::{Vec2, Vec3};
@@ -358,7 +358,7 @@ fn packet_and_single_ray_renders_are_the_same_image() {
             threads: Some(2),
             ..Default::default()
         };
-        let mut s = Session::from_config(cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
+        let mut s = Renderer::from_config(cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
         let options = SceneOptions {
             packets,
             coherent: false,
@@ -395,7 +395,7 @@ fn cornell_renders_agree_between_backends() {
             threads: Some(2),
             ..Default::default()
         };
-        let mut s = Session::from_config(cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
+        let mut s = Renderer::from_config(cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
         s.exr_path = None;
         s.png_path = None;
         let name = s.intersector.name();
@@ -491,7 +491,7 @@ fn coherent_batches_find_the_single_rays_hits_but_for_ties() {
         ("cornell-box/cornell-box.toml", 65_536),
         ("stanford-dragon/dragon.toml", 16_384),
     ] {
-        let s = Session::prepare(&scene_config(rel), &Overrides::default())
+        let s = Renderer::prepare(&scene_config(rel), &Overrides::default())
             .unwrap_or_else(|e| panic!("{e}"));
         let cam = s.camera;
         let mut rng = Rng::new(9, 2);

@@ -6,7 +6,7 @@ use crate::common;
 
 use common::{
     assert_image_mean, assert_regions_unbiased, assert_same_wall_hues, independent_runs, mutations,
-    render, session_at, sun_node, MeanRule, FLOOR, LAMBERT,
+    render, renderer_at, sun_node, MeanRule, FLOOR, LAMBERT,
 };
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
@@ -33,7 +33,7 @@ fn every_strategy_satisfies_detailed_balance() {
     let all = strategies();
     let list: Vec<(&str, &[(&str, toml::Value)])> =
         all.iter().map(|(p, e)| (*p, e.as_slice())).collect();
-    let s = session_at(
+    let s = renderer_at(
         "cornell-box/erpt.toml",
         48,
         48,
@@ -42,7 +42,7 @@ fn every_strategy_satisfies_detailed_balance() {
     );
     let set = s.instance.mutation_set();
     assert_eq!(set.len(), all.len());
-    // SAFETY: the session keeps the view's data alive.
+    // SAFETY: the renderer keeps the view's data alive.
     let scene = unsafe { Scene::from_view(s.instance.view()) };
     let mut unit_tracer = UnitTracer::new(&s.scene, s.intersector.as_ref());
     let table = unit_tracer.table();
@@ -120,7 +120,7 @@ fn check_unbiased_window(
     // Wider windows spread each run's noise over the image: more runs keep the test sharp.
     let runs = if film_window > 8 { 10 } else { 6 };
     let make = || {
-        session_at(
+        renderer_at(
             config,
             32,
             32,
@@ -139,7 +139,7 @@ fn check_unbiased_window(
 }
 
 fn reference(config: &str, spp: u32) -> Vec<Rgb> {
-    let mut s = session_at(config, 32, 32, spp, &[]);
+    let mut s = renderer_at(config, 32, 32, spp, &[]);
     s.options.seed = 77;
     render(&s).frame.image()
 }
@@ -185,23 +185,23 @@ fn erpt_does_not_shift_hue_between_red_and_blue_walls() {
         let mut cfg = flowlight_scene::config::load_config(&common::scene_config(config)).unwrap();
         cfg.integrator_plugin = "mcpt".into();
         cfg.integrator_params.clear();
-        let ov = flowlight_host::session::Overrides {
+        let ov = flowlight_host::renderer::Overrides {
             spp: Some(512),
             threads: Some(2),
             ..Default::default()
         };
-        render(&flowlight_host::session::Session::from_config(cfg, &ov).unwrap())
+        render(&flowlight_host::renderer::Renderer::from_config(cfg, &ov).unwrap())
             .frame
             .image()
     };
-    let erpt = render(&session_at(config, 64, 64, 8, &[])).frame.image();
+    let erpt = render(&renderer_at(config, 64, 64, 8, &[])).frame.image();
     assert_same_wall_hues(&mcpt, &erpt);
 }
 
 #[test]
 fn swapping_strategies_in_the_config_changes_the_loaded_plugins() {
     let names = |list: toml::Value| -> Vec<String> {
-        let s = session_at("cornell-box/erpt.toml", 8, 8, 1, &[("mutations", list)]);
+        let s = renderer_at("cornell-box/erpt.toml", 8, 8, 1, &[("mutations", list)]);
         s.instance
             .mutations()
             .iter()
@@ -214,9 +214,9 @@ fn swapping_strategies_in_the_config_changes_the_loaded_plugins() {
         ["blow", "hard-reconnection"]
     );
     // A strategy's own parameters are checked by its plugin.
-    let err = flowlight_host::session::Session::prepare(
+    let err = flowlight_host::renderer::Renderer::prepare(
         &common::scene_config("cornell-box/erpt.toml"),
-        &flowlight_host::session::Overrides {
+        &flowlight_host::renderer::Overrides {
             params: common::toml_params(&[(
                 "mutations",
                 mutations(&[("drill", &[("width", "medium".into())])]),
@@ -228,9 +228,9 @@ fn swapping_strategies_in_the_config_changes_the_loaded_plugins() {
     .expect("bad strategy parameter accepted");
     let err = common::plugin_refusal(&err, "drill");
     assert!(err.contains("width"), "{err}");
-    let err = flowlight_host::session::Session::prepare(
+    let err = flowlight_host::renderer::Renderer::prepare(
         &common::scene_config("cornell-box/erpt.toml"),
-        &flowlight_host::session::Overrides {
+        &flowlight_host::renderer::Overrides {
             params: common::toml_params(&[("mutations", mutations(&[("no-such-mutation", &[])]))]),
             ..Default::default()
         },
@@ -342,9 +342,9 @@ fn mutations_keep_detailed_balance_with_lights_at_infinity() {
             "plugin = \"erpt\"",
             tail,
         );
-        let s = session_at(&cfg, 32, 32, 1, &[("mutations", mutations(&list))]);
+        let s = renderer_at(&cfg, 32, 32, 1, &[("mutations", mutations(&list))]);
         let set = s.instance.mutation_set();
-        // SAFETY: the session keeps the view's data alive.
+        // SAFETY: the renderer keeps the view's data alive.
         let scene = unsafe { Scene::from_view(s.instance.view()) };
         let mut unit_tracer = UnitTracer::new(&s.scene, s.intersector.as_ref());
         let table = unit_tracer.table();
@@ -540,14 +540,14 @@ fn erpt_agrees_with_mcpt_on_a_varnished_floor_under_sun_and_sky() {
 
 /// A 64×64 ERPT Cornell box in 8×8 tiles (64 units a pass), one sample per pixel, with
 /// short chains (8 mutations per sample, chains of 8) to keep it quick.
-fn small_erpt(seed: u64) -> flowlight_host::session::Session {
+fn small_erpt(seed: u64) -> flowlight_host::renderer::Renderer {
     let mut cfg =
         flowlight_scene::config::load_config(&common::scene_config("cornell-box/erpt.toml"))
             .unwrap();
     cfg.width = 64;
     cfg.height = 64;
     cfg.tile_size = 8;
-    let ov = flowlight_host::session::Overrides {
+    let ov = flowlight_host::renderer::Overrides {
         spp: Some(1),
         threads: Some(2),
         seed: Some(seed),
@@ -557,7 +557,7 @@ fn small_erpt(seed: u64) -> flowlight_host::session::Session {
         ]),
         ..Default::default()
     };
-    let mut s = flowlight_host::session::Session::from_config(cfg, &ov).unwrap();
+    let mut s = flowlight_host::renderer::Renderer::from_config(cfg, &ov).unwrap();
     s.exr_path = None;
     s.png_path = None;
     s

@@ -12,13 +12,13 @@
 use crate::common;
 
 use common::{
-    assert_image_mean, assert_regions_unbiased, independent_runs, render, scratch, session_at,
+    assert_image_mean, assert_regions_unbiased, independent_runs, render, renderer_at, scratch,
     table, MeanRule,
 };
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
-use flowlight_host::session::{Overrides, Session};
+use flowlight_host::renderer::{Overrides, Renderer};
 use flowlight_mcmc::{measurement, WeakNode};
 use flowlight_pathtrace::untangled;
 use flowlight_sdk::{Scene, Stats, Tracer};
@@ -56,7 +56,7 @@ fn lamp(strength: f64) -> MaterialOptions {
 /// A floor under a lamp with a mirror pair (a corridor: eye and light paths bounce between
 /// them), a glass slab (two refractions), two stacked slabs (four) and a glass sphere.
 fn specular_scene() -> String {
-    let mut b = SceneBuilder::new("tests/erpt_perturbations.rs: specular chains");
+    let mut b = SceneBuilder::new("tests/integration/erpt_perturbations.rs: specular chains");
     b.material("floor", [0.7, 0.7, 0.7], MaterialOptions::default());
     b.material("mirror", [0.95, 0.95, 0.95], mirror());
     b.material("glass", [1.0, 1.0, 1.0], glass());
@@ -100,7 +100,7 @@ fn specular_scene() -> String {
 /// A mirror caustic: a small tilted mirror throws the lamp's light onto the floor, which the
 /// camera sees directly (E D S L) next to the lamp's direct light (E D L).
 fn mirror_caustic_scene() -> String {
-    let mut b = SceneBuilder::new("tests/erpt_perturbations.rs: mirror caustic");
+    let mut b = SceneBuilder::new("tests/integration/erpt_perturbations.rs: mirror caustic");
     b.material("floor", [0.7, 0.7, 0.7], MaterialOptions::default());
     b.material("mirror", [0.95, 0.95, 0.95], mirror());
     b.material("lamp", [0.0; 3], lamp(40.0));
@@ -182,16 +182,16 @@ fn dirac_count(p: &Path) -> usize {
         .count()
 }
 
-/// A session of the glTF text `gltf` (or of the file at `gltf_path`) with `integrator`'s
+/// A renderer of the glTF text `gltf` (or of the file at `gltf_path`) with `integrator`'s
 /// body, `size`², `spp`, and integrator parameter overrides.
-fn session_of(
+fn renderer_of(
     name: &str,
     gltf: &str,
     integrator: &str,
     size: u32,
     spp: u32,
     params: &[(&str, toml::Value)],
-) -> Session {
+) -> Renderer {
     let dir = scratch(name);
     let scene = if gltf.ends_with(".gltf") {
         gltf.to_string()
@@ -213,7 +213,7 @@ fn session_of(
         params: common::toml_params(params),
         ..Default::default()
     };
-    let mut s = Session::prepare(&cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
+    let mut s = Renderer::prepare(&cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
     s.exr_path = None;
     s.png_path = None;
     s
@@ -233,17 +233,17 @@ fn dirac_run(p: &Path) -> usize {
     best
 }
 
-/// Proposals of every strategy of the session on its seed paths: the ratio must be
+/// Proposals of every strategy of the renderer on its seed paths: the ratio must be
 /// T(y→x)/T(x→y) from the densities (so f(x)T(x→y)a(x→y) = f(y)T(y→x)a(y→x) with the
 /// Metropolis–Hastings acceptance), and a caustic proposal, which keeps the vertex after a
 /// Dirac chain, must have density 0 under every other strategy (and the other strategies'
 /// proposals density 0 under the caustic one), so that the mixture density is consistent.
 /// Returns, per strategy, the checked proposals by the longest Dirac run of x (0 … 4, 5+),
 /// and how many of them changed the number of Dirac vertices. Only a strategy with free chain
-/// lengths (`free_chains`: whether the session's take them) may; the others must keep x's
+/// lengths (`free_chains`: whether the renderer's take them) may; the others must keep x's
 /// length and vertex types, which is checked.
 fn check_balance(
-    s: &Session,
+    s: &Renderer,
     size: u32,
     seeds: usize,
     free_chains: bool,
@@ -375,7 +375,7 @@ fn balance_through_chains(free_chains: bool) {
         ],
         &[("free_chains", free_chains.into())],
     );
-    let s = session_of(
+    let s = renderer_of(
         &format!("perturbation-balance-{free_chains}"),
         &specular_scene(),
         "plugin = \"erpt\"\npath_depth = 10",
@@ -419,7 +419,7 @@ fn balance_through_chains(free_chains: bool) {
     }
 }
 
-/// ERPT parameters of the unbiasedness runs (as in `tests/erpt.rs`).
+/// ERPT parameters of the unbiasedness runs (as in `tests/integration/erpt.rs`).
 fn erpt_params(list: toml::Value) -> Vec<(&'static str, toml::Value)> {
     vec![
         ("mutations", list),
@@ -429,9 +429,9 @@ fn erpt_params(list: toml::Value) -> Vec<(&'static str, toml::Value)> {
     ]
 }
 
-/// ERPT sessions from `make` (32×32, 4 spp) agree with `reference` per 8×8 region (z-test
+/// ERPT renderers from `make` (32×32, 4 spp) agree with `reference` per 8×8 region (z-test
 /// over 6 independent runs, the reference's own noise included) and in the image mean.
-fn check_unbiased(label: &str, make: &dyn Fn() -> Session, reference: &[Rgb]) {
+fn check_unbiased(label: &str, make: &dyn Fn() -> Renderer, reference: &[Rgb]) {
     let (images, _) = independent_runs(label, 6, 3000, make);
     assert_regions_unbiased(label, &images, reference);
     // The image mean, by a z-test too: on the caustic scenes the seeds (untangled path
@@ -464,19 +464,19 @@ fn strategy_lists() -> Vec<(&'static str, toml::Value)> {
 fn perturbations_are_unbiased_in_the_furnace_and_on_the_cornell_box() {
     // Every pixel of the furnace is 2·(1 − 0.5^(N+1)) with N = 8.
     let exact = vec![Rgb::splat((2.0 * (1.0 - 0.5f64.powi(9))) as f32); 32 * 32];
-    let mut s = session_at("cornell-box/cornell-box.toml", 32, 32, 1024, &[]);
+    let mut s = renderer_at("cornell-box/cornell-box.toml", 32, 32, 1024, &[]);
     s.options.seed = 77;
     let cornell = render(&s).frame.image();
     for (label, list) in strategy_lists() {
         let params = erpt_params(list);
         check_unbiased(
             &format!("furnace {label}"),
-            &|| session_at("furnace/erpt.toml", 32, 32, 4, &params),
+            &|| renderer_at("furnace/erpt.toml", 32, 32, 4, &params),
             &exact,
         );
         check_unbiased(
             &format!("cornell {label}"),
-            &|| session_at("cornell-box/erpt.toml", 32, 32, 4, &params),
+            &|| renderer_at("cornell-box/erpt.toml", 32, 32, 4, &params),
             &cornell,
         );
     }
@@ -484,7 +484,7 @@ fn perturbations_are_unbiased_in_the_furnace_and_on_the_cornell_box() {
 
 /// Path-traced reference of a glTF scene at 32×32.
 fn mcpt_reference(name: &str, gltf: &str, spp: u32) -> Vec<Rgb> {
-    let mut s = session_of(
+    let mut s = renderer_of(
         name,
         gltf,
         "plugin = \"mcpt\"\nvariant = \"entangled\"\npath_depth = 10",
@@ -512,7 +512,7 @@ fn perturbations_are_unbiased_on_the_glass_caustic_and_a_mirror_caustic() {
             check_unbiased(
                 &format!("{name} {label}"),
                 &|| {
-                    session_of(
+                    renderer_of(
                         name,
                         gltf,
                         "plugin = \"erpt\"\npath_depth = 10",
@@ -570,7 +570,7 @@ fn the_caustic_chain_samples_its_leaf_in_proportion_to_f_times_the_leaf_jacobian
     // mirror, paths built without the plugin). With T = q instead of q/J, the chain samples
     // ∝ f instead, and its mean moves by many standard errors.
     let size = 64;
-    let s = session_of(
+    let s = renderer_of(
         "caustic-leaf",
         &mirror_caustic_scene(),
         "plugin = \"erpt\"\npath_depth = 10",
@@ -746,9 +746,9 @@ fn each_perturbation_density_is_the_density_its_proposals_have() {
         let list = toml::Value::Array(vec![table(&[("plugin", pair.0.into())]), table(&second)]);
         let params = [("mutations", list), ("path_depth", 8.into())];
         let s = if config == "cornell-box" {
-            session_at("cornell-box/erpt.toml", size, size, 1, &params)
+            renderer_at("cornell-box/erpt.toml", size, size, 1, &params)
         } else {
-            session_of(config, &corridor, "plugin = \"erpt\"", size, 1, &params)
+            renderer_of(config, &corridor, "plugin = \"erpt\"", size, 1, &params)
         };
         let set = s.instance.mutation_set();
         common::with_seed_sampler(&s, |scene, tracer, settings| {
@@ -871,7 +871,7 @@ fn free_chain_lengths_have_the_density_the_drill_samples() {
         ("plugin", "drill".into()),
         ("cap_degrees", 10.0.into()),
     ])]);
-    let s = session_of(
+    let s = renderer_of(
         "free-chain-density",
         &corridor,
         "plugin = \"erpt\"",

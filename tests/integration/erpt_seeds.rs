@@ -8,7 +8,7 @@ use crate::common;
 
 use common::{
     assert_image_mean, assert_regions_unbiased, assert_same_wall_hues, independent_runs, mutations,
-    render, session_at, sun_node, MeanRule, FLOOR,
+    render, renderer_at, sun_node, MeanRule, FLOOR,
 };
 use flowlight_core::path::{NodeType, Path};
 use flowlight_core::rng::Rng;
@@ -35,10 +35,10 @@ fn s(v: &str) -> toml::Value {
 /// w · f(x̄)/p(x̄) with f from `flowlight-mcmc`'s target function, and the seeds of one path
 /// tree sum, per layer, to the entangled sampler's contributions from the same random stream.
 /// Returns how many seeds of each technique were checked.
-fn check_seed_estimates(config: &str, session: flowlight_host::session::Session) -> [usize; 3] {
-    // SAFETY: the session keeps the view's data alive.
-    let scene = unsafe { Scene::from_view(session.instance.view()) };
-    let mut unit_tracer = UnitTracer::new(&session.scene, session.intersector.as_ref());
+fn check_seed_estimates(config: &str, renderer: flowlight_host::renderer::Renderer) -> [usize; 3] {
+    // SAFETY: the renderer keeps the view's data alive.
+    let scene = unsafe { Scene::from_view(renderer.instance.view()) };
+    let mut unit_tracer = UnitTracer::new(&renderer.scene, renderer.intersector.as_ref());
     let table = unit_tracer.table();
     let tracer = Tracer::new(&table);
     let mut settings = PathSettings::from_params(&flowlight_sdk::Params::from_slice(&[])).unwrap();
@@ -434,14 +434,14 @@ fn for_seed_scenes(tag: &str, mut f: impl FnMut(&str, &Scene, &Tracer, &PathSett
         "glass-caustic/glass-caustic.toml",
         "satin",
     ] {
-        let session = if config == "satin" {
+        let renderer = if config == "satin" {
             sun_and_sky_in(&format!("{tag}-satin"), SATIN, "plugin = \"mcpt\"", 1)
         } else {
-            session_at(config, 32, 32, 1, &[])
+            renderer_at(config, 32, 32, 1, &[])
         };
-        // SAFETY: the session keeps the view's data alive.
-        let scene = unsafe { Scene::from_view(session.instance.view()) };
-        let mut unit_tracer = UnitTracer::new(&session.scene, session.intersector.as_ref());
+        // SAFETY: the renderer keeps the view's data alive.
+        let scene = unsafe { Scene::from_view(renderer.instance.view()) };
+        let mut unit_tracer = UnitTracer::new(&renderer.scene, renderer.intersector.as_ref());
         let table = unit_tracer.table();
         let tracer = Tracer::new(&table);
         let settings = PathSettings::from_params(&flowlight_sdk::Params::from_slice(&[])).unwrap();
@@ -461,7 +461,7 @@ const VARNISH: &str = r#"{"name": "varnish", "pbrMetallicRoughness": {"baseColor
 
 /// A varnished floor and wall under a sun and a constant sky (lights at infinity, Dirac and
 /// smooth lobes mixed), rendered by `integrator`.
-fn sun_and_sky(name: &str, integrator: &str, spp: u32) -> flowlight_host::session::Session {
+fn sun_and_sky(name: &str, integrator: &str, spp: u32) -> flowlight_host::renderer::Renderer {
     sun_and_sky_in(name, VARNISH, integrator, spp)
 }
 
@@ -474,7 +474,7 @@ fn sun_and_sky_in(
     material: &str,
     integrator: &str,
     spp: u32,
-) -> flowlight_host::session::Session {
+) -> flowlight_host::renderer::Renderer {
     let gltf = common::quads_gltf(
         &[FLOOR, SHORT_WALL],
         material,
@@ -499,7 +499,7 @@ color = [0.6, 0.8, 1.0]
 strength = 1.5
 "#
     );
-    common::session_from(name, &gltf, &body, spp)
+    common::renderer_from(name, &gltf, &body, spp)
 }
 
 #[test]
@@ -508,7 +508,7 @@ fn entangled_seeds_are_mis_weighted_measurements_that_sum_to_the_path_tracer() {
         "cornell-box/cornell-box.toml",
         "glass-caustic/glass-caustic.toml",
     ] {
-        let c = check_seed_estimates(config, session_at(config, 48, 48, 1, &[]));
+        let c = check_seed_estimates(config, renderer_at(config, 48, 48, 1, &[]));
         assert!(c[0] > 1000 && c[1] > 10, "{config}: {c:?}");
     }
     let c = check_seed_estimates(
@@ -542,7 +542,7 @@ fn check_unbiased(
         }
     }
     let (images, last) =
-        independent_runs(label, runs, 2000, &|| session_at(config, 32, 32, 4, &all));
+        independent_runs(label, runs, 2000, &|| renderer_at(config, 32, 32, 4, &all));
     assert_regions_unbiased(label, &images, reference);
     // Within 3 %, or within 4 standard errors where caustics make both sides heavy-tailed.
     assert_image_mean(label, &images, reference, MeanRule::WithinOrZ(0.03, 4.0));
@@ -557,12 +557,12 @@ fn mcpt_reference(config: &str, spp: u32) -> Vec<Rgb> {
     // The seeds' depth: the same path space.
     cfg.integrator_plugin = "mcpt".into();
     cfg.integrator_params.retain(|(k, _)| k == "path_depth");
-    let ov = flowlight_host::session::Overrides {
+    let ov = flowlight_host::renderer::Overrides {
         spp: Some(spp),
         threads: Some(2),
         ..Default::default()
     };
-    let mut s = flowlight_host::session::Session::from_config(cfg, &ov).unwrap();
+    let mut s = flowlight_host::renderer::Renderer::from_config(cfg, &ov).unwrap();
     s.exr_path = None;
     s.png_path = None;
     s.options.seed = 77;
@@ -697,7 +697,7 @@ fn erpt_path_traces_a_scene_without_paths_in_the_chains_part() {
             ("mutations", mix()),
         ]
     };
-    let out = render(&session_at(
+    let out = render(&renderer_at(
         "cornell-box/erpt.toml",
         16,
         16,
@@ -718,11 +718,11 @@ fn erpt_path_traces_a_scene_without_paths_in_the_chains_part() {
             .expect("an accumulation report");
         (format!("{:?}", r.style), r.private_bytes, r.frame_bytes)
     };
-    let mcpt = render(&session_at("cornell-box/cornell-box.toml", 16, 16, 2, &[]));
+    let mcpt = render(&renderer_at("cornell-box/cornell-box.toml", 16, 16, 2, &[]));
     assert_eq!(report(&out), report(&mcpt));
     let chainless = report(&out);
     // Untangled seeds keep the thesis' per-path classification.
-    let out = render(&session_at(
+    let out = render(&renderer_at(
         "cornell-box/erpt.toml",
         16,
         16,
@@ -735,7 +735,7 @@ fn erpt_path_traces_a_scene_without_paths_in_the_chains_part() {
     // start from its caustic seeds.
     let mut glass = params("entangled");
     glass.push(("mutations_per_sample", toml::Value::Float(8.0)));
-    let out = render(&session_at("glass-caustic/erpt.toml", 16, 16, 2, &glass));
+    let out = render(&renderer_at("glass-caustic/erpt.toml", 16, 16, 2, &glass));
     assert_eq!(stat(&out, "units_without_chains"), 0.0);
     assert!(stat(&out, "chains") > 0.0);
     // Chains random-walk on the film, so their units get the flanged style.
@@ -787,7 +787,7 @@ fn the_mcpt_and_erpt_parts_sum_to_the_image_through_the_glass_caustic() {
 fn entangled_seeds_do_not_shift_hue_between_red_and_blue_walls() {
     let config = "cornell-box/red-blue.toml";
     let mcpt = mcpt_at(config, 64, 512);
-    let erpt = render(&session_at(config, 64, 64, 8, &[entangled()]))
+    let erpt = render(&renderer_at(config, 64, 64, 8, &[entangled()]))
         .frame
         .image();
     assert_same_wall_hues(&mcpt, &erpt);
@@ -801,12 +801,12 @@ fn mcpt_at(config: &str, size: u32, spp: u32) -> Vec<Rgb> {
     cfg.height = size;
     cfg.integrator_plugin = "mcpt".into();
     cfg.integrator_params.clear();
-    let ov = flowlight_host::session::Overrides {
+    let ov = flowlight_host::renderer::Overrides {
         spp: Some(spp),
         threads: Some(2),
         ..Default::default()
     };
-    render(&flowlight_host::session::Session::from_config(cfg, &ov).unwrap())
+    render(&flowlight_host::renderer::Renderer::from_config(cfg, &ov).unwrap())
         .frame
         .image()
 }
@@ -821,13 +821,13 @@ fn bad_split_and_seed_values_are_one_line_errors() {
     ] {
         let cfg = flowlight_scene::config::load_config(&common::scene_config("furnace/erpt.toml"))
             .unwrap();
-        let ov = flowlight_host::session::Overrides {
+        let ov = flowlight_host::renderer::Overrides {
             spp: Some(1),
             threads: Some(1),
             params: common::toml_params(&[(key, s(value))]),
             ..Default::default()
         };
-        let e = match flowlight_host::session::Session::from_config(cfg, &ov) {
+        let e = match flowlight_host::renderer::Renderer::from_config(cfg, &ov) {
             Ok(_) => panic!("{key} = {value:?} was accepted"),
             Err(e) => e.to_string(),
         };

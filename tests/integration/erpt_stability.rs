@@ -5,9 +5,9 @@
 
 use crate::common;
 
-use common::{render, session_at};
+use common::{render, renderer_at};
 use flowlight_host::render::RenderOutcome;
-use flowlight_host::session::{Overrides, Session};
+use flowlight_host::renderer::{Overrides, Renderer};
 
 fn counter(out: &RenderOutcome, name: &str) -> f64 {
     out.stats
@@ -40,7 +40,7 @@ fn erpt_params() -> Vec<(&'static str, toml::Value)> {
 }
 
 /// Renders `config` (made ERPT with the mixture above) and checks the invariants.
-fn check_clean(s: &Session, label: &str) -> RenderOutcome {
+fn check_clean(s: &Renderer, label: &str) -> RenderOutcome {
     let out = render(s);
     assert_eq!(
         out.stats.invalid_deposits, 0,
@@ -58,16 +58,16 @@ fn check_clean(s: &Session, label: &str) -> RenderOutcome {
     out
 }
 
-fn erpt_session(config: &str, width: u32, extra: &[(&str, toml::Value)]) -> Session {
-    erpt_session_with(config, width, extra, |_| {})
+fn erpt_renderer(config: &str, width: u32, extra: &[(&str, toml::Value)]) -> Renderer {
+    erpt_renderer_with(config, width, extra, |_| {})
 }
 
-fn erpt_session_with(
+fn erpt_renderer_with(
     config: &str,
     width: u32,
     extra: &[(&str, toml::Value)],
     edit: impl FnOnce(&mut flowlight_scene::config::RenderConfig),
-) -> Session {
+) -> Renderer {
     let mut cfg = flowlight_scene::config::load_config(&common::scene_config(config)).unwrap();
     edit(&mut cfg);
     cfg.width = width;
@@ -82,7 +82,7 @@ fn erpt_session_with(
         params,
         ..Default::default()
     };
-    let mut s = Session::from_config(cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
+    let mut s = Renderer::from_config(cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
     s.exr_path = None;
     s.png_path = None;
     s
@@ -91,7 +91,7 @@ fn erpt_session_with(
 #[test]
 fn corner_traps_are_survived_and_show_in_the_norms() {
     let out = check_clean(
-        &erpt_session("narrow-gap/narrow-gap.toml", 48, &[]),
+        &erpt_renderer("narrow-gap/narrow-gap.toml", 48, &[]),
         "narrow gap",
     );
     // Corner traps surface as domain misses and rejections; they are counted, per strategy.
@@ -123,14 +123,14 @@ fn chains_meeting_zero_densities_never_deposit_there() {
             },
         );
     };
-    let s = erpt_session_with("cornell-box/cornell-box.toml", 32, &[], blacken);
+    let s = erpt_renderer_with("cornell-box/cornell-box.toml", 32, &[], blacken);
     let out = check_clean(&s, "black surfaces");
     assert!(
         counter(&out, "total.rejection") > 0.0,
         "no proposal met a zero density"
     );
     // With a zero-width film window the raster never moves: still clean.
-    let s = erpt_session_with(
+    let s = erpt_renderer_with(
         "cornell-box/cornell-box.toml",
         32,
         &[("film_window", toml::Value::Integer(0))],
@@ -170,7 +170,7 @@ fn enormous_seeds_are_capped_or_counted_never_written_as_nan() {
         threads: Some(2),
         ..Default::default()
     };
-    let mut s = Session::from_config(c, &ov).unwrap();
+    let mut s = Renderer::from_config(c, &ov).unwrap();
     s.exr_path = None;
     let out = check_clean(&s, "1e30 furnace");
     let mean = out
@@ -187,7 +187,7 @@ fn enormous_seeds_are_capped_or_counted_never_written_as_nan() {
     // line naming the cause, instead of failing at write time after the whole render.
     let cfg = furnace_with_strength("3e38");
     let c = flowlight_scene::config::load_config(&cfg).unwrap();
-    let err = Session::from_config(c, &ov)
+    let err = Renderer::from_config(c, &ov)
         .err()
         .expect("3e38 emission must be refused");
     // The loader refuses the scene, before anything is rendered.
@@ -204,7 +204,7 @@ fn enormous_seeds_are_capped_or_counted_never_written_as_nan() {
 #[test]
 fn the_biased_filter_is_marked_in_the_output() {
     let dir = common::scratch("biased-filter");
-    let mut s = session_at(
+    let mut s = renderer_at(
         "furnace/erpt.toml",
         16,
         16,
@@ -238,7 +238,7 @@ fn image_quantum_and_selected_ratio_modes_render_clean() {
     ] {
         let label = format!("{extra:?}");
         let out = check_clean(
-            &erpt_session("cornell-box/cornell-box.toml", 24, &extra),
+            &erpt_renderer("cornell-box/cornell-box.toml", 24, &extra),
             &label,
         );
         assert!(counter(&out, "mean_quantum") > 0.0, "{label}");

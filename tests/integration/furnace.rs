@@ -7,7 +7,7 @@
 
 use crate::common;
 
-use common::{mean_and_stderr, render, session};
+use common::{mean_and_stderr, render, renderer};
 
 /// `depth` N leaves a tail of 0.5^(N+1)·2 beyond the path-space depth; the check uses the
 /// exact truncated value Le(1 − a^{N+1})/(1 − a).
@@ -28,7 +28,7 @@ fn check_with(
         ("path_depth", toml::Value::Integer(depth)),
     ];
     params.extend_from_slice(extra);
-    let s = session("furnace/furnace.toml", spp, &params);
+    let s = renderer("furnace/furnace.toml", spp, &params);
     let out = render(&s);
     assert_eq!(out.stats.invalid_deposits, 0, "no NaN/Inf samples expected");
     let img = out.frame.image();
@@ -161,7 +161,7 @@ fn entangled_throughput_from_first_vertex() {
 fn throughput_layers_match_the_analytic_furnace_layers() {
     // Untangled paths carry one connection each, so deep layers get few samples: N = 4 there.
     for (variant, n) in [("entangled", 6i64), ("untangled", 4)] {
-        let s = session(
+        let s = renderer(
             "furnace/furnace.toml",
             512,
             &[
@@ -225,7 +225,7 @@ branched! {
 /// nothing to split), is refused with the parameter's name.
 #[test]
 fn bad_branches_are_named() {
-    use flowlight_host::session::{Overrides, Session};
+    use flowlight_host::renderer::{Overrides, Renderer};
     for (params, shown) in [
         (vec![("branches", toml::Value::Integer(0))], "got 0"),
         (vec![("branches", toml::Value::Integer(65))], "got 65"),
@@ -241,7 +241,7 @@ fn bad_branches_are_named() {
             params: common::toml_params(&params),
             ..Default::default()
         };
-        let err = Session::prepare(&common::scene_config("furnace/furnace.toml"), &ov)
+        let err = Renderer::prepare(&common::scene_config("furnace/furnace.toml"), &ov)
             .err()
             .unwrap_or_else(|| panic!("{params:?} accepted"));
         let err = common::plugin_refusal(&err, "mcpt");
@@ -252,7 +252,7 @@ fn bad_branches_are_named() {
 /// Out-of-range roulette settings are refused with the parameter's name and value.
 #[test]
 fn bad_roulette_settings_are_named() {
-    use flowlight_host::session::{Overrides, Session};
+    use flowlight_host::renderer::{Overrides, Renderer};
     for (key, value, shown) in [
         ("rr_depth", toml::Value::Integer(0), "got 0"),
         ("rr_max_survival", toml::Value::Float(1.0), "got 1"),
@@ -262,7 +262,7 @@ fn bad_roulette_settings_are_named() {
             params: common::toml_params(&[("termination", "throughput".into()), (key, value)]),
             ..Default::default()
         };
-        let err = Session::prepare(&common::scene_config("furnace/furnace.toml"), &ov)
+        let err = Renderer::prepare(&common::scene_config("furnace/furnace.toml"), &ov)
             .err()
             .unwrap_or_else(|| panic!("{key} accepted"));
         let err = common::plugin_refusal(&err, "mcpt");
@@ -274,7 +274,7 @@ fn bad_roulette_settings_are_named() {
 /// (so T = 0.6, not the 0.5 of `bxdf`): the image mean stays 2·(1 − 0.5^9).
 #[test]
 fn erpt_seeds_with_throughput_termination_keep_the_furnace() {
-    let s = session(
+    let s = renderer(
         "furnace/erpt.toml",
         16,
         &[

@@ -6,7 +6,7 @@
 
 use crate::common;
 
-use common::{mean_and_stderr, render, scene_config, scratch, session_at};
+use common::{mean_and_stderr, render, renderer_at, scene_config, scratch};
 
 /// The furnace scene with a white material of the given roughness and ior, written to a
 /// scratch folder; returns the config's path.
@@ -51,7 +51,7 @@ fn white_furnace(tag: &str, roughness: f32, ior: f32) -> common::InTempDir<Strin
 
 fn check(variant: &str, roughness: f32, ior: f32, depth: i64) {
     let cfg = white_furnace(&format!("{variant}-{roughness}-{ior}"), roughness, ior);
-    let s = session_at(
+    let s = renderer_at(
         &cfg,
         32,
         32,
@@ -264,9 +264,9 @@ fn volume_absorbs_by_beer_lambert() {
     let erpt_cfg = cfg.replace("cube.toml", "cube-erpt.toml");
     for variant in ["entangled", "untangled", "erpt"] {
         let s = if variant == "erpt" {
-            session_at(&erpt_cfg, 16, 16, 4, &[])
+            renderer_at(&erpt_cfg, 16, 16, 4, &[])
         } else {
-            session_at(&cfg, 16, 16, 16, &[("variant", variant.into())])
+            renderer_at(&cfg, 16, 16, 16, &[("variant", variant.into())])
         };
         let out = render(&s);
         assert_eq!(out.stats.invalid_deposits, 0);

@@ -478,7 +478,7 @@ fn item10_threads_beyond_four_per_core_are_clamped() {
 // Item 13: a time budget is a budget, for ERPT (flanged units) and MCPT. Pass/fail tests
 // read no clock (the machine is shared: wall time is a benchmark figure, in the closing note
 // and docs/config.md); the stop rule itself — no work unit starts after the deadline — is
-// asserted from the render report in tests/erpt.rs
+// asserted from the render report in tests/integration/erpt.rs
 // (`erpt_time_budget_starts_no_unit_after_the_deadline_and_marks_the_fraction`). Here: the CLI
 // renders under a budget that ends inside the first ERPT pass and marks the cut honestly.
 #[test]

@@ -5,7 +5,7 @@
 
 use crate::common;
 
-use common::{mean_and_stderr, render, session_from};
+use common::{mean_and_stderr, render, renderer_from};
 use flowlight_testkit::gltf::{octahedra_gltf, octahedra_placements};
 
 const BODY_BVH: &str = r#"
@@ -31,13 +31,13 @@ fn instanced_emissive_octahedra_render_like_their_flattened_copy() {
         r#"{"emissiveFactor": [1.0, 0.8, 0.6], "pbrMetallicRoughness": {"metallicFactor": 0.0}}"#;
     for isect in ["bvh", "embree"] {
         let body = BODY_BVH.replace("\"bvh\"", &format!("\"{isect}\""));
-        let shared = session_from(
+        let shared = renderer_from(
             &format!("inst-shared-{isect}"),
             &octahedra_gltf(&placements, false, material),
             &body,
             8,
         );
-        let flat = session_from(
+        let flat = renderer_from(
             &format!("inst-flat-{isect}"),
             &octahedra_gltf(&placements, true, material),
             &body,

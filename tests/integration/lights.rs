@@ -1,6 +1,6 @@
 //! Analytic checks of every light type through the whole renderer (synthetic glTF scenes, both
 //! MCPT variants), and ERPT against MCPT under a point light (ERPT under lights at infinity:
-//! `tests/erpt.rs`).
+//! `tests/integration/erpt.rs`).
 //!
 //! The surface is a Lambert floor (albedo ½, KHR_materials_specular factor 0: the spec's purely
 //! diffuse material) seen from above. Direct lighting by a delta light is noise-free (one light, one
@@ -16,9 +16,9 @@
 
 use crate::common;
 
-use common::{mean_and_stderr, quads_gltf, render, session_from, FLOOR, LAMBERT};
+use common::{mean_and_stderr, quads_gltf, render, renderer_from, FLOOR, LAMBERT};
 use flowlight_core::Rgb;
-use flowlight_host::session::Session;
+use flowlight_host::renderer::Renderer;
 use glam::{Vec2, Vec3};
 
 const ALBEDO: f64 = 0.5;
@@ -56,7 +56,7 @@ path_depth = {depth}
 
 /// Per pixel, the mean of `radiance(p)` over an 8×8 grid of the pixel's footprint on the
 /// floor y = 0 (0 where the ray misses it).
-fn expected_image(s: &Session, radiance: impl Fn(Vec3) -> f64) -> Vec<f64> {
+fn expected_image(s: &Renderer, radiance: impl Fn(Vec3) -> f64) -> Vec<f64> {
     let cam = s.camera;
     let mut out = Vec::new();
     for y in 0..cam.height {
@@ -83,7 +83,7 @@ fn expected_image(s: &Session, radiance: impl Fn(Vec3) -> f64) -> Vec<f64> {
 
 /// Renders `s` and compares each pixel's red channel with `expected` (relative `tol` where
 /// the expected value is above 10% of the maximum, absolute elsewhere) and the image means.
-fn compare(label: &str, s: &Session, expected: &[f64], tol: f64) {
+fn compare(label: &str, s: &Renderer, expected: &[f64], tol: f64) {
     let out = render(s);
     assert_eq!(out.stats.invalid_deposits, 0, "{label}: invalid samples");
     let img = out.frame.image();
@@ -142,7 +142,7 @@ fn point_light_over_a_lambert_plane_gives_i_cos_over_r2() {
         r#"[{"type": "point", "intensity": 10.0, "color": [1.0, 1.0, 1.0], "range": 100.0}]"#,
     );
     for variant in ["entangled", "untangled"] {
-        let s = session_from(
+        let s = renderer_from(
             &format!("point-{variant}"),
             &gltf,
             &config(variant, 1, ""),
@@ -169,7 +169,7 @@ fn directional_light_gives_lux_cos_theta() {
         r#"[{"type": "directional", "intensity": 3.0, "color": [1.0, 0.5, 0.25]}]"#,
     );
     for variant in ["entangled", "untangled"] {
-        let s = session_from(&format!("dir-{variant}"), &gltf, &config(variant, 1, ""), 8);
+        let s = renderer_from(&format!("dir-{variant}"), &gltf, &config(variant, 1, ""), 8);
         let want =
             ALBEDO / std::f64::consts::PI * (lux / LUMENS_PER_WATT) * tilt.to_radians().cos();
         let expected = expected_image(&s, |_| want);
@@ -198,7 +198,7 @@ fn spot_light_falls_off_between_its_cones() {
         ),
     );
     for variant in ["entangled", "untangled"] {
-        let s = session_from(
+        let s = renderer_from(
             &format!("spot-{variant}"),
             &gltf,
             &config(variant, 1, ""),
@@ -233,7 +233,7 @@ fn constant_environment_over_an_open_plane_gives_albedo_times_sky() {
         ("entangled", 3, 512),
         ("untangled", 2, 1024),
     ] {
-        let s = session_from(
+        let s = renderer_from(
             &format!("env-{variant}-{depth}"),
             &gltf,
             &config(
@@ -256,7 +256,7 @@ fn constant_environment_over_an_open_plane_gives_albedo_times_sky() {
     // Looking up, the camera sees the sky itself.
     let up = config("entangled", 1, "[environment]\ncolor = [0.5, 1.0, 2.0]\n")
         .replace("look_at = [0.3, 0.0, 0.2]", "look_at = [0.3, 8.0, 0.2]");
-    let s = session_from("env-up", &gltf, &up, 2);
+    let s = renderer_from("env-up", &gltf, &up, 2);
     let img = render(&s).frame.image();
     assert!(img.iter().all(|c| *c == Rgb::new(0.5, 1.0, 2.0)));
 }
@@ -264,7 +264,7 @@ fn constant_environment_over_an_open_plane_gives_albedo_times_sky() {
 #[test]
 fn a_scene_without_light_renders_with_one_warning() {
     let gltf = quads_gltf(&[FLOOR], LAMBERT, &[], "");
-    let s = session_from("no-light", &gltf, &config("entangled", 2, ""), 2);
+    let s = renderer_from("no-light", &gltf, &config("entangled", 2, ""), 2);
     let img = render(&s).frame.image();
     assert!(img.iter().all(|c| c.is_black()));
     // The command line says so, once, and still succeeds.
@@ -321,7 +321,7 @@ fov_y = 60.0
 "#;
     let mcpt =
         format!("{head}[integrator]\nplugin = \"mcpt\"\nvariant = \"entangled\"\npath_depth = 3\n");
-    let reference = render(&session_from("erpt-ref", &gltf, &mcpt, 512))
+    let reference = render(&renderer_from("erpt-ref", &gltf, &mcpt, 512))
         .frame
         .image();
     let ref_mean = reference.iter().map(|c| c.luminance() as f64).sum::<f64>() / 1024.0;
@@ -346,7 +346,7 @@ weight = 0.3
     );
     let mut means = Vec::new();
     for run in 0..4 {
-        let mut s = session_from(&format!("erpt-{run}"), &gltf, &erpt, 4);
+        let mut s = renderer_from(&format!("erpt-{run}"), &gltf, &erpt, 4);
         s.options.seed = 100 + run;
         let out = render(&s);
         assert_eq!(out.stats.invalid_deposits, 0);
@@ -398,9 +398,9 @@ plugin = "blow"
 plugin = "drill"
 width = "wide"
 "#;
-    let s = session_from("erpt-balance", &gltf, cfg, 1);
+    let s = renderer_from("erpt-balance", &gltf, cfg, 1);
     let set = s.instance.mutation_set();
-    // SAFETY: the session keeps the view's data alive.
+    // SAFETY: the renderer keeps the view's data alive.
     let scene = unsafe { Scene::from_view(s.instance.view()) };
     let mut unit_tracer = UnitTracer::new(&s.scene, s.intersector.as_ref());
     let table = unit_tracer.table();

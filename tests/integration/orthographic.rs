@@ -9,22 +9,22 @@ use flowlight_core::camera::{Camera, Projection};
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
 use flowlight_host::intersector::UnitTracer;
-use flowlight_host::session::{Overrides, Session};
+use flowlight_host::renderer::{Overrides, Renderer};
 use flowlight_pathtrace::{untangled, PathSettings, Variant};
 use flowlight_scene::config::load_config;
 use flowlight_sdk::{Scene, Stats, Tracer};
 use glam::Vec3;
 
-/// A session of `config` at `w`×`h` through an orthographic camera with the config's (or
+/// A renderer of `config` at `w`×`h` through an orthographic camera with the config's (or
 /// the file's) placement and `ortho_height`.
-fn ortho_session(
+fn ortho_renderer(
     config: &std::path::Path,
     w: u32,
     h: u32,
     spp: u32,
     ortho_height: f32,
     params: &[(&str, toml::Value)],
-) -> Session {
+) -> Renderer {
     let mut cfg = load_config(config).unwrap_or_else(|e| panic!("{e}"));
     cfg.width = w;
     cfg.height = h;
@@ -39,7 +39,7 @@ fn ortho_session(
         params: toml_params(params),
         ..Default::default()
     };
-    let mut s = Session::from_config(cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
+    let mut s = Renderer::from_config(cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
     s.exr_path = None;
     s.png_path = None;
     assert_eq!(s.camera.kind(), Projection::Orthographic);
@@ -61,7 +61,7 @@ fn the_image_of_an_emitter_has_its_orthographic_extent() {
             format!("scene = \"q.gltf\"\n[camera]\nposition = [0.0, 0.0, {z}]\nforward = [0.0, 0.0, -1.0]\n[integrator]\nplugin = \"mcpt\"\n"),
         )
         .unwrap();
-        let s = ortho_session(&cfg, 16, 16, 4, 4.0, &[]);
+        let s = ortho_renderer(&cfg, 16, 16, 4, 4.0, &[]);
         let img = render(&s).frame.image();
         for y in 0..16 {
             for x in 0..16 {
@@ -101,7 +101,7 @@ const STRATEGIES: &[(&str, &[(&str, &str)])] = &[
 
 #[test]
 fn every_mutation_keeps_the_eye_vertex_on_the_orthographic_film() {
-    let s = ortho_session(
+    let s = ortho_renderer(
         &common::scene_config("cornell-box/erpt.toml"),
         48,
         48,
@@ -111,7 +111,7 @@ fn every_mutation_keeps_the_eye_vertex_on_the_orthographic_film() {
     );
     let camera: Camera = s.camera;
     let set = s.instance.mutation_set();
-    // SAFETY: the session keeps the view's data alive.
+    // SAFETY: the renderer keeps the view's data alive.
     let scene = unsafe { Scene::from_view(s.instance.view()) };
     let mut unit_tracer = UnitTracer::new(&s.scene, s.intersector.as_ref());
     let table = unit_tracer.table();
@@ -167,7 +167,7 @@ fn every_mutation_keeps_the_eye_vertex_on_the_orthographic_film() {
 #[test]
 fn erpt_agrees_with_path_tracing_through_an_orthographic_camera() {
     let config = common::scene_config("cornell-box/erpt.toml");
-    let mcpt = ortho_session(
+    let mcpt = ortho_renderer(
         &common::scene_config("cornell-box/cornell-box.toml"),
         32,
         32,
@@ -179,7 +179,7 @@ fn erpt_agrees_with_path_tracing_through_an_orthographic_camera() {
     let (ref_mean, ref_se) = mean_and_stderr(&reference, |c| c.luminance());
     let mut means = Vec::new();
     for seed in 0..6 {
-        let mut s = ortho_session(
+        let mut s = ortho_renderer(
             &config,
             32,
             32,

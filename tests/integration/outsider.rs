@@ -24,9 +24,9 @@
 
 use crate::common;
 
-use common::{mean_and_stderr, render, scene_config, session_at, toml_params};
+use common::{mean_and_stderr, render, renderer_at, scene_config, toml_params};
 use flowlight_core::Rgb;
-use flowlight_host::session::{Overrides, Session};
+use flowlight_host::renderer::{Overrides, Renderer};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::Mutex;
@@ -118,8 +118,8 @@ fn image_mean(img: &[Rgb]) -> f64 {
     img.iter().map(|c| c.luminance() as f64).sum::<f64>() / img.len() as f64
 }
 
-/// A session of the Cornell box at 32×32 with integrator `plugin` and `params`.
-fn cornell_with(plugin: &str, spp: u32, seed: u64, params: &[(&str, toml::Value)]) -> Session {
+/// A renderer of the Cornell box at 32×32 with integrator `plugin` and `params`.
+fn cornell_with(plugin: &str, spp: u32, seed: u64, params: &[(&str, toml::Value)]) -> Renderer {
     let mut cfg =
         flowlight_scene::config::load_config(&scene_config("cornell-box/cornell-box.toml"))
             .unwrap_or_else(|e| panic!("{e}"));
@@ -134,7 +134,7 @@ fn cornell_with(plugin: &str, spp: u32, seed: u64, params: &[(&str, toml::Value)
         params: toml_params(params),
         ..Default::default()
     };
-    let mut s = Session::from_config(cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
+    let mut s = Renderer::from_config(cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
     s.exr_path = None;
     s.png_path = None;
     s.options.tile_size = 16;
@@ -280,7 +280,7 @@ fn generated_mutation_conforms_and_renders(kind: &str, name: &str, params: &[(&s
         .into_iter()
         .collect(),
     )]);
-    let img = render(&session_at(
+    let img = render(&renderer_at(
         "cornell-box/erpt.toml",
         16,
         16,
@@ -410,7 +410,7 @@ fn ao_example_matches_the_analytic_occlusion_next_to_a_wall() {
         "[render]\nwidth = 16\nheight = 16\nspp = 32\n[camera]\nposition = [-1.0, 0.0, 5.0]\nlook_at = [-1.0, 0.0, 0.0]\nup = [0.0, 1.0, 0.0]\nprojection = \"orthographic\"\northo_height = 4.0\n[integrator]\nplugin = {:?}\nradius = 1.0\nao_samples = 16\naovs = true\n",
         lib.to_str().unwrap()
     );
-    let s = common::session_from("ao-wall", &gltf, &body, 32);
+    let s = common::renderer_from("ao-wall", &gltf, &body, 32);
     let out = render(&s);
     let (w, h) = (16usize, 16usize);
     let ao = out.frame.layer(0);
@@ -489,7 +489,7 @@ fn film_perturbation_example_passes_the_kit_and_erpt_with_it_matches_path_tracin
     let runs = 6;
     let mut per_run = Vec::new();
     for r in 0..runs {
-        let mut s = session_at(
+        let mut s = renderer_at(
             "cornell-box/erpt.toml",
             32,
             32,
@@ -579,7 +579,7 @@ fn gaussian_lens_example_passes_the_kit_on_its_built_library_and_counts_in_erpt(
         .into_iter()
         .collect(),
     )]);
-    let outcome = render(&session_at(
+    let outcome = render(&renderer_at(
         "cornell-box/erpt.toml",
         16,
         16,

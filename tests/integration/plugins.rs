@@ -7,7 +7,7 @@ use flowlight_host::error::HostError;
 use flowlight_host::plugin::{
     find_plugin, plugin_file_name, search_dirs, PluginError, PluginLibrary,
 };
-use flowlight_host::session::{Overrides, Session};
+use flowlight_host::renderer::{Overrides, Renderer};
 use flowlight_sdk::abi::ABI_VERSION;
 use flowlight_sdk::PluginKind;
 
@@ -90,7 +90,7 @@ fn missing_plugin_is_a_clear_error() {
         "scene = \"furnace.gltf\"\n[integrator]\nplugin = \"no-such-integrator\"\n",
     )
     .unwrap();
-    let err = Session::prepare(&cfg, &Overrides::default())
+    let err = Renderer::prepare(&cfg, &Overrides::default())
         .err()
         .expect("missing plugin accepted");
     let HostError::Plugin {
@@ -129,7 +129,7 @@ fn unknown_integrator_parameter_names_the_key() {
         params: common::toml_params(&[("path_dpeth", toml::Value::Integer(3))]),
         ..Default::default()
     };
-    let err = Session::prepare(&common::scene_config("furnace/furnace.toml"), &ov)
+    let err = Renderer::prepare(&common::scene_config("furnace/furnace.toml"), &ov)
         .err()
         .expect("typo accepted");
     let err = common::plugin_refusal(&err, "mcpt");
@@ -138,7 +138,7 @@ fn unknown_integrator_parameter_names_the_key() {
         params: common::toml_params(&[("variant", "sideways".into())]),
         ..Default::default()
     };
-    let err = Session::prepare(&common::scene_config("furnace/furnace.toml"), &ov)
+    let err = Renderer::prepare(&common::scene_config("furnace/furnace.toml"), &ov)
         .err()
         .expect("bad value accepted");
     let err = common::plugin_refusal(&err, "mcpt");
@@ -147,7 +147,7 @@ fn unknown_integrator_parameter_names_the_key() {
 
 #[test]
 fn the_real_plugin_renders_an_image() {
-    let s = common::session("furnace/furnace.toml", 4, &[]);
+    let s = common::renderer("furnace/furnace.toml", 4, &[]);
     let out = common::render(&s);
     assert_eq!(out.stats.pixel_samples, 32 * 32 * 4);
     assert!(out.stats.closest_rays >= 32 * 32 * 4);
@@ -169,7 +169,7 @@ fn plugin_errors_and_panics_come_back_as_errors() {
             .unwrap();
     cfg.integrator_plugin = "test-panic".into();
     cfg.integrator_params.clear();
-    let err = Session::from_config(cfg.clone(), &ov)
+    let err = Renderer::from_config(cfg.clone(), &ov)
         .err()
         .expect("create error ignored");
     let err = common::plugin_refusal(&err, "test-panic");
@@ -180,7 +180,7 @@ fn plugin_errors_and_panics_come_back_as_errors() {
         threads: Some(2),
         ..Default::default()
     };
-    let s = Session::from_config(cfg, &ov).unwrap();
+    let s = Renderer::from_config(cfg, &ov).unwrap();
     let out = s
         .render(&std::sync::atomic::AtomicBool::new(false), &|_| {})
         .unwrap();
@@ -451,7 +451,7 @@ fn weighted(entries: &[(&str, toml::Value)]) -> toml::Value {
 #[test]
 fn erpt_counters_arrive_merged_and_consistent() {
     let list = weighted(&[("drill", 1.into()), ("blow", 3.into())]);
-    let s = common::session_at("cornell-box/erpt.toml", 16, 16, 2, &[("mutations", list)]);
+    let s = common::renderer_at("cornell-box/erpt.toml", 16, 16, 2, &[("mutations", list)]);
     let weights: Vec<f64> = (0..2)
         .map(|i| s.instance.mutation_set().weight(i))
         .collect();
@@ -505,7 +505,7 @@ fn bad_mutation_weights_are_refused_naming_the_entry() {
     let config = common::scene_config("cornell-box/erpt.toml");
     // The list's error (`file` the config), as the CLI prints it.
     let prepare = |list: toml::Value| {
-        let e = Session::prepare(
+        let e = Renderer::prepare(
             &config,
             &Overrides {
                 params: common::toml_params(&[("mutations", list)]),
@@ -544,7 +544,7 @@ fn bad_mutation_weights_are_refused_naming_the_entry() {
 /// unknown parameter like any other.
 #[test]
 fn mutations_for_an_integrator_without_a_list_are_an_unknown_parameter() {
-    let err = Session::prepare(
+    let err = Renderer::prepare(
         &common::scene_config("furnace/furnace.toml"),
         &Overrides {
             params: common::toml_params(&[("mutations", weighted(&[("drill", 1.into())]))]),
@@ -572,7 +572,7 @@ fn the_mutation_list_is_read_under_the_declared_name() {
         "strategies",
         weighted(&[("drill", 1.into()), ("blow", 1.into())]),
     )]);
-    let s = Session::from_config(cfg.clone(), &Overrides::default()).unwrap();
+    let s = Renderer::from_config(cfg.clone(), &Overrides::default()).unwrap();
     let names: Vec<&str> = s
         .instance
         .mutations()
@@ -583,7 +583,7 @@ fn the_mutation_list_is_read_under_the_declared_name() {
     assert_eq!(s.instance.mutation_set().weight(1), 0.5);
     // `mutations` is not a parameter of this integrator.
     cfg.integrator_params = common::toml_params(&[("mutations", weighted(&[("drill", 1.into())]))]);
-    let err = Session::from_config(cfg, &Overrides::default())
+    let err = Renderer::from_config(cfg, &Overrides::default())
         .err()
         .expect("a list under an undeclared name was read");
     let err = common::plugin_refusal(&err, "test-panic");
@@ -692,7 +692,7 @@ fn declarations_cross_the_abi_with_ranges_and_roles() {
 #[test]
 fn values_outside_their_declared_range_are_refused() {
     let refused = |config: &str, params: &[(&str, toml::Value)]| {
-        Session::prepare(
+        Renderer::prepare(
             &common::scene_config(config),
             &Overrides {
                 params: common::toml_params(params),
@@ -741,7 +741,7 @@ fn resolved_parameters_are_written_into_the_exr_metadata() {
         ("drill", &[("width", "wide".into()), ("weight", 1.into())]),
         ("lens-perturbation", &[("weight", 3.into())]),
     ]);
-    let mut s = common::session_at(
+    let mut s = common::renderer_at(
         "cornell-box/erpt.toml",
         8,
         8,

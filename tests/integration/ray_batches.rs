@@ -5,14 +5,14 @@
 
 use crate::common;
 
-use common::{scene_config, scratch, session, session_from};
+use common::{renderer, renderer_from, scene_config, scratch};
 use flowlight_core::geometry::Ray;
 use flowlight_core::mesh::CompactHit;
 use flowlight_core::rng::Rng;
 use flowlight_core::sampler::{PairAhead, SampleStream, SLOT_BSDF_PAIR, SLOT_LIGHT};
 use flowlight_core::sobol::SobolSampler;
 use flowlight_host::intersector::UnitTracer;
-use flowlight_host::session::{Overrides, Session};
+use flowlight_host::renderer::{Overrides, Renderer};
 use flowlight_pathtrace::sampler::BranchStream;
 use flowlight_pathtrace::{entangled, PathSettings, SampleContributions};
 use flowlight_sdk::{Params, Scene, Tracer};
@@ -21,7 +21,7 @@ use glam::{Vec2, Vec3};
 
 /// Rays from a sphere around the scene towards random points inside its box, and the
 /// camera's rays through a jittered grid (the coherent kind).
-fn probe_rays(s: &Session, n: usize, seed: u64) -> (Vec<Ray>, Vec<Ray>) {
+fn probe_rays(s: &Renderer, n: usize, seed: u64) -> (Vec<Ray>, Vec<Ray>) {
     let (lo, hi) = s.scene.bounds().unwrap();
     let (c, r) = ((lo + hi) * 0.5, (hi - lo).length());
     let mut rng = Rng::new(seed, 1);
@@ -54,8 +54,8 @@ fn probe_rays(s: &Session, n: usize, seed: u64) -> (Vec<Ray>, Vec<Ray>) {
 
 /// Checks batches against single rays and the lazy surface data against the host's, on
 /// `rays`; returns the number of hits seen.
-fn check_batches(s: &Session, rays: &[Ray], coherent: bool, what: &str) -> usize {
-    // SAFETY: the session keeps the view's data alive while `scene` is used.
+fn check_batches(s: &Renderer, rays: &[Ray], coherent: bool, what: &str) -> usize {
+    // SAFETY: the renderer keeps the view's data alive while `scene` is used.
     let scene = unsafe { Scene::from_view(s.instance.view()) };
     let mut single = UnitTracer::new(&s.scene, s.intersector.as_ref());
     let mut batched = UnitTracer::new(&s.scene, s.intersector.as_ref());
@@ -106,14 +106,14 @@ fn check_batches(s: &Session, rays: &[Ray], coherent: bool, what: &str) -> usize
     n_hits
 }
 
-fn check_session(s: &Session, what: &str) {
+fn check_renderer(s: &Renderer, what: &str) {
     let (incoherent, camera) = probe_rays(s, 3000, 0x5eed);
     let a = check_batches(s, &incoherent, false, &format!("{what} incoherent"));
     let b = check_batches(s, &camera, true, &format!("{what} camera"));
     assert!(a > 100 && b > 50, "{what}: too few hits ({a}, {b})");
 }
 
-fn with_intersector(config: &str, isect: &str) -> Session {
+fn with_intersector(config: &str, isect: &str) -> Renderer {
     let mut cfg = flowlight_scene::config::load_config(&scene_config(config))
         .unwrap_or_else(|e| panic!("{e}"));
     cfg.intersector = match isect {
@@ -127,7 +127,7 @@ fn with_intersector(config: &str, isect: &str) -> Session {
         threads: Some(1),
         ..Default::default()
     };
-    Session::from_config(cfg, &ov).unwrap_or_else(|e| panic!("{e}"))
+    Renderer::from_config(cfg, &ov).unwrap_or_else(|e| panic!("{e}"))
 }
 
 const BODY: &str = r#"
@@ -151,16 +151,16 @@ fn batches_equal_single_rays_and_lazy_surfaces_equal_host_hits() {
         // instances of a mesh stored once.
         let s = with_intersector("cornell-box/cornell-box.toml", isect);
         assert_eq!(s.intersector.name(), isect);
-        check_session(&s, &format!("{isect} cornell"));
+        check_renderer(&s, &format!("{isect} cornell"));
         let placements = octahedra_placements(9);
-        let s = session_from(
+        let s = renderer_from(
             &format!("batch-inst-{isect}"),
             &octahedra_gltf(&placements, false, "{}"),
             &BODY.replace("ISECT", isect),
             1,
         );
         assert!(s.scene.is_instanced());
-        check_session(&s, &format!("{isect} instances"));
+        check_renderer(&s, &format!("{isect} instances"));
     }
 }
 
@@ -208,9 +208,9 @@ plugin = "mcpt"
             threads: Some(1),
             ..Default::default()
         };
-        let s = Session::prepare(&cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
+        let s = Renderer::prepare(&cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
         assert!(s.scene.has_alpha() && s.scene.is_instanced());
-        check_session(&s, &format!("{isect} alpha"));
+        check_renderer(&s, &format!("{isect} alpha"));
     }
 }
 
@@ -218,8 +218,8 @@ plugin = "mcpt"
 /// every BSDF built per hit, and with the untextured materials' BSDFs from the scene's table
 /// (as plugins see them), whose light connections the wavefront evaluates only after their
 /// shadow rays.
-fn wavefront_matches(s: &Session, what: &str) {
-    // SAFETY: the session keeps the view's data alive while `scene` is used.
+fn wavefront_matches(s: &Renderer, what: &str) {
+    // SAFETY: the renderer keeps the view's data alive while `scene` is used.
     let scene = unsafe { Scene::from_view(s.instance.view()) };
     wavefront_matches_in(s, &scene, &format!("{what}, BSDFs per hit"));
     let mut tabled = scene;
@@ -231,7 +231,7 @@ fn wavefront_matches(s: &Session, what: &str) {
 
 /// Unsplit paths, and paths split into three branches at their first lighting vertex (whose
 /// contributions the wavefront merges after the first branch's, in branch order).
-fn wavefront_matches_in(s: &Session, scene: &Scene, what: &str) {
+fn wavefront_matches_in(s: &Renderer, scene: &Scene, what: &str) {
     let defaults = PathSettings::from_params(&Params::from_slice(&[])).unwrap();
     for branches in [1, 3] {
         let settings = PathSettings {
@@ -242,11 +242,11 @@ fn wavefront_matches_in(s: &Session, scene: &Scene, what: &str) {
     }
 }
 
-fn wavefront_matches_with(s: &Session, scene: &Scene, settings: &PathSettings, what: &str) {
+fn wavefront_matches_with(s: &Renderer, scene: &Scene, settings: &PathSettings, what: &str) {
     let scene = *scene;
     // The wavefront's camera rays are a coherent batch; Embree's coherent packets may break a
     // tie between two triangles at one distance otherwise than the walk's single rays
-    // (tests/embree.rs), so this comparison of the two samplers' logic uses plain packets.
+    // (tests/integration/embree.rs), so this comparison of the two samplers' logic uses plain packets.
     let plain = (s.intersector.name() == "embree").then(|| {
         let options = flowlight_embree::SceneOptions {
             coherent: false,
@@ -305,8 +305,8 @@ fn wavefront_matches_with(s: &Session, scene: &Scene, settings: &PathSettings, w
 /// lit from behind a partition, where the bound does skip at many camera hits.
 #[test]
 fn skipping_lights_behind_a_surface_changes_no_contribution() {
-    let s = session("indirect-room/indirect-room.toml", 1, &[]);
-    // SAFETY: the session keeps the view's data alive while the scenes are used.
+    let s = renderer("indirect-room/indirect-room.toml", 1, &[]);
+    // SAFETY: the renderer keeps the view's data alive while the scenes are used.
     let mut scene = unsafe { Scene::from_view(s.instance.view()) };
     // SAFETY: `_table` outlives `scene` and `blind`, the scenes that point at it.
     let _table = unsafe { scene.attach_constant_bsdfs() };
@@ -361,15 +361,15 @@ fn skipping_lights_behind_a_surface_changes_no_contribution() {
 
 #[test]
 fn wavefront_gives_each_sample_the_path_at_a_time_contributions() {
-    wavefront_matches(&session("cornell-box/cornell-box.toml", 1, &[]), "cornell");
+    wavefront_matches(&renderer("cornell-box/cornell-box.toml", 1, &[]), "cornell");
     wavefront_matches(
-        &session("glass-caustic/glass-caustic.toml", 1, &[]),
+        &renderer("glass-caustic/glass-caustic.toml", 1, &[]),
         "glass",
     );
     // Textured materials (a BSDF built per hit, its connections evaluated before the shadow
     // ray) beside untextured glTF ones (table BSDFs, evaluated after it).
     wavefront_matches(
-        &session("blender-showcase/showcase.toml", 1, &[]),
+        &renderer("blender-showcase/showcase.toml", 1, &[]),
         "showcase",
     );
 }
@@ -454,8 +454,8 @@ fn sobol_pairs_drawn_ahead_change_no_contribution() {
         ("glass-caustic/glass-caustic.toml", "glass"),
         ("blender-showcase/showcase.toml", "showcase"),
     ] {
-        let s = session(config, 1, &[]);
-        // SAFETY: the session keeps the view's data alive while `scene` is used.
+        let s = renderer(config, 1, &[]);
+        // SAFETY: the renderer keeps the view's data alive while `scene` is used.
         let mut scene = unsafe { Scene::from_view(s.instance.view()) };
         // SAFETY: `_table` outlives `scene`, the only scene that points at it.
         let _table = unsafe { scene.attach_constant_bsdfs() };

@@ -4,13 +4,13 @@
 use crate::common;
 
 use common::{
-    assert_image_mean, assert_regions_unbiased, independent_runs, render, session_at, MeanRule,
+    assert_image_mean, assert_regions_unbiased, independent_runs, render, renderer_at, MeanRule,
 };
 use flowlight_core::Rgb;
 
 /// A 32×32 render of `config` with `sampler` at `spp` and the given seed.
 fn image(config: &str, sampler: &str, spp: u32, seed: u64) -> Vec<Rgb> {
-    let mut s = session_at(config, 32, 32, spp, &[("sampler", sampler.into())]);
+    let mut s = renderer_at(config, 32, 32, spp, &[("sampler", sampler.into())]);
     s.options.seed = seed;
     let out = render(&s);
     assert_eq!(out.stats.invalid_deposits, 0);
@@ -22,7 +22,7 @@ fn image(config: &str, sampler: &str, spp: u32, seed: u64) -> Vec<Rgb> {
 fn unbiased(config: &str, sampler: &str, spp: u32, reference_spp: u32, rule: MeanRule) {
     let reference = image(config, "independent", reference_spp, 77);
     let label = format!("{config} sampler {sampler}");
-    let make = || session_at(config, 32, 32, spp, &[("sampler", sampler.into())]);
+    let make = || renderer_at(config, 32, 32, spp, &[("sampler", sampler.into())]);
     let (images, _) = independent_runs(&label, 6, 500, &make);
     assert_regions_unbiased(&label, &images, &reference);
     assert_image_mean(&label, &images, &reference, rule);
@@ -70,7 +70,7 @@ fn branches_are_unbiased_on_the_cornell_box_and_through_glass() {
         for (sampler, branches) in [("sobol", 4), ("independent", 3)] {
             let label = format!("{config} {sampler}, {branches} branches");
             let make = || {
-                session_at(
+                renderer_at(
                     config,
                     32,
                     32,
@@ -94,7 +94,7 @@ fn independent_is_unbiased_on_the_cornell_box() {
     // against the other.
     let config = "cornell-box/cornell-box.toml";
     let reference = image(config, "sobol", 2048, 78);
-    let make = || session_at(config, 32, 32, 64, &[("sampler", "independent".into())]);
+    let make = || renderer_at(config, 32, 32, 64, &[("sampler", "independent".into())]);
     let (images, _) = independent_runs("independent", 6, 600, &make);
     assert_regions_unbiased("independent", &images, &reference);
     assert_image_mean("independent", &images, &reference, MeanRule::Within(0.01));
@@ -130,7 +130,7 @@ fn sobol_has_less_error_at_equal_samples() {
 
 #[test]
 fn untangled_refuses_sobol_and_defaults_to_independent() {
-    use flowlight_host::session::{Overrides, Session};
+    use flowlight_host::renderer::{Overrides, Renderer};
     let ov = |params: &[(&str, toml::Value)]| Overrides {
         spp: Some(1),
         params: common::toml_params(params),
@@ -138,7 +138,7 @@ fn untangled_refuses_sobol_and_defaults_to_independent() {
     };
     // The plugin refuses it, naming the parameter and what it needs.
     let refused = |config: &str, plugin: &str, params: &[(&str, toml::Value)]| {
-        let err = Session::prepare(&common::scene_config(config), &ov(params))
+        let err = Renderer::prepare(&common::scene_config(config), &ov(params))
             .err()
             .unwrap_or_else(|| panic!("{config} {params:?} must be refused"));
         let err = common::plugin_refusal(&err, plugin);
@@ -154,7 +154,7 @@ fn untangled_refuses_sobol_and_defaults_to_independent() {
         &[("variant", "untangled".into()), sobol.clone()],
     );
     let config = common::scene_config("cornell-box/cornell-box.toml");
-    assert!(Session::prepare(&config, &ov(&[("variant", "untangled".into())])).is_ok());
+    assert!(Renderer::prepare(&config, &ov(&[("variant", "untangled".into())])).is_ok());
     // ERPT's untangled seeds likewise.
     refused(
         "glass-caustic/erpt.toml",

@@ -9,7 +9,7 @@
 
 use crate::common;
 
-use common::{mean_and_stderr, render, scratch, session_at};
+use common::{mean_and_stderr, render, renderer_at, scratch};
 use flowlight_core::Rgb;
 use flowlight_host::metrics;
 use std::fmt::Write as _;
@@ -312,7 +312,7 @@ impl Builder {
             })
             .collect();
         format!(
-            r#"{{"asset":{{"version":"2.0","generator":"flowlight tests/stability.rs"}},
+            r#"{{"asset":{{"version":"2.0","generator":"flowlight tests/integration/stability.rs"}},
 "extensionsUsed":["KHR_materials_emissive_strength","KHR_materials_transmission","KHR_materials_ior","KHR_materials_volume","KHR_materials_specular"],
 "scene":0,"scenes":[{{"nodes":[{}]}}],"nodes":[{}],"meshes":[{}],"materials":[{}],
 "accessors":[{}],"bufferViews":[{}],
@@ -384,7 +384,7 @@ fn render_checked(
     spp: u32,
     pairs: &[(&'static str, toml::Value)],
 ) -> (Vec<Rgb>, flowlight_host::RenderStats) {
-    let s = session_at(cfg.to_str().unwrap(), size, size, spp, pairs);
+    let s = renderer_at(cfg.to_str().unwrap(), size, size, spp, pairs);
     let out = render(&s);
     let img = out.frame.image();
     let all_valid = |v: &[Rgb]| v.iter().all(|c| c.is_valid_radiance());
@@ -457,7 +457,7 @@ fn cornell_box_scaled_and_translated_gives_the_same_image() {
     let unit = transformed_cornell(&dir, "unit", 1.0, 0.0);
     let (a, _) = render_checked(&unit, size, spp, &[]);
     // The noise baseline: the unit scene with another seed.
-    let mut s = session_at(unit.to_str().unwrap(), size, size, spp, &[]);
+    let mut s = renderer_at(unit.to_str().unwrap(), size, size, spp, &[]);
     s.options.seed = 2;
     let noise = render(&s).frame.image();
     let baseline = metrics::compare(&noise, &a, None).unwrap().relmse;
@@ -474,7 +474,7 @@ fn cornell_box_scaled_and_translated_gives_the_same_image() {
         ("small-far", 1e-4, 0.1),
     ] {
         let cfg = transformed_cornell(&dir, name, scale, t);
-        let mut s = session_at(cfg.to_str().unwrap(), size, size, spp, &[]);
+        let mut s = renderer_at(cfg.to_str().unwrap(), size, size, spp, &[]);
         s.options.seed = 2;
         let out = render(&s);
         assert_eq!(out.stats.invalid_deposits, 0, "{name}");
@@ -852,7 +852,7 @@ fn degenerate_geometry_extreme_albedo_and_lights_give_finite_counted_output() {
                 ("termination", termination.into()),
                 ("layers", true.into()),
             ]);
-            let s = session_at(cfg.to_str().unwrap(), 48, 48, 16, &pairs);
+            let s = renderer_at(cfg.to_str().unwrap(), 48, 48, 16, &pairs);
             let out = render(&s);
             let img = out.frame.image();
             assert!(img.iter().all(|c| c.is_valid_radiance()), "{what}");
@@ -1032,10 +1032,10 @@ fn virtual_depth_keeps_direct_light_through_ten_mirrors() {
     let unfolded = build(false).write(&dir, "unfolded", &cam(0.5 - 10.0), "path_depth = 1\n");
     let (size, spp) = (24, 256);
     let (a, _) = render_checked(&chain, size, spp, &[]);
-    let mut s = session_at(unfolded.to_str().unwrap(), size, size, spp, &[]);
+    let mut s = renderer_at(unfolded.to_str().unwrap(), size, size, spp, &[]);
     s.options.seed = 2;
     let b = render(&s).frame.image();
-    let mut s = session_at(unfolded.to_str().unwrap(), size, size, spp, &[]);
+    let mut s = renderer_at(unfolded.to_str().unwrap(), size, size, spp, &[]);
     s.options.seed = 3;
     let c = render(&s).frame.image();
     let noise = metrics::compare(&c, &b, None).unwrap();

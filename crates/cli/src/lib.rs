@@ -269,7 +269,7 @@ pub fn main() {
             samples,
         } => match parse_sets(&set) {
             Ok(params) => {
-                let ov = flowlight_host::session::Overrides {
+                let ov = flowlight_host::renderer::Overrides {
                     spp,
                     time,
                     threads,

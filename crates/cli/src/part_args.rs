@@ -2,15 +2,15 @@
 
 use anyhow::{anyhow, Result};
 use flowlight_host::parts::{parse_part, parse_samples, PartSpec};
-use flowlight_host::session::Session;
+use flowlight_host::renderer::Renderer;
 use std::path::{Path, PathBuf};
 
-/// Restricts `session` to the part the flags name, if any: part K of N of the session's
+/// Restricts `renderer` to the part the flags name, if any: part K of N of the renderer's
 /// samples per pixel, or samples A..B. Without `--out` (`out_given` false) the part's files
 /// go beside the config's image under names of their own ([`part_path`]): a part never
 /// replaces the final image.
 pub fn apply(
-    session: &mut Session,
+    renderer: &mut Renderer,
     part: Option<&str>,
     samples: Option<&str>,
     out_given: bool,
@@ -18,8 +18,8 @@ pub fn apply(
     if part.is_none() && samples.is_none() {
         return Ok(());
     }
-    session.check_part_budget().map_err(|e| anyhow!(e))?;
-    let total = session.options.spp;
+    renderer.check_part_budget().map_err(|e| anyhow!(e))?;
+    let total = renderer.options.spp;
     let spec = match (part, samples) {
         (Some(p), _) => {
             let (k, n) = parse_part(p).map_err(|e| anyhow!(e))?;
@@ -32,10 +32,10 @@ pub fn apply(
         (None, None) => return Ok(()),
     };
     if !out_given {
-        session.exr_path = session.exr_path.as_deref().map(|p| part_path(p, &spec));
-        session.png_path = session.png_path.as_deref().map(|p| part_path(p, &spec));
+        renderer.exr_path = renderer.exr_path.as_deref().map(|p| part_path(p, &spec));
+        renderer.png_path = renderer.png_path.as_deref().map(|p| part_path(p, &spec));
     }
-    session.set_part(spec).map_err(|e| anyhow!(e))
+    renderer.set_part(spec).map_err(|e| anyhow!(e))
 }
 
 /// `image.exr` → `image.part-1-of-4.exr` (or `image.samples-8-12.exr`): where a part goes

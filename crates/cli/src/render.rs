@@ -1,7 +1,7 @@
 //! `flowlight render`: one render of a TOML config, with a progress bar and a summary.
 
 use anyhow::{anyhow, Result};
-use flowlight_host::session::{Overrides, Session};
+use flowlight_host::renderer::{Overrides, Renderer};
 use flowlight_sdk::abi::StatSpec;
 use flowlight_sdk::StatDisplay;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -26,10 +26,10 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
     if ov.spp == Some(0) {
         return Err(anyhow!("--spp must be at least 1"));
     }
-    let mut session = Session::prepare(config, ov).map_err(|e| anyhow!(e))?;
-    crate::part_args::apply(&mut session, part.part, part.samples, ov.out.is_some())?;
+    let mut renderer = Renderer::prepare(config, ov).map_err(|e| anyhow!(e))?;
+    crate::part_args::apply(&mut renderer, part.part, part.samples, ov.out.is_some())?;
     // Before any work: the outputs must be writable and must not overwrite an input.
-    session.check_outputs().map_err(|e| anyhow!(e))?;
+    renderer.check_outputs().map_err(|e| anyhow!(e))?;
     let stop = Arc::new(AtomicBool::new(false));
     {
         let stop = stop.clone();
@@ -43,17 +43,17 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
         .map_err(|e| anyhow!("cannot install the Ctrl-C handler: {e}"))?;
     }
 
-    let (w, h) = (session.camera.width as u64, session.camera.height as u64);
+    let (w, h) = (renderer.camera.width as u64, renderer.camera.height as u64);
     let bar = if quiet {
         ProgressBar::hidden()
-    } else if let Some(t) = session.options.time {
+    } else if let Some(t) = renderer.options.time {
         let b = ProgressBar::new(t.as_millis() as u64);
         b.set_style(
             ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {msg}").unwrap(),
         );
         b
     } else {
-        let b = ProgressBar::new(session.options.spp as u64 * w * h);
+        let b = ProgressBar::new(renderer.options.spp as u64 * w * h);
         b.set_style(
             ProgressStyle::with_template(
                 "[{elapsed_precise}] {wide_bar} {percent}% {msg} ETA {eta}",
@@ -62,12 +62,12 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
         );
         b
     };
-    let env = if session.config.environment.is_some() {
+    let env = if renderer.config.environment.is_some() {
         " + environment"
     } else {
         ""
     };
-    let sc = &session.scene;
+    let sc = &renderer.scene;
     let triangles = if sc.is_instanced() {
         format!(
             "{} triangles in {} instances, {} stored",
@@ -80,11 +80,11 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
     };
     eprintln!(
         "flowlight: {} ({triangles}, {} emissive triangles, {} punctual lights{env}) with '{}' on {} ({}x{})",
-        session.config.scene.display(),
-        session.scene.emitters.len(),
-        session.scene.punctual_lights.len(),
-        session.instance.plugin().name,
-        session.intersector.name(),
+        renderer.config.scene.display(),
+        renderer.scene.emitters.len(),
+        renderer.scene.punctual_lights.len(),
+        renderer.instance.plugin().name,
+        renderer.intersector.name(),
         w,
         h
     );
@@ -107,7 +107,7 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
         }
     };
     let cpu0 = crate::cpu_time::process_cpu_time();
-    let outcome = session.render(&stop, &progress).map_err(|e| anyhow!(e))?;
+    let outcome = renderer.render(&stop, &progress).map_err(|e| anyhow!(e))?;
     let cpu = crate::cpu_time::process_cpu_time()
         .zip(cpu0)
         .map(|(b, a)| b.saturating_sub(a));
@@ -120,23 +120,23 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
     let s = &outcome.stats;
     let secs = s.wall.as_secs_f64().max(1e-9);
     let peak_render = crate::cpu_time::peak_resident_bytes();
-    let written = session
+    let written = renderer
         .write_outputs(outcome.frame, s)
         .map_err(|e| anyhow!(e))?;
     let peak_written = crate::cpu_time::peak_resident_bytes();
     println!("render summary");
-    println!("  integrator      {}", session.instance.plugin().name);
+    println!("  integrator      {}", renderer.instance.plugin().name);
     // Embree's mode changes its speed by about 15% (docs/embree.md), so a timing says which.
-    let mode = match session.intersector.name() {
-        "embree" if session.config.robust => ", robust mode",
+    let mode = match renderer.intersector.name() {
+        "embree" if renderer.config.robust => ", robust mode",
         "embree" => ", fast mode (robust = false)",
         _ => "",
     };
     println!(
         "  intersector     {}{mode} (load {:.3} s, build {:.3} s)",
-        session.intersector.name(),
-        session.load_time.as_secs_f64(),
-        session.build_time.as_secs_f64()
+        renderer.intersector.name(),
+        renderer.load_time.as_secs_f64(),
+        renderer.build_time.as_secs_f64()
     );
     println!("  threads         {}", s.threads);
     println!("  wall time       {secs:.3} s");
@@ -152,7 +152,7 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
         s.pixel_samples as f64 / (w * h) as f64,
         s.pixel_samples as f64 / secs / 1e6
     );
-    if let Some((spec, _)) = &session.part {
+    if let Some((spec, _)) = &renderer.part {
         println!(
             "  part            samples {}..{} of 0..{} (flowlight merge joins the parts)",
             spec.begin, spec.end, spec.total
@@ -192,7 +192,7 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
             s.stray_deposits
         );
     }
-    print_integrator_stats(&s.integrator, session.instance.stat_specs());
+    print_integrator_stats(&s.integrator, renderer.instance.stat_specs());
     if s.interrupted {
         println!("  interrupted     yes: the image holds the samples finished before the stop");
     }

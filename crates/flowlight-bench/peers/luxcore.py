@@ -151,15 +151,15 @@ def luxcore_worker(job):
     props = pyluxcore.Properties()
     props.SetFromString("\n".join(job["scene"]))
     scene.Parse(props)
-    session = pyluxcore.RenderSession(pyluxcore.RenderConfig(cfg, scene))
+    renderer = pyluxcore.RenderSession(pyluxcore.RenderConfig(cfg, scene))
     t0 = time.perf_counter()
-    session.Start()
+    renderer.Start()
     while time.perf_counter() - t0 < job["seconds"]:
         time.sleep(0.02)
-        session.UpdateStats()
-    session.Stop()
+        renderer.UpdateStats()
+    renderer.Stop()
     wall = time.perf_counter() - t0
-    session.GetFilm().SaveOutput(job["out"], pyluxcore.FilmOutputType.RGB, pyluxcore.Properties())
+    renderer.GetFilm().SaveOutput(job["out"], pyluxcore.FilmOutputType.RGB, pyluxcore.Properties())
     print(json.dumps({"wall": wall}))
     # pyluxcore 2.11's log callback crashes the interpreter's finalisation: leave at once.
     sys.stdout.flush()

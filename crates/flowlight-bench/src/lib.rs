@@ -1,7 +1,7 @@
 //! References and the error-against-time benchmark (`flowlight reference`, `flowlight bench`),
 //! a crate of its own so the host does not carry the suite format or the plotting library.
 //!
-//! Everything here goes through the ordinary host API ([`flowlight_host::session::Session`]): a method of the suite is
+//! Everything here goes through the ordinary host API ([`flowlight_host::renderer::Renderer`]): a method of the suite is
 //! any integrator plugin plus parameters, so a new integrator (ERPT and its mutation mixes)
 //! is benchmarked by adding a `[[method]]` entry, without code changes. The suite format is
 //! documented in `docs/bench.md`.

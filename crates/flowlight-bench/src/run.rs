@@ -1,4 +1,4 @@
-//! Renders through the ordinary host API ([`Session`]): one [`RenderRequest`], or every
+//! Renders through the ordinary host API ([`Renderer`]): one [`RenderRequest`], or every
 //! (scene, method, budget, seed) of a suite.
 
 use crate::plot::{plot_layers, plot_scene};
@@ -8,7 +8,7 @@ use crate::suite::{Suite, SuiteScene};
 use flowlight_core::Rgb;
 use flowlight_host::accumulation::Frame;
 use flowlight_host::metrics::{self, Errors};
-use flowlight_host::session::{Overrides, Session};
+use flowlight_host::renderer::{Overrides, Renderer};
 use flowlight_scene::config::{load_config, RenderConfig};
 use flowlight_sdk::ParamRole;
 use std::path::{Path, PathBuf};
@@ -65,15 +65,15 @@ pub struct RenderResult {
 
 /// The resolved value of the render's integer parameter with role `role` (the integrator
 /// reports what it read, default included; `None` when it declares no such parameter).
-fn resolved_int(session: &Session, role: ParamRole) -> Option<u32> {
-    let name = session
+fn resolved_int(renderer: &Renderer, role: ParamRole) -> Option<u32> {
+    let name = renderer
         .instance
         .plugin()
         .params()
         .into_iter()
         .find(|p| p.role == role)?
         .name;
-    session
+    renderer
         .instance
         .resolved_params()
         .into_iter()
@@ -152,17 +152,17 @@ pub fn render_request(req: &RenderRequest) -> Result<RenderResult, String> {
         seed: Some(req.seed),
         params: req.params.clone(),
     };
-    let mut session = Session::from_config(cfg, &ov)?;
-    session.exr_path = None;
-    session.png_path = None;
+    let mut renderer = Renderer::from_config(cfg, &ov)?;
+    renderer.exr_path = None;
+    renderer.png_path = None;
     let stop = AtomicBool::new(false);
-    let out = session.render(&stop, &|_| {})?;
+    let out = renderer.render(&stop, &|_| {})?;
     if let Some(e) = out.error {
         return Err(e.to_string());
     }
     let frame: &Frame = &out.frame;
     let (w, h) = (frame.width as usize, frame.height as usize);
-    let params = session
+    let params = renderer
         .config
         .integrator_params
         .iter()
@@ -179,10 +179,10 @@ pub fn render_request(req: &RenderRequest) -> Result<RenderResult, String> {
         wall: out.stats.wall.as_secs_f64(),
         spp: out.stats.pixel_samples as f64 / (w * h).max(1) as f64,
         invalid_samples: out.stats.invalid_deposits,
-        plugin: session.instance.plugin().name.clone(),
+        plugin: renderer.instance.plugin().name.clone(),
         params,
-        path_depth: resolved_int(&session, ParamRole::PathDepth),
-        max_ray_depth: resolved_int(&session, ParamRole::MaxRayDepth),
+        path_depth: resolved_int(&renderer, ParamRole::PathDepth),
+        max_ray_depth: resolved_int(&renderer, ParamRole::MaxRayDepth),
     })
 }
 

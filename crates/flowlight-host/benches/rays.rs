@@ -152,7 +152,7 @@ fn inside_rays(rng: &mut Rng, out: &mut Vec<Ray>) {
 /// `FLOWLIGHT_BENCH_LEAKS=M` (instead of the timings): how many of M million rays from
 /// inside each closed mesh leak through it, for Embree in robust and in fast mode (8-lane packets, as renders of
 /// scenes up to 100k triangles trace) and for the BVH. A measurement, not a test: the tests
-/// aim rays at shared edges and vertices (tests/embree.rs); this gives the rate for rays
+/// aim rays at shared edges and vertices (tests/integration/embree.rs); this gives the rate for rays
 /// that hit edges only by chance, as a render's do.
 fn leak_table(sizes: &[usize], millions: usize) {
     println!("| triangles | backend | rays from inside | leaked |\n|---:|---|---:|---:|");

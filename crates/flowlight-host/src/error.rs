@@ -1,4 +1,4 @@
-//! What can go wrong in a [`Session`](crate::session::Session): one typed error, so that
+//! What can go wrong in a [`Renderer`](crate::renderer::Renderer): one typed error, so that
 //! callers (tests, the bench, the conformance kit) match on what failed instead of on the
 //! wording, while users keep reading the same one-line message.
 //!
@@ -17,7 +17,7 @@ use flowlight_scene::{ConfigError, SceneError};
 use std::fmt;
 use std::path::PathBuf;
 
-/// Why a [`Session`](crate::session::Session) could not be prepared, configured, rendered or
+/// Why a [`Renderer`](crate::renderer::Renderer) could not be prepared, configured, rendered or
 /// written.
 #[derive(Debug)]
 pub enum HostError {
@@ -52,7 +52,7 @@ pub enum HostError {
     Variable(String),
     /// A plugin could not be found, loaded or created; `file` and `field` say where the
     /// config named it, when the message gives them. Boxed: the other variants are small,
-    /// and every `Result` of a `Session` carries the largest.
+    /// and every `Result` of a `Renderer` carries the largest.
     Plugin {
         file: Option<PathBuf>,
         field: Option<String>,

@@ -4,7 +4,7 @@
 //! units on it ([`render`](mod@render)), answers ray queries through an intersector ([`intersector`]),
 //! owns the accumulators ([`accumulation`]), counts statistics, and writes images atomically
 //! ([`output`]); [`parts`] splits a render into sample ranges and merges them back. A
-//! [`session::Session`] fails with a [`HostError`] ([`error`]).
+//! [`renderer::Renderer`] fails with a [`HostError`] ([`error`]).
 
 pub mod accumulation;
 pub mod error;
@@ -16,7 +16,7 @@ pub mod params;
 pub mod parts;
 pub mod plugin;
 pub mod render;
-pub mod session;
+pub mod renderer;
 
 pub use error::HostError;
 pub use plugin::{IntegratorInstance, PluginError, PluginLibrary};

@@ -744,7 +744,7 @@ fn json_string(s: &str) -> String {
     out
 }
 
-/// The session's statistics JSON with a `counter_kinds` object appended, for a part.
+/// The renderer's statistics JSON with a `counter_kinds` object appended, for a part.
 pub fn stats_json_with_kinds(json: &str, kinds: &[(String, String)]) -> String {
     let body = json.trim_end().strip_suffix('}').unwrap_or(json).trim_end();
     let mut out = format!("{body},\n  \"counter_kinds\": {{");
@@ -945,7 +945,7 @@ fn merge_stats_files(parts: &[PartFile]) -> Result<MergedStats, String> {
         integrator: counters,
         ..Default::default()
     };
-    let json = crate::session::stats_json(&integrator, &stats);
+    let json = crate::renderer::stats_json(&integrator, &stats);
     Ok((Some(stats_json_with_kinds(&json, &kinds)), None))
 }
 
@@ -1020,7 +1020,7 @@ mod tests {
             .enumerate()
         {
             let path = dir.join(format!("p{i}.exr"));
-            let json = stats_json_with_kinds(&crate::session::stats_json("erpt", s), &kinds);
+            let json = stats_json_with_kinds(&crate::renderer::stats_json("erpt", s), &kinds);
             std::fs::write(path.with_extension("stats.json"), &json).unwrap();
             // The part's record of its statistics file (written with it).
             let checksum = format!("{:016x}", fnv1a(FNV_OFFSET, json.as_bytes()));

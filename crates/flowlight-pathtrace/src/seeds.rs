@@ -32,7 +32,7 @@
 //! draws its seeds from bidirectional path tracing in the same way, each connection strategy
 //! with its MIS weight (`src/integrators/erpt/`).
 //!
-//! Each seed records w_t and p_t beside X_t so that `tests/erpt_seeds.rs` can check
+//! Each seed records w_t and p_t beside X_t so that `tests/integration/erpt_seeds.rs` can check
 //! X_t = w_t · f(x̄)/p_t for every seed with `measure.rs`'s f. A trunk vertex keeps the node type
 //! and BSDF component the BSDF sample chose; the vertex a light is connected from gets the type
 //! of the smooth component that scatters most light along the connection (only Dirac versus

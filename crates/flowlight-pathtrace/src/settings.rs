@@ -35,7 +35,7 @@ pub struct PathSettings {
 pub const MAX_BRANCHES: u32 = BRANCHES.range().1 as u32;
 
 /// MCPT's default `branches` for entangled paths ([`BRANCHES`]'s declared default): the
-/// most efficient of 1, 2 and 4 on the benchmark suite (`scenes/suite-branches.toml`).
+/// most efficient of 1, 2 and 4 on the benchmark suite (`scenes/experiments/suite-branches.toml`).
 pub const DEFAULT_BRANCHES: u32 = BRANCHES.default() as u32;
 
 /// `variant`: the estimator of MCPT's paths (ERPT's seeds choose theirs with `seeds`).

@@ -53,7 +53,7 @@ use flowlight_core::path::{Path, PathVertex};
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
 use flowlight_host::intersector::UnitTracer;
-use flowlight_host::session::{Overrides, Session};
+use flowlight_host::renderer::{Overrides, Renderer};
 use flowlight_mcmc::regenerate::all_forced;
 use flowlight_mcmc::{measurement, WeakNode};
 use flowlight_pathtrace::{untangled, PathSettings, Variant};
@@ -131,16 +131,16 @@ fn mutation_list(plugin: &str, params: &[(&str, toml::Value)]) -> toml::Value {
     toml::Value::Array(vec![toml::Value::Table(t)])
 }
 
-/// An ERPT session of `config` (under `scenes/`) at `size`² with `plugin` as its only
+/// An ERPT renderer of `config` (under `scenes/`) at `size`² with `plugin` as its only
 /// strategy and no outputs.
-fn erpt_session(
+fn erpt_renderer(
     config: &str,
     size: u32,
     spp: u32,
     plugin: &str,
     params: &[(&str, toml::Value)],
     extra: &[(&str, toml::Value)],
-) -> Result<Session, String> {
+) -> Result<Renderer, String> {
     let path = scenes_dir().join(config);
     let mut cfg = flowlight_scene::config::load_config(&path).map_err(|e| e.to_string())?;
     cfg.width = size;
@@ -154,7 +154,7 @@ fn erpt_session(
         params: overrides,
         ..Default::default()
     };
-    let mut s = Session::from_config(cfg, &ov)?;
+    let mut s = Renderer::from_config(cfg, &ov)?;
     s.exr_path = None;
     s.png_path = None;
     Ok(s)
@@ -275,11 +275,11 @@ fn check_scene(
     config: &str,
 ) -> Result<(String, SceneCounts), String> {
     let size = 48;
-    let s = erpt_session(config, size, 1, plugin, params, &[])
+    let s = erpt_renderer(config, size, 1, plugin, params, &[])
         .map_err(|e| format!("scene {label} ({config}): {e}"))?;
     let set = s.instance.mutation_set();
     let name = set.name(0).to_string();
-    // SAFETY: the session keeps the view's data alive while `scene` is used.
+    // SAFETY: the renderer keeps the view's data alive while `scene` is used.
     let scene = unsafe { Scene::from_view(s.instance.view()) };
     let mut unit_tracer = UnitTracer::new(&s.scene, s.intersector.as_ref());
     let table = unit_tracer.table();
@@ -389,7 +389,7 @@ pub fn check_furnace(
     let runs = 8;
     let mut per_run: Vec<[f64; 16]> = Vec::new();
     for r in 0..runs {
-        let mut s = erpt_session(
+        let mut s = erpt_renderer(
             "furnace/erpt.toml",
             32,
             4,

@@ -6,7 +6,7 @@
 use flowlight_core::Rgb;
 use flowlight_host::error::HostError;
 use flowlight_host::render::RenderOutcome;
-use flowlight_host::session::{Overrides, Session};
+use flowlight_host::renderer::{Overrides, Renderer};
 use flowlight_host::PluginError;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -35,7 +35,7 @@ pub fn scratch(name: &str) -> TempDir {
     ))
 }
 
-/// What `plugin` said when it refused to prepare a `Session` (its `create`, or the host checking the
+/// What `plugin` said when it refused to prepare a `Renderer` (its `create`, or the host checking the
 /// parameters it declares): the message of the [`PluginError::Call`]. Panics, naming the
 /// error, on any other error.
 pub fn plugin_refusal<'e>(e: &'e HostError, plugin: &str) -> &'e str {
@@ -56,28 +56,28 @@ pub fn toml_params(pairs: &[(&str, toml::Value)]) -> Vec<(String, toml::Value)> 
         .collect()
 }
 
-/// Prepares a session for a scene config with integrator parameter overrides and no outputs.
-pub fn session(config: &str, spp: u32, params: &[(&str, toml::Value)]) -> Session {
+/// Prepares a renderer for a scene config with integrator parameter overrides and no outputs.
+pub fn renderer(config: &str, spp: u32, params: &[(&str, toml::Value)]) -> Renderer {
     let ov = Overrides {
         spp: Some(spp),
         threads: Some(2),
         params: toml_params(params),
         ..Default::default()
     };
-    let mut s = Session::prepare(&scene_config(config), &ov).unwrap_or_else(|e| panic!("{e}"));
+    let mut s = Renderer::prepare(&scene_config(config), &ov).unwrap_or_else(|e| panic!("{e}"));
     s.exr_path = None;
     s.png_path = None;
     s
 }
 
-/// Like [`session`], at another resolution.
-pub fn session_at(
+/// Like [`renderer`], at another resolution.
+pub fn renderer_at(
     config: &str,
     width: u32,
     height: u32,
     spp: u32,
     params: &[(&str, toml::Value)],
-) -> Session {
+) -> Renderer {
     let mut cfg = flowlight_scene::config::load_config(&scene_config(config))
         .unwrap_or_else(|e| panic!("{e}"));
     cfg.width = width;
@@ -88,13 +88,13 @@ pub fn session_at(
         params: toml_params(params),
         ..Default::default()
     };
-    let mut s = Session::from_config(cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
+    let mut s = Renderer::from_config(cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
     s.exr_path = None;
     s.png_path = None;
     s
 }
 
-pub fn render(s: &Session) -> RenderOutcome {
+pub fn render(s: &Renderer) -> RenderOutcome {
     let stop = AtomicBool::new(false);
     let out = s.render(&stop, &|_| {}).unwrap();
     if let Some(e) = &out.error {
@@ -120,8 +120,8 @@ pub fn mean_and_stderr(img: &[Rgb], f: impl Fn(Rgb) -> f32) -> (f64, f64) {
 pub use flowlight_testkit::gltf::{base64, emitting_square, quads_gltf};
 
 /// Writes `gltf` and a config (`body` is everything after the `scene =` line) into a scratch
-/// folder and prepares a session with `spp` samples and no outputs.
-pub fn session_from(name: &str, gltf: &str, body: &str, spp: u32) -> Session {
+/// folder and prepares a renderer with `spp` samples and no outputs.
+pub fn renderer_from(name: &str, gltf: &str, body: &str, spp: u32) -> Renderer {
     let dir = scratch(name);
     std::fs::write(dir.join("scene.gltf"), gltf).unwrap();
     let cfg = dir.join("scene.toml");
@@ -131,7 +131,7 @@ pub fn session_from(name: &str, gltf: &str, body: &str, spp: u32) -> Session {
         threads: Some(2),
         ..Default::default()
     };
-    let mut s = Session::prepare(&cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
+    let mut s = Renderer::prepare(&cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
     s.exr_path = None;
     s.png_path = None;
     s
@@ -227,14 +227,14 @@ pub fn sun_node(tilt: f32) -> String {
     )
 }
 
-/// Renders `runs` independent sessions from `make` (seeds `seed_base` + r, 16-pixel tiles)
+/// Renders `runs` independent renderers from `make` (seeds `seed_base` + r, 16-pixel tiles)
 /// and checks each for invalid deposits and non-finite pixels; returns the images and the
 /// last outcome (for its statistics).
 pub fn independent_runs(
     label: &str,
     runs: u64,
     seed_base: u64,
-    make: &dyn Fn() -> Session,
+    make: &dyn Fn() -> Renderer,
 ) -> (Vec<Vec<Rgb>>, RenderOutcome) {
     let mut images = Vec::new();
     let mut last = None;
@@ -349,17 +349,17 @@ pub fn assert_image_mean(label: &str, images: &[Vec<Rgb>], reference: &[Rgb], ru
     );
 }
 
-/// Runs `body` with what a test that drives mutations by hand needs from session `s`: its
+/// Runs `body` with what a test that drives mutations by hand needs from renderer `s`: its
 /// scene view, a tracer over its intersector and the untangled seed sampler's settings.
 pub fn with_seed_sampler<R>(
-    s: &Session,
+    s: &Renderer,
     body: impl FnOnce(
         &flowlight_sdk::Scene,
         &flowlight_sdk::Tracer,
         flowlight_pathtrace::PathSettings,
     ) -> R,
 ) -> R {
-    // SAFETY: the session keeps the view's data alive.
+    // SAFETY: the renderer keeps the view's data alive.
     let scene = unsafe { flowlight_sdk::Scene::from_view(s.instance.view()) };
     let mut unit_tracer =
         flowlight_host::intersector::UnitTracer::new(&s.scene, s.intersector.as_ref());

@@ -27,7 +27,7 @@
 //! (`crate::seeds`) stores each as a seed path with its estimate, MIS weight and density. Both
 //! therefore see the same numbers, the same decisions and the same float operations: an MCPT
 //! contribution and the matching ERPT seed's estimate are equal bit for bit
-//! (`tests/erpt_seeds.rs`, `seeds_and_mcpt_contributions_are_equal_path_by_path`).
+//! (`tests/integration/erpt_seeds.rs`, `seeds_and_mcpt_contributions_are_equal_path_by_path`).
 //!
 //! The scheduler ([`wave`]) runs the step for many paths as a wavefront: the camera rays as
 //! one coherent batch, then per bounce one batch of extension rays and one of shadow rays, so

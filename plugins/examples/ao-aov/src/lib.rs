@@ -13,7 +13,7 @@
 //! disk lifted onto the hemisphere, `sampling::cosine_hemisphere`). A direction below the
 //! geometric surface counts as occluded. An open plane has AO = 1; a point at distance d
 //! from an infinite perpendicular wall has AO = 1 − (acos a − a√(1 − a²))/π with
-//! a = min(d/r, 1) — the share of the unit disk beyond x = a (the test in tests/outsider.rs).
+//! a = min(d/r, 1) — the share of the unit disk beyond x = a (the test in tests/integration/outsider.rs).
 //! A camera ray that hits nothing deposits nothing (0).
 //!
 //! With `aovs = true` the plugin also writes what denoisers take as auxiliary images, in

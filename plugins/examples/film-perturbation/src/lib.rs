@@ -32,7 +32,7 @@
 //!
 //! The strategy never changes the light end of a path, so on its own it cannot make ERPT
 //! ergodic over paths that differ beyond x_j; the seeds (fresh path-traced samples) supply
-//! those, and ERPT stays unbiased (thesis §5.2): `tests/outsider.rs` checks ERPT with this
+//! those, and ERPT stays unbiased (thesis §5.2): `tests/integration/outsider.rs` checks ERPT with this
 //! mutation alone against path tracing on the Cornell box, and the conformance kit
 //! (`flowlight-testkit`) checks the density, the ratio and the furnace.
 //!

@@ -38,7 +38,7 @@ pub struct Overrides {
 
 /// Everything loaded for a render. Field order matters: the integrator instance is dropped
 /// before the scene data its view points into.
-pub struct Session {
+pub struct Renderer {
     pub instance: IntegratorInstance,
     pub intersector: Box<dyn Intersector>,
     pub build_time: Duration,
@@ -58,8 +58,8 @@ pub struct Session {
     plugin_files: Vec<PathBuf>,
     /// The resolved config as hashed for a part ([`crate::parts::config_text`]).
     config_text: String,
-    /// The share of the samples this session renders, with the config hash
-    /// ([`Session::set_part`]); `None` for a whole render.
+    /// The share of the samples this renderer renders, with the config hash
+    /// ([`Renderer::set_part`]); `None` for a whole render.
     pub part: Option<(crate::parts::PartSpec, u64)>,
 }
 /// `p` in a form two names of one file share: canonical where the file (or its folder)
@@ -80,17 +80,17 @@ fn comparable_path(p: &Path) -> PathBuf {
     }
     std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf())
 }
-impl Session {
+impl Renderer {
     /// Loads `config_path` and everything it names. Errors are one line naming the file,
     /// field or plugin at fault.
-    pub fn prepare(config_path: &Path, ov: &Overrides) -> Result<Session, HostError> {
+    pub fn prepare(config_path: &Path, ov: &Overrides) -> Result<Renderer, HostError> {
         let config = load_config(config_path)?;
-        Session::from_config(config, ov)
+        Renderer::from_config(config, ov)
     }
 
-    /// [`Session::prepare`] for a config already read: `ov` applied, the scene loaded, the
+    /// [`Renderer::prepare`] for a config already read: `ov` applied, the scene loaded, the
     /// intersector built, the integrator (and its mutations) created over the scene's view.
-    pub fn from_config(mut config: RenderConfig, ov: &Overrides) -> Result<Session, HostError> {
+    pub fn from_config(mut config: RenderConfig, ov: &Overrides) -> Result<Renderer, HostError> {
         apply_set_overrides(&mut config, &ov.params)?;
         let (exr_path, png_path) = output_paths(&config, ov.out.as_deref())?;
         // Refuse an image that cannot fit before anything big is loaded (layers are known
@@ -140,7 +140,7 @@ impl Session {
             &view,
             &mut plugin_files,
         )?;
-        // SAFETY: the view points into `scene` and `textures`, which the session owns and
+        // SAFETY: the view points into `scene` and `textures`, which the renderer owns and
         // drops after the instance (field order); their heap buffers never move.
         let instance = unsafe {
             IntegratorInstance::create(plugin, &config.integrator_params, mutations, view)
@@ -155,7 +155,7 @@ impl Session {
         )
         .map_err(|msg| memory_error(&config, msg))?;
         let options = render_options(&config, &camera, ov);
-        let session = Session {
+        let renderer = Renderer {
             instance,
             intersector,
             build_time,
@@ -173,7 +173,7 @@ impl Session {
             config_text,
             part: None,
         };
-        Ok(session)
+        Ok(renderer)
     }
 
     /// Renders only `spec`'s samples [begin, end) of the `spec.total` the config asks for (a
@@ -222,7 +222,7 @@ impl Session {
 
     /// Checks the outputs before anything is rendered: none may be one of the inputs (the
     /// config, the scene, a plugin) or another output, and each one's folder must accept a
-    /// new file. The CLI calls it before rendering, after the outputs are final; sessions
+    /// new file. The CLI calls it before rendering, after the outputs are final; renderers
     /// that write nothing (benchmarks, tests) need not.
     pub fn check_outputs(&self) -> Result<(), HostError> {
         let file = &self.config.path;

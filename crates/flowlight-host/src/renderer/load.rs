@@ -1,4 +1,4 @@
-//! Loading what a session renders with, step by step as [`Session::from_config`](super::Session::from_config) runs them:
+//! Loading what a renderer renders with, step by step as [`Renderer::from_config`](super::Renderer::from_config) runs them:
 //! the command line's `--set`s, the intersector, the mutation list, the view of the scene the
 //! plugins read, the mutation plugins and the render options.
 
@@ -64,7 +64,7 @@ pub(super) fn frame_precision(config: &RenderConfig) -> Precision {
     }
 }
 
-/// A plugin's error while preparing a `Session`, said of the config (and of the config
+/// A plugin's error while preparing a `Renderer`, said of the config (and of the config
 /// key that named the plugin, if given).
 pub(super) fn plugin_error(
     config: &RenderConfig,
@@ -227,7 +227,7 @@ pub(super) fn create_mutations(
             })?;
         plugin_files.push(path.clone());
         let lib = Arc::new(PluginLibrary::load(&path)?);
-        // SAFETY: as for the integrator: the view points into data the session owns and
+        // SAFETY: as for the integrator: the view points into data the renderer owns and
         // drops after every instance.
         let m = unsafe { MutationInstance::create(lib, &entry.params, entry.weight, view) }
             .map_err(|error| plugin_error(config, None, error))?;
