@@ -10,7 +10,7 @@
 //! | `flowlight plugins` and its `--markdown` tables, the docs tables | read from the specs |
 //!
 //! The default and the range are written once, as literals of the declaring macro
-//! ([`int_param!`], [`float_param!`], [`bool_param!`], [`choice_param!`], [`string_param!`]);
+//! ([`int_param!`](crate::int_param), [`float_param!`](crate::float_param), [`bool_param!`](crate::bool_param), [`choice_param!`](crate::choice_param), [`string_param!`](crate::string_param));
 //! the macro keeps their text for the spec (`stringify!`), so the default a table shows is
 //! the default `get` returns, and a default outside its range fails to compile. A value
 //! outside the range is refused with one line naming the parameter:
@@ -55,7 +55,7 @@
 use crate::abi::{ParamRole, ParamSpec, StrRef};
 use crate::params::{toml_float, ParamKind, Params};
 
-/// An integer parameter accepting `min..=max`. Declared with [`int_param!`].
+/// An integer parameter accepting `min..=max`. Declared with [`int_param!`](crate::int_param).
 #[derive(Clone, Copy, Debug)]
 pub struct IntParam {
     name: &'static str,
@@ -69,7 +69,7 @@ pub struct IntParam {
 }
 
 impl IntParam {
-    /// Used by [`int_param!`], which passes the literals' own text; call the macro instead.
+    /// Used by [`int_param!`](crate::int_param), which passes the literals' own text; call the macro instead.
     #[doc(hidden)]
     pub const fn __declare(
         name: &'static str,
@@ -160,7 +160,7 @@ pub enum Bounds {
 }
 
 /// A float parameter (an integer in the config is converted), finite and within its range.
-/// Declared with [`float_param!`].
+/// Declared with [`float_param!`](crate::float_param).
 #[derive(Clone, Copy, Debug)]
 pub struct FloatParam {
     name: &'static str,
@@ -175,7 +175,7 @@ pub struct FloatParam {
 }
 
 impl FloatParam {
-    /// Used by [`float_param!`], which passes the literals' own text; call the macro instead.
+    /// Used by [`float_param!`](crate::float_param), which passes the literals' own text; call the macro instead.
     #[doc(hidden)]
     #[allow(clippy::too_many_arguments)]
     pub const fn __declare(
@@ -240,7 +240,7 @@ impl FloatParam {
     }
 
     /// The config's value, else the declared default; refused outside the range. A
-    /// declaration without a default ([`float_param!`]'s `unset` form) is read with
+    /// declaration without a default ([`float_param!`](crate::float_param)'s `unset` form) is read with
     /// [`FloatParam::get_or`]; `get` on one that the config left out is an error.
     pub fn get(&self, params: &Params) -> Result<f64, String> {
         match self.default {
@@ -275,7 +275,7 @@ const fn accepts(x: f64, min: f64, max: f64, bounds: Bounds) -> bool {
         }
 }
 
-/// A boolean parameter. Declared with [`bool_param!`].
+/// A boolean parameter. Declared with [`bool_param!`](crate::bool_param).
 #[derive(Clone, Copy, Debug)]
 pub struct BoolParam {
     name: &'static str,
@@ -286,7 +286,7 @@ pub struct BoolParam {
 }
 
 impl BoolParam {
-    /// Used by [`bool_param!`]; call the macro instead.
+    /// Used by [`bool_param!`](crate::bool_param); call the macro instead.
     #[doc(hidden)]
     pub const fn __declare(
         name: &'static str,
@@ -336,7 +336,7 @@ impl BoolParam {
     }
 }
 
-/// A string parameter that must be one of a fixed list. Declared with [`choice_param!`].
+/// A string parameter that must be one of a fixed list. Declared with [`choice_param!`](crate::choice_param).
 #[derive(Clone, Copy, Debug)]
 pub struct ChoiceParam {
     name: &'static str,
@@ -349,7 +349,7 @@ pub struct ChoiceParam {
 }
 
 impl ChoiceParam {
-    /// Used by [`choice_param!`]; call the macro instead.
+    /// Used by [`choice_param!`](crate::choice_param); call the macro instead.
     #[doc(hidden)]
     pub const fn __declare(
         name: &'static str,
@@ -445,7 +445,7 @@ const fn contains(choices: &[&str], s: &str) -> bool {
 }
 
 /// A free-text string parameter (checked by the plugin, e.g. a pattern). Declared with
-/// [`string_param!`].
+/// [`string_param!`](crate::string_param).
 #[derive(Clone, Copy, Debug)]
 pub struct StringParam {
     name: &'static str,
@@ -456,7 +456,7 @@ pub struct StringParam {
 }
 
 impl StringParam {
-    /// Used by [`string_param!`]; call the macro instead.
+    /// Used by [`string_param!`](crate::string_param); call the macro instead.
     #[doc(hidden)]
     pub const fn __declare(
         name: &'static str,

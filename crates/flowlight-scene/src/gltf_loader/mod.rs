@@ -6,7 +6,7 @@
 //! - Instancing: the walk first collects every placement (node, and each
 //!   `EXT_mesh_gpu_instancing` instance) of every mesh. A mesh placed once is flattened into
 //!   world space; a mesh placed several times is loaded once, in its local space, and each
-//!   placement becomes a [`MeshInstance`] (see [`crate::scene`]). The instance and
+//!   placement becomes a [`MeshInstance`](crate::MeshInstance) (see [`crate::scene`]). The instance and
 //!   virtual-triangle limits are checked from the accessors' counts before any geometry is
 //!   decoded ([`MAX_INSTANCES`], [`MAX_VIRTUAL_TRIANGLES`], and the memory estimate against
 //!   the memory available: [`crate::memory`]).
@@ -27,7 +27,7 @@
 //! - Degenerate triangles (a repeated index, a NaN or infinite vertex, zero area) are dropped
 //!   and counted; an index beyond the vertex count is an error.
 //! - Every remaining triangle whose emission, integrated over it (texture included), is
-//!   non-zero becomes an [`Emitter`] ([`crate::lights::mean_emission`]).
+//!   non-zero becomes an [`Emitter`](flowlight_core::light::Emitter) ([`crate::lights::mean_emission`]).
 //! - `KHR_lights_punctual` lights become [`flowlight_core::light::PunctualLight`]s placed by
 //!   their node's world transform.
 //! - Every node that places a camera (perspective or orthographic) is recorded in traversal
