@@ -798,15 +798,16 @@ fn a_clearcoat_normal_texture_is_ignored_and_the_coat_still_applies() {
 fn d10_an_image_in_a_buffer_view_without_mime_type_is_a_clear_error() {
     let q = Quad {
         images: vec![png8(1, 1, 3, &[200, 100, 50])],
-        textures: r#"[{"source": 0}]"#.into(),
+        textures: r#"{"source": 0}"#.into(),
         material: r#"{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}"#.into(),
         ..Default::default()
     };
     let mut text = q.json();
-    let at = text.find("data:image/png").unwrap();
-    let start = text[..at].rfind('{').unwrap();
-    let end = at + text[at..].find('}').unwrap() + 1;
-    text.replace_range(start..end, r#"{"bufferView": 0}"#);
+    // The images array becomes one image read from buffer view 0, with no mimeType.
+    let key = "\"images\":[";
+    let start = text.find(key).unwrap() + key.len() - 1;
+    let end = start + text[start..].find(']').unwrap() + 1;
+    text.replace_range(start..end, r#"[{"bufferView": 0}]"#);
     let dir = temp_dir("d10-mime");
     let path = dir.join("nomime.gltf");
     std::fs::write(&path, text).unwrap();
