@@ -207,15 +207,16 @@ impl Renderer {
         Ok(())
     }
 
-    /// The files the render will write: the EXR, its `.stats.json` and the PNG preview.
-    pub fn output_paths(&self) -> Vec<(&'static str, PathBuf)> {
+    /// The files the render will write, each with the extension its format needs: the EXR,
+    /// its `.stats.json` and the PNG preview.
+    pub fn output_paths(&self) -> Vec<(&'static str, &'static str, PathBuf)> {
         let mut out = Vec::new();
         if let Some(p) = &self.exr_path {
-            out.push(("the EXR output", p.clone()));
-            out.push(("the statistics file", p.with_extension("stats.json")));
+            out.push(("the EXR output", "exr", p.clone()));
+            out.push(("the statistics file", "json", p.with_extension("stats.json")));
         }
         if let Some(p) = &self.png_path {
-            out.push(("the PNG preview", p.clone()));
+            out.push(("the PNG preview", "png", p.clone()));
         }
         out
     }
@@ -236,7 +237,7 @@ impl Renderer {
         }
         inputs.extend(self.scene.files.iter().map(|p| ("a scene file", p.clone())));
         let outputs = self.output_paths();
-        for (i, (what, out)) in outputs.iter().enumerate() {
+        for (i, (what, wanted, out)) in outputs.iter().enumerate() {
             let key = comparable_path(out);
             if let Some((input, _)) = inputs.iter().find(|(_, p)| comparable_path(p) == key) {
                 return Err(HostError::OutputIsInput {
@@ -246,7 +247,10 @@ impl Renderer {
                     input,
                 });
             }
-            if let Some((other, _)) = outputs[..i].iter().find(|(_, p)| comparable_path(p) == key) {
+            if let Some((other, _, _)) = outputs[..i]
+                .iter()
+                .find(|(_, _, p)| comparable_path(p) == key)
+            {
                 return Err(HostError::SameOutput {
                     file: file.clone(),
                     what,
@@ -260,13 +264,6 @@ impl Renderer {
                 error,
             })?;
             let ext = out.extension().map(|e| e.to_ascii_lowercase());
-            let wanted = if *what == "the PNG preview" {
-                "png"
-            } else if *what == "the EXR output" {
-                "exr"
-            } else {
-                "json"
-            };
             if ext.as_deref() != Some(std::ffi::OsStr::new(wanted)) {
                 return Err(HostError::WrongExtension {
                     file: file.clone(),
