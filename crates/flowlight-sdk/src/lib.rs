@@ -99,9 +99,6 @@ pub mod deposit;
 mod guard;
 pub mod integrator;
 pub mod mutation;
-// The parameter declarations are being redesigned (one declaration per parameter, from which
-// parsing and the docs tables come); its remaining undocumented items go with that change.
-#[allow(missing_docs)]
 pub mod params;
 pub mod scene;
 pub mod stats;
