@@ -5,22 +5,29 @@
 //! of thesis §5.5 with a parameter for its reconnection probability):
 //!
 //! ```
-//! use flowlight_mcmc::strategy::probability;
 //! use flowlight_mcmc::{Policy, Strategy, StrategyMutation};
-//! use flowlight_sdk::{export_mutation, param, ParamKind, ParamSpec, Params};
+//! use flowlight_sdk::declare::FloatParam;
+//! use flowlight_sdk::{export_mutation, float_param, ParamSpec, Params};
+//!
+//! /// `p`: declared once; its spec, its default and its range check come from here.
+//! const P: FloatParam = float_param!(
+//!     "p",
+//!     1.0,
+//!     0.0 <= x <= 1.0,
+//!     "probability of reconnecting at a smooth vertex"
+//! );
 //!
 //! pub struct Reconnect;
 //!
 //! impl Strategy for Reconnect {
 //!     const NAME: &'static str = "reconnect";
 //!     const DESCRIPTION: &'static str = "film migration, then a hard reconnection";
-//!     const PARAMS: &'static [ParamSpec] =
-//!         &[param("p", ParamKind::Float, "1.0", "probability of reconnecting at a smooth vertex")];
+//!     const PARAMS: &'static [ParamSpec] = &[P.spec()];
 //!
 //!     fn policy(params: &Params) -> Result<Policy, String> {
 //!         Ok(Policy {
 //!             min_extensions: 0,
-//!             p_reconnect: probability(params, "p", 1.0)?,
+//!             p_reconnect: P.get(params)? as f32,
 //!             extension: None,
 //!             drill_caustics: false,
 //!             free_chains: true,
@@ -104,24 +111,4 @@ impl<S: Strategy> Mutation for StrategyMutation<S> {
     fn density(&self, from: &Path, to: &Path) -> f64 {
         density(&self.scene, &self.policy, from, to)
     }
-}
-
-/// Reads a cap half-angle in degrees, checking its range.
-pub fn cap_degrees(params: &Params, name: &str, default: f64) -> Result<f32, String> {
-    let d = params.float(name, default)?;
-    if !(d > 0.0 && d <= 90.0) {
-        return Err(format!(
-            "parameter '{name}' must be in (0, 90] degrees, got {d}"
-        ));
-    }
-    Ok(d as f32)
-}
-
-/// Reads a probability, checking its range.
-pub fn probability(params: &Params, name: &str, default: f64) -> Result<f32, String> {
-    let p = params.float(name, default)?;
-    if !(0.0..=1.0).contains(&p) {
-        return Err(format!("parameter '{name}' must be in [0, 1], got {p}"));
-    }
-    Ok(p as f32)
 }
