@@ -213,7 +213,11 @@ impl Renderer {
         let mut out = Vec::new();
         if let Some(p) = &self.exr_path {
             out.push(("the EXR output", "exr", p.clone()));
-            out.push(("the statistics file", "json", p.with_extension("stats.json")));
+            out.push((
+                "the statistics file",
+                "json",
+                p.with_extension("stats.json"),
+            ));
         }
         if let Some(p) = &self.png_path {
             out.push(("the PNG preview", "png", p.clone()));
