@@ -7,6 +7,8 @@
 //!   `"independent"`).
 //! * [`seeds`]: the entangled sampler split into its techniques, each a stored path with its
 //!   MIS-weighted estimate: ERPT's entangled seeds.
+//! * [`bidir`]: light subpaths and the bidirectional strategies (light tracing, BDPT, vertex
+//!   connection and merging) built on the walker's scattering step.
 //! * [`walk`]: the one path walker under [`entangled`] and [`seeds`]: the per-vertex step,
 //!   the wavefront scheduler, and the sink each of them reports to.
 //!
@@ -16,6 +18,7 @@
 //! layers. A contribution found with lighting depth k belongs to lighting layer k (paths of
 //! virtual length k + 1); the path-space depth N is the deepest layer.
 
+pub mod bidir;
 pub mod entangled;
 pub mod sampler;
 pub mod seeds;

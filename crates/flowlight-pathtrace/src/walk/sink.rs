@@ -9,7 +9,7 @@
 
 use super::WalkState;
 use crate::shading::{Connection, Shading};
-use flowlight_core::bsdf::{Bsdf, BsdfAt};
+use flowlight_core::bsdf::{Bsdf, BsdfAt, BsdfSample};
 use flowlight_core::geometry::{Ray, SurfaceHit};
 use flowlight_core::light::LightSample;
 use flowlight_core::path::NodeType;
@@ -46,6 +46,9 @@ pub struct Extension {
     /// The BSDF sample's node type and the first number of its pair (which chose the
     /// component, [`Bsdf::choose_component`]), where a sample was drawn.
     pub sampled: Option<(NodeType, f32)>,
+    /// The BSDF sample the path went on with (a light subpath re-weights it with the
+    /// adjoint BSDF, `crate::bidir`); `None` where the path stopped.
+    pub sample: Option<BsdfSample>,
 }
 
 /// Where one path's reports go. Every method but [`PathSink::connect`] and

@@ -334,6 +334,7 @@ pub fn extend<S: SampleStream>(
     let mut extension = Extension {
         survived: None,
         sampled: None,
+        sample: None,
     };
     let rng = &mut state.rng;
     if !state.last && t > 0.0 {
@@ -359,6 +360,7 @@ pub fn extend<S: SampleStream>(
     if state.beta.is_black() {
         return (false, extension);
     }
+    extension.sample = Some(s);
     state.eta2 *= s.eta * s.eta;
     state.step = if s.delta {
         Step::Dirac(s.pdf)

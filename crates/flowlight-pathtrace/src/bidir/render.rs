@@ -1,0 +1,157 @@
+//! One work unit of a bidirectional render: per sample index, one light subpath per pixel of
+//! the unit (splatting where light tracing is on), the merging grid over their vertices,
+//! then one camera subpath per pixel ([`super`] for the iteration's structure).
+//!
+//! Memory: the light vertices, the grid and the contributions live in a per-thread arena
+//! that the thread's units reuse, so after its first units a thread allocates nothing per
+//! sample. A unit keeps the vertices of one sample index at a time: at most
+//! (unit pixels) × `path_depth` of them, reported as `light vertices (max per unit)`.
+
+use super::camera_path::{CameraCounts, CameraPaths, MergeSet};
+use super::grid::HashGrid;
+use super::light_path::LightPaths;
+use super::mis::Iteration;
+use super::vertex::LightVertex;
+use super::BidirSettings;
+use crate::walk::units::unit_pixels;
+use crate::SampleContributions;
+use flowlight_core::light::emission::scene_sphere;
+use flowlight_core::rng::Rng;
+use flowlight_core::Rgb;
+use flowlight_sdk::{Film, Scene, Tracer, WorkUnit};
+use glam::Vec2;
+use std::cell::RefCell;
+
+/// The PCG stream of a pixel sample's light subpath (its camera subpath draws from stream 0
+/// of the same seed, as MCPT's samples do; ERPT's chains use stream 1).
+const LIGHT_STREAM: u64 = 2;
+
+/// A thread's buffers (module docs).
+#[derive(Default)]
+struct Arena {
+    vertices: Vec<LightVertex>,
+    /// Per pixel of the unit, where its light subpath's vertices start in `vertices`.
+    starts: Vec<usize>,
+    grid: HashGrid,
+    contributions: SampleContributions,
+}
+
+thread_local! {
+    static ARENA: RefCell<Arena> = RefCell::new(Arena::default());
+}
+
+/// What a unit counted.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct UnitCounts {
+    pub light_paths: u64,
+    pub light_vertices: u64,
+    /// The most light vertices one iteration of the unit kept.
+    pub max_light_vertices: u64,
+    pub camera_paths: u64,
+    pub connections: u64,
+    pub merges: u64,
+}
+
+/// Renders `unit` into `film`.
+pub fn render_unit(
+    scene: &Scene,
+    tracer: &Tracer,
+    settings: &BidirSettings,
+    unit: &WorkUnit,
+    film: &mut Film,
+    counts: &mut UnitCounts,
+) {
+    ARENA.with(|arena| {
+        let arena = &mut *arena.borrow_mut();
+        let sphere = scene_sphere(scene.bounds_min, scene.bounds_max);
+        let camera = &scene.camera;
+        let film_paths = camera.width as f32 * camera.height as f32;
+        let unit_paths = unit_pixels(unit).count() as f32;
+        for s in unit.sample_begin..unit.sample_begin + unit.sample_count {
+            let radius = settings.radius_at(s, sphere.1);
+            let it = Iteration::new(
+                settings.heuristic,
+                settings.techniques,
+                film_paths,
+                unit_paths,
+                radius,
+            );
+            let light = LightPaths {
+                scene,
+                tracer,
+                settings,
+                it: &it,
+                sphere,
+            };
+            arena.vertices.clear();
+            arena.starts.clear();
+            let mut splat = |raster: Vec2, layer: u32, value: Rgb| {
+                film.deposit(raster.x, raster.y, layer, value)
+            };
+            for (x, y) in unit_pixels(unit) {
+                arena.starts.push(arena.vertices.len());
+                let rng = Rng::new(pixel_seed(unit.seed, x, y, s), LIGHT_STREAM);
+                light.trace(rng, &mut arena.vertices, &mut splat);
+            }
+            arena.starts.push(arena.vertices.len());
+            counts.light_paths += unit_paths as u64;
+            counts.light_vertices += arena.vertices.len() as u64;
+            counts.max_light_vertices = counts.max_light_vertices.max(arena.vertices.len() as u64);
+            if !it.techniques.camera_paths() {
+                continue;
+            }
+            if it.techniques.merge {
+                let points = arena.vertices.iter().map(|v| v.hit.p);
+                arena.grid.build(points, it.radius);
+            }
+            let camera_paths = CameraPaths {
+                scene,
+                tracer,
+                settings,
+                it: &it,
+                sphere,
+            };
+            let merges = it.techniques.merge.then_some(MergeSet {
+                grid: &arena.grid,
+                vertices: &arena.vertices,
+            });
+            let mut camera_counts = CameraCounts::default();
+            for (k, (x, y)) in unit_pixels(unit).enumerate() {
+                let mut rng = Rng::new(pixel_seed(unit.seed, x, y, s), 0);
+                let raster = Vec2::new(x as f32, y as f32) + rng.uniform2();
+                let own = if it.techniques.connect {
+                    &arena.vertices[arena.starts[k]..arena.starts[k + 1]]
+                } else {
+                    &[]
+                };
+                let out = &mut arena.contributions;
+                out.clear();
+                camera_paths.trace(rng, raster, own, merges, out, &mut camera_counts);
+                deposit(film, x, y, out, settings.layers());
+            }
+            counts.camera_paths += unit_paths as u64;
+            counts.connections += camera_counts.connections;
+            counts.merges += camera_counts.merges;
+        }
+    });
+}
+
+/// The seed of pixel sample (`x`, `y`, `s`) of a render with seed `seed`.
+fn pixel_seed(seed: u64, x: u32, y: u32, s: u32) -> u64 {
+    Rng::hash(&[seed, x as u64, y as u64, s as u64])
+}
+
+/// Deposits a camera sample's contributions in pixel (`x`, `y`) (box filter), or one
+/// invalid deposit when any is not finite and non-negative (MCPT's rule).
+fn deposit(film: &mut Film, x: u32, y: u32, contributions: &SampleContributions, layers: bool) {
+    let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
+    if !contributions.is_valid() {
+        film.deposit(cx, cy, 0, Rgb::splat(f32::NAN));
+    } else if layers {
+        for &(layer, value) in &contributions.entries {
+            film.deposit(cx, cy, layer, value);
+        }
+    } else {
+        film.deposit(cx, cy, 0, contributions.total());
+    }
+}
