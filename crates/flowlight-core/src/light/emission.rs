@@ -1,6 +1,6 @@
 //! Emitted rays: the first vertex of a light subpath (light tracing, BDPT, VCM) and the
-//! densities with which it was drawn (Veach 1997 §10.2; pbrt-v4 §12.6 "Light emission
-//! sampling" and §13.4 "Bidirectional path tracing").
+//! densities with which it was drawn (Veach 1997 §10.2; pbrt-v3 §16.1.2 "Sampling light
+//! rays", `Light::Sample_Le`, and §16.3 for its use in bidirectional path tracing).
 //!
 //! [`Lights::sample_emission`] chooses a light by power (the same CDF as next-event
 //! estimation, with the choice number rescaled and reused as [`Lights::sample_from_pair`]
