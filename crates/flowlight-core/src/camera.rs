@@ -26,6 +26,58 @@
 //! In the film (raster-area) measure both projections have the constant importance
 //! 1 / (pixel area), so path estimates and Markov-chain target functions need no camera
 //! factor (Veach 1997, §8.2; pbrt-v4 §5.1–5.2 for the two projections).
+//!
+//! ## Importance: connecting light paths to the eye
+//!
+//! Light tracing and bidirectional methods reach the film from the other side: a vertex x of
+//! a light subpath is joined to the eye ([`Camera::connect_eye`]) and lands at some raster
+//! position. What it deposits there follows from the film normalisation. A pixel's value is
+//! the mean radiance over its raster area (1 in raster units), and a camera ray is generated
+//! from a raster position r uniform over the whole film, density 1/(W·H). Let A be the film's
+//! area in world units ([`Camera::film_area`]): the image plane at distance 1 for a pinhole,
+//! 4·a·tan²θ; the film plane itself for an orthographic camera, (2·a·h)(2·h).
+//!
+//! * **perspective.** Raster positions are uniform on the image plane at distance 1, density
+//!   1/A there. A ray at angle θ from the forward axis (cos θ = dir·forward) meets that plane
+//!   at distance 1/cos θ and obliquely, so dA_plane = dω / cos³θ and the ray's solid-angle
+//!   density is 1/(A cos³θ). At a surface point at distance d whose normal makes |cos θ_s|
+//!   with the ray, dω = |cos θ_s| dA / d²:
+//!
+//!   ```text
+//!   p_A(x) = |cos θ_s| / (d² · A · cos³θ)
+//!   ```
+//!
+//! * **orthographic.** The direction is a Dirac along forward and the origin is uniform on the
+//!   film plane, density 1/A; a surface element dA projects to |cos θ_s| dA on it:
+//!
+//!   ```text
+//!   p_A(x) = |cos θ_s| / A
+//!   ```
+//!
+//! [`Camera::hit_density`] is this p_A, the density of a camera subpath's first vertex in
+//! area measure (what MIS weights need). It is also the factor a light vertex splats with.
+//! Pixel j's value is I_j = ∫ h_j(r) L(r) dr, h_j the pixel's indicator, and changing
+//! variables from r to the surface point x seen through r gives dr = W·H · p_A(x) dA(x), so
+//!
+//! ```text
+//! I_j = ∫ h_j(r(x)) · W·H · p_A(x) · L(x → eye) dA(x).
+//! ```
+//!
+//! W·H·h_j·p_A is W_e·G — the camera's importance times the geometry term to the eye
+//! (Veach 1997 §10.2; for the pinhole pbrt-v3 §16.1.1, whose `PerspectiveCamera::We`, also
+//! in pbrt-v4's source, is W_e(ω) = 1/(A cos⁴θ) for lens area 1, and W_e·cos θ·|cos θ_s|/d²
+//! = p_A; the orthographic case is the Dirac in direction above). A light subpath vertex x with
+//! throughput β (the light's L_e and every f·|cos|/p up to x) connecting to the eye through a
+//! BSDF value f therefore deposits
+//!
+//! ```text
+//! β · f · p_A(x)      at raster position r(x), per light path,
+//! ```
+//!
+//! and a render that traces one light path per pixel sample (W·H light paths per sample
+//! pass) divides the deposits by the samples per pixel, as it divides a pixel's camera
+//! samples: the W·H light paths per pass supply the W·H factor. Visibility between x and the
+//! eye is the caller's test.
 
 use crate::geometry::Ray;
 use glam::{Vec2, Vec3};
@@ -232,6 +284,78 @@ impl Camera {
     }
 }
 
+/// A world point seen by the camera: what a light-path vertex needs to connect to the eye.
+#[derive(Clone, Copy, Debug)]
+pub struct EyeConnection {
+    /// Where the point lands on the film, inside [0, W) × [0, H).
+    pub raster: Vec2,
+    /// The eye vertex: the pinhole, or for an orthographic camera the point projected onto
+    /// the film plane.
+    pub eye: Vec3,
+    /// Unit direction from the point towards the eye.
+    pub to_eye: Vec3,
+    /// |eye − p|.
+    pub distance: f32,
+}
+
+impl Camera {
+    /// Area of the film in world units (module docs): perspective — the image plane at
+    /// distance 1, 4·a·tan²θ; orthographic — the film plane, (2·a·h)(2·h).
+    #[inline]
+    pub fn film_area(&self) -> f32 {
+        let e = self.half_extent();
+        4.0 * e.x * e.y
+    }
+
+    /// How world point `p` connects to the eye: its raster position, the eye vertex and the
+    /// direction and distance to it. `None` when `p` is behind the camera (or its film plane)
+    /// or off the film, as for [`Camera::project`].
+    pub fn connect_eye(&self, p: Vec3) -> Option<EyeConnection> {
+        let raster = self.project(p)?;
+        let eye = match self.kind() {
+            Projection::Perspective => self.position,
+            Projection::Orthographic => {
+                // p moved back along forward onto the film plane through the position.
+                p - self.forward * (p - self.position).dot(self.forward)
+            }
+        };
+        let d = eye - p;
+        let distance = d.length();
+        if !(distance > 0.0 && distance.is_finite()) {
+            return None;
+        }
+        Some(EyeConnection {
+            raster,
+            eye,
+            to_eye: d / distance,
+            distance,
+        })
+    }
+
+    /// Density, in area measure at a surface point, with which a camera ray through a
+    /// uniformly random raster position of the whole film first reaches that point at
+    /// `distance` along unit `dir` (the ray direction, from the eye), the surface's normal
+    /// making |`cos_surface`| with the ray; visibility is not included. Perspective:
+    /// |cos_surface| / (distance² · film_area · cos³θ), cos θ = dir·forward; orthographic:
+    /// |cos_surface| / film_area. 0 where cos θ ≤ 0. Also the factor a light vertex splats
+    /// with (module docs).
+    #[inline]
+    pub fn hit_density(&self, dir: Vec3, distance: f32, cos_surface: f32) -> f32 {
+        let cos_theta = dir.dot(self.forward);
+        if cos_theta <= 0.0 || cos_theta.is_nan() {
+            return 0.0;
+        }
+        let area = self.film_area();
+        match self.kind() {
+            Projection::Perspective => {
+                let c3 = cos_theta * cos_theta * cos_theta;
+                cos_surface.abs() / (distance * distance * area * c3)
+            }
+            Projection::Orthographic => cos_surface.abs() / area,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -314,6 +438,158 @@ mod tests {
             let mut c = cameras()[0];
             c.projection = p.code();
             assert_eq!(c.kind(), p);
+        }
+    }
+
+    #[test]
+    fn film_areas_follow_the_view() {
+        // tan 45° = 1, aspect 2: the image plane at distance 1 is 4 × 2.
+        let cam = Camera::look_along(Vec3::ZERO, -Vec3::Z, Vec3::Y, 90.0, 200, 100);
+        assert!((cam.film_area() - 8.0).abs() < 1e-5);
+        // Half height 2, aspect 2: the film plane is 8 × 4.
+        let cam = Camera::orthographic(Vec3::ZERO, -Vec3::Z, Vec3::Y, 2.0, 200, 100);
+        assert!((cam.film_area() - 32.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn connect_eye_inverts_generate_ray_for_both_projections() {
+        for cam in cameras() {
+            for raster in [
+                Vec2::new(0.5, 0.5),
+                Vec2::new(32.0, 24.0),
+                Vec2::new(63.2, 40.7),
+                Vec2::new(0.01, 47.9),
+            ] {
+                let ray = cam.generate_ray(raster);
+                for t in [0.3, 5.0, 40.0] {
+                    let c = cam.connect_eye(ray.at(t)).unwrap();
+                    let what = format!("{:?} {raster} t {t}: {c:?}", cam.kind());
+                    assert!((c.raster - raster).length() < 2e-3, "{what}");
+                    assert!(
+                        (c.eye - cam.eye_point(raster)).length() < 1e-4 * t,
+                        "{what}"
+                    );
+                    assert!((c.to_eye + ray.dir).length() < 1e-4, "{what}");
+                    assert!((c.distance - t).abs() < 1e-4 * t, "{what}");
+                }
+            }
+            assert!(cam.connect_eye(cam.position - cam.forward).is_none());
+            let off_film = cam.position + cam.forward * 2.0 + cam.up * 1e3;
+            assert!(cam.connect_eye(off_film).is_none());
+            // Behind the camera or sideways: no density.
+            assert_eq!(cam.hit_density(-cam.forward, 1.0, 1.0), 0.0);
+            assert_eq!(cam.hit_density(cam.right, 1.0, 1.0), 0.0);
+        }
+    }
+
+    /// A plane through `centre` with unit normal `normal`, as (origin, s axis, t axis).
+    fn plane_frame(centre: Vec3, normal: Vec3) -> (Vec3, Vec3, Vec3) {
+        let f = crate::geometry::Frame::from_z(normal);
+        (centre, f.x, f.y)
+    }
+
+    /// Where the ray through `raster` meets the plane (centre, normal), in the plane's (s, t).
+    fn plane_hit(cam: &Camera, raster: Vec2, centre: Vec3, normal: Vec3) -> Vec2 {
+        let ray = cam.generate_ray(raster);
+        let t = (centre - ray.origin).dot(normal) / ray.dir.dot(normal);
+        assert!(t > 0.0);
+        let (o, a, b) = plane_frame(centre, normal);
+        let x = ray.at(t) - o;
+        Vec2::new(x.dot(a), x.dot(b))
+    }
+
+    /// The camera's planes: one facing it, one tilted 35° about its right axis, both 5 ahead.
+    fn planes(cam: &Camera) -> [(Vec3, Vec3); 2] {
+        let centre = cam.position + cam.forward * 5.0;
+        let (c, s) = (35f32.to_radians().cos(), 35f32.to_radians().sin());
+        [
+            (centre, -cam.forward),
+            (centre, -(cam.forward * c + cam.up * s).normalize()),
+        ]
+    }
+
+    /// ∫ hit_density dA over a plane that covers the whole view is 1: every camera ray hits
+    /// it exactly once. Midpoint rule over the bounding box, in the plane, of where the
+    /// film's corner rays land; points off the film count 0.
+    #[test]
+    fn hit_density_integrates_to_one_over_a_plane_covering_the_view() {
+        for cam in cameras() {
+            for (centre, normal) in planes(&cam) {
+                let (w, h) = (cam.width as f32, cam.height as f32);
+                let corners = [
+                    Vec2::ZERO,
+                    Vec2::new(w, 0.0),
+                    Vec2::new(0.0, h),
+                    Vec2::new(w, h),
+                ]
+                .map(|r| plane_hit(&cam, r, centre, normal));
+                let lo = corners.iter().fold(Vec2::INFINITY, |m, c| m.min(*c)) - 0.01;
+                let hi = corners.iter().fold(-Vec2::INFINITY, |m, c| m.max(*c)) + 0.01;
+                let (o, a, b) = plane_frame(centre, normal);
+                let n = 1200;
+                let cell = (hi - lo) / n as f32;
+                let mut total = 0.0f64;
+                for i in 0..n {
+                    for j in 0..n {
+                        let st = lo + cell * Vec2::new(i as f32 + 0.5, j as f32 + 0.5);
+                        let x = o + a * st.x + b * st.y;
+                        if let Some(c) = cam.connect_eye(x) {
+                            let dir = -c.to_eye;
+                            let density = cam.hit_density(dir, c.distance, normal.dot(dir));
+                            total += (density * cell.x * cell.y) as f64;
+                        }
+                    }
+                }
+                assert!(
+                    (total - 1.0).abs() < 5e-3,
+                    "{:?} {normal}: {total}",
+                    cam.kind()
+                );
+            }
+        }
+    }
+
+    /// The density where it is not uniform: the share of camera rays through uniform raster
+    /// positions that hit a patch off the axis of the tilted plane matches ∫ hit_density
+    /// over the patch.
+    #[test]
+    fn hit_density_matches_the_hits_of_uniform_raster_rays() {
+        use crate::rng::Rng;
+        for cam in cameras() {
+            let (centre, normal) = planes(&cam)[1];
+            let (o, a, b) = plane_frame(centre, normal);
+            // The patch around where raster (50, 10) lands, a tenth of the view across.
+            let mid = plane_hit(&cam, Vec2::new(50.0, 10.0), centre, normal);
+            let half = 0.05 * (plane_hit(&cam, Vec2::ZERO, centre, normal) - mid).length();
+            let (lo, hi) = (mid - half, mid + half);
+            let n = 200;
+            let cell = (hi - lo) / n as f32;
+            let mut want = 0.0f64;
+            for i in 0..n {
+                for j in 0..n {
+                    let st = lo + cell * Vec2::new(i as f32 + 0.5, j as f32 + 0.5);
+                    let c = cam.connect_eye(o + a * st.x + b * st.y).unwrap();
+                    let density = cam.hit_density(-c.to_eye, c.distance, normal.dot(c.to_eye));
+                    want += (density * cell.x * cell.y) as f64;
+                }
+            }
+            let mut r = Rng::new(3, 1);
+            let rays = 400_000;
+            let film = Vec2::new(cam.width as f32, cam.height as f32);
+            let hits = (0..rays)
+                .filter(|_| {
+                    let st = plane_hit(&cam, r.uniform2() * film, centre, normal);
+                    st.cmpge(lo).all() && st.cmplt(hi).all()
+                })
+                .count();
+            let got = hits as f64 / rays as f64;
+            let sigma = (want * (1.0 - want) / rays as f64).sqrt();
+            assert!(want > 1e-3, "{want}");
+            assert!(
+                (got - want).abs() < 4.0 * sigma,
+                "{:?}: {got} vs {want}",
+                cam.kind()
+            );
         }
     }
 }

@@ -1,5 +1,6 @@
 //! The scene's lights and their sampling: emissive triangles ([`Emitter`]), the punctual
-//! lights of `KHR_lights_punctual` ([`punctual`]) and the environment ([`environment`]).
+//! lights of `KHR_lights_punctual` ([`punctual`]) and the environment ([`environment`]);
+//! the rays they emit, for light subpaths, in [`emission`].
 //!
 //! Light selection. Every light has an index in one list: the area emitters first, then the
 //! punctual lights, then the environment when there is one. Next-event estimation chooses a
@@ -23,9 +24,11 @@
 //! connections carry weight 1 and the "density" an estimator divides by is the selection
 //! probability alone ([`Incident::delta`]).
 
+pub mod emission;
 pub mod environment;
 pub mod punctual;
 
+pub use emission::{scene_sphere, EmissionSample};
 pub use environment::{Environment, EnvironmentKind};
 pub use punctual::{PunctualKind, PunctualLight};
 
