@@ -3,11 +3,10 @@
 //! rays", `Light::Sample_Le`, and §16.3 for its use in bidirectional path tracing).
 //!
 //! [`Lights::sample_emission`] chooses a light by power (the same CDF as next-event
-//! estimation, with the choice number rescaled and reused as [`Lights::sample_from_pair`]
-//! does) and then a point and a direction on it. The densities are returned separately —
-//! `pdf_choose`, `pdf_pos` (area measure, selection not included) and `pdf_dir` (solid
-//! angle at the point) — because a bidirectional estimator needs each of them in its
-//! multiple-importance weights:
+//! estimation) and then a point and a direction on it, each from its own numbers. The
+//! densities are returned separately — `pdf_choose`, `pdf_pos` (area measure, selection not
+//! included) and `pdf_dir` (solid angle at the point) — because a bidirectional estimator
+//! needs each of them in its multiple-importance weights:
 //!
 //! ```text
 //! light          position p                         direction ω               radiance
@@ -38,10 +37,12 @@
 //! fall-off between the cones as linear; the glTF curve is quadratic, so the emitted power is
 //! 2π((1 − cos θ_i) + (cos θ_i − cos θ_o)/3)·I. The two agree for a hard-edged cone.
 //!
-//! Conventions (light.rs): a directional light's [`PunctualLight::direction`] is the
-//! direction its light travels; [`Environment::sample`] returns the direction *towards* the
-//! environment, so the emitted ray travels along its negation; a spot's intensity is
-//! [`PunctualLight::intensity_towards`] of the direction leaving it.
+//! Conventions (light.rs): a directional light's
+//! [`PunctualLight::direction`](super::PunctualLight::direction) is the direction its light
+//! travels; [`Environment::sample`](super::Environment::sample) returns the direction
+//! *towards* the environment, so the emitted ray travels along its negation; a spot's
+//! intensity is [`PunctualLight::intensity_towards`](super::PunctualLight::intensity_towards)
+//! of the direction leaving it.
 
 use super::{LightKind, Lights, PunctualKind};
 use crate::geometry::{barycentric_error, Frame};
