@@ -47,7 +47,7 @@
 //!   the first. The EXR says `flowlight.partial_pass = m/n` as a decimal (`0` when no pass
 //!   was cut) and `flowlight.biased` only for the integrator's own bias. A tile-local
 //!   integrator keeps scan order (its cut needs no correction). Under a time budget flanged
-//!   integrators run units of at most [`FLANGED_TIME_TILE`]² pixels, so the units in flight
+//!   integrators with a flange (ERPT's chains) run units of at most [`FLANGED_TIME_TILE`]² pixels, so the units in flight
 //!   at the deadline are short and a cut pass keeps many tiles.
 //!
 //! # Limits

@@ -191,14 +191,20 @@ pub fn render(
     })
 }
 
-/// The work units' tiles and the flange of their buffers: a flanged integrator under a time
-/// budget runs units of at most [`FLANGED_TIME_TILE`]² pixels (module documentation).
+/// The work units' tiles and the flange of their buffers: a flanged integrator with a
+/// flange (chains that random-walk from their tile, ERPT) under a time budget runs units of
+/// at most [`FLANGED_TIME_TILE`]² pixels (module documentation). One without (light
+/// tracing, BDPT, VCM: deposits anywhere, no chains) keeps the configured tiles: its units
+/// cost what a path-tracing unit costs, and a unit's light paths are its merging set.
 fn unit_tiles(
     instance: &IntegratorInstance,
     opts: &RenderOptions,
 ) -> (Vec<(u32, u32, u32, u32)>, u32) {
     let mut tile_size = opts.tile_size.max(1);
-    if opts.time.is_some() && instance.info.accumulation == AccumulationStyle::FlangedTile {
+    if opts.time.is_some()
+        && instance.info.accumulation == AccumulationStyle::FlangedTile
+        && instance.info.flange > 0
+    {
         tile_size = tile_size.min(FLANGED_TIME_TILE);
     }
     let flange = opts.flange.unwrap_or(match instance.info.accumulation {

@@ -97,7 +97,7 @@ impl CameraPaths<'_, '_> {
             }
             if t == 1 {
                 let density = scene.camera.hit_density(state.ray.dir, hit.t, cos_in);
-                partial = Partial::camera_start(it, density);
+                partial = Partial::camera_start(it, density * it.film_pixels);
             } else {
                 partial.arrive(it, hit.t * hit.t, cos_in, true);
             }
@@ -245,10 +245,17 @@ impl CameraPaths<'_, '_> {
             return;
         }
         let cos_x = conn.wi_local.z.abs();
-        let reverse = here.bsdf.at(conn.wi_local).pdf(here.shading.wo);
+        let reverse = here.bsdf.pdf(conn.wi_local, here.shading.wo);
         let ratio = self.emission_ratio(&ls, here.hit.p, cos_x);
         let bsdf_forward = if conn.delta { 0.0 } else { forward };
-        let weight = mis::light_sample(self.it, &here.partial, bsdf_forward, reverse, conn.pdf, ratio);
+        let weight = mis::light_sample(
+            self.it,
+            &here.partial,
+            bsdf_forward,
+            reverse,
+            conn.pdf,
+            ratio,
+        );
         let value = here.beta * f * conn.radiance * (cos_x / conn.pdf);
         let Some(value) = mis::weighted(value, weight) else {
             return;
@@ -316,8 +323,8 @@ impl CameraPaths<'_, '_> {
         let (cos_camera, cos_light) = (wi.z.abs(), y_wo.z.abs());
         let densities = ConnectionDensities {
             camera_forward: camera_forward * cos_light / d2,
-            camera_reverse: here.bsdf.at(wi).pdf(here.shading.wo),
-            light_forward: y_bsdf.at(y_wi).pdf(y_wo) * cos_camera / d2,
+            camera_reverse: here.bsdf.pdf(wi, here.shading.wo),
+            light_forward: y_bsdf.pdf(y_wi, y_wo) * cos_camera / d2,
             light_reverse,
         };
         let weight = mis::connection(self.it, &here.partial, &y.partial, &densities);
@@ -357,7 +364,7 @@ impl CameraPaths<'_, '_> {
                     return;
                 }
                 let weight = if it.techniques.weighs() {
-                    let reverse = here.bsdf.at(wi).pdf(here.shading.wo);
+                    let reverse = here.bsdf.pdf(wi, here.shading.wo);
                     mis::merge(it, &here.partial, &y.partial, forward, reverse)
                 } else {
                     1.0

@@ -42,7 +42,9 @@ impl HashGrid {
         let size = n.next_power_of_two().max(1);
         self.mask = (size - 1) as u32;
         self.ends.resize(size, 0);
-        self.buckets.extend(points.clone().map(|p| self.bucket(self.cell(p))));
+        let mut buckets = std::mem::take(&mut self.buckets);
+        buckets.extend(points.clone().map(|p| self.bucket(self.cell(p))));
+        self.buckets = buckets;
         for &b in &self.buckets {
             self.ends[b as usize] += 1;
         }

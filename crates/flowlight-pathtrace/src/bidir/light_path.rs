@@ -155,7 +155,12 @@ impl LightPaths<'_, '_> {
     }
 
     /// The eye connection of light vertex `v` (t = 1), splatted where visible.
-    fn connect_to_eye(&self, v: &LightVertex, bsdf: &flowlight_core::bsdf::Bsdf, out: &mut impl Splat) {
+    fn connect_to_eye(
+        &self,
+        v: &LightVertex,
+        bsdf: &flowlight_core::bsdf::Bsdf,
+        out: &mut impl Splat,
+    ) {
         let camera = &self.scene.camera;
         let Some(eye) = camera.connect_eye(v.hit.p) else {
             return;
@@ -173,7 +178,12 @@ impl LightPaths<'_, '_> {
         let factor = camera.hit_density(-eye.to_eye, eye.distance, 1.0);
         let value = v.beta * f * (adjoint_cos(&v.hit, v.towards_light, eye.to_eye) * factor);
         let weight = if self.it.techniques.weighs() {
-            mis::eye_connection(self.it, &v.partial, factor * cos_eye, reverse)
+            mis::eye_connection(
+                self.it,
+                &v.partial,
+                factor * cos_eye * self.it.film_pixels,
+                reverse,
+            )
         } else {
             1.0
         };

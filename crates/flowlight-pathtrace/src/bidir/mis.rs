@@ -146,6 +146,9 @@ pub struct Iteration {
     pub techniques: Techniques,
     /// N_LT: light paths splatting to the film per camera sample.
     pub light_paths: f32,
+    /// W·H: a pixel sample's camera ray starts uniformly in its pixel, so its density is
+    /// W·H times `Camera::hit_density` (a density over the whole film).
+    pub film_pixels: f32,
     /// Merging radius r of this iteration (0 without merging).
     pub radius: f32,
     /// m(η_VCM) where merging is on, else 0.
@@ -162,7 +165,7 @@ impl Iteration {
     pub fn new(
         heuristic: Heuristic,
         techniques: Techniques,
-        light_paths: f32,
+        (light_paths, film_pixels): (f32, f32),
         merge_paths: f32,
         radius: f32,
     ) -> Iteration {
@@ -172,6 +175,7 @@ impl Iteration {
             heuristic,
             techniques,
             light_paths,
+            film_pixels,
             radius: if merging { radius } else { 0.0 },
             vm_factor: if merging { heuristic.m(eta) } else { 0.0 },
             vc_factor: if merging && techniques.connect {
@@ -209,8 +213,8 @@ impl Partial {
         }
     }
 
-    /// A camera subpath at its first hit, which the camera reaches with area density
-    /// `camera_density` (`Camera::hit_density`).
+    /// A camera subpath at its first hit, which the pixel sample's camera ray reaches with
+    /// area density `camera_density` (W·H · `Camera::hit_density`).
     pub fn camera_start(it: &Iteration, camera_density: f32) -> Self {
         Partial {
             dvcm: it.m(it.light_paths / camera_density),
@@ -235,7 +239,14 @@ impl Partial {
     /// A BSDF sample left the vertex at |cos θ_o| = `cos_out` with forward and reverse
     /// densities `forward`, `reverse` (solid angle); `dirac` for a Dirac lobe.
     #[inline]
-    pub fn scatter(&mut self, it: &Iteration, cos_out: f32, forward: f32, reverse: f32, dirac: bool) {
+    pub fn scatter(
+        &mut self,
+        it: &Iteration,
+        cos_out: f32,
+        forward: f32,
+        reverse: f32,
+        dirac: bool,
+    ) {
         if dirac {
             let c = it.m(cos_out);
             self.dvcm = 0.0;
@@ -288,7 +299,7 @@ pub fn light_sample(
 }
 
 /// Weight of a light vertex connected to the eye (t = 1): `camera_density` the area density
-/// with which the camera reaches it, `reverse` the density with which its BSDF, seen from the
+/// with which a pixel sample's camera ray reaches it (W·H · `Camera::hit_density`), `reverse` the density with which its BSDF, seen from the
 /// eye, samples the direction back to the light subpath.
 #[inline]
 pub fn eye_connection(it: &Iteration, light: &Partial, camera_density: f32, reverse: f32) -> f32 {
@@ -313,7 +324,12 @@ pub struct ConnectionDensities {
 
 /// Weight of a connection between a camera vertex and a light vertex (s, t ≥ 2).
 #[inline]
-pub fn connection(it: &Iteration, camera: &Partial, light: &Partial, d: &ConnectionDensities) -> f32 {
+pub fn connection(
+    it: &Iteration,
+    camera: &Partial,
+    light: &Partial,
+    d: &ConnectionDensities,
+) -> f32 {
     let to_light = light.connection_ratio(it, d.camera_forward, d.light_reverse);
     let to_camera = camera.connection_ratio(it, d.light_forward, d.camera_reverse);
     1.0 / (to_light + 1.0 + to_camera)

@@ -43,6 +43,7 @@ pub mod camera_path;
 pub mod grid;
 pub mod light_path;
 pub mod mis;
+pub mod params;
 pub mod render;
 pub mod vertex;
 

@@ -18,7 +18,8 @@ use crate::SampleContributions;
 use flowlight_core::light::emission::scene_sphere;
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
-use flowlight_sdk::{Film, Scene, Tracer, WorkUnit};
+use flowlight_sdk::stats::{Counter, Stats, StatsBuilder};
+use flowlight_sdk::{AccumulationStyle, Film, IntegratorInfo, Scene, Tracer, WorkUnit};
 use glam::Vec2;
 use std::cell::RefCell;
 
@@ -72,7 +73,7 @@ pub fn render_unit(
             let it = Iteration::new(
                 settings.heuristic,
                 settings.techniques,
-                film_paths,
+                (film_paths, film_paths),
                 unit_paths,
                 radius,
             );
@@ -153,5 +154,87 @@ fn deposit(film: &mut Film, x: u32, y: u32, contributions: &SampleContributions,
         }
     } else {
         film.deposit(cx, cy, 0, contributions.total());
+    }
+}
+
+/// The counters a bidirectional plugin reports.
+#[derive(Clone, Copy, Debug)]
+pub struct Counters {
+    light_paths: Counter,
+    light_vertices: Counter,
+    max_light_vertices: Counter,
+    connections: Counter,
+    merges: Counter,
+}
+
+impl Counters {
+    /// Declares the counters.
+    pub fn declare(stats: &mut StatsBuilder) -> Counters {
+        Counters {
+            light_paths: stats.sum("light paths"),
+            light_vertices: stats.sum("light vertices kept"),
+            max_light_vertices: stats.max("light vertices (max per unit)"),
+            connections: stats.sum("connections"),
+            merges: stats.sum("merges"),
+        }
+    }
+
+    /// Reports a unit's counts.
+    pub fn report(&self, stats: &mut Stats, c: &UnitCounts) {
+        stats.add(self.light_paths, c.light_paths as f64);
+        stats.add(self.light_vertices, c.light_vertices as f64);
+        stats.add(self.max_light_vertices, c.max_light_vertices as f64);
+        stats.add(self.connections, c.connections as f64);
+        stats.add(self.merges, c.merges as f64);
+    }
+}
+
+/// What the `lighttrace`, `bdpt` and `vcm` plugins are: a scene, settings and counters;
+/// each plugin is this with its techniques and parameters.
+pub struct BidirPlugin {
+    pub scene: Scene<'static>,
+    pub settings: BidirSettings,
+    counters: Counters,
+}
+
+impl BidirPlugin {
+    /// The plugin for `settings`, with its counters declared on `stats` and the host's
+    /// information: deposits anywhere on the film (flanged tiles, every deposit kept),
+    /// `biased` where merging is on, one layer per lighting layer or strategy.
+    pub fn new(
+        scene: Scene<'static>,
+        settings: BidirSettings,
+        stats: &mut StatsBuilder,
+    ) -> (BidirPlugin, IntegratorInfo) {
+        let depth = settings.path.path_depth;
+        let layer_count = if settings.strategy_layers {
+            super::strategy_layer_count(depth)
+        } else if settings.lighting_layers {
+            depth + 1
+        } else {
+            0
+        };
+        let info = IntegratorInfo {
+            layer_count,
+            accumulation: AccumulationStyle::FlangedTile,
+            flange: 0,
+            biased: u32::from(settings.techniques.merge),
+        };
+        let counters = Counters::declare(stats);
+        (
+            BidirPlugin {
+                scene,
+                settings,
+                counters,
+            },
+            info,
+        )
+    }
+
+    /// Renders one work unit.
+    pub fn render(&self, unit: &WorkUnit, tracer: &Tracer, film: &mut Film, stats: &mut Stats) {
+        let mut counts = UnitCounts::default();
+        render_unit(&self.scene, tracer, &self.settings, unit, film, &mut counts);
+        self.counters.report(stats, &counts);
     }
 }

@@ -120,12 +120,7 @@ pub fn scatter(
 /// albedo `albedo` and relative throughput `relative` (β over the subpath's first β), and
 /// whether the vertex is the subpath's last (its sample is traced for emission only).
 #[inline]
-pub fn termination(
-    schedule: &TerminationSchedule,
-    depth: u32,
-    albedo: f32,
-    relative: f32,
-) -> f32 {
+pub fn termination(schedule: &TerminationSchedule, depth: u32, albedo: f32, relative: f32) -> f32 {
     if depth == 0 {
         return 0.0;
     }
