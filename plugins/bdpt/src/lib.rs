@@ -19,7 +19,7 @@
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]
 
-use flowlight_pathtrace::bidir::params::{settings_from_params, SHARED, STRATEGIES};
+use flowlight_pathtrace::bidir::params::{settings_from_params, HEURISTIC, SHARED, STRATEGIES};
 use flowlight_pathtrace::bidir::render::BidirPlugin;
 use flowlight_pathtrace::bidir::Techniques;
 use flowlight_sdk::abi::ParamSpec;
@@ -35,7 +35,7 @@ const PARAMS: [ParamSpec; 8] = [
     SHARED[3],
     SHARED[4],
     SHARED[5],
-    SHARED[6],
+    HEURISTIC.spec(),
     STRATEGIES.spec(),
 ];
 

@@ -14,8 +14,8 @@
 //!
 //! Parameters: `path_depth` (the deepest lighting layer: light vertices y₁ … y_N),
 //! `max_ray_depth`, `termination`/`rr_depth`/`rr_max_survival` (the roulette, as in MCPT, on
-//! the throughput relative to the emitted one), `layers`; `heuristic` is accepted and has no
-//! effect (one strategy). Generated table: docs/bdpt.md ("Parameters").
+//! the throughput relative to the emitted one), `layers` (no `heuristic`: every path has one
+//! strategy). Generated table: docs/bdpt.md ("Parameters").
 
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]

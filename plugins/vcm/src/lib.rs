@@ -22,7 +22,7 @@
 #![forbid(unsafe_code)]
 
 use flowlight_pathtrace::bidir::params::{
-    settings_from_params, MODE, RADIUS, RADIUS_ALPHA, SHARED,
+    settings_from_params, HEURISTIC, MODE, RADIUS, RADIUS_ALPHA, SHARED,
 };
 use flowlight_pathtrace::bidir::render::BidirPlugin;
 use flowlight_pathtrace::bidir::Techniques;
@@ -39,7 +39,7 @@ const PARAMS: [ParamSpec; 10] = [
     SHARED[3],
     SHARED[4],
     SHARED[5],
-    SHARED[6],
+    HEURISTIC.spec(),
     RADIUS.spec(),
     RADIUS_ALPHA.spec(),
     MODE.spec(),

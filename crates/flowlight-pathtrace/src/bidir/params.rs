@@ -57,27 +57,32 @@ pub const MODE: ChoiceParam = choice_param!(
     "\"vcm\": every connection strategy and merging, by MIS; \"ppm\": progressive photon mapping, merging alone at the first non-Dirac camera vertex"
 );
 
-/// What every bidirectional plugin takes: depths, roulette, heuristic and lighting layers.
-pub const SHARED: [ParamSpec; 7] = [
+/// What every bidirectional plugin takes: depths, roulette and lighting layers (`bdpt` and
+/// `vcm` add [`HEURISTIC`]: light tracing alone has one strategy per path).
+pub const SHARED: [ParamSpec; 6] = [
     settings::TERMINATION.spec(),
     settings::PATH_DEPTH.spec(),
     settings::MAX_RAY_DEPTH.spec(),
     settings::RR_DEPTH.spec(),
     settings::RR_MAX_SURVIVAL.spec(),
-    HEURISTIC.spec(),
     LAYERS.spec(),
 ];
 
 /// The settings of a plugin that combines `techniques` (for `vcm`, [`MODE`] may replace
-/// them by photon mapping). Reads only the parameters the plugin declares: `strategies`
-/// where `strategies` is true, the radius where `techniques` merge.
+/// them by photon mapping). Reads only the parameters the plugin declares: the heuristic
+/// where `techniques` weigh strategies, `strategies` where `strategies` is true, the radius
+/// and mode where `techniques` merge.
 pub fn settings_from_params(
     p: &Params,
     techniques: Techniques,
     strategies: bool,
 ) -> Result<BidirSettings, String> {
     let path = PathSettings::shared_from_params(p, Variant::Entangled, &settings::MAX_RAY_DEPTH)?;
-    let heuristic = Heuristic::parse(HEURISTIC.get(p)?).expect("declared choice");
+    let heuristic = if techniques.weighs() {
+        Heuristic::parse(HEURISTIC.get(p)?).expect("declared choice")
+    } else {
+        Heuristic::Power
+    };
     let lighting_layers = LAYERS.get(p)?;
     let strategy_layers = strategies && STRATEGIES.get(p)?;
     if lighting_layers && strategy_layers {
