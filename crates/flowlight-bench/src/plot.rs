@@ -205,6 +205,7 @@ mod tests {
             efficiency: 1.0 / (e * wall),
             relative_efficiency: 1.0,
             runs: 1,
+            biased: false,
         };
         let rows = vec![
             row("a", 0.5, 0.1),

@@ -23,6 +23,8 @@ pub struct SummaryRow {
     /// Efficiency over the baseline method's at the same scene and budget.
     pub relative_efficiency: f64,
     pub runs: usize,
+    /// The method's estimator is biased (its renders say so): the tables mark it.
+    pub biased: bool,
 }
 
 /// Everything a bench produced.
@@ -69,6 +71,7 @@ pub fn summarise(runs: &[Run], baseline: &str) -> Vec<SummaryRow> {
                 efficiency: 1.0 / (relmse * wall),
                 relative_efficiency: f64::NAN,
                 runs: g.len(),
+                biased: g.iter().any(|r| r.biased),
             }
         })
         .collect();
@@ -113,12 +116,12 @@ pub(crate) fn write_tables(
 ) -> Result<Vec<PathBuf>, String> {
     let mut files = Vec::new();
     let mut csv = String::from(
-        "scene,method,plugin,params,budget_s,seed,wall_s,spp,relmse,rmse,luminance_ratio,reference_floor,invalid_samples,non_finite_pixels\n",
+        "scene,method,plugin,params,budget_s,seed,wall_s,spp,relmse,rmse,luminance_ratio,reference_floor,invalid_samples,non_finite_pixels,biased\n",
     );
     for r in runs {
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{},{:.6},{:.3},{:.6e},{:.6e},{:.6},{},{},{}",
+            "{},{},{},{},{},{},{:.6},{:.3},{:.6e},{:.6e},{:.6},{},{},{},{}",
             csv_field(&r.scene),
             csv_field(&r.method),
             csv_field(&r.plugin),
@@ -135,7 +138,8 @@ pub(crate) fn write_tables(
                 .map(|f| format!("{f:.6e}"))
                 .unwrap_or_default(),
             r.invalid_samples,
-            r.errors.non_finite
+            r.errors.non_finite,
+            r.biased
         );
     }
     let p = suite.out.join("results.csv");
@@ -163,10 +167,11 @@ pub(crate) fn write_tables(
     files.push(p);
 
     let mut csv = String::from(
-        "scene,method,budget_s,runs,wall_s,spp,relmse,rmse,luminance_ratio,efficiency,relative_efficiency\n",
+        "scene,method,budget_s,runs,wall_s,spp,relmse,rmse,luminance_ratio,efficiency,relative_efficiency,biased\n",
     );
     let mut md = format!(
-        "Efficiency = 1 / (relMSE × wall time), means over seeds {:?}; relative to `{}` at the same budget.\n\n\
+        "Efficiency = 1 / (relMSE × wall time), means over seeds {:?}; relative to `{}` at the same budget. \
+         A method marked (biased) converges to the image only as it goes on (VCM's shrinking radius).\n\n\
          | scene | method | budget (s) | wall (s) | spp | relMSE | RMSE | lum. ratio | efficiency | vs `{}` |\n\
          |---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         suite.seeds, suite.baseline, suite.baseline
@@ -174,7 +179,7 @@ pub(crate) fn write_tables(
     for r in summary {
         let _ = writeln!(
             csv,
-            "{},{},{},{},{:.6},{:.3},{:.6e},{:.6e},{:.6},{:.6e},{:.4}",
+            "{},{},{},{},{:.6},{:.3},{:.6e},{:.6e},{:.6},{:.6e},{:.4},{}",
             csv_field(&r.scene),
             csv_field(&r.method),
             r.budget,
@@ -185,13 +190,15 @@ pub(crate) fn write_tables(
             r.rmse,
             r.luminance_ratio,
             r.efficiency,
-            r.relative_efficiency
+            r.relative_efficiency,
+            r.biased
         );
         let _ = writeln!(
             md,
-            "| {} | {} | {} | {:.2} | {:.1} | {:.3e} | {:.3e} | {:.3} | {:.3e} | {:.2} |",
+            "| {} | {}{} | {} | {:.2} | {:.1} | {:.3e} | {:.3e} | {:.3} | {:.3e} | {:.2} |",
             r.scene,
             r.method,
+            if r.biased { " (biased)" } else { "" },
             r.budget,
             r.wall,
             r.spp,
@@ -231,6 +238,7 @@ mod tests {
                 ..Default::default()
             },
             invalid_samples: 0,
+            biased: method == "fast",
             layers: vec![],
         };
         let runs = vec![
@@ -244,5 +252,7 @@ mod tests {
         assert!((s[0].relmse - 0.2).abs() < 1e-12);
         assert!((s[0].relative_efficiency - 1.0).abs() < 1e-12);
         assert!((s[1].relative_efficiency - 4.0).abs() < 1e-9);
+        // A biased method's rows say so.
+        assert_eq!((s[0].biased, s[1].biased), (false, true));
     }
 }

@@ -61,6 +61,8 @@ pub struct RenderResult {
     pub path_depth: Option<u32>,
     /// The integrator's [`ParamRole::MaxRayDepth`] parameter, likewise.
     pub max_ray_depth: Option<u32>,
+    /// The integrator declared its estimator biased ([`Run::biased`]).
+    pub biased: bool,
 }
 
 /// The resolved value of the render's integer parameter with role `role` (the integrator
@@ -183,6 +185,7 @@ pub fn render_request(req: &RenderRequest) -> Result<RenderResult, String> {
         params,
         path_depth: resolved_int(&renderer, ParamRole::PathDepth),
         max_ray_depth: resolved_int(&renderer, ParamRole::MaxRayDepth),
+        biased: renderer.instance.info.biased != 0,
     })
 }
 
@@ -199,6 +202,9 @@ pub struct Run {
     pub spp: f64,
     pub errors: Errors,
     pub invalid_samples: u64,
+    /// The integrator says its estimator is biased (`flowlight.biased`: VCM's merging,
+    /// ERPT's consecutive-sample filter).
+    pub biased: bool,
     /// (layer index, errors) for each lighting layer both the render and the reference have.
     pub layers: Vec<(usize, Errors)>,
 }
@@ -451,6 +457,7 @@ pub fn run_suite(
                         spp: r.spp,
                         errors,
                         invalid_samples: r.invalid_samples,
+                        biased: r.biased,
                         layers,
                     });
                 }
@@ -527,6 +534,7 @@ mod tests {
             efficiency: 1.0 / (relmse * budget),
             relative_efficiency: 1.0,
             runs: 2,
+            biased: false,
         }
     }
 
