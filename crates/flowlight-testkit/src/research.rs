@@ -177,25 +177,23 @@ fn table(b: &mut SceneBuilder, top: &str, legs: &str, lo: [f64; 3], hi: [f64; 3]
     }
 }
 
-pub fn veach_door() -> ResearchScene {
-    let mut b = SceneBuilder::new(&generator("veach-door"));
-    b.material("wall", [0.75, 0.75, 0.72], plain());
-    b.material("floor", [0.55, 0.5, 0.45], plain());
-    b.material("door", [0.7, 0.66, 0.58], plain());
-    let glossy = MaterialOptions {
-        metallic: 1.0,
-        roughness: Some(0.2),
-        ..MaterialOptions::default()
-    };
-    b.material("table-top", [0.8, 0.76, 0.7], glossy);
-    b.material("table-legs", [0.35, 0.25, 0.18], plain());
-    b.material("lamp", [0.0; 3], lamp([1.0, 0.9, 0.75], 15000.0));
-    // Both rooms 4 m wide, 2.6 m high; the near room z 0–4, the shared wall z 4–4.12, the
-    // far room z 4.12–8. The doorway: x 1.5–2.4, up to 2.1 m.
-    let (w, h, d) = (4.0, 2.6, 8.0);
-    let (z0, z1) = (4.0, 4.12);
-    let (dx0, dx1, dh) = (1.5, 2.4, 2.1);
-    room(&mut b, "floor", "wall", [0.0; 3], [w, h, d]);
+/// A lamp quad at height `y` over x in `x`, z in `z`, facing down.
+fn ceiling_lamp(
+    b: &mut SceneBuilder,
+    material: &str,
+    y: f64,
+    [x0, x1]: [f64; 2],
+    [z0, z1]: [f64; 2],
+) {
+    let corners = [[x0, y, z0], [x1, y, z0], [x1, y, z1], [x0, y, z1]];
+    b.quad(material, corners, Some([0.0, -1.0, 0.0]));
+}
+
+/// The wall between two rooms of width `w` and height `h` (x from 0 to `w`), from z = `z[0]`
+/// to `z[1]`, with a doorway from x = `door[0]` to `door[1]` up to y = `door[2]`: its two
+/// faces, the jambs and the lintel's underside.
+fn shared_wall(b: &mut SceneBuilder, [w, h]: [f64; 2], [z0, z1]: [f64; 2], door: [f64; 3]) {
+    let [dx0, dx1, dh] = door;
     for (z, f) in [(z0, -1.0), (z1, 1.0)] {
         let facing = Some([0.0, 0.0, f]);
         b.quad(
@@ -229,6 +227,28 @@ pub fn veach_door() -> ResearchScene {
         [[dx0, dh, z0], [dx1, dh, z0], [dx1, dh, z1], [dx0, dh, z1]],
         Some([0.0, -1.0, 0.0]),
     );
+}
+
+pub fn veach_door() -> ResearchScene {
+    let mut b = SceneBuilder::new(&generator("veach-door"));
+    b.material("wall", [0.75, 0.75, 0.72], plain());
+    b.material("floor", [0.55, 0.5, 0.45], plain());
+    b.material("door", [0.7, 0.66, 0.58], plain());
+    let glossy = MaterialOptions {
+        metallic: 1.0,
+        roughness: Some(0.2),
+        ..MaterialOptions::default()
+    };
+    b.material("table-top", [0.8, 0.76, 0.7], glossy);
+    b.material("table-legs", [0.35, 0.25, 0.18], plain());
+    b.material("lamp", [0.0; 3], lamp([1.0, 0.9, 0.75], 15000.0));
+    // Both rooms 4 m wide, 2.6 m high; the near room z 0–4, the shared wall z 4–4.12, the
+    // far room z 4.12–8. The doorway: x 1.5–2.4, up to 2.1 m.
+    let (w, h, d) = (4.0, 2.6, 8.0);
+    let (z0, z1) = (4.0, 4.12);
+    let (dx0, dx1, dh) = (1.5, 2.4, 2.1);
+    room(&mut b, "floor", "wall", [0.0; 3], [w, h, d]);
+    shared_wall(&mut b, [w, h], [z0, z1], [dx0, dx1, dh]);
     // The door, 1 m × 2.15 m × 4 cm, on the near room's side of the wall, overlapping the
     // doorway by 5 cm on every side but the floor, hinged at x = 1.45 and opened 3° into the
     // near room: the wedge between it and the wall opens to 0.95 tan 3° = 5.0 cm at the
@@ -248,12 +268,7 @@ pub fn veach_door() -> ResearchScene {
         [2.2, 0.76, 3.2],
     );
     // The lamp, 0.6 m square, 5 cm under the far room's ceiling in its far corner, facing down.
-    let y = h - 0.05;
-    b.quad(
-        "lamp",
-        [[2.9, y, 6.9], [3.5, y, 6.9], [3.5, y, 7.5], [2.9, y, 7.5]],
-        Some([0.0, -1.0, 0.0]),
-    );
+    ceiling_lamp(&mut b, "lamp", h - 0.05, [2.9, 3.5], [6.9, 7.5]);
     let files = finish(
         "veach-door",
         &b,
@@ -351,23 +366,10 @@ fn water(b: &mut SceneBuilder, material: &str, e: f64, bottom: f64, grid: usize)
     t.write(b, material);
 }
 
-pub fn water_pool() -> ResearchScene {
-    let mut b = SceneBuilder::new(&generator("water-pool"));
-    b.material("tile-light", [0.75, 0.75, 0.7], plain());
-    b.material("tile-dark", [0.25, 0.35, 0.45], plain());
-    b.material("pool-wall", [0.6, 0.62, 0.6], plain());
-    let water_material = MaterialOptions {
-        roughness: Some(0.0),
-        transmission: Some(1.0),
-        ior: Some(1.33),
-        thickness: Some(1.0),
-        ..MaterialOptions::default()
-    };
-    b.material("water", [1.0, 1.0, 1.0], water_material);
-    b.material("lamp", [0.0; 3], lamp([1.0, 0.95, 0.85], 3000.0));
-    // The pool: 1.5 m square, walls 0.6 m high on three sides, the floor a 10 × 10 checker
-    // of 15 cm tiles (geometry: the builder writes no textures).
-    let (half, tiles) = (0.75, 10);
+/// The pool: a floor 2 `half` square, a `tiles` × `tiles` checker of the materials
+/// `tile-light` and `tile-dark` (geometry: the builder writes no textures), and `pool-wall`
+/// walls `hw` high on three sides (none at z = −`half`).
+fn pool(b: &mut SceneBuilder, half: f64, hw: f64, tiles: usize) {
     let side = 2.0 * half / tiles as f64;
     for i in 0..tiles {
         for j in 0..tiles {
@@ -389,7 +391,6 @@ pub fn water_pool() -> ResearchScene {
             );
         }
     }
-    let hw = 0.6;
     b.quad(
         "pool-wall",
         [
@@ -420,23 +421,31 @@ pub fn water_pool() -> ResearchScene {
         ],
         Some([0.0, 0.0, -1.0]),
     );
+}
+
+pub fn water_pool() -> ResearchScene {
+    let mut b = SceneBuilder::new(&generator("water-pool"));
+    b.material("tile-light", [0.75, 0.75, 0.7], plain());
+    b.material("tile-dark", [0.25, 0.35, 0.45], plain());
+    b.material("pool-wall", [0.6, 0.62, 0.6], plain());
+    let water_material = MaterialOptions {
+        roughness: Some(0.0),
+        transmission: Some(1.0),
+        ior: Some(1.33),
+        thickness: Some(1.0),
+        ..MaterialOptions::default()
+    };
+    b.material("water", [1.0, 1.0, 1.0], water_material);
+    b.material("lamp", [0.0; 3], lamp([1.0, 0.95, 0.85], 3000.0));
+    let half = 0.75;
+    pool(&mut b, half, 0.6, 10);
     // The water reaches 1 mm past the floor and the walls, so that they lie inside it (a
     // ray between them and the surface travels in water) and no face of it is coplanar
     // with theirs; its front face, with no wall before it, is the camera's window.
     water(&mut b, "water", half + 0.001, -0.001, 96);
     // A 5 cm × 4 cm lamp 1 m above the water, facing down: every path from it to the floor
     // crosses the wavy surface.
-    let (lx, ly, lz) = (0.1, 1.4, 0.1);
-    b.quad(
-        "lamp",
-        [
-            [lx - 0.025, ly, lz - 0.02],
-            [lx + 0.025, ly, lz - 0.02],
-            [lx + 0.025, ly, lz + 0.02],
-            [lx - 0.025, ly, lz + 0.02],
-        ],
-        Some([0.0, -1.0, 0.0]),
-    );
+    ceiling_lamp(&mut b, "lamp", 1.4, [0.075, 0.125], [0.08, 0.12]);
     let files = finish(
         "water-pool",
         &b,
@@ -462,6 +471,24 @@ Caustics seen through water rendered with vertex connection and merging: photons
 land on the floor through the wavy surface and are merged with camera paths that came through
 the front face (L S D S E, which no connection can make).",
     )
+}
+
+/// Plate i of `veach-mis` (material `plate-i`, 4 m × 0.7 m) at (0, 0.35 + 0.42 i,
+/// 1 − 0.5 i), its normal halfway between the directions to `camera` and to `lights`, the
+/// middle of the row of lights: each mirrors the row.
+fn plates(b: &mut SceneBuilder, camera: [f64; 3], lights: [f64; 3]) {
+    for i in 0..4 {
+        let c = [0.0, 0.35 + 0.42 * i as f64, 1.0 - 0.5 * i as f64];
+        let n = norm(add(norm(sub(camera, c)), norm(sub(lights, c))));
+        let t = scale(cross([1.0, 0.0, 0.0], n), 0.35);
+        let x = [2.0, 0.0, 0.0];
+        let p = |sx: f64, st: f64| add(add(c, scale(x, sx)), scale(t, st));
+        b.quad(
+            &format!("plate-{i}"),
+            [p(-1.0, -1.0), p(1.0, -1.0), p(1.0, 1.0), p(-1.0, 1.0)],
+            Some(n),
+        );
+    }
 }
 
 pub fn veach_mis() -> ResearchScene {
@@ -512,16 +539,7 @@ pub fn veach_mis() -> ResearchScene {
         ],
         Some([0.0, 0.0, 1.0]),
     );
-    b.quad(
-        "fill",
-        [
-            [-3.0, 4.5, 2.0],
-            [3.0, 4.5, 2.0],
-            [3.0, 4.5, 6.0],
-            [-3.0, 4.5, 6.0],
-        ],
-        Some([0.0, -1.0, 0.0]),
-    );
+    ceiling_lamp(&mut b, "fill", 4.5, [-3.0, 3.0], [2.0, 6.0]);
     let (camera, lights) = ([0.0, 2.0, 6.0], [0.0, 2.6, -1.0]);
     for (i, x) in [-1.8, -0.6, 0.6, 1.8].iter().enumerate() {
         b.sphere(
@@ -531,20 +549,7 @@ pub fn veach_mis() -> ResearchScene {
             3,
         );
     }
-    // Plate i (4 m × 0.7 m) at (0, 0.35 + 0.42 i, 1 − 0.5 i), its normal halfway between the
-    // directions to the camera and to the middle of the row of lights: each mirrors the row.
-    for i in 0..4 {
-        let c = [0.0, 0.35 + 0.42 * i as f64, 1.0 - 0.5 * i as f64];
-        let n = norm(add(norm(sub(camera, c)), norm(sub(lights, c))));
-        let t = scale(cross([1.0, 0.0, 0.0], n), 0.35);
-        let x = [2.0, 0.0, 0.0];
-        let p = |sx: f64, st: f64| add(add(c, scale(x, sx)), scale(t, st));
-        b.quad(
-            &format!("plate-{i}"),
-            [p(-1.0, -1.0), p(1.0, -1.0), p(1.0, 1.0), p(-1.0, 1.0)],
-            Some(n),
-        );
-    }
+    plates(&mut b, camera, lights);
     let files = finish(
         "veach-mis",
         &b,
