@@ -93,3 +93,38 @@ fn committed_references_load_with_their_recorded_floor_and_match_their_scenes() 
         assert!(e.contains(&format!("path_depth {depth}")), "{e}");
     }
 }
+
+/// The bidirectional suite: its two suite scenes use their committed MCPT references, its four
+/// research scenes have none and get one rendered by VCM; every config loads, and the
+/// methods are MCPT (the baseline), the three bidirectional plugins and ERPT.
+#[test]
+fn the_bidirectional_suite_renders_references_only_for_the_research_scenes() {
+    let suite = load_suite(&scenes().join("experiments/suite-bidir.toml")).unwrap();
+    assert_eq!(suite.reference_plugin.as_deref(), Some("vcm"));
+    assert_eq!(suite.baseline, "mcpt-entangled-throughput");
+    let names: Vec<&str> = suite.scenes.iter().map(|s| s.name.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "veach-door",
+            "water-pool",
+            "veach-mis",
+            "lamp-shade",
+            "cornell-box",
+            "glass-caustic"
+        ]
+    );
+    for s in &suite.scenes {
+        flowlight_scene::config::load_config(&s.config)
+            .unwrap_or_else(|e| panic!("{}: {e}", s.name));
+        let committed = s.committed_reference.as_ref().is_some_and(|p| p.exists());
+        let research = !matches!(s.name.as_str(), "cornell-box" | "glass-caustic");
+        assert_eq!(committed, !research, "{}: committed reference", s.name);
+    }
+    let plugins: Vec<&str> = suite
+        .methods
+        .iter()
+        .map(|m| m.plugin.as_deref().unwrap())
+        .collect();
+    assert_eq!(plugins, ["mcpt", "lighttrace", "bdpt", "vcm", "erpt"]);
+}

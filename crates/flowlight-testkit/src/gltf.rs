@@ -9,9 +9,9 @@
 //! * [`Quad`] is the unit quad with chosen vertex attributes, images and material (the
 //!   loader's texture and attribute tests).
 //! * [`SceneBuilder`] is the benchmark scenes' builder: named materials, quads turned to
-//!   face a direction, boxes, icospheres with smooth normals, a look-at camera; the
-//!   `make-scenes` binary of this crate writes `scenes/{indirect-room,glass-caustic,
-//!   mirror-chain,narrow-gap}` with it.
+//!   face a direction, boxes, icospheres with smooth normals, triangle lists, a look-at
+//!   camera; the `make-scenes` binary of this crate writes the benchmark scenes
+//!   (`scenes.rs`) and the research scenes (`research.rs`) with it.
 
 use serde_json::{json, Map, Value};
 use std::collections::BTreeSet;
@@ -477,20 +477,20 @@ pub struct SceneBuilder {
     meshes: Vec<SceneMesh>,
 }
 
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [
         a[1] * b[2] - a[2] * b[1],
         a[2] * b[0] - a[0] * b[2],
         a[0] * b[1] - a[1] * b[0],
     ]
 }
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
-fn norm(a: [f64; 3]) -> [f64; 3] {
+pub(crate) fn norm(a: [f64; 3]) -> [f64; 3] {
     let n = dot(a, a).sqrt();
     [a[0] / n, a[1] / n, a[2] / n]
 }
@@ -571,6 +571,37 @@ impl SceneBuilder {
         mesh.1.extend(pts);
         mesh.3
             .extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+    }
+
+    /// Triangles `indices` (three per triangle, counter-clockwise seen from the front) over
+    /// `positions`, with one vertex normal per position for a smooth mesh or none for a flat
+    /// one: the research scenes' height fields, cones and boxes built from numbers. A material
+    /// is either smooth or flat in every call.
+    pub fn triangles(
+        &mut self,
+        material: &str,
+        positions: &[[f64; 3]],
+        normals: Option<&[[f64; 3]]>,
+        indices: &[u32],
+    ) {
+        let i = self.mesh(material, normals.is_some());
+        let mesh = &mut self.meshes[i];
+        assert_eq!(
+            mesh.2.is_some(),
+            normals.is_some(),
+            "{material}: mixes smooth and flat parts"
+        );
+        let base = mesh.1.len() as u32;
+        mesh.1.extend_from_slice(positions);
+        if let (Some(all), Some(n)) = (mesh.2.as_mut(), normals) {
+            assert_eq!(
+                n.len(),
+                positions.len(),
+                "{material}: one normal per position"
+            );
+            all.extend_from_slice(n);
+        }
+        mesh.3.extend(indices.iter().map(|k| base + k));
     }
 
     /// An axis-aligned closed box, faces pointing outwards.

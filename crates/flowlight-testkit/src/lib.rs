@@ -62,6 +62,7 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
 pub mod gltf;
+pub mod research;
 pub mod scenes;
 
 /// Fewest valid proposals the kit accepts from the seed paths it tries.

@@ -20,6 +20,11 @@
 //! * `ring-caustic`: a polished metal ring (open cylinder) on a diffuse floor, lit by a small
 //!   lamp at a low angle: the cardioid caustic inside the ring is made of LSDE paths.
 //!
+//!
+//! and the research scenes of the bidirectional integrators (`src/research.rs` describes
+//! them), each with a second config for the method it is shown with (`bdpt.toml` or
+//! `vcm.toml`): `veach-door`, `water-pool`, `veach-mis` and `lamp-shade`.
+//!
 //! `tests/scenes.rs` of this crate checks that the committed files are what this writes.
 
 use std::path::Path;
@@ -30,21 +35,36 @@ fn main() {
         .map(std::path::PathBuf::from)
         .unwrap_or_else(flowlight_testkit::scenes_dir);
     for (name, text_gltf, text_toml, triangles) in flowlight_testkit::scenes::all() {
-        if let Err(e) = write(&out, name, &text_gltf, &text_toml) {
-            eprintln!("error: {e}");
-            std::process::exit(1);
-        }
-        println!("{name:<14} {triangles:>5} triangles");
+        let files = [
+            (format!("{name}.gltf"), text_gltf),
+            (format!("{name}.toml"), text_toml),
+        ];
+        write_or_exit(&out, name, &files, triangles);
+    }
+    for scene in flowlight_testkit::research::all() {
+        let (name, text_gltf, text_toml, triangles) = scene.files;
+        let (method_file, method_text) = scene.method_config;
+        let files = [
+            (format!("{name}.gltf"), text_gltf),
+            (format!("{name}.toml"), text_toml),
+            (method_file.to_string(), method_text),
+        ];
+        write_or_exit(&out, name, &files, triangles);
     }
 }
 
-fn write(out: &Path, name: &str, gltf: &str, toml: &str) -> Result<(), String> {
+fn write_or_exit(out: &Path, name: &str, files: &[(String, String)], triangles: usize) {
+    if let Err(e) = write(out, name, files) {
+        eprintln!("error: {e}");
+        std::process::exit(1);
+    }
+    println!("{name:<14} {triangles:>5} triangles");
+}
+
+fn write(out: &Path, name: &str, files: &[(String, String)]) -> Result<(), String> {
     let folder = out.join(name);
     std::fs::create_dir_all(&folder).map_err(|e| format!("{}: {e}", folder.display()))?;
-    for (file, text) in [
-        (format!("{name}.gltf"), gltf),
-        (format!("{name}.toml"), toml),
-    ] {
+    for (file, text) in files {
         let p = folder.join(file);
         std::fs::write(&p, text).map_err(|e| format!("{}: {e}", p.display()))?;
     }
