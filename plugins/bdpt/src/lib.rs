@@ -19,14 +19,11 @@
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]
 
-use flowlight_pathtrace::bidir::params::{settings_from_params, HEURISTIC, SHARED, STRATEGIES};
-use flowlight_pathtrace::bidir::render::BidirPlugin;
+use flowlight_pathtrace::bidir::params::{HEURISTIC, SHARED, STRATEGIES};
+use flowlight_pathtrace::bidir::render::{BidirIntegrator, BidirKind};
 use flowlight_pathtrace::bidir::Techniques;
 use flowlight_sdk::abi::ParamSpec;
-use flowlight_sdk::{
-    export_integrator, Film, Integrator, IntegratorInfo, MutationSet, Params, Scene, Stats,
-    StatsBuilder, Tracer, WorkUnit,
-};
+use flowlight_sdk::export_integrator;
 
 const PARAMS: [ParamSpec; 8] = [
     SHARED[0],
@@ -39,35 +36,14 @@ const PARAMS: [ParamSpec; 8] = [
     STRATEGIES.spec(),
 ];
 
-pub struct Bdpt(BidirPlugin);
+pub struct Bdpt;
 
-impl Integrator for Bdpt {
+impl BidirKind for Bdpt {
     const NAME: &'static str = "bdpt";
-    const DESCRIPTION: &'static str =
-        "Bidirectional path tracing: every (s, t) strategy combined by multiple importance sampling";
+    const DESCRIPTION: &'static str = "Bidirectional path tracing: every (s, t) strategy combined by multiple importance sampling";
     const PARAMS: &'static [ParamSpec] = &PARAMS;
-
-    fn create(
-        params: &Params,
-        _mutations: MutationSet<'static>,
-        scene: Scene<'static>,
-        stats: &mut StatsBuilder,
-    ) -> Result<(Self, IntegratorInfo), String> {
-        let settings = settings_from_params(params, Techniques::BDPT, true)?;
-        let (plugin, info) = BidirPlugin::new(scene, settings, stats);
-        Ok((Bdpt(plugin), info))
-    }
-
-    fn render(
-        &self,
-        unit: &WorkUnit,
-        tracer: &Tracer,
-        film: &mut Film,
-        stats: &mut Stats,
-    ) -> Result<(), String> {
-        self.0.render(unit, tracer, film, stats);
-        Ok(())
-    }
+    const TECHNIQUES: Techniques = Techniques::BDPT;
+    const STRATEGY_LAYERS: bool = true;
 }
 
-export_integrator!(Bdpt);
+export_integrator!(BidirIntegrator<Bdpt>);

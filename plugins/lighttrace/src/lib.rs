@@ -20,44 +20,20 @@
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]
 
-use flowlight_pathtrace::bidir::params::{settings_from_params, SHARED};
-use flowlight_pathtrace::bidir::render::BidirPlugin;
+use flowlight_pathtrace::bidir::params::SHARED;
+use flowlight_pathtrace::bidir::render::{BidirIntegrator, BidirKind};
 use flowlight_pathtrace::bidir::Techniques;
 use flowlight_sdk::abi::ParamSpec;
-use flowlight_sdk::{
-    export_integrator, Film, Integrator, IntegratorInfo, MutationSet, Params, Scene, Stats,
-    StatsBuilder, Tracer, WorkUnit,
-};
+use flowlight_sdk::export_integrator;
 
-pub struct LightTrace(BidirPlugin);
+pub struct LightTrace;
 
-impl Integrator for LightTrace {
+impl BidirKind for LightTrace {
     const NAME: &'static str = "lighttrace";
     const DESCRIPTION: &'static str =
         "Light tracing: light subpaths connected to the eye at every vertex (t = 1)";
     const PARAMS: &'static [ParamSpec] = &SHARED;
-
-    fn create(
-        params: &Params,
-        _mutations: MutationSet<'static>,
-        scene: Scene<'static>,
-        stats: &mut StatsBuilder,
-    ) -> Result<(Self, IntegratorInfo), String> {
-        let settings = settings_from_params(params, Techniques::LIGHT_TRACE, false)?;
-        let (plugin, info) = BidirPlugin::new(scene, settings, stats);
-        Ok((LightTrace(plugin), info))
-    }
-
-    fn render(
-        &self,
-        unit: &WorkUnit,
-        tracer: &Tracer,
-        film: &mut Film,
-        stats: &mut Stats,
-    ) -> Result<(), String> {
-        self.0.render(unit, tracer, film, stats);
-        Ok(())
-    }
+    const TECHNIQUES: Techniques = Techniques::LIGHT_TRACE;
 }
 
-export_integrator!(LightTrace);
+export_integrator!(BidirIntegrator<LightTrace>);

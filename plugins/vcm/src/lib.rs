@@ -21,16 +21,11 @@
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]
 
-use flowlight_pathtrace::bidir::params::{
-    settings_from_params, HEURISTIC, MODE, RADIUS, RADIUS_ALPHA, SHARED,
-};
-use flowlight_pathtrace::bidir::render::BidirPlugin;
+use flowlight_pathtrace::bidir::params::{HEURISTIC, MODE, RADIUS, RADIUS_ALPHA, SHARED};
+use flowlight_pathtrace::bidir::render::{BidirIntegrator, BidirKind};
 use flowlight_pathtrace::bidir::Techniques;
 use flowlight_sdk::abi::ParamSpec;
-use flowlight_sdk::{
-    export_integrator, Film, Integrator, IntegratorInfo, MutationSet, Params, Scene, Stats,
-    StatsBuilder, Tracer, WorkUnit,
-};
+use flowlight_sdk::export_integrator;
 
 const PARAMS: [ParamSpec; 10] = [
     SHARED[0],
@@ -45,35 +40,13 @@ const PARAMS: [ParamSpec; 10] = [
     MODE.spec(),
 ];
 
-pub struct Vcm(BidirPlugin);
+pub struct Vcm;
 
-impl Integrator for Vcm {
+impl BidirKind for Vcm {
     const NAME: &'static str = "vcm";
-    const DESCRIPTION: &'static str =
-        "Vertex connection and merging (biased, consistent): BDPT's strategies plus merging within a shrinking radius; mode = \"ppm\" for photon mapping";
+    const DESCRIPTION: &'static str = "Vertex connection and merging (biased, consistent): BDPT's strategies plus merging within a shrinking radius; mode = \"ppm\" for photon mapping";
     const PARAMS: &'static [ParamSpec] = &PARAMS;
-
-    fn create(
-        params: &Params,
-        _mutations: MutationSet<'static>,
-        scene: Scene<'static>,
-        stats: &mut StatsBuilder,
-    ) -> Result<(Self, IntegratorInfo), String> {
-        let settings = settings_from_params(params, Techniques::VCM, false)?;
-        let (plugin, info) = BidirPlugin::new(scene, settings, stats);
-        Ok((Vcm(plugin), info))
-    }
-
-    fn render(
-        &self,
-        unit: &WorkUnit,
-        tracer: &Tracer,
-        film: &mut Film,
-        stats: &mut Stats,
-    ) -> Result<(), String> {
-        self.0.render(unit, tracer, film, stats);
-        Ok(())
-    }
+    const TECHNIQUES: Techniques = Techniques::VCM;
 }
 
-export_integrator!(Vcm);
+export_integrator!(BidirIntegrator<Vcm>);

@@ -11,6 +11,8 @@ use super::camera_path::{CameraCounts, CameraPaths, MergeSet};
 use super::grid::HashGrid;
 use super::light_path::LightPaths;
 use super::mis::Iteration;
+use super::mis::Techniques;
+use super::params::settings_from_params;
 use super::vertex::LightVertex;
 use super::BidirSettings;
 use crate::walk::units::unit_pixels;
@@ -18,10 +20,15 @@ use crate::SampleContributions;
 use flowlight_core::light::emission::scene_sphere;
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
+use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::stats::{Counter, Stats, StatsBuilder};
-use flowlight_sdk::{AccumulationStyle, Film, IntegratorInfo, Scene, Tracer, WorkUnit};
+use flowlight_sdk::{
+    AccumulationStyle, Film, Integrator, IntegratorInfo, MutationSet, Params, Scene, Tracer,
+    WorkUnit,
+};
 use glam::Vec2;
 use std::cell::RefCell;
+use std::marker::PhantomData;
 
 /// The PCG stream of a pixel sample's light subpath (its camera subpath draws from stream 0
 /// of the same seed, as MCPT's samples do; ERPT's chains use stream 1).
@@ -128,7 +135,7 @@ pub fn render_unit(
                 let out = &mut arena.contributions;
                 out.clear();
                 camera_paths.trace(rng, raster, own, merges, out, &mut camera_counts);
-                deposit(film, x, y, out, settings.layers());
+                out.deposit(film, x, y, settings.layers());
             }
             counts.camera_paths += unit_paths as u64;
             counts.connections += camera_counts.connections;
@@ -140,21 +147,6 @@ pub fn render_unit(
 /// The seed of pixel sample (`x`, `y`, `s`) of a render with seed `seed`.
 fn pixel_seed(seed: u64, x: u32, y: u32, s: u32) -> u64 {
     Rng::hash(&[seed, x as u64, y as u64, s as u64])
-}
-
-/// Deposits a camera sample's contributions in pixel (`x`, `y`) (box filter), or one
-/// invalid deposit when any is not finite and non-negative (MCPT's rule).
-fn deposit(film: &mut Film, x: u32, y: u32, contributions: &SampleContributions, layers: bool) {
-    let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
-    if !contributions.is_valid() {
-        film.deposit(cx, cy, 0, Rgb::splat(f32::NAN));
-    } else if layers {
-        for &(layer, value) in &contributions.entries {
-            film.deposit(cx, cy, layer, value);
-        }
-    } else {
-        film.deposit(cx, cy, 0, contributions.total());
-    }
 }
 
 /// The counters a bidirectional plugin reports.
@@ -189,23 +181,40 @@ impl Counters {
     }
 }
 
-/// What the `lighttrace`, `bdpt` and `vcm` plugins are: a scene, settings and counters;
-/// each plugin is this with its techniques and parameters.
-pub struct BidirPlugin {
-    pub scene: Scene<'static>,
-    pub settings: BidirSettings,
-    counters: Counters,
+/// What distinguishes the `lighttrace`, `bdpt` and `vcm` plugins: their names, parameters
+/// and strategies. Each plugin is [`BidirIntegrator`] of its own kind.
+pub trait BidirKind: Send + Sync + 'static {
+    const NAME: &'static str;
+    const DESCRIPTION: &'static str;
+    const PARAMS: &'static [ParamSpec];
+    /// The strategies it combines (`vcm`'s `mode` may narrow them to photon mapping).
+    const TECHNIQUES: Techniques;
+    /// Whether it takes `strategies` (per-strategy layers).
+    const STRATEGY_LAYERS: bool = false;
 }
 
-impl BidirPlugin {
-    /// The plugin for `settings`, with its counters declared on `stats` and the host's
-    /// information: deposits anywhere on the film (flanged tiles, every deposit kept),
-    /// `biased` where merging is on, one layer per lighting layer or strategy.
-    pub fn new(
+/// A bidirectional integrator: the scene, its settings and counters.
+pub struct BidirIntegrator<K> {
+    scene: Scene<'static>,
+    settings: BidirSettings,
+    counters: Counters,
+    kind: PhantomData<K>,
+}
+
+impl<K: BidirKind> Integrator for BidirIntegrator<K> {
+    const NAME: &'static str = K::NAME;
+    const DESCRIPTION: &'static str = K::DESCRIPTION;
+    const PARAMS: &'static [ParamSpec] = K::PARAMS;
+
+    /// Deposits land anywhere on the film (flanged tiles without a flange: every deposit
+    /// kept); `biased` where merging is on; one layer per lighting layer or strategy.
+    fn create(
+        params: &Params,
+        _mutations: MutationSet<'static>,
         scene: Scene<'static>,
-        settings: BidirSettings,
         stats: &mut StatsBuilder,
-    ) -> (BidirPlugin, IntegratorInfo) {
+    ) -> Result<(Self, IntegratorInfo), String> {
+        let settings = settings_from_params(params, K::TECHNIQUES, K::STRATEGY_LAYERS)?;
         let depth = settings.path.path_depth;
         let layer_count = if settings.strategy_layers {
             super::strategy_layer_count(depth)
@@ -221,20 +230,25 @@ impl BidirPlugin {
             biased: u32::from(settings.techniques.merge),
         };
         let counters = Counters::declare(stats);
-        (
-            BidirPlugin {
-                scene,
-                settings,
-                counters,
-            },
-            info,
-        )
+        let integrator = BidirIntegrator {
+            scene,
+            settings,
+            counters,
+            kind: PhantomData,
+        };
+        Ok((integrator, info))
     }
 
-    /// Renders one work unit.
-    pub fn render(&self, unit: &WorkUnit, tracer: &Tracer, film: &mut Film, stats: &mut Stats) {
+    fn render(
+        &self,
+        unit: &WorkUnit,
+        tracer: &Tracer,
+        film: &mut Film,
+        stats: &mut Stats,
+    ) -> Result<(), String> {
         let mut counts = UnitCounts::default();
         render_unit(&self.scene, tracer, &self.settings, unit, film, &mut counts);
         self.counters.report(stats, &counts);
+        Ok(())
     }
 }
