@@ -9,6 +9,7 @@ Run `setup.sh` once (venv with Mitsuba 3.9.1, Debian's libllvm19), build the rel
     crates/flowlight-bench/peers/peers.py            # both scenes, the defaults below
     crates/flowlight-bench/peers/peers.py --set termination=throughput --scenes cornell-box
     crates/flowlight-bench/peers/peers.py --render-set robust=false   # Mitsuba 3's Embree flags
+    crates/flowlight-bench/peers/peers.py --scenes cornell-box --plugin bdpt  # another integrator
 
 What it does, per scene (`cornell-box`, `stanford-dragon`):
   1. writes the Flowlight config and the Mitsuba scene into --out (the Cornell box's Mitsuba
@@ -157,6 +158,19 @@ def fl_config(path, scene, a, camera=None, intersector="embree"):
     lines += ["[integrator]", 'plugin = "mcpt"', 'variant = "entangled"',
               f"path_depth = {a.depth}"]
     open(path, "w").write("\n".join(lines) + "\n")
+
+
+def with_plugin(cfg, plugin):
+    """`cfg` itself for MCPT, else a copy beside it (`*-PLUGIN.toml`) whose integrator is
+    `plugin` with its defaults (the reference stays MCPT's)."""
+    if plugin == "mcpt":
+        return cfg
+    text = [l for l in open(cfg).read().splitlines()
+            if not l.startswith("variant") and not l.startswith("plugin")]
+    at = text.index("[integrator]") + 1
+    other = cfg[:-len(".toml")] + f"-{plugin}.toml"
+    open(other, "w").write("\n".join(text[:at] + [f'plugin = "{plugin}"'] + text[at:]) + "\n")
+    return other
 
 
 def with_render_settings(cfg, lines):
@@ -439,6 +453,9 @@ def main():
                     help="the flowlight binary (default: this checkout's release build)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="Flowlight MCPT parameter, as `flowlight render --set` (repeatable), e.g. termination=throughput")
+    ap.add_argument("--plugin", default="mcpt",
+                    help="Flowlight integrator of the timed renders (mcpt, lighttrace, bdpt, vcm); "
+                         "--set then applies to it, and the reference stays MCPT's")
     ap.add_argument("--render-set", action="append", default=[], metavar="KEY=VALUE",
                     help="a [render] setting of the timed Flowlight renders, TOML syntax (repeatable), "
                          "e.g. robust=false (Embree's fast mode, Mitsuba 3's own scene flags) or "
@@ -475,7 +492,7 @@ def main():
     # The label names the termination in use: the user's --set, else the plugin's default.
     sets = dict(s.split("=", 1) for s in a.set if "=" in s)
     for key in ("sampler", "termination", "branches"):
-        if key not in sets:
+        if key not in sets and a.plugin == "mcpt":
             text = run([a.flowlight, "plugins"])
             m = re.search(rf"^mcpt \(Integrator\).*?^\s+{key}\s+(?:string|integer)\s+default \"?(\w+)\"?", text, re.M | re.S)
             sets = {key: (m.group(1) if m else "?") + " (default)", **sets}
@@ -486,7 +503,8 @@ def main():
         except (tomllib.TOMLDecodeError, ValueError):
             die(f"--render-set {rs!r}: expected one KEY=VALUE in TOML syntax, e.g. robust=false")
         render_sets.append((key, value, rs))
-    fl_label = "Flowlight MCPT (entangled, " + ", ".join(f"{k} {v}" for k, v in sets.items()) + \
+    fl_label = ("Flowlight MCPT (entangled, " if a.plugin == "mcpt" else f"Flowlight {a.plugin} (") + \
+        (", ".join(f"{k} {v}" for k, v in sets.items()) or "defaults") + \
         "".join(f", render {k} = {json.dumps(v)}" for k, v, _ in render_sets) + ")"
     rev = subprocess.run(["git", "-C", ROOT, "describe", "--always", "--dirty"], capture_output=True, text=True).stdout.strip()
     print(f"# Peers: Flowlight {rev or '?'} ({a.flowlight}) vs Mitsuba {MITSUBA_VERSION} {', '.join(variants)}; Mitsuba samplers {', '.join(samplers)}")
@@ -503,7 +521,7 @@ def main():
         ref = reference(a, name, cfg, a.out)
         if a.reference_only:
             continue
-        timed_cfg = with_render_settings(cfg, [rs for _, _, rs in render_sets])
+        timed_cfg = with_render_settings(with_plugin(cfg, a.plugin), [rs for _, _, rs in render_sets])
         renderers = ["flowlight"] + [f"{v}/{s}" for v in variants for s in samplers]
         rows = {r: [] for r in renderers}
         for k in range(a.runs):
