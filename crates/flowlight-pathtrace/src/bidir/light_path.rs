@@ -211,7 +211,7 @@ impl LightPaths<'_, '_> {
         let cos = e.n.dot(eye.to_eye).abs();
         let le = self.scene.lights.emitted(e.light as usize, e.p, eye.to_eye);
         let density = e.pdf_choose * e.pdf_pos;
-        if le.is_black() || cos == 0.0 || !(density > 0.0) {
+        if le.is_black() || cos == 0.0 || density.is_nan() || density <= 0.0 {
             return;
         }
         let value = le * (camera.hit_density(-eye.to_eye, eye.distance, cos) / density);
