@@ -178,7 +178,7 @@ pub(super) fn mutation_list(
 /// The view of the scene the plugins read: pointers into `scene`, `textures` and
 /// `light_cdf`, which must outlive every plugin instance made over it. Without a light the
 /// environment is left out, as the power CDF is empty.
-pub(super) fn scene_view(
+pub fn scene_view(
     scene: &Scene,
     camera: Camera,
     textures: &[Texture],

@@ -19,9 +19,12 @@ use std::time::{Duration, Instant};
 
 mod load;
 
+/// Public for code that runs a plugin library's functions in-process over a loaded scene
+/// (the bidirectional library's allocation test) without loading a plugin.
+pub use load::scene_view;
 use load::{
     apply_set_overrides, build_intersector, create_mutations, frame_precision, memory_error,
-    mutation_list, plugin_error, relative_to, render_options, scene_view,
+    mutation_list, plugin_error, relative_to, render_options,
 };
 
 /// Command-line settings that take precedence over the config file.

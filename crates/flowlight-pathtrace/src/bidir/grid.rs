@@ -6,8 +6,8 @@
 //! buckets; the vertices are sorted by bucket (a counting sort), so a bucket is one range of
 //! an index array. Two cells of one query can share a bucket: the query visits each bucket
 //! once, so no vertex is counted twice. The buffers are kept between iterations (the
-//! thread's arena): building allocates only when an iteration has more vertices than any
-//! before.
+//! thread's arena) with power-of-two capacities: building allocates only when an iteration's
+//! vertex count passes a power of two that no earlier iteration reached.
 
 use glam::{IVec3, Vec3};
 
@@ -22,6 +22,9 @@ pub struct HashGrid {
     ends: Vec<u32>,
     indices: Vec<u32>,
     buckets: Vec<u32>,
+    /// The counting sort's fill positions, kept like the other buffers so that a build
+    /// allocates nothing once they are large enough.
+    cursor: Vec<u32>,
 }
 
 impl HashGrid {
@@ -41,6 +44,16 @@ impl HashGrid {
         self.inv_cell = 1.0 / (2.0 * radius);
         let size = n.next_power_of_two().max(1);
         self.mask = (size - 1) as u32;
+        // Every buffer takes a power-of-two capacity (`vertices` grows by doubling too), so
+        // a build allocates only when the vertex count passes a power of two it never reached.
+        for buffer in [
+            &mut self.ends,
+            &mut self.indices,
+            &mut self.buckets,
+            &mut self.cursor,
+        ] {
+            buffer.reserve_exact(size);
+        }
         self.ends.resize(size, 0);
         let mut buckets = std::mem::take(&mut self.buckets);
         buckets.extend(points.clone().map(|p| self.bucket(self.cell(p))));
@@ -56,10 +69,11 @@ impl HashGrid {
         self.indices.resize(n, 0);
         // Fill each bucket from its end backwards: afterwards `ends[b]` still ends it and the
         // previous bucket's end starts it.
-        let mut cursor = self.ends.clone();
+        self.cursor.clear();
+        self.cursor.extend_from_slice(&self.ends);
         for (i, &b) in self.buckets.iter().enumerate().rev() {
-            cursor[b as usize] -= 1;
-            self.indices[cursor[b as usize] as usize] = i as u32;
+            self.cursor[b as usize] -= 1;
+            self.indices[self.cursor[b as usize] as usize] = i as u32;
         }
     }
 

@@ -20,6 +20,11 @@
 //! The vertex on the light itself (s = 1, t = 1) is connected to the eye only by light
 //! tracing alone (for area lights), where it is the only way to see a lamp; with camera
 //! subpaths the lamp is seen by hitting it.
+//!
+//! **Bound.** A subpath keeps at most `path_depth` vertices: at most one per surface it
+//! reaches (the vertex on the light is never kept), and it stops at its `path_depth`-th
+//! surface, so an iteration of a unit keeps at most (unit pixels) × `path_depth`
+//! ([`super::render`]).
 
 use super::mis::{self, Iteration, Partial};
 use super::vertex::{self, adjoint_cos, importance_bsdf, LightVertex, Side};

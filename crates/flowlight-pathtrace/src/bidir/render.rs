@@ -3,9 +3,12 @@
 //! then one camera subpath per pixel ([`super`] for the iteration's structure).
 //!
 //! Memory: the light vertices, the grid and the contributions live in a per-thread arena
-//! that the thread's units reuse, so after its first units a thread allocates nothing per
-//! sample. A unit keeps the vertices of one sample index at a time: at most
-//! (unit pixels) × `path_depth` of them, reported as `light vertices (max per unit)`.
+//! that the thread's units reuse. Its buffers grow by doubling to the largest iteration the
+//! thread has rendered, so nothing is allocated per sample: a thread allocates only when an
+//! iteration needs more room than any before (`tests/allocations.rs` counts it). A unit
+//! keeps the vertices of one sample index at a time: at most (unit pixels) × `path_depth`
+//! of them, as a light subpath keeps at most `path_depth` ([`super::light_path`]), reported
+//! as `light vertices (max per unit)`.
 
 use super::camera_path::{CameraCounts, CameraPaths, MergeSet};
 use super::grid::HashGrid;
