@@ -194,7 +194,8 @@ def luxcore_material(path, mat):
 
 
 def luxcore_scene(a, gltf_path, out):
-    """Writes the PLY files and returns the scene's LuxCore properties as text lines."""
+    """Writes the PLY files (named after the glTF file and the node, so scenes rendered into the
+    same --out do not share them) and returns the scene's LuxCore properties as text lines."""
     g = json.load(open(gltf_path))
     fmt3 = lambda v: " ".join(f"{x:.9g}" for x in v)  # noqa: E731
     lines, exported = [], set()
@@ -206,7 +207,7 @@ def luxcore_scene(a, gltf_path, out):
                 "distinct names)")
         exported.add(name)
         lines += [f"scene.materials.{name}.{p}" for p in luxcore_material(gltf_path, mat)]
-        ply = os.path.join(out, f"{name}.ply")
+        ply = os.path.join(out, f"{os.path.basename(gltf_path)[:-len('.gltf')]}-{name}.ply")
         peers.write_ply(ply, pos, idx, nrm)
         lines += [f"scene.shapes.{name}.type = mesh",
                   f"scene.shapes.{name}.ply = {ply}",
@@ -369,7 +370,8 @@ def report(a, spec, renderers, rows):
                   f"compared ({smallest:.2e}): raise --reference-spp and pass --rebuild-reference")
     baselines = [b for b in BASELINES if b in renderers]
     against = f" against {label(spec, baselines[0])} in the same round" if baselines else ""
-    print(f"{spec['title']}, {a.width}x{a.height}, {a.seconds:g} s, {a.threads} threads, seeds "
+    title = spec["title"] + "".join(f" without {n}" for n in a.without)
+    print(f"{title}, {a.width}x{a.height}, {a.seconds:g} s, {a.threads} threads, seeds "
           f"{a.seeds}; efficiency = 1/(relMSE x wall){against}, median (range) over rounds; "
           f"reference {a.reference_spp} spp of Flowlight {spec['reference_label']}, floor "
           f"{floor:.2e}.\n")
@@ -418,7 +420,8 @@ def main():
     spec = SCENES[a.scene]
     scene_dir = os.path.join(ROOT, "scenes", a.scene)
     if a.depth is None:
-        m = re.search(r"^path_depth\s*=\s*(\d+)", open(os.path.join(scene_dir, spec["mcpt"])).read(), re.M)
+        mcpt_toml = open(os.path.join(scene_dir, spec["mcpt"])).read()
+        m = re.search(r"^path_depth\s*=\s*(\d+)", mcpt_toml, re.M)
         a.depth = int(m.group(1)) if m else 8
     a.out = os.path.abspath(a.out)
     if a.width != a.height:
