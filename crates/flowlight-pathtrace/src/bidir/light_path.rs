@@ -80,8 +80,12 @@ impl LightPaths<'_, '_> {
             return;
         }
         let distant = e.kind.is_distant();
+        // The density of the light sample that picks the same light point or direction:
+        // solid angle for the environment, the choice alone for a directional light (its
+        // disc position is not sampled by a light sample), area otherwise (1 for a point).
         let direct = match e.kind {
             LightKind::Environment => e.pdf_choose * e.pdf_dir,
+            LightKind::Directional => e.pdf_choose,
             _ => e.pdf_choose * e.pdf_pos,
         };
         let beta = e.radiance * (e.cos / emission);
@@ -206,7 +210,7 @@ impl LightPaths<'_, '_> {
         let cos = e.n.dot(eye.to_eye).abs();
         let le = self.scene.lights.emitted(e.light as usize, e.p, eye.to_eye);
         let density = e.pdf_choose * e.pdf_pos;
-        if le.is_black() || cos == 0.0 || !(density > 0.0) {
+        if le.is_black() || cos == 0.0 || density.is_nan() || density <= 0.0 {
             return;
         }
         let value = le * (camera.hit_density(-eye.to_eye, eye.distance, cos) / density);
