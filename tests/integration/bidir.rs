@@ -18,7 +18,9 @@
 //! The committed references (`scenes/<scene>/reference/<scene>.exr`, 128×128 MCPT with a
 //! per-pixel variance layer) are box-filtered down to 32×32: a pixel's value is the mean
 //! radiance over its raster area, so the mean of a 4×4 block of the 128×128 image is the
-//! 32×32 pixel's value, with 16 times the samples. `BIDIR_DEBUG=1` prints every region.
+//! 32×32 pixel's value, with 16 times the samples. `BIDIR_DEBUG=1` prints every region;
+//! `BIDIR_SEED_OFFSET=n` shifts every seed, to see how often the tests fail a correct
+//! integrator under other seeds (none of five offsets, 0 to 4000, did at this commit).
 
 use crate::common;
 
@@ -33,10 +35,16 @@ const SIZE: usize = 32;
 const BLOCK: usize = 8;
 /// Regions per image.
 const REGIONS: usize = (SIZE / BLOCK) * (SIZE / BLOCK);
-/// The z-test's bound: with 16 regions and a handful of checks per test, |z| ≥ 5 by chance
-/// has a probability of order 1e-5 per check under a normal model (more with few runs; the
-/// variance floor of [`region_scores`] covers that).
-const Z_MAX: f64 = 5.0;
+/// The z-test's bound. A region's variance from [`RUNS`] runs makes z a Student t with 15
+/// degrees of freedom: |t| ≥ 5.5 with probability 6e-5, 0.1% per check of 16 regions and
+/// about 3% over the whole file's 500-odd region tests, for a correct integrator under
+/// another seed (the variance floor of [`region_scores`] lowers it). Measured over ten seed
+/// sets: with 6 runs and a bound of 5, one set in five failed a correct BDPT; with 12 runs,
+/// two in five failed a correct light tracer at |z| = 5.1.
+const Z_MAX: f64 = 5.5;
+/// Independent runs of the integrator under test: many short ones rather than a few long
+/// ones, for the degrees of freedom of their variance.
+const RUNS: u64 = 16;
 
 fn debug() -> bool {
     std::env::var("BIDIR_DEBUG").is_ok()
@@ -313,7 +321,8 @@ fn light_traceable(s: &Renderer) -> Vec<bool> {
 
 fn runs(label: &str, runs: u64, seed: u64, make: &dyn Fn() -> Renderer) -> Vec<Vec<Rgb>> {
     let start = std::time::Instant::now();
-    let images = independent_runs(label, runs, seed, make).0;
+    let off: u64 = std::env::var("BIDIR_SEED_OFFSET").map_or(0, |v| v.parse().unwrap());
+    let images = independent_runs(label, runs, seed + off, make).0;
     if debug() {
         eprintln!("{label}: {runs} runs in {:.2?}", start.elapsed());
     }
@@ -332,19 +341,23 @@ fn furnace_lighttrace_and_bdpt_match_the_analytic_radiance() {
     let n = 6;
     let exact = (1.0 - 0.5f32.powi(n as i32 + 1)) / 0.5;
     let reference = Reference::exact(Rgb::splat(exact));
-    for (plugin, spp) in [("lighttrace", 32), ("bdpt", 8)] {
-        let images = runs(plugin, 6, 11, &|| {
+    for (plugin, spp, seed) in [("lighttrace", 12, 100), ("bdpt", 3, 200)] {
+        let images = runs(plugin, RUNS, seed, &|| {
             scene_renderer("furnace/furnace.toml", plugin, spp, &[depth(n)])
         });
         let label = format!("furnace/{plugin}");
         let scores = assert_unbiased(&label, &images, &reference, None);
-        // Every region to 2.5%: a 12% error is 5 standard errors there.
+        // Every region to 5% (light tracing's furnace is heavy-tailed: the regions' standard
+        // errors from a handful of runs reach 3.4%).
         for s in &scores {
-            assert!(s.se < 0.025 * exact as f64, "{label}: {s:?}");
+            assert!(s.se < 0.05 * exact as f64, "{label}: {s:?}");
         }
         // The image mean to 0.6%: a 3% error is 5 standard errors.
         let means: Vec<f64> = images.iter().map(|img| image_mean(img, None)).collect();
         let (m, se) = mean_and_se(&means);
+        if debug() {
+            eprintln!("{label}: image mean {m:.5} ± {se:.5}, exact {exact:.5}");
+        }
         assert!(
             ((m - exact as f64) / se).abs() < Z_MAX && se < 0.006 * exact as f64,
             "{label}: image mean {m:.5} ± {se:.5}, exact {exact:.5}"
@@ -373,10 +386,10 @@ fn mean_and_se(values: &[f64]) -> (f64, f64) {
 
 /// BDPT runs on the Cornell box (shared by the unbiasedness and the power test).
 fn cornell_bdpt_runs() -> &'static Vec<Vec<Rgb>> {
-    static RUNS: OnceLock<Vec<Vec<Rgb>>> = OnceLock::new();
-    RUNS.get_or_init(|| {
-        runs("cornell/bdpt", 6, 21, &|| {
-            scene_renderer("cornell-box/cornell-box.toml", "bdpt", 32, &[depth(8)])
+    static BDPT_RUNS: OnceLock<Vec<Vec<Rgb>>> = OnceLock::new();
+    BDPT_RUNS.get_or_init(|| {
+        runs("cornell/bdpt", RUNS, 300, &|| {
+            scene_renderer("cornell-box/cornell-box.toml", "bdpt", 12, &[depth(8)])
         })
     })
 }
@@ -390,11 +403,11 @@ fn cornell_reference() -> &'static Reference {
 fn cornell_box_lighttrace_and_bdpt_match_the_mcpt_reference() {
     let reference = cornell_reference();
     assert_unbiased("cornell/bdpt", cornell_bdpt_runs(), reference, None);
-    let images = runs("cornell/lighttrace", 6, 31, &|| {
+    let images = runs("cornell/lighttrace", RUNS, 400, &|| {
         scene_renderer(
             "cornell-box/cornell-box.toml",
             "lighttrace",
-            32,
+            12,
             &[depth(8)],
         )
     });
@@ -411,10 +424,10 @@ fn a_five_percent_error_fails_the_region_test() {
     let mut best = honest.clone();
     best.sort_by(|a, b| (a.se / a.reference).total_cmp(&(b.se / b.reference)));
     for s in &best[..3] {
-        // A 5% shift is at least 8 standard errors: it passes the |z| < 5 bound only with a
+        // A 5% shift is at least Z_MAX + 3 standard errors: it passes the bound only with a
         // fluctuation of 3 standard errors against it.
         assert!(
-            0.05 * s.reference / s.se > 8.0,
+            0.05 * s.reference / s.se > Z_MAX + 3.0,
             "too noisy to see a 5% error: {s:?}"
         );
         let k = s.region;
@@ -443,15 +456,15 @@ fn a_five_percent_error_fails_the_region_test() {
 /// The glass caustic. Where the eye first sees the floor or the walls, light tracing and
 /// BDPT pass the region test. Through the sphere, the caustic on the floor (L S S D S S E)
 /// is sampled by s = 0 alone, as in MCPT: a camera path that hits the small lamp through
-/// the glass, rare and bright, so that six short runs mostly miss it and underestimate both
-/// the mean and their own spread (a region test there failed at z = −8 with 6 × 32 spp and
-/// passed at z = 0.0 with 4 × 256). Those pixels' mean is checked to 10%; light tracing
+/// the glass, rare and bright, so that a few short runs mostly miss it and underestimate both
+/// the mean and their own spread (a region test there failed at z = −8 with 6 runs of 32 spp
+/// and passed at z = 0.0 with 4 runs of 256). Those pixels' mean is checked to 10%; light tracing
 /// has no strategy for them at all.
 #[test]
 fn glass_caustic_lighttrace_and_bdpt_match_the_mcpt_reference() {
     let reference = Reference::committed("glass-caustic", 10);
     let config = "glass-caustic/glass-caustic.toml";
-    let make = |plugin: &str| scene_renderer(config, plugin, 32, &[depth(10)]);
+    let make = |plugin: &str| scene_renderer(config, plugin, 12, &[depth(10)]);
     let keep = light_traceable(&make("lighttrace"));
     let through: Vec<bool> = keep.iter().map(|k| !k).collect();
     let seen = through.iter().filter(|&&k| k).count();
@@ -459,7 +472,7 @@ fn glass_caustic_lighttrace_and_bdpt_match_the_mcpt_reference() {
         (20..SIZE * SIZE / 2).contains(&seen),
         "the sphere covers {seen} pixels"
     );
-    let images = runs("glass/bdpt", 6, 41, &|| make("bdpt"));
+    let images = runs("glass/bdpt", RUNS, 500, &|| make("bdpt"));
     assert_unbiased("glass/bdpt", &images, &reference, Some(&keep));
     let means: Vec<f64> = images
         .iter()
@@ -471,7 +484,7 @@ fn glass_caustic_lighttrace_and_bdpt_match_the_mcpt_reference() {
         (m / want - 1.0).abs() < 0.1,
         "glass/bdpt through the sphere: mean {m:.5} vs reference {want:.5}"
     );
-    let images = runs("glass/lighttrace", 6, 51, &|| make("lighttrace"));
+    let images = runs("glass/lighttrace", RUNS, 600, &|| make("lighttrace"));
     assert_unbiased("glass/lighttrace", &images, &reference, Some(&keep));
 }
 
@@ -501,31 +514,58 @@ path_depth = 3
     )
 }
 
-/// MCPT (the reference, 4 runs) against light tracing and BDPT (6 runs each) on the floor
-/// and wall scene `gltf`; light tracing over the pixels it can render.
+/// MCPT (the reference, 4 runs) against light tracing and BDPT under both heuristics ([`RUNS`]
+/// runs each) on the floor and wall scene `gltf`, by regions and by the image mean; light
+/// tracing over the pixels it can render.
 fn synthetic_against_mcpt(name: &str, gltf: &str, tail: &str, spp: [u32; 3]) {
-    let make = |plugin: &str, spp: u32| {
+    let make = |plugin: &str, spp: u32, extra: &str| {
         renderer_from(
             &format!("{name}-{plugin}"),
             gltf,
-            &synthetic_config(plugin, tail),
+            &synthetic_config(plugin, &format!("{extra}\n{tail}")),
             spp,
         )
     };
-    let reference = Reference::from_runs(&runs(&format!("{name}/mcpt"), 4, 61, &|| {
-        make("mcpt", spp[0])
+    let reference = Reference::from_runs(&runs(&format!("{name}/mcpt"), 4, 700, &|| {
+        make("mcpt", spp[0], "")
     }));
-    let images = runs(&format!("{name}/bdpt"), 6, 71, &|| make("bdpt", spp[1]));
-    assert_unbiased(&format!("{name}/bdpt"), &images, &reference, None);
-    let keep = light_traceable(&make("lighttrace", 1));
-    let images = runs(&format!("{name}/lighttrace"), 6, 81, &|| {
-        make("lighttrace", spp[2])
-    });
-    assert_unbiased(
-        &format!("{name}/lighttrace"),
-        &images,
-        &reference,
-        Some(&keep),
+    for (heuristic, seed) in [("power", 800), ("balance", 900)] {
+        let label = format!("{name}/bdpt/{heuristic}");
+        let extra = format!("heuristic = \"{heuristic}\"");
+        let images = runs(&label, RUNS, seed, &|| make("bdpt", spp[1], &extra));
+        assert_unbiased(&label, &images, &reference, None);
+        assert_mean_matches(&label, &images, &reference, None);
+    }
+    let keep = light_traceable(&make("lighttrace", 1, ""));
+    let label = format!("{name}/lighttrace");
+    let images = runs(&label, RUNS, 1000, &|| make("lighttrace", spp[2], ""));
+    assert_unbiased(&label, &images, &reference, Some(&keep));
+    assert_mean_matches(&label, &images, &reference, Some(&keep));
+}
+
+/// The image mean of the runs over the pixels `keep` allows within [`Z_MAX`] standard
+/// errors (the runs' spread and the reference's pixel variance) of the reference's.
+fn assert_mean_matches(
+    label: &str,
+    images: &[Vec<Rgb>],
+    reference: &Reference,
+    keep: Option<&[bool]>,
+) {
+    let means: Vec<f64> = images.iter().map(|img| image_mean(img, keep)).collect();
+    let (m, se) = mean_and_se(&means);
+    let want = image_mean(&reference.image, keep);
+    let kept: Vec<f64> = (0..SIZE * SIZE)
+        .filter(|&i| keep.is_none_or(|k| k[i]))
+        .map(|i| reference.variance[i])
+        .collect();
+    let want_se = kept.iter().sum::<f64>().sqrt() / kept.len() as f64;
+    let z = (m - want) / (se * se + want_se * want_se).sqrt().max(1e-4 * want);
+    if debug() {
+        eprintln!("{label}: image mean {m:.5} ± {se:.5} vs {want:.5} ± {want_se:.5}, z = {z:.2}");
+    }
+    assert!(
+        z.abs() < Z_MAX,
+        "{label}: image mean {m:.5} ± {se:.5} vs reference {want:.5} ± {want_se:.5} (z = {z:.2})"
     );
 }
 
@@ -548,7 +588,7 @@ fn spot_light_lighttrace_and_bdpt_match_mcpt() {
         &[light_node([0.3, 2.0, 0.5], q)],
         r#"[{"type": "spot", "intensity": 400.0, "spot": {"innerConeAngle": 0.3, "outerConeAngle": 0.6}}]"#,
     );
-    synthetic_against_mcpt("spot", &gltf, "", [192, 64, 128]);
+    synthetic_against_mcpt("spot", &gltf, "", [192, 24, 48]);
 }
 
 /// A directional light from behind the wall, 30° from the vertical: the wall's shadow on
@@ -561,7 +601,7 @@ fn directional_light_lighttrace_and_bdpt_match_mcpt() {
         &[common::sun_node(30.0)],
         r#"[{"type": "directional", "intensity": 1000.0, "color": [1.0, 0.8, 0.6]}]"#,
     );
-    synthetic_against_mcpt("directional", &gltf, "", [192, 64, 128]);
+    synthetic_against_mcpt("directional", &gltf, "", [192, 24, 48]);
 }
 
 /// An equirectangular map with a bright patch above the horizon on a blue gradient:
@@ -596,34 +636,37 @@ fn environment_map_lighttrace_and_bdpt_match_mcpt() {
     .unwrap();
     let gltf = quads_gltf(&[common::FLOOR, LOW_WALL], common::LAMBERT, &[], "");
     let tail = format!("[environment]\nmap = {:?}\n", map.display().to_string());
-    synthetic_against_mcpt("envmap", &gltf, &tail, [192, 64, 128]);
+    synthetic_against_mcpt("envmap", &gltf, &tail, [192, 24, 48]);
 }
 
 // ---------------------------------------------------------------------------------------
 // VCM: convergence, and the bias of a constant radius.
 // ---------------------------------------------------------------------------------------
 
-/// relMSE of the luminance of `img` against the reference (ε = 10⁻², as
-/// `flowlight_host::metrics`), less the reference's own floor.
-fn relmse(img: &[Rgb], reference: &Reference) -> f64 {
+/// The mean relative absolute error of the luminance of `img` against the reference,
+/// |a − b| / (b + ε) with ε = 10⁻² (the ε of `flowlight_host::metrics`' relMSE). Not relMSE:
+/// a VCM run on the caustic now and then holds a firefly that multiplies its relMSE by
+/// five (measured: 0.005 to 0.072 over eight runs of 64 samples), while the absolute error
+/// varies by a few percent from run to run.
+fn rel_mae(img: &[Rgb], reference: &Reference) -> f64 {
     let eps = flowlight_host::metrics::REL_EPS;
     img.iter()
         .zip(&reference.image)
-        .zip(&reference.variance)
-        .map(|((a, b), v)| {
+        .map(|(a, b)| {
             let (a, b) = (a.luminance() as f64, b.luminance() as f64);
-            ((a - b).powi(2) - v) / (b * b + eps)
+            (a - b).abs() / (b + eps)
         })
         .sum::<f64>()
         / img.len() as f64
 }
 
-/// VCM's error on the glass caustic falls with the iterations: relMSE at 64 samples per
-/// pixel is below a quarter of that at 4. An unbiased estimator's falls as 1/N (1/16 from 4
-/// to 64); merging with the radius shrinking as i^((α − 1)/2), α = 0.75, has variance
-/// falling as N^(−α) (16^(−0.75) = 0.125) and a bias that vanishes (Knaus & Zwicker 2011).
-/// A quarter (a fitted exponent β > 0.5) leaves room for the noise of four runs, and fails
-/// a render whose error stops falling (a constant radius's bias, a lost normalisation).
+/// VCM's error on the glass caustic falls with the iterations at about the rate of an
+/// unbiased estimator. With relMSE ∝ N^(−β), the absolute error falls as N^(−β/2): from 4 to
+/// 64 samples per pixel by 16^(−1/2) = 0.25 for an unbiased estimator (β = 1), by
+/// 16^(−0.375) = 0.35 for merging alone with the default α = 0.75 (its variance falls as
+/// N^(−α) as the radius shrinks, Knaus & Zwicker 2011). Measured: 0.185, 0.102, 0.058,
+/// 0.031 at 4, 16, 64, 256 samples (β ≈ 0.85). The bound, a ratio under 0.5, is β > 0.5:
+/// an error that stops falling (a radius that does not shrink, a lost normalisation) fails.
 #[test]
 fn vcm_error_on_the_glass_caustic_falls_with_iterations() {
     let reference = Reference::committed("glass-caustic", 10);
@@ -633,18 +676,18 @@ fn vcm_error_on_the_glass_caustic_falls_with_iterations() {
         });
         images
             .iter()
-            .map(|img| relmse(img, &reference))
+            .map(|img| rel_mae(img, &reference))
             .sum::<f64>()
             / 4.0
     };
-    let (coarse, fine) = (error(4, 101), error(64, 111));
-    let beta = (coarse / fine).ln() / 16f64.ln();
+    let (coarse, fine) = (error(4, 1100), error(64, 1200));
+    let beta = 2.0 * (coarse / fine).ln() / 16f64.ln();
     if debug() {
-        eprintln!("glass/vcm: relMSE {coarse:.5} at 4 spp, {fine:.5} at 64 spp, beta {beta:.3}");
+        eprintln!("glass/vcm: relative MAE {coarse:.5} at 4 spp, {fine:.5} at 64 spp, β {beta:.3}");
     }
     assert!(
-        fine < 0.25 * coarse && fine > 0.0,
-        "glass/vcm: relMSE {coarse:.5} at 4 spp, {fine:.5} at 64 spp (β = {beta:.3})"
+        fine < 0.5 * coarse && fine > 0.0,
+        "glass/vcm: relative MAE {coarse:.5} at 4 spp, {fine:.5} at 64 spp (β = {beta:.3})"
     );
 }
 
@@ -657,11 +700,11 @@ fn vcm_error_on_the_glass_caustic_falls_with_iterations() {
 fn vcm_constant_large_radius_is_biased_and_the_shrinking_one_is_not() {
     let reference = Reference::committed("glass-caustic", 10);
     let config = "glass-caustic/glass-caustic.toml";
-    let constant = runs("glass/vcm constant radius", 4, 121, &|| {
+    let constant = runs("glass/vcm constant radius", RUNS, 1300, &|| {
         scene_renderer(
             config,
             "vcm",
-            64,
+            24,
             &[
                 depth(10),
                 ("radius", 0.05.into()),
@@ -673,11 +716,14 @@ fn vcm_constant_large_radius_is_biased_and_the_shrinking_one_is_not() {
         .expect_err("a constant radius of 0.05 passed the region test");
     let scores = region_scores(&constant, &reference, None);
     let z = |k: usize| scores.iter().find(|s| s.region == k).unwrap().z;
-    // Region 10 holds most of the shadow: 14 and 21 standard errors too bright with two
-    // other seeds.
-    assert!(z(10) > 2.0 * Z_MAX && z(9) > 0.0, "{err}");
-    let shrinking = runs("glass/vcm shrinking radius", 4, 131, &|| {
-        scene_renderer(config, "vcm", 64, &[depth(10)])
+    // Both shadow regions brighter, one beyond the bound (measured over ten seed sets: z from
+    // 5.6 to 12.9 in region 9, from 5.5 to 24 in region 10).
+    assert!(
+        z(9) > 3.0 && z(10) > 3.0 && z(9).max(z(10)) >= Z_MAX,
+        "{err}"
+    );
+    let shrinking = runs("glass/vcm shrinking radius", RUNS, 1400, &|| {
+        scene_renderer(config, "vcm", 24, &[depth(10)])
     });
     assert_unbiased("glass/vcm shrinking radius", &shrinking, &reference, None);
 }
@@ -785,7 +831,7 @@ fn lighting_layers_sum_to_the_image() {
 /// of them.
 #[test]
 fn ppm_keeps_the_cornell_box_mean() {
-    let images = runs("cornell/ppm", 4, 141, &|| {
+    let images = runs("cornell/ppm", 4, 1500, &|| {
         scene_renderer(
             "cornell-box/cornell-box.toml",
             "vcm",
@@ -836,16 +882,8 @@ fn lighttrace_through_an_orthographic_camera_matches_mcpt() {
         s.png_path = None;
         s
     };
-    let reference = Reference::from_runs(&runs("ortho/mcpt", 4, 151, &|| make("mcpt", 64)));
-    let images = runs("ortho/lighttrace", 6, 161, &|| make("lighttrace", 32));
+    let reference = Reference::from_runs(&runs("ortho/mcpt", 4, 1600, &|| make("mcpt", 64)));
+    let images = runs("ortho/lighttrace", RUNS, 1700, &|| make("lighttrace", 12));
     assert_unbiased("ortho/lighttrace", &images, &reference, None);
-    let means: Vec<f64> = images.iter().map(|img| image_mean(img, None)).collect();
-    let (m, se) = mean_and_se(&means);
-    let want = image_mean(&reference.image, None);
-    let want_se = (reference.variance.iter().sum::<f64>()).sqrt() / (SIZE * SIZE) as f64;
-    let z = (m - want) / (se * se + want_se * want_se).sqrt();
-    assert!(
-        z.abs() < Z_MAX && (m / want - 1.0).abs() < 0.03,
-        "ortho: light tracing mean {m:.5} ± {se:.5} vs MCPT {want:.5} ± {want_se:.5} (z = {z:.2})"
-    );
+    assert_mean_matches("ortho/lighttrace", &images, &reference, None);
 }
