@@ -14,6 +14,7 @@ mod common;
 mod accumulation;
 mod alpha;
 mod bench;
+mod bidir;
 mod cli;
 mod cornell;
 mod depths;

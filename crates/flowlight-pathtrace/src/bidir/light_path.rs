@@ -85,8 +85,12 @@ impl LightPaths<'_, '_> {
             return;
         }
         let distant = e.kind.is_distant();
+        // The density of the light sample that picks the same light point or direction:
+        // solid angle for the environment, the choice alone for a directional light (its
+        // disc position is not sampled by a light sample), area otherwise (1 for a point).
         let direct = match e.kind {
             LightKind::Environment => e.pdf_choose * e.pdf_dir,
+            LightKind::Directional => e.pdf_choose,
             _ => e.pdf_choose * e.pdf_pos,
         };
         let beta = e.radiance * (e.cos / emission);
