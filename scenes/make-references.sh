@@ -30,10 +30,10 @@ table=(
   "ring-caustic|900|61440|variant=untangled termination=equi"
   "cornell-box|420|20480|variant=entangled termination=bxdf"
   "narrow-gap|480|23552|variant=entangled termination=equi"
-  "veach-door|600|0|path_depth=12|bdpt.toml"
-  "water-pool|600|0|path_depth=12|vcm.toml"
-  "veach-mis|300|0|path_depth=10|bdpt.toml"
-  "lamp-shade|300|0|path_depth=10|bdpt.toml"
+  "veach-door|420|0|path_depth=12|bdpt.toml"
+  "water-pool|480|0|path_depth=12|vcm.toml"
+  "veach-mis|240|0|path_depth=10|bdpt.toml"
+  "lamp-shade|240|0|path_depth=10|bdpt.toml"
 )
 budget_kind="${BUDGET:-time}"
 
