@@ -13,7 +13,7 @@
 //! An iteration is one sample index of a work unit: one light subpath per pixel of the
 //! unit, merged with by every camera path of the unit (the image depends on the tile size,
 //! never on the thread count). Light vertices kept per unit: reported as
-//! `light vertices (max per unit)`.
+//! `max light vertices`.
 //!
 //! Parameters: those of `bdpt` but `strategies`, plus `radius`, `radius_alpha` and `mode`.
 //! Generated table: docs/bdpt.md ("Parameters").

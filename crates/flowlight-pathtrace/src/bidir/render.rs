@@ -8,7 +8,7 @@
 //! iteration needs more room than any before (`tests/allocations.rs` counts it). A unit
 //! keeps the vertices of one sample index at a time: at most (unit pixels) × `path_depth`
 //! of them, as a light subpath keeps at most `path_depth` ([`super::light_path`]), reported
-//! as `light vertices (max per unit)`.
+//! as `max light vertices`.
 
 use super::camera_path::{CameraCounts, CameraPaths, MergeSet};
 use super::grid::HashGrid;
@@ -168,7 +168,7 @@ impl Counters {
         Counters {
             light_paths: stats.sum("light paths"),
             light_vertices: stats.sum("light vertices kept"),
-            max_light_vertices: stats.max("light vertices (max per unit)"),
+            max_light_vertices: stats.max("max light vertices"),
             connections: stats.sum("connections"),
             merges: stats.sum("merges"),
         }
