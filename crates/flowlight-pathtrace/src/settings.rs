@@ -4,8 +4,8 @@
 
 use flowlight_core::bsdf::NARROW_GLOSSY_ALPHA;
 use flowlight_core::termination::{TerminationDistribution, TerminationSchedule};
-use flowlight_sdk::declare::{ChoiceParam, FloatParam, IntParam};
-use flowlight_sdk::{choice_param, float_param, int_param, ParamRole, Params};
+use flowlight_sdk::declare::{BoolParam, ChoiceParam, FloatParam, IntParam};
+use flowlight_sdk::{bool_param, choice_param, float_param, int_param, ParamRole, Params};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Variant {
@@ -97,6 +97,14 @@ pub const NARROW_GLOSSY_ALPHA_PARAM: FloatParam = float_param!(
     0.0 <= x <= 1.0,
     "untangled only: a glossy lobe with GGX alpha below it is treated as specular, with no light connection there (0: connect at every non-Dirac vertex)"
 );
+
+/// `layers`: write the lighting layers (MCPT and the bidirectional plugins).
+pub const LAYERS: BoolParam = bool_param!(
+    "layers",
+    false,
+    "also write lighting layers layer0..layerN as EXR layers (layer k = paths of virtual length k + 1); they sum to the image"
+)
+.role(ParamRole::Layers);
 
 /// `branches` (MCPT only): splitting at the first lighting vertex.
 pub const BRANCHES: IntParam = int_param!(

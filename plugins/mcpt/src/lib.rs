@@ -30,10 +30,10 @@ use flowlight_pathtrace::{
     entangled, settings, untangled, PathSettings, SampleContributions, Variant,
 };
 use flowlight_sdk::abi::ParamSpec;
-use flowlight_sdk::declare::{BoolParam, IntParam};
+use flowlight_sdk::declare::IntParam;
 use flowlight_sdk::{
-    bool_param, export_integrator, int_param, Film, Integrator, IntegratorInfo, MutationSet,
-    ParamRole, Params, Scene, Stats, StatsBuilder, Tracer, WorkUnit,
+    export_integrator, int_param, Film, Integrator, IntegratorInfo, MutationSet, Params, Scene,
+    Stats, StatsBuilder, Tracer, WorkUnit,
 };
 
 pub struct Mcpt {
@@ -45,14 +45,6 @@ pub struct Mcpt {
     /// Lighting layers are written: each contribution keeps its layer.
     layers: bool,
 }
-
-/// `layers`: write the lighting layers.
-const LAYERS: BoolParam = bool_param!(
-    "layers",
-    false,
-    "also write lighting layers layer0..layerN as EXR layers (layer k = paths of virtual length k + 1); they sum to the image"
-)
-.role(ParamRole::Layers);
 
 /// `wavefront`: paths traced together as ray batches. The default is large enough that a
 /// batch amortises the host call, small enough that the batch's rays and states stay in cache.
@@ -70,7 +62,7 @@ const PARAMS: [ParamSpec; 11] = [
     settings::MAX_RAY_DEPTH.spec(),
     settings::RR_DEPTH.spec(),
     settings::RR_MAX_SURVIVAL.spec(),
-    LAYERS.spec(),
+    settings::LAYERS.spec(),
     settings::NARROW_GLOSSY_ALPHA_PARAM.spec(),
     WAVEFRONT.spec(),
     settings::BRANCHES.spec(),
@@ -90,7 +82,7 @@ impl Integrator for Mcpt {
     ) -> Result<(Self, IntegratorInfo), String> {
         let mut settings = PathSettings::from_params(params)?;
         settings.branches = settings::branches_from_params(params, settings.variant)?;
-        let layers = LAYERS.get(params)?;
+        let layers = settings::LAYERS.get(params)?;
         let sampler = SamplerKind::from_params(
             params,
             settings.variant == Variant::Entangled,

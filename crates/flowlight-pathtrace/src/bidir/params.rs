@@ -8,7 +8,7 @@ use crate::settings::{self, Variant};
 use crate::PathSettings;
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::declare::{BoolParam, ChoiceParam, FloatParam};
-use flowlight_sdk::{bool_param, choice_param, float_param, ParamRole, Params};
+use flowlight_sdk::{bool_param, choice_param, float_param, Params};
 
 /// `heuristic`: how the strategies' densities become weights.
 pub const HEURISTIC: ChoiceParam = choice_param!(
@@ -17,14 +17,6 @@ pub const HEURISTIC: ChoiceParam = choice_param!(
     ["power", "balance"],
     "multiple importance sampling of the strategies: \"power\" (Veach's power heuristic, exponent 2) or \"balance\""
 );
-
-/// `layers`: lighting layers, as MCPT writes them.
-pub const LAYERS: BoolParam = bool_param!(
-    "layers",
-    false,
-    "also write lighting layers layer0..layerN as EXR layers (layer k = paths of virtual length k + 1); they sum to the image"
-)
-.role(ParamRole::Layers);
 
 /// `strategies` (bdpt): one layer per (s, t) strategy.
 pub const STRATEGIES: BoolParam = bool_param!(
@@ -65,7 +57,7 @@ pub const SHARED: [ParamSpec; 6] = [
     settings::MAX_RAY_DEPTH.spec(),
     settings::RR_DEPTH.spec(),
     settings::RR_MAX_SURVIVAL.spec(),
-    LAYERS.spec(),
+    settings::LAYERS.spec(),
 ];
 
 /// The settings of a plugin that combines `techniques` (for `vcm`, [`MODE`] may replace
@@ -83,7 +75,7 @@ pub fn settings_from_params(
     } else {
         Heuristic::Power
     };
-    let lighting_layers = LAYERS.get(p)?;
+    let lighting_layers = settings::LAYERS.get(p)?;
     let strategy_layers = strategies && STRATEGIES.get(p)?;
     if lighting_layers && strategy_layers {
         return Err(
