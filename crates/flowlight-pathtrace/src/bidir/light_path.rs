@@ -1,4 +1,5 @@
-//! Light subpaths: a ray emitted by a light ([`Lights::sample_emission`]), continued by BSDF
+//! Light subpaths: a ray emitted by a light
+//! ([`flowlight_core::light::Lights::sample_emission`]), continued by BSDF
 //! sampling with the adjoint BSDF ([`super::vertex`]); each vertex with a non-Dirac BSDF is
 //! kept for connections and merges and, where light tracing is on, connected to the eye and
 //! splatted onto the film at its raster position (t = 1; Veach 1997 §10.2).
