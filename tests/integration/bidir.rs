@@ -694,7 +694,7 @@ fn vcm_error_on_the_glass_caustic_falls_with_iterations() {
 /// A constant merging radius (`radius_alpha = 1`) of 5% of the scene's bounding sphere
 /// blurs light into the sphere's shadow on the floor (regions 9 and 10, where the caustic's
 /// focus sits beside black shadow): the region test fails there, brighter than the
-/// reference by many standard errors. The default schedule (radius 0.003, α = 0.75) passes
+/// reference by many standard errors. The default schedule (radius 0.01, α = 0.75) passes
 /// the same test at the same sample count.
 #[test]
 fn vcm_constant_large_radius_is_biased_and_the_shrinking_one_is_not() {
@@ -824,7 +824,7 @@ fn lighting_layers_sum_to_the_image() {
 /// Progressive photon mapping (`mode = "ppm"`) on the Cornell box keeps the reference's
 /// mean luminance within 2% (measured: −0.2% ± 0.6%). Its bias is the blur of a disc of
 /// radius 0.02 × the scene's bounding radius (about 1 cm in a box of 0.55 m; larger than the
-/// default 0.003 to bring the noise of four runs of 128 samples under 1%), shrinking with
+/// default 0.01 to bring the noise of four runs of 128 samples under 1%), shrinking with
 /// α = 0.75: it moves light across the box's edges and corners, in a band about r wide on
 /// each side of them, a few percent of the image whose light it redistributes rather than
 /// loses; the mean's standard error must stay under 1% so that the 2% bound is at least two
