@@ -58,22 +58,8 @@ fn scene_renderer(
     spp: u32,
     params: &[(&str, toml::Value)],
 ) -> Renderer {
-    let mut cfg = flowlight_scene::config::load_config(&scene_config(config))
-        .unwrap_or_else(|e| panic!("{e}"));
-    cfg.width = SIZE as u32;
-    cfg.height = SIZE as u32;
-    cfg.integrator_plugin = plugin.to_string();
-    cfg.integrator_params.clear();
-    let ov = Overrides {
-        spp: Some(spp),
-        threads: Some(2),
-        params: toml_params(params),
-        ..Default::default()
-    };
-    let mut s = Renderer::from_config(cfg, &ov).unwrap_or_else(|e| panic!("{e}"));
-    s.exr_path = None;
-    s.png_path = None;
-    s
+    let size = (SIZE as u32, SIZE as u32);
+    common::renderer_with(config, Some(plugin), size, spp, params)
 }
 
 fn depth(n: i64) -> (&'static str, toml::Value) {

@@ -78,10 +78,26 @@ pub fn renderer_at(
     spp: u32,
     params: &[(&str, toml::Value)],
 ) -> Renderer {
+    renderer_with(config, None, (width, height), spp, params)
+}
+
+/// Like [`renderer_at`]; with `plugin`, the config's integrator is replaced by that plugin
+/// with `params` alone (the config's own parameters are another plugin's).
+pub fn renderer_with(
+    config: &str,
+    plugin: Option<&str>,
+    (width, height): (u32, u32),
+    spp: u32,
+    params: &[(&str, toml::Value)],
+) -> Renderer {
     let mut cfg = flowlight_scene::config::load_config(&scene_config(config))
         .unwrap_or_else(|e| panic!("{e}"));
     cfg.width = width;
     cfg.height = height;
+    if let Some(plugin) = plugin {
+        cfg.integrator_plugin = plugin.to_string();
+        cfg.integrator_params.clear();
+    }
     let ov = Overrides {
         spp: Some(spp),
         threads: Some(2),
