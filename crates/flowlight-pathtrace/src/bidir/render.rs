@@ -58,7 +58,6 @@ pub struct UnitCounts {
     pub light_vertices: u64,
     /// The most light vertices one iteration of the unit kept.
     pub max_light_vertices: u64,
-    pub camera_paths: u64,
     pub connections: u64,
     pub merges: u64,
 }
@@ -140,7 +139,6 @@ pub fn render_unit(
                 camera_paths.trace(rng, raster, own, merges, out, &mut camera_counts);
                 out.deposit(film, x, y, settings.layers());
             }
-            counts.camera_paths += unit_paths as u64;
             counts.connections += camera_counts.connections;
             counts.merges += camera_counts.merges;
         }
