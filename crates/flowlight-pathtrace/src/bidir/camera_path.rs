@@ -11,7 +11,7 @@
 use super::grid::HashGrid;
 use super::light_path::layer_of;
 use super::mis::{self, ConnectionDensities, Iteration, Partial, Techniques};
-use super::vertex::{self, adjoint_cos, importance_bsdf, LightVertex, Side};
+use super::vertex::{self, adjoint_cos, importance_bsdf, LightVertex, Side, Surface};
 use super::BidirSettings;
 use crate::shading::{light_connection, light_sample, side_consistent, Shading};
 use crate::walk::{Step, WalkState};
@@ -151,14 +151,18 @@ impl CameraPaths<'_, '_> {
                 state.beta.max_component() * state.eta2,
             );
             state.last = roulette >= 1.0 || state.physical >= settings.path.max_ray_depth;
+            let surface = Surface {
+                hit: &hit,
+                bsdf: &bsdf,
+                shading: &shading,
+                at: &at,
+            };
             let going = vertex::scatter(
                 scene,
                 it,
                 Side::Camera,
-                &mut state,
-                &mut partial,
-                &hit,
-                &bsdf,
+                (&mut state, &mut partial),
+                &surface,
                 roulette,
             );
             let dirac = matches!(state.step, Step::Dirac(_));

@@ -28,8 +28,9 @@
 //! ([`super::render`]).
 
 use super::mis::{self, Iteration, Partial};
-use super::vertex::{self, adjoint_cos, importance_bsdf, LightVertex, Side};
+use super::vertex::{self, adjoint_cos, importance_bsdf, LightVertex, Side, Surface};
 use super::BidirSettings;
+use crate::shading::{side_consistent, Shading};
 use crate::walk::WalkState;
 use flowlight_core::bsdf::volume;
 use flowlight_core::geometry::{offset_ray_origin, Frame, Ray};
@@ -148,14 +149,19 @@ impl LightPaths<'_, '_> {
                 bsdf.albedo(),
                 relative,
             );
+            let shading = Shading::new(&hit, -state.ray.dir);
+            let surface = Surface {
+                hit: &hit,
+                bsdf: &bsdf,
+                shading: &shading,
+                at: &bsdf.at(shading.wo),
+            };
             let going = vertex::scatter(
                 self.scene,
                 self.it,
                 Side::Light,
-                &mut state,
-                &mut partial,
-                &hit,
-                &bsdf,
+                (&mut state, &mut partial),
+                &surface,
                 t,
             );
             if !going {
@@ -177,7 +183,7 @@ impl LightPaths<'_, '_> {
         };
         let frame = Frame::from_z(v.hit.ns);
         let (wo, wi) = (frame.to_local(eye.to_eye), frame.to_local(v.towards_light));
-        if eye.to_eye.dot(v.hit.ng) * wo.z <= 0.0 {
+        if !side_consistent(&v.hit, eye.to_eye, wo) {
             return;
         }
         let (f, reverse) = bsdf.at(wo).eval_pdf(wi);

@@ -17,9 +17,9 @@
 //! ([`adjoint_cos`]); the MIS densities use shading cosines on both sides alike.
 
 use super::mis::{Iteration, Partial};
-use crate::shading::{side_consistent, Shading};
+use crate::shading::Shading;
 use crate::walk::{step, Step, WalkState};
-use flowlight_core::bsdf::{Bsdf, TransportMode};
+use flowlight_core::bsdf::{Bsdf, BsdfAt, TransportMode};
 use flowlight_core::geometry::SurfaceHit;
 use flowlight_core::rng::Rng;
 use flowlight_core::termination::TerminationSchedule;
@@ -73,31 +73,40 @@ pub enum Side {
     Light,
 }
 
-/// One BSDF sample of a subpath at `hit`: the walker's roulette and sample ([`step::extend`]
-/// with stop probability `t`), then, on a light subpath, the adjoint value; the partial
-/// weights follow. Returns whether the path goes on.
-#[allow(clippy::too_many_arguments)]
+/// A vertex's surface as its scattering step needs it: the hit, its BSDF, the shading frame
+/// with ω_o (towards where the subpath came from) and the BSDF at ω_o, which the caller has
+/// already built for its connections.
+pub struct Surface<'a> {
+    pub hit: &'a SurfaceHit,
+    pub bsdf: &'a Bsdf,
+    pub shading: &'a Shading,
+    pub at: &'a BsdfAt<'a>,
+}
+
+/// One BSDF sample of a subpath at `surface`: the walker's roulette and sample
+/// ([`step::extend`] with stop probability `t`), then, on a light subpath, the adjoint value;
+/// the partial weights follow. Returns whether the path goes on.
 pub fn scatter(
     scene: &Scene,
     it: &Iteration,
     side: Side,
-    state: &mut WalkState<Rng>,
-    partial: &mut Partial,
-    hit: &SurfaceHit,
-    bsdf: &Bsdf,
+    (state, partial): (&mut WalkState<Rng>, &mut Partial),
+    surface: &Surface,
     t: f32,
 ) -> bool {
-    let shading = Shading::new(hit, -state.ray.dir);
+    let Surface {
+        hit,
+        bsdf,
+        shading,
+        at,
+    } = *surface;
     let towards_back = -state.ray.dir;
-    let at = bsdf.at(shading.wo);
     let beta_before = state.beta;
-    let (going, extension) = step::extend(scene, state, hit, &at, &shading, t, None);
+    let (going, extension) = step::extend(scene, state, hit, at, shading, t, None);
     let Some(sample) = extension.sample.filter(|_| going) else {
         return false;
     };
     let survival = extension.survived.map_or(1.0, |t| 1.0 - t);
-    let out = state.ray.dir;
-    let cos_out = sample.wi.z.abs();
     let dirac = matches!(state.step, Step::Dirac(_));
     // The reverse density, and on a light subpath the adjoint value f(ω_o = out, ω_i = back).
     let (value, reverse) = if dirac {
@@ -106,13 +115,13 @@ pub fn scatter(
         bsdf.at(sample.wi).eval_pdf(shading.wo)
     };
     if side == Side::Light {
-        let cos = adjoint_cos(hit, towards_back, out);
+        let cos = adjoint_cos(hit, towards_back, state.ray.dir);
         state.beta = beta_before * value * (cos / (sample.pdf * survival));
-        if state.beta.is_black() || !side_consistent(hit, out, sample.wi) {
+        if state.beta.is_black() {
             return false;
         }
     }
-    partial.scatter(it, cos_out, sample.pdf, reverse, dirac);
+    partial.scatter(it, sample.wi.z.abs(), sample.pdf, reverse, dirac);
     true
 }
 
