@@ -405,10 +405,13 @@ pub fn run_suite(
     let mut references = Vec::new();
     for s in &suite.scenes {
         let reference = ensure_reference(&suite, s, ov.rebuild_references, log)?;
-        'method: for m in suite.methods.iter().filter(|m| m.runs_on(&s.name)) {
+        'method: for m in suite.methods.iter().filter(|m| m.runs_on(s)) {
             for &budget in &suite.budgets {
                 for &seed in &suite.seeds {
                     let mut req = scene_request(s, suite.threads);
+                    if let Some(config) = m.config_for(s) {
+                        req.config = config;
+                    }
                     req.plugin = m.plugin.clone();
                     req.params = m.params.clone();
                     req.budget = Budget::Time(budget);

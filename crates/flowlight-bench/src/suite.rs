@@ -70,6 +70,7 @@ struct RawMethod {
     #[serde(default)]
     params: toml::Table,
     scenes: Option<Vec<String>>,
+    config: Option<String>,
 }
 
 /// A scene of a suite.
@@ -96,13 +97,29 @@ pub struct Method {
     pub params: Vec<(String, toml::Value)>,
     /// Scene names it runs on (`None`: all).
     pub scenes: Option<Vec<String>>,
+    /// A config file name (`config = "erpt.toml"`): the method renders each scene's own
+    /// config of that name, found beside the scene's config, with `params` over it; scenes
+    /// without one are skipped. How a suite compares every scene's hand-tuned configuration
+    /// in one row.
+    pub config: Option<String>,
 }
 
 impl Method {
-    pub fn runs_on(&self, scene: &str) -> bool {
-        self.scenes
+    /// Whether the method renders `scene`: named by `scenes` (or no list), and, for a
+    /// method with a `config`, that scene has such a file.
+    pub fn runs_on(&self, scene: &SuiteScene) -> bool {
+        let named = self
+            .scenes
             .as_ref()
-            .is_none_or(|s| s.iter().any(|n| n == scene))
+            .is_none_or(|s| s.iter().any(|n| *n == scene.name));
+        named && self.config_for(scene).is_none_or(|c| c.is_file())
+    }
+
+    /// The config the method renders `scene` with when it names its own
+    /// ([`Method::config`]): that file beside the scene's config.
+    pub fn config_for(&self, scene: &SuiteScene) -> Option<PathBuf> {
+        let name = self.config.as_ref()?;
+        Some(scene.config.with_file_name(name))
     }
 }
 
@@ -220,6 +237,7 @@ pub fn parse_suite(path: &Path, text: &str) -> Result<Suite, String> {
             plugin: m.plugin,
             params: table_pairs(m.params),
             scenes: m.scenes,
+            config: m.config,
         });
     }
     let baseline = match b.baseline {
@@ -296,7 +314,7 @@ scenes = ["b"]
         );
         assert_eq!(s.scenes[0].reference_budget, Budget::Spp(64));
         assert_eq!(s.scenes[1].reference_budget, Budget::Spp(16));
-        assert!(!s.methods[1].runs_on("a"));
+        assert!(!s.methods[1].runs_on(&s.scenes[0]));
         assert_eq!(s.methods[1].plugin.as_deref(), Some("erpt"));
         for bad in [
             text.replace("budgets = [0.5, 1.0]", "budgets = []"),
@@ -308,5 +326,43 @@ scenes = ["b"]
         ] {
             assert!(parse_suite(p, &bad).is_err(), "accepted:\n{bad}");
         }
+    }
+
+    /// A method with `config` renders each scene's file of that name and skips the scenes
+    /// that have none.
+    #[test]
+    fn method_config_is_found_beside_each_scene() {
+        let dir = std::env::temp_dir().join(format!("flowlight-suite-{}", std::process::id()));
+        for scene in ["a", "b"] {
+            std::fs::create_dir_all(dir.join(scene)).unwrap();
+        }
+        std::fs::write(dir.join("b/tuned.toml"), "").unwrap();
+        let text = r#"
+[bench]
+budgets = [1.0]
+seeds = [1]
+[[scene]]
+name = "a"
+config = "a/a.toml"
+[[scene]]
+name = "b"
+config = "b/b.toml"
+[[method]]
+label = "pt"
+[[method]]
+label = "tuned"
+config = "tuned.toml"
+"#;
+        let s = parse_suite(&dir.join("suite.toml"), text).unwrap();
+        let tuned = &s.methods[1];
+        assert!(!tuned.runs_on(&s.scenes[0]));
+        assert!(tuned.runs_on(&s.scenes[1]));
+        assert_eq!(
+            tuned.config_for(&s.scenes[1]),
+            Some(dir.join("b/tuned.toml"))
+        );
+        assert!(s.methods[0].runs_on(&s.scenes[0]));
+        assert_eq!(s.methods[0].config_for(&s.scenes[0]), None);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
