@@ -7,7 +7,7 @@
 # whose difference gives the variance layer and the floor (docs/bench.md). The EXR metadata
 # records the spp, seeds, parameters, path depths, floor and this command line.
 #
-#   scenes/make-references.sh [SCENE...]        # default: all ten; build the dev profile first:
+#   scenes/make-references.sh [SCENE...]        # default: all twelve; build the dev profile first:
 #   cargo build --workspace
 #
 # FLOWLIGHT (default target/debug/flowlight) and THREADS (default 2) can be set. The
@@ -34,6 +34,8 @@ table=(
   "water-pool|480|0|path_depth=12|vcm.toml"
   "veach-mis|240|0|path_depth=10|bdpt.toml"
   "lamp-shade|240|0|path_depth=10|bdpt.toml"
+  "lens-spot|300|0|path_depth=10|bdpt.toml"
+  "glass-rod|300|0|path_depth=10|bdpt.toml"
 )
 budget_kind="${BUDGET:-time}"
 

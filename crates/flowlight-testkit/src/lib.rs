@@ -61,6 +61,7 @@ use flowlight_sdk::{Scene, Stats, Tracer};
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
+pub mod caustics;
 pub mod gltf;
 pub mod research;
 pub mod scenes;

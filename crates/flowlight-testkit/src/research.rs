@@ -32,7 +32,7 @@ pub struct ResearchScene {
 
 /// The second config of scene `name`: the same scene, resolution and samples as the MCPT
 /// one, rendered by `plugin` at `path_depth`.
-fn method_config(
+pub(crate) fn method_config(
     files: SceneFiles,
     file: &'static str,
     plugin: &str,
@@ -62,14 +62,14 @@ fn scale(a: [f64; 3], s: f64) -> [f64; 3] {
 
 /// Triangles gathered for one [`SceneBuilder::triangles`] call of a smooth mesh.
 #[derive(Default)]
-struct Tris {
-    positions: Vec<[f64; 3]>,
-    normals: Vec<[f64; 3]>,
-    indices: Vec<u32>,
+pub(crate) struct Tris {
+    pub(crate) positions: Vec<[f64; 3]>,
+    pub(crate) normals: Vec<[f64; 3]>,
+    pub(crate) indices: Vec<u32>,
 }
 
 impl Tris {
-    fn vertex(&mut self, p: [f64; 3], n: [f64; 3]) -> u32 {
+    pub(crate) fn vertex(&mut self, p: [f64; 3], n: [f64; 3]) -> u32 {
         self.positions.push(p);
         self.normals.push(norm(n));
         self.positions.len() as u32 - 1
@@ -77,7 +77,7 @@ impl Tris {
 
     /// Triangle a b c, wound so that its front face points to `facing`: the loader takes a
     /// closed volume's outside from the winding.
-    fn tri(&mut self, a: u32, b: u32, c: u32, facing: [f64; 3]) {
+    pub(crate) fn tri(&mut self, a: u32, b: u32, c: u32, facing: [f64; 3]) {
         let p = |k: u32| self.positions[k as usize];
         let n = cross(sub(p(b), p(a)), sub(p(c), p(a)));
         let t = if dot(n, facing) < 0.0 {
@@ -88,12 +88,12 @@ impl Tris {
         self.indices.extend(t);
     }
 
-    fn quad(&mut self, v: [u32; 4], facing: [f64; 3]) {
+    pub(crate) fn quad(&mut self, v: [u32; 4], facing: [f64; 3]) {
         self.tri(v[0], v[1], v[2], facing);
         self.tri(v[0], v[2], v[3], facing);
     }
 
-    fn write(&self, b: &mut SceneBuilder, material: &str) {
+    pub(crate) fn write(&self, b: &mut SceneBuilder, material: &str) {
         b.triangles(
             material,
             &self.positions,
@@ -130,7 +130,7 @@ fn slab(
 }
 
 /// The inside of an axis-aligned room `lo`..`hi`: floor, ceiling and four walls facing in.
-fn room(b: &mut SceneBuilder, floor: &str, walls: &str, lo: [f64; 3], hi: [f64; 3]) {
+pub(crate) fn room(b: &mut SceneBuilder, floor: &str, walls: &str, lo: [f64; 3], hi: [f64; 3]) {
     let ([x0, y0, z0], [x1, y1, z1]) = (lo, hi);
     b.quad(
         floor,
@@ -178,7 +178,7 @@ fn table(b: &mut SceneBuilder, top: &str, legs: &str, lo: [f64; 3], hi: [f64; 3]
 }
 
 /// A lamp quad at height `y` over x in `x`, z in `z`, facing down.
-fn ceiling_lamp(
+pub(crate) fn ceiling_lamp(
     b: &mut SceneBuilder,
     material: &str,
     y: f64,
@@ -650,5 +650,12 @@ shade's openings and land on the ceiling and the table, where camera subpaths co
 
 /// Every research scene, in the order `make-scenes` writes them.
 pub fn all() -> Vec<ResearchScene> {
-    vec![veach_door(), water_pool(), veach_mis(), lamp_shade()]
+    vec![
+        veach_door(),
+        water_pool(),
+        veach_mis(),
+        lamp_shade(),
+        crate::caustics::lens_spot(),
+        crate::caustics::glass_rod(),
+    ]
 }
