@@ -1,9 +1,10 @@
 #!/usr/bin/env python3
 """Flowlight side by side with LuxCore 2.11 (path tracing with its Metropolis and random
 samplers, bidirectional path tracing with and without Metropolis, bidirectional with vertex
-merging) on the glass caustic or the Cornell box, at equal wall time: relMSE against a
-Flowlight reference and efficiency 1/(relMSE x wall time), as ratios to the baselines present,
-printed as a markdown table (docs/results.md, "Flowlight against LuxCore").
+merging) on the glass caustic, the Cornell box or the two caustic scenes kept out of tuning
+(lens-spot, glass-rod), at equal wall time: relMSE against a Flowlight reference and
+efficiency 1/(relMSE x wall time), as ratios to the baselines present, printed as a markdown
+table (docs/results.md, "Flowlight against LuxCore").
 
 Run `setup-luxcore.sh` once (a venv with pyluxcore 2.11.2 from PyPI, pinned by hash), build
 the release binaries (`cargo build --release --workspace`), then, from anywhere:
@@ -25,9 +26,9 @@ Renderers (`--renderers`, comma separated; the default is the first four):
                             the scene's bounding-sphere radius), bidirvm.alpha 0.95
   luxcore-light             LIGHTCPU (light tracing only: no directly seen lamp, no surface seen
                             through glass; a diagnostic of the export, not a competitor)
-  flowlight-lighttrace, flowlight-bdpt, flowlight-vcm
+  flowlight-lighttrace, flowlight-bdpt, flowlight-vcm, flowlight-pssmlt, flowlight-mmlt
                             the scene's MCPT config with its [integrator] replaced by `plugin =
-                            "lighttrace" | "bdpt" | "vcm"` and nothing else; refused up front, in
+                            "lighttrace" | "bdpt" | "vcm" | "pssmlt" | "mmlt"` and nothing else; refused up front, in
                             one line, when `flowlight plugins` does not list the plugin.
 PATHCPU gets path.pathdepth.{total,diffuse,glossy,specular} = --depth; BIDIRCPU, BIDIRVMCPU
 and LIGHTCPU get path.maxdepth = --depth + 1 (the eye subpath may hit the lamp after --depth
@@ -96,7 +97,8 @@ LUXCORE = {
 }
 # Flowlight renderers whose integrator is only the plugin's name: renderer -> plugin.
 FLOWLIGHT_PLUGIN_ONLY = {"flowlight-lighttrace": "lighttrace", "flowlight-bdpt": "bdpt",
-                         "flowlight-vcm": "vcm"}
+                         "flowlight-vcm": "vcm", "flowlight-pssmlt": "pssmlt",
+                         "flowlight-mmlt": "mmlt"}
 RENDERERS = ("flowlight-erpt", "flowlight-mcpt", *FLOWLIGHT_PLUGIN_ONLY, *LUXCORE)
 # Efficiency columns, in this order, for those present in --renderers.
 BASELINES = {"flowlight-mcpt": "Flowlight MCPT", "luxcore-metropolis": "LuxCore Metropolis",
@@ -110,6 +112,13 @@ SCENES = {
     "cornell-box": {"title": "Cornell box", "mcpt": "cornell-box.toml", "mcpt_sets": [],
                     "mcpt_label": "entangled, throughput", "reference": "cornell-box.toml",
                     "reference_label": "MCPT"},
+    # The two caustic scenes kept out of every tuning (crates/flowlight-testkit/src/caustics.rs).
+    "lens-spot": {"title": "Lens spot", "mcpt": "lens-spot.toml", "mcpt_sets": [],
+                  "mcpt_label": "entangled, throughput", "reference": "bdpt.toml",
+                  "reference_label": "BDPT"},
+    "glass-rod": {"title": "Glass rod", "mcpt": "glass-rod.toml", "mcpt_sets": [],
+                  "mcpt_label": "entangled, throughput", "reference": "bdpt.toml",
+                  "reference_label": "BDPT"},
 }
 ALLOWED_EXTENSIONS = {"KHR_materials_emissive_strength", "KHR_materials_ior",
                       "KHR_materials_transmission", "KHR_materials_volume",

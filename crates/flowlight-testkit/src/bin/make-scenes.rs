@@ -23,7 +23,8 @@
 //!
 //! and the research scenes of the bidirectional integrators (`src/research.rs` describes
 //! them), each with a second config for the method it is shown with (`bdpt.toml` or
-//! `vcm.toml`): `veach-door`, `water-pool`, `veach-mis` and `lamp-shade`.
+//! `vcm.toml`): `veach-door`, `water-pool`, `veach-mis` and `lamp-shade`; and the two caustic
+//! scenes kept out of every tuning (`src/caustics.rs`), `lens-spot` and `glass-rod`.
 //!
 //! `tests/scenes.rs` of this crate checks that the committed files are what this writes.
 
