@@ -124,3 +124,46 @@ fn the_bidirectional_suite_covers_every_suite_and_research_scene_with_committed_
         .collect();
     assert_eq!(plugins, ["mcpt", "lighttrace", "bdpt", "vcm", "erpt"]);
 }
+
+/// The cross-family suite: every scene of the bidirectional suite plus the two caustic scenes
+/// kept out of tuning, each with a committed reference that matches it at the suite's size
+/// and depth; one method per family (and the hand-tuned ERPT configs, found beside the scenes
+/// of `scenes/suite.toml` only).
+#[test]
+fn the_cross_family_suite_covers_every_scene_with_matching_references() {
+    let suite = load_suite(&scenes().join("experiments/suite-mcmc.toml")).unwrap();
+    let bidir = load_suite(&scenes().join("experiments/suite-bidir.toml")).unwrap();
+    let main = load_suite(&scenes().join("suite.toml")).unwrap();
+    let mut want: Vec<&str> = bidir.scenes.iter().map(|s| s.name.as_str()).collect();
+    want.extend(["lens-spot", "glass-rod"]);
+    let mut names: Vec<&str> = suite.scenes.iter().map(|s| s.name.as_str()).collect();
+    want.sort_unstable();
+    names.sort_unstable();
+    assert_eq!(names, want);
+    for s in &suite.scenes {
+        let path = s.committed_reference.clone().unwrap();
+        let r = read_reference(&path).unwrap_or_else(|e| panic!("{}: {e}", s.name));
+        let mut cfg = flowlight_scene::config::load_config(&s.config).unwrap();
+        cfg.width = s.width.unwrap();
+        cfg.height = s.height.unwrap();
+        check_reference_matches(&r, &path, &s.name, &cfg).unwrap();
+        assert!(r.floor().is_some_and(|f| f > 0.0 && f < 0.05), "{}", s.name);
+    }
+    let plugins: Vec<&str> = suite
+        .methods
+        .iter()
+        .filter_map(|m| m.plugin.as_deref())
+        .collect();
+    for family in ["mcpt", "bdpt", "vcm", "pssmlt", "mmlt", "erpt"] {
+        assert!(plugins.contains(&family), "no {family} method");
+    }
+    let tuned = suite
+        .methods
+        .iter()
+        .find(|m| m.label == "erpt-tuned")
+        .unwrap();
+    for s in &suite.scenes {
+        let in_main = main.scenes.iter().any(|m| m.name == s.name);
+        assert_eq!(tuned.runs_on(s), in_main, "{}: erpt.toml", s.name);
+    }
+}
