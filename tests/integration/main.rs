@@ -34,6 +34,7 @@ mod lights;
 mod orthographic;
 mod outsider;
 mod plugins;
+mod pssmlt;
 mod ray_batches;
 mod sampler;
 mod stability;
