@@ -1,0 +1,276 @@
+//! ERPT seeded by BDPT (`seeds = "bdpt"`): every connection strategy (s, t) of a BDPT pixel
+//! sample is a seed whose estimate is its MIS weight times f/p with the chains' own target
+//! function, the seeds of one sample add up to the `bdpt` plugin's deposits for it, ERPT with
+//! them is unbiased against MCPT (a diffuse box and a glass caustic), and every mutation plugin
+//! takes them, light-tracing seeds and light-side Dirac chains included.
+
+use crate::common;
+
+use common::{
+    assert_image_mean, assert_regions_unbiased, independent_runs, mutations, renderer_at,
+    MeanRule,
+};
+use flowlight_core::path::Path;
+use flowlight_core::Rgb;
+use flowlight_host::intersector::UnitTracer;
+use flowlight_mcmc::measurement;
+use flowlight_pathtrace::bidir::strategy_seeds::StrategySeeds;
+use flowlight_pathtrace::bidir::{BidirSettings, Heuristic, Techniques};
+use flowlight_pathtrace::seeds::{SeedStore, Technique};
+use flowlight_pathtrace::PathSettings;
+use flowlight_sdk::{Scene, Tracer};
+
+fn s(v: &str) -> toml::Value {
+    toml::Value::String(v.into())
+}
+
+/// BDPT's settings as ERPT's seeds use them, at `path_depth`.
+fn bidir_settings(path_depth: u32) -> BidirSettings {
+    let mut path = PathSettings::from_params(&flowlight_sdk::Params::from_slice(&[])).unwrap();
+    path.max_ray_depth = 32;
+    path.path_depth = path_depth;
+    BidirSettings {
+        path,
+        heuristic: Heuristic::Power,
+        techniques: Techniques::BDPT,
+        lighting_layers: false,
+        strategy_layers: false,
+        radius: 0.0,
+        radius_alpha: 1.0,
+    }
+}
+
+/// Seeds checked per kind of strategy: s = 0, s = 1, s ≥ 2 with t ≥ 2, t = 1; and of those
+/// with a Dirac vertex on the light side of their connection.
+#[derive(Debug, Default)]
+struct Kinds {
+    by_kind: [usize; 4],
+    light_side_dirac: usize,
+}
+
+/// For every pixel sample of a 24² image of `config`: the seeds add up to the `bdpt` plugin's
+/// deposits of that sample (camera contributions and light-tracing splats), and every seed with
+/// a path is X = w · f(x̄)/p(x̄) with `flowlight-mcmc`'s f.
+fn check_bdpt_seeds(config: &str, path_depth: u32) -> Kinds {
+    let renderer = renderer_at(config, 24, 24, 1, &[]);
+    // SAFETY: the renderer keeps the view's data alive.
+    let scene = unsafe { Scene::from_view(renderer.instance.view()) };
+    let mut unit_tracer = UnitTracer::new(&renderer.scene, renderer.intersector.as_ref());
+    let table = unit_tracer.table();
+    let tracer = Tracer::new(&table);
+    let settings = bidir_settings(path_depth);
+    let mut sampler = StrategySeeds::new(&scene, &tracer, &settings);
+    let mut store = SeedStore::default();
+    let mut path = Box::new(Path::empty());
+    let mut kinds = Kinds::default();
+    let (mut zero_f, mut outliers, mut total) = (0usize, 0usize, 0usize);
+    for sample in 0..3u32 {
+        for y in 0..24 {
+            for x in 0..24 {
+                let key = (x, y, sample);
+                let want = sampler.estimate(31, key);
+                store.clear();
+                sampler.trace_sample(31, key, &mut store);
+                let bdpt = want.contributions.total()
+                    + want.splats.iter().fold(Rgb::ZERO, |a, s| a + s.2);
+                let seeds = store.seeds.iter().fold(Rgb::ZERO, |a, s| a + s.estimate);
+                let (a, b) = (bdpt.luminance(), seeds.luminance());
+                assert!(
+                    (a - b).abs() <= 1e-5 * a.max(b) + 1e-12,
+                    "{config} {key:?}: BDPT {a} vs seeds {b}"
+                );
+                for k in 0..store.seeds.len() {
+                    let sd = store.seeds[k];
+                    let Technique::Bidirectional { s, t } = sd.technique else {
+                        panic!("{config}: a BDPT seed of technique {:?}", sd.technique);
+                    };
+                    store.path(k, &mut path);
+                    assert_eq!(path.vertex_count, s + t, "{config}: ({s}, {t})");
+                    let f = measurement(&scene, &path);
+                    total += 1;
+                    if f.luminance() == 0.0 {
+                        zero_f += 1;
+                        continue;
+                    }
+                    assert!(
+                        sd.mis_weight > 0.0 && sd.mis_weight <= 1.0 + 1e-6 && sd.density > 0.0,
+                        "{config}: ({s}, {t}) w = {} p = {}",
+                        sd.mis_weight,
+                        sd.density
+                    );
+                    for (c, (x, fc)) in [(sd.estimate.r, f.r), (sd.estimate.g, f.g)]
+                        .into_iter()
+                        .enumerate()
+                    {
+                        let want = sd.mis_weight as f64 * fc as f64 / sd.density;
+                        let error = (x as f64 - want).abs() / (want.abs() + 1e-9);
+                        if error > 2e-3 {
+                            outliers += 1;
+                        }
+                        assert!(
+                            error < 0.05,
+                            "{config}: ({s}, {t}) {} channel {c}: X = {x} but w·f/p = {} · {fc} / {} = {want}",
+                            path.heckbert(),
+                            sd.mis_weight,
+                            sd.density
+                        );
+                    }
+                    let kind = match (s, t) {
+                        (0, _) => 0,
+                        (1, _) if t > 1 => 1,
+                        (_, 1) => 3,
+                        _ => 2,
+                    };
+                    kinds.by_kind[kind] += 1;
+                    let light_side = &path.vertices()[t as usize..path.vertex_count as usize - 1];
+                    if light_side.iter().any(|v| v.node.is_specular()) {
+                        kinds.light_side_dirac += 1;
+                    }
+                }
+            }
+        }
+    }
+    assert!(
+        outliers * 200 <= total,
+        "{config}: {outliers} of {total} seeds differ from w·f/p by over 0.2 %"
+    );
+    assert!(
+        zero_f * 200 <= total,
+        "{config}: {zero_f} of {total} seeds have f = 0 in the target function"
+    );
+    kinds
+}
+
+#[test]
+fn bdpt_seeds_are_mis_weighted_measurements_that_sum_to_bdpt() {
+    let k = check_bdpt_seeds("cornell-box/cornell-box.toml", 8);
+    assert!(k.by_kind.iter().all(|&n| n > 100), "cornell box: {k:?}");
+    let k = check_bdpt_seeds("glass-caustic/glass-caustic.toml", 10);
+    assert!(k.by_kind.iter().all(|&n| n > 20), "glass caustic: {k:?}");
+    assert!(k.light_side_dirac > 20, "glass caustic: {k:?}");
+}
+
+/// ERPT with BDPT seeds of `config` with `params` (M = 32, N = 32, K = 8 unless given) against
+/// `reference` per 8×8 region and in the image mean; returns the last run's stats.
+fn check_unbiased(
+    config: &str,
+    label: &str,
+    params: &[(&str, toml::Value)],
+    reference: &[Rgb],
+) -> flowlight_host::render::RenderOutcome {
+    let mut all: Vec<(&str, toml::Value)> = vec![
+        ("seeds", s("bdpt")),
+        ("mutations_per_sample", 32.0.into()),
+        ("chain_length", toml::Value::Integer(32)),
+        ("film_window", toml::Value::Integer(8)),
+        ("direct", s("erpt")),
+        ("chains_for", s("all")),
+    ];
+    for (k, v) in params {
+        all.retain(|(a, _)| a != k);
+        all.push((k, v.clone()));
+    }
+    let (images, last) =
+        independent_runs(label, 6, 3000, &|| renderer_at(config, 32, 32, 4, &all));
+    assert_regions_unbiased(label, &images, reference);
+    assert_image_mean(label, &images, reference, MeanRule::WithinOrZ(0.03, 4.0));
+    last
+}
+
+/// MCPT of `config` at 32², `spp` samples per pixel, at the seeds' depth.
+fn mcpt_reference(config: &str, spp: u32) -> Vec<Rgb> {
+    let mut cfg = flowlight_scene::config::load_config(&common::scene_config(config)).unwrap();
+    cfg.width = 32;
+    cfg.height = 32;
+    cfg.integrator_plugin = "mcpt".into();
+    cfg.integrator_params.retain(|(k, _)| k == "path_depth");
+    let ov = flowlight_host::renderer::Overrides {
+        spp: Some(spp),
+        threads: Some(2),
+        ..Default::default()
+    };
+    let mut s = flowlight_host::renderer::Renderer::from_config(cfg, &ov).unwrap();
+    s.exr_path = None;
+    s.png_path = None;
+    s.options.seed = 77;
+    common::render(&s).frame.image()
+}
+
+fn stat(out: &flowlight_host::render::RenderOutcome, name: &str) -> f64 {
+    out.stats
+        .integrator
+        .iter()
+        .find(|(n, _)| n == name)
+        .map(|(_, v)| *v)
+        .unwrap_or_else(|| panic!("no statistic '{name}'"))
+}
+
+#[test]
+fn erpt_with_bdpt_seeds_is_unbiased_on_the_cornell_box() {
+    let reference = mcpt_reference("cornell-box/erpt.toml", 512);
+    let mix = mutations(&[
+        ("blow", &[("weight", 0.5.into())]),
+        ("drill", &[("weight", 0.3.into())]),
+        ("hard-reconnection", &[("weight", 0.2.into())]),
+    ]);
+    let out = check_unbiased(
+        "cornell-box/erpt.toml",
+        "cornell box, bdpt seeds",
+        &[("mutations", mix)],
+        &reference,
+    );
+    // Light-tracing seeds land all over the film, outside their unit's flanged tile too.
+    assert!(stat(&out, "seeds_outside_flange") > 0.0);
+}
+
+#[test]
+fn erpt_with_bdpt_seeds_is_unbiased_on_the_glass_caustic() {
+    let reference = mcpt_reference("glass-caustic/erpt.toml", 1024);
+    let mix = mutations(&[
+        ("multichain-perturbation", &[("weight", 0.5.into())]),
+        ("caustic-perturbation", &[("weight", 0.2.into())]),
+        ("blow", &[("weight", 0.3.into())]),
+    ]);
+    check_unbiased(
+        "glass-caustic/erpt.toml",
+        "glass caustic, bdpt seeds",
+        &[("mutations", mix), ("path_depth", toml::Value::Integer(10))],
+        &reference,
+    );
+}
+
+/// Every mutation plugin, alone, takes BDPT seeds on the glass caustic (light-tracing seeds,
+/// light-side chains through the sphere): the render finishes with a finite image, no invalid
+/// deposit, and every step counted as a domain hit or miss.
+#[test]
+fn every_mutation_plugin_takes_bdpt_seeds() {
+    for plugin in [
+        "blow",
+        "drill",
+        "hard-reconnection",
+        "soft-reconnection",
+        "lens-perturbation",
+        "caustic-perturbation",
+        "multichain-perturbation",
+        "bxdf-extension",
+    ] {
+        let params = [
+            ("seeds", s("bdpt")),
+            ("mutations", mutations(&[(plugin, &[])])),
+            ("mutations_per_sample", 4.0.into()),
+            ("chain_length", toml::Value::Integer(8)),
+            ("direct", s("erpt")),
+            ("chains_for", s("all")),
+            ("quantum", s("tile")),
+        ];
+        let label = format!("glass caustic, bdpt seeds, {plugin}");
+        let (images, out) = independent_runs(&label, 1, 5, &|| {
+            renderer_at("glass-caustic/erpt.toml", 24, 24, 1, &params)
+        });
+        let mean = images[0].iter().map(|c| c.luminance() as f64).sum::<f64>();
+        assert!(mean > 0.0, "{label}: a black image");
+        let steps = stat(&out, "total.mutations");
+        let hits = stat(&out, "total.domain_hit") + stat(&out, "total.domain_miss");
+        assert!(steps > 100.0 && hits == steps, "{label}: {steps} steps, {hits} hits and misses");
+    }
+}
