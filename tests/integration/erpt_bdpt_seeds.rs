@@ -122,7 +122,8 @@ fn check_bdpt_seeds(config: &str, path_depth: u32) -> Kinds {
                         _ => 2,
                     };
                     kinds.by_kind[kind] += 1;
-                    let light_side = &path.vertices()[t as usize..path.vertex_count as usize - 1];
+                    let n = path.vertex_count as usize;
+                    let light_side = &path.vertices()[(t as usize).min(n - 1)..n - 1];
                     if light_side.iter().any(|v| v.node.is_specular()) {
                         kinds.light_side_dirac += 1;
                     }
@@ -144,9 +145,10 @@ fn check_bdpt_seeds(config: &str, path_depth: u32) -> Kinds {
 #[test]
 fn bdpt_seeds_are_mis_weighted_measurements_that_sum_to_bdpt() {
     let k = check_bdpt_seeds("cornell-box/cornell-box.toml", 8);
-    assert!(k.by_kind.iter().all(|&n| n > 100), "cornell box: {k:?}");
+    // The lamp is small: few camera paths hit it (s = 0).
+    assert!(k.by_kind[0] > 10 && k.by_kind[1..].iter().all(|&n| n > 1000), "cornell box: {k:?}");
     let k = check_bdpt_seeds("glass-caustic/glass-caustic.toml", 10);
-    assert!(k.by_kind.iter().all(|&n| n > 20), "glass caustic: {k:?}");
+    assert!(k.by_kind[0] > 0 && k.by_kind[1..].iter().all(|&n| n > 200), "glass caustic: {k:?}");
     assert!(k.light_side_dirac > 20, "glass caustic: {k:?}");
 }
 
@@ -213,14 +215,16 @@ fn erpt_with_bdpt_seeds_is_unbiased_on_the_cornell_box() {
         ("drill", &[("weight", 0.3.into())]),
         ("hard-reconnection", &[("weight", 0.2.into())]),
     ]);
+    // K = 2: a flange of 4 pixels around 16-pixel tiles, so that many light-tracing seeds
+    // start outside their unit's flanged tile, and their chains still run.
     let out = check_unbiased(
         "cornell-box/erpt.toml",
         "cornell box, bdpt seeds",
-        &[("mutations", mix)],
+        &[("mutations", mix), ("film_window", toml::Value::Integer(2))],
         &reference,
     );
-    // Light-tracing seeds land all over the film, outside their unit's flanged tile too.
-    assert!(stat(&out, "seeds_outside_flange") > 0.0);
+    let (outside, seeds) = (stat(&out, "seeds_outside_flange"), stat(&out, "seeds"));
+    assert!(outside > 0.02 * seeds, "{outside} of {seeds} seeds outside the flange");
 }
 
 #[test]

@@ -126,7 +126,8 @@ impl LightPaths<'_, '_> {
             }
             partial.arrive(self.it, hit.t * hit.t, cos_in, length > 0 || !distant);
             if let Some(r) = self.recorder {
-                r.borrow_mut().light_hit(&hit, state.step, state.prev_p);
+                r.borrow_mut()
+                    .light_hit(&hit, (state.step, state.eta2), state.prev_p);
             }
             length += 1;
             state.physical += 1;

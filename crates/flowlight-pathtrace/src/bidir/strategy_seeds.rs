@@ -120,6 +120,8 @@ struct Recorded {
     hit: SurfaceHit,
     dirac_in: bool,
     density: f64,
+    /// The subpath's product of η'² up to here (light side: the [`run_jacobian`]'s η').
+    eta2: f32,
 }
 
 /// What a pixel sample's subpaths and strategies leave for the seeds: the emission sample, the
@@ -166,8 +168,8 @@ impl StrategyRecorder {
         self.light_survival = 1.0;
     }
 
-    /// The light subpath reaches `hit` by `step` from `from`.
-    pub(super) fn light_hit(&mut self, hit: &SurfaceHit, step: Step, from: Vec3) {
+    /// The light subpath reaches `hit` by `step` from `from`, its product of η'² `eta2`.
+    pub(super) fn light_hit(&mut self, hit: &SurfaceHit, (step, eta2): (Step, f32), from: Vec3) {
         let (before, step_density) = match (self.light.last(), self.emission) {
             (Some(prev), _) => (prev.density, Self::step_density(step, prev.hit.p, hit)),
             (None, Some(e)) => {
@@ -185,6 +187,7 @@ impl StrategyRecorder {
             hit: *hit,
             dirac_in: matches!(step, Step::Dirac(_)),
             density: before * step_density * self.light_survival,
+            eta2,
         });
         self.light_survival = 1.0;
     }
@@ -201,6 +204,7 @@ impl StrategyRecorder {
             hit: *hit,
             dirac_in: matches!(step, Step::Dirac(_)),
             density: before * Self::step_density(step, from, hit) * self.camera_survival,
+            eta2: 1.0,
         });
         self.camera_survival = 1.0;
     }
@@ -468,6 +472,12 @@ impl<'a, 'b> StrategySeeds<'a, 'b> {
             }
         };
         self.set_nodes(rec, camera_count, light_hits, event.end);
+        let light_part = matches!(event.end, StrategyEnd::LightVertex | StrategyEnd::Eye { .. });
+        let density = if light_part {
+            density * self.light_runs_jacobian(rec, camera_count, light_hits)
+        } else {
+            density
+        };
         Some((density, raster))
     }
 
@@ -506,6 +516,58 @@ impl<'a, 'b> StrategySeeds<'a, 'b> {
             self.path[k].node = node;
             self.path[k].component = component;
         }
+    }
+}
+
+/// G(u, v) = |n_u·ω||n_v·ω|/d² of the segment between two stored vertices (geometric
+/// normals), for a vertex at infinity `v` only |n_u·ω|: the area (or solid-angle) Jacobians of
+/// the target's measure on both ends.
+fn geometry(scene: &Scene, u: &PathVertex, v: &PathVertex) -> f64 {
+    if is_distant(scene, v) {
+        return u.ng.dot(v.ng).abs() as f64;
+    }
+    let d = v.p - u.p;
+    let d2 = d.length_squared() as f64;
+    (u.ng.dot(d).abs() as f64) * (v.ng.dot(d).abs() as f64) / (d2 * d2)
+}
+
+impl StrategySeeds<'_, '_> {
+    /// p_eye / p_light of the light part of `self.path` (module docs, "Light-side Dirac
+    /// chains"): the product over its Dirac runs x_a … x_b of G(x_{a−1}, x_a) / G(x_b, x_{b+1})
+    /// times, per vertex k of the run, ρ_k = η'²_k · |n_g·ω_L||n_s·ω_E| / (|n_g·ω_E||n_s·ω_L|)
+    /// (ω_E towards the eye side, ω_L towards the light side, η'_k the light subpath's).
+    fn light_runs_jacobian(&self, rec: &StrategyRecorder, camera_count: usize, light_hits: usize) -> f64 {
+        let (p, n) = (&self.path, self.path.len());
+        // Path index k of the light part is light vertex y_j, j = light_hits + camera_count + 1 − k;
+        // η'² of the light subpath on arriving there.
+        let eta2_at = |k: usize| {
+            let j = light_hits + camera_count + 1 - k;
+            j.checked_sub(1).map_or(1.0, |i| rec.light[i].eta2) as f64
+        };
+        let direction = |k: usize, to: usize| {
+            if to == n - 1 && is_distant(self.scene, &p[to]) {
+                p[to].ng
+            } else {
+                (p[to].p - p[k].p).normalize_or_zero()
+            }
+        };
+        let mut factor = 1.0;
+        let mut run_start = None;
+        for k in camera_count + 1..n - 1 {
+            if !p[k].node.is_specular() {
+                continue;
+            }
+            let a = *run_start.get_or_insert(k);
+            let (w_eye, w_light) = (direction(k, k - 1), direction(k, k + 1));
+            let (v, cos) = (&p[k], |n: Vec3, w: Vec3| n.dot(w).abs() as f64);
+            let eta2 = eta2_at(k - 1) / eta2_at(k);
+            factor *= eta2 * cos(v.ng, w_light) * cos(v.ns, w_eye) / (cos(v.ng, w_eye) * cos(v.ns, w_light));
+            if !p[k + 1].node.is_specular() {
+                factor *= geometry(self.scene, &p[a - 1], &p[a]) / geometry(self.scene, &p[k], &p[k + 1]);
+                run_start = None;
+            }
+        }
+        factor
     }
 }
 
