@@ -7,8 +7,7 @@
 use crate::common;
 
 use common::{
-    assert_image_mean, assert_regions_unbiased, independent_runs, mutations, renderer_at,
-    MeanRule,
+    assert_image_mean, assert_regions_unbiased, independent_runs, mutations, renderer_at, MeanRule,
 };
 use flowlight_core::path::Path;
 use flowlight_core::Rgb;
@@ -71,8 +70,8 @@ fn check_bdpt_seeds(config: &str, path_depth: u32) -> Kinds {
                 let want = sampler.estimate(31, key);
                 store.clear();
                 sampler.trace_sample(31, key, &mut store);
-                let bdpt = want.contributions.total()
-                    + want.splats.iter().fold(Rgb::ZERO, |a, s| a + s.2);
+                let bdpt =
+                    want.contributions.total() + want.splats.iter().fold(Rgb::ZERO, |a, s| a + s.2);
                 let seeds = store.seeds.iter().fold(Rgb::ZERO, |a, s| a + s.estimate);
                 let (a, b) = (bdpt.luminance(), seeds.luminance());
                 assert!(
@@ -146,9 +145,15 @@ fn check_bdpt_seeds(config: &str, path_depth: u32) -> Kinds {
 fn bdpt_seeds_are_mis_weighted_measurements_that_sum_to_bdpt() {
     let k = check_bdpt_seeds("cornell-box/cornell-box.toml", 8);
     // The lamp is small: few camera paths hit it (s = 0).
-    assert!(k.by_kind[0] > 10 && k.by_kind[1..].iter().all(|&n| n > 1000), "cornell box: {k:?}");
+    assert!(
+        k.by_kind[0] > 10 && k.by_kind[1..].iter().all(|&n| n > 1000),
+        "cornell box: {k:?}"
+    );
     let k = check_bdpt_seeds("glass-caustic/glass-caustic.toml", 10);
-    assert!(k.by_kind[0] > 0 && k.by_kind[1..].iter().all(|&n| n > 200), "glass caustic: {k:?}");
+    assert!(
+        k.by_kind[0] > 0 && k.by_kind[1..].iter().all(|&n| n > 200),
+        "glass caustic: {k:?}"
+    );
     assert!(k.light_side_dirac > 20, "glass caustic: {k:?}");
 }
 
@@ -172,8 +177,7 @@ fn check_unbiased(
         all.retain(|(a, _)| a != k);
         all.push((k, v.clone()));
     }
-    let (images, last) =
-        independent_runs(label, 6, 3000, &|| renderer_at(config, 32, 32, 4, &all));
+    let (images, last) = independent_runs(label, 6, 3000, &|| renderer_at(config, 32, 32, 4, &all));
     assert_regions_unbiased(label, &images, reference);
     assert_image_mean(label, &images, reference, MeanRule::WithinOrZ(0.03, 4.0));
     last
@@ -224,7 +228,10 @@ fn erpt_with_bdpt_seeds_is_unbiased_on_the_cornell_box() {
         &reference,
     );
     let (outside, seeds) = (stat(&out, "seeds_outside_flange"), stat(&out, "seeds"));
-    assert!(outside > 0.02 * seeds, "{outside} of {seeds} seeds outside the flange");
+    assert!(
+        outside > 0.02 * seeds,
+        "{outside} of {seeds} seeds outside the flange"
+    );
 }
 
 #[test]
@@ -275,6 +282,9 @@ fn every_mutation_plugin_takes_bdpt_seeds() {
         assert!(mean > 0.0, "{label}: a black image");
         let steps = stat(&out, "total.mutations");
         let hits = stat(&out, "total.domain_hit") + stat(&out, "total.domain_miss");
-        assert!(steps > 100.0 && hits == steps, "{label}: {steps} steps, {hits} hits and misses");
+        assert!(
+            steps > 100.0 && hits == steps,
+            "{label}: {steps} steps, {hits} hits and misses"
+        );
     }
 }

@@ -5,7 +5,10 @@
 //! paths, one light connection each (`seeds = "untangled"`, the thesis'), or entangled paths
 //! split into their techniques (`seeds = "entangled"`: every light connection, emitter hit
 //! and environment escape is a seed with its MIS-weighted estimate; `flowlight_pathtrace::seeds`
-//! has the argument why their energy density is f). Each seed spawns chains that redistribute
+//! has the argument why their energy density is f), or BDPT samples split into their
+//! connection strategies (`seeds = "bdpt"`, `flowlight_pathtrace::bidir::strategy_seeds`; a
+//! light-tracing seed runs its chains from its own raster position, wherever it lies, and a
+//! seed whose path the target function gives no energy goes to its pixel). Each seed spawns chains that redistribute
 //! its energy over nearby paths with the mutation strategies listed in the config, each its own
 //! plugin:
 //!
@@ -60,9 +63,9 @@ use flowlight_core::path::{NodeType, Path};
 use flowlight_core::rng::Rng;
 use flowlight_core::sobol::SobolSampler;
 use flowlight_core::Rgb;
-use flowlight_pathtrace::sampler::{sample_start, PixelSampler, SamplerKind};
 use flowlight_pathtrace::bidir::strategy_seeds::StrategySeeds;
 use flowlight_pathtrace::bidir::{BidirSettings, Heuristic, Techniques};
+use flowlight_pathtrace::sampler::{sample_start, PixelSampler, SamplerKind};
 use flowlight_pathtrace::seeds::{self, SeedFilter, SeedStore, SeedWavefront};
 use flowlight_pathtrace::walk::units;
 use flowlight_pathtrace::{entangled, untangled, SampleContributions};

@@ -11,8 +11,8 @@
 use super::grid::HashGrid;
 use super::light_path::layer_of;
 use super::mis::{self, ConnectionDensities, Iteration, Partial, Techniques};
-use super::vertex::{self, adjoint_cos, importance_bsdf, LightVertex, Side, Surface};
 use super::strategy_seeds::{StrategyEnd, StrategyEvent, StrategyRecorder};
+use super::vertex::{self, adjoint_cos, importance_bsdf, LightVertex, Side, Surface};
 use super::BidirSettings;
 use crate::shading::{light_connection, light_sample, side_consistent, Shading};
 use crate::walk::{Step, WalkState};
@@ -160,7 +160,8 @@ impl CameraPaths<'_, '_> {
             state.last = roulette >= 1.0 || state.physical >= settings.path.max_ray_depth;
             if let Some(r) = self.recorder {
                 let rolled = !state.last && roulette > 0.0;
-                r.borrow_mut().camera_scatter(if rolled { 1.0 - roulette } else { 1.0 });
+                r.borrow_mut()
+                    .camera_scatter(if rolled { 1.0 - roulette } else { 1.0 });
             }
             let surface = Surface {
                 hit: &hit,
@@ -311,7 +312,11 @@ impl CameraPaths<'_, '_> {
             out.add(layer, value);
             if let Some(r) = self.recorder {
                 // What next-event estimation divides by: the area density of an area light.
-                let pdf = if ls.kind == LightKind::Area { ls.pdf } else { conn.pdf };
+                let pdf = if ls.kind == LightKind::Area {
+                    ls.pdf
+                } else {
+                    conn.pdf
+                };
                 let vertex = crate::untangled::light_vertex(scene, &ls, here.hit.p);
                 r.borrow_mut().event(StrategyEvent {
                     s: 1,

@@ -28,8 +28,8 @@
 //! ([`super::render`]).
 
 use super::mis::{self, Iteration, Partial};
-use super::vertex::{self, adjoint_cos, importance_bsdf, LightVertex, Side, Surface};
 use super::strategy_seeds::{StrategyEnd, StrategyEvent, StrategyRecorder};
+use super::vertex::{self, adjoint_cos, importance_bsdf, LightVertex, Side, Surface};
 use super::BidirSettings;
 use crate::shading::{side_consistent, Shading};
 use crate::walk::WalkState;
@@ -161,7 +161,8 @@ impl LightPaths<'_, '_> {
                 relative,
             );
             if let Some(r) = self.recorder {
-                r.borrow_mut().light_scatter(if t > 0.0 { 1.0 - t } else { 1.0 });
+                r.borrow_mut()
+                    .light_scatter(if t > 0.0 { 1.0 - t } else { 1.0 });
             }
             let shading = Shading::new(&hit, -state.ray.dir);
             let surface = Surface {

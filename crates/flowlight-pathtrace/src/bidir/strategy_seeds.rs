@@ -33,6 +33,26 @@
 //!   and with N_LT = W·H light paths per sample index each light path's deposit is
 //!   w·f/(N_LT·p): the seed is recorded with p_{s,1} = p_light / hit_density.
 //!
+//! **Light-side Dirac chains.** The target's measure makes a vertex after a Dirac vertex (eye
+//! order) no free coordinate, so of a Dirac run x_a … x_b between smooth x_{a−1} and x_{b+1}
+//! (or the light) it keeps x_a free, where the light subpath drew x_b (and x_{b+1}) and
+//! x_{a−1} followed. With the smooth vertices as common coordinates (each run fixes its far
+//! end from its near end and the first vertex of the run, Jakob & Marschner 2012), the two
+//! measures differ per run by the ratio of the Jacobians of those maps, which conservation of
+//! étendue along the run gives:
+//!
+//! ```text
+//! p_eye / p_light = Π_runs G(x_{a−1}, x_a) / G(x_b, x_{b+1}) · Π_{k=a..b} ρ_k
+//! ρ_k = η'_k² · |n_g·ω_L| |n_s·ω_E| / (|n_g·ω_E| |n_s·ω_L|)
+//! ```
+//!
+//! with G(u, v) = |n_u·ω||n_v·ω|/d² (geometric normals; |n_u·ω| towards a light at infinity),
+//! ω_E and ω_L the directions at x_k towards the eye and the light side, and η'_k the light
+//! subpath's relative index there (a mirror: 1): Snell's law about the shading normal keeps
+//! η²|n_s·ω| dσ, and dA|n_g·ω|dσ is the measure of the ray bundle on either side (the
+//! caustic perturbation's Jacobian, `flowlight-mcmc`'s `specular_chain.rs`, is the same
+//! étendue argument). Camera-side Dirac runs are drawn in the target's own parametrisation.
+//!
 //! **Why the seeds' energy density is f.** The weights of every strategy that can draw a path
 //! sum to one (the library's weights are Veach's heuristic over the same densities, roulette and
 //! depth caps outside them: `bidir::tests`), so over all strategies of one sample index
@@ -232,7 +252,13 @@ impl StrategyRecorder {
 /// The type and component of a scattering vertex at `hit` between `prev` (eye side) and the
 /// direction `next` (light side): a Dirac lobe's where the step was `dirac`, else the
 /// most-scattering smooth component's.
-fn vertex_node(bsdf: &Bsdf, hit: &SurfaceHit, prev: Vec3, next: Vec3, dirac: bool) -> (NodeType, u8) {
+fn vertex_node(
+    bsdf: &Bsdf,
+    hit: &SurfaceHit,
+    prev: Vec3,
+    next: Vec3,
+    dirac: bool,
+) -> (NodeType, u8) {
     let frame = Frame::from_z(hit.ns);
     let wo_w = (prev - hit.p).normalize_or_zero();
     let (wo, wi) = (frame.to_local(wo_w), frame.to_local(next));
@@ -306,7 +332,8 @@ impl<'a, 'b> StrategySeeds<'a, 'b> {
     /// BDPT's connection strategies (no merging) over `scene` with `settings` (its heuristic
     /// and depth caps; its layer options are ignored: seeds keep lighting layers).
     pub fn new(scene: &'a Scene<'b>, tracer: &'a Tracer<'a>, settings: &'a BidirSettings) -> Self {
-        let sphere = flowlight_core::light::emission::scene_sphere(scene.bounds_min, scene.bounds_max);
+        let sphere =
+            flowlight_core::light::emission::scene_sphere(scene.bounds_min, scene.bounds_max);
         let film = scene.camera.width as f32 * scene.camera.height as f32;
         let it = Iteration::new(settings.heuristic, Techniques::BDPT, (film, film), 1.0, 0.0);
         StrategySeeds {
@@ -325,7 +352,13 @@ impl<'a, 'b> StrategySeeds<'a, 'b> {
     /// Traces pixel sample (`x`, `y`, `s`) of a render seeded `seed` (the `bdpt` plugin's
     /// random streams) with or without the recorder; the camera path's contributions go to
     /// `self.contributions`, the splats to `splat`.
-    fn trace(&mut self, seed: u64, (x, y, s): (u32, u32, u32), record: bool, splat: &mut dyn FnMut(Vec2, u32, Rgb)) {
+    fn trace(
+        &mut self,
+        seed: u64,
+        (x, y, s): (u32, u32, u32),
+        record: bool,
+        splat: &mut dyn FnMut(Vec2, u32, Rgb),
+    ) {
         let recorder = record.then_some(&self.recorder);
         if let Some(r) = recorder {
             r.borrow_mut().clear();
@@ -340,9 +373,11 @@ impl<'a, 'b> StrategySeeds<'a, 'b> {
             sphere: self.sphere,
             recorder,
         };
-        light.trace(Rng::new(hash, LIGHT_STREAM), &mut self.own, &mut |r: Vec2, l: u32, v: Rgb| {
-            splat(r, l, v)
-        });
+        light.trace(
+            Rng::new(hash, LIGHT_STREAM),
+            &mut self.own,
+            &mut |r: Vec2, l: u32, v: Rgb| splat(r, l, v),
+        );
         let camera = CameraPaths {
             scene: self.scene,
             tracer: self.tracer,
@@ -355,7 +390,14 @@ impl<'a, 'b> StrategySeeds<'a, 'b> {
         let raster = Vec2::new(x as f32, y as f32) + rng.uniform2();
         self.contributions.clear();
         let mut counts = Default::default();
-        camera.trace(rng, raster, &self.own, None, &mut self.contributions, &mut counts);
+        camera.trace(
+            rng,
+            raster,
+            &self.own,
+            None,
+            &mut self.contributions,
+            &mut counts,
+        );
     }
 
     /// The deposits of pixel sample (`x`, `y`, `s`) as the `bdpt` plugin makes them (no
@@ -415,7 +457,12 @@ impl<'a, 'b> StrategySeeds<'a, 'b> {
 
     /// Writes the path of `event` into `self.path` (eye first) and returns its density
     /// p_{s,t} and raster position; `None` for an event the recording cannot place.
-    fn build_path(&mut self, rec: &StrategyRecorder, event: &StrategyEvent, raster: Vec2) -> Option<(f64, Vec2)> {
+    fn build_path(
+        &mut self,
+        rec: &StrategyRecorder,
+        event: &StrategyEvent,
+        raster: Vec2,
+    ) -> Option<(f64, Vec2)> {
         let (s, t) = (event.s as usize, event.t as usize);
         let scene = self.scene;
         self.path.clear();
@@ -435,7 +482,8 @@ impl<'a, 'b> StrategySeeds<'a, 'b> {
         };
         self.path.push(PathVertex::eye(eye, forward));
         for v in &rec.camera[..camera_count] {
-            self.path.push(PathVertex::from_hit(&v.hit, NodeType::DiffuseReflection, 0));
+            self.path
+                .push(PathVertex::from_hit(&v.hit, NodeType::DiffuseReflection, 0));
         }
         let camera_density = camera_count
             .checked_sub(1)
@@ -445,10 +493,16 @@ impl<'a, 'b> StrategySeeds<'a, 'b> {
         let density = match event.end {
             StrategyEnd::Hit => {
                 let last = self.path.pop()?;
-                self.path.push(PathVertex { node: NodeType::Light, component: 0, ..last });
+                self.path.push(PathVertex {
+                    node: NodeType::Light,
+                    component: 0,
+                    ..last
+                });
                 camera_density
             }
-            StrategyEnd::Escape { dir, light, pdf, .. } => {
+            StrategyEnd::Escape {
+                dir, light, pdf, ..
+            } => {
                 let from = self.path.last()?.p;
                 self.path.push(distant_vertex(from, dir, light));
                 camera_density * pdf
@@ -460,11 +514,14 @@ impl<'a, 'b> StrategySeeds<'a, 'b> {
             StrategyEnd::LightVertex | StrategyEnd::Eye { .. } => {
                 let e = rec.emission?;
                 for y in rec.light[..light_hits].iter().rev() {
-                    self.path.push(PathVertex::from_hit(&y.hit, NodeType::DiffuseReflection, 0));
+                    self.path
+                        .push(PathVertex::from_hit(&y.hit, NodeType::DiffuseReflection, 0));
                 }
                 let p_ref = self.path.last()?.p;
                 self.path.push(origin_vertex(scene, &e, p_ref));
-                let light_density = light_hits.checked_sub(1).map_or(rec.origin_density, |j| rec.light[j].density);
+                let light_density = light_hits
+                    .checked_sub(1)
+                    .map_or(rec.origin_density, |j| rec.light[j].density);
                 match event.end {
                     StrategyEnd::Eye { density, .. } => light_density / density,
                     _ => camera_density * light_density,
@@ -472,7 +529,10 @@ impl<'a, 'b> StrategySeeds<'a, 'b> {
             }
         };
         self.set_nodes(rec, camera_count, light_hits, event.end);
-        let light_part = matches!(event.end, StrategyEnd::LightVertex | StrategyEnd::Eye { .. });
+        let light_part = matches!(
+            event.end,
+            StrategyEnd::LightVertex | StrategyEnd::Eye { .. }
+        );
         let density = if light_part {
             density * self.light_runs_jacobian(rec, camera_count, light_hits)
         } else {
@@ -485,7 +545,13 @@ impl<'a, 'b> StrategySeeds<'a, 'b> {
     /// vertex k by the step that reached camera vertex k + 1 (the escape's own step for the
     /// last), light vertex y_j by the step that reached y_{j+1}; connection vertices are
     /// smooth.
-    fn set_nodes(&mut self, rec: &StrategyRecorder, camera_count: usize, light_hits: usize, end: StrategyEnd) {
+    fn set_nodes(
+        &mut self,
+        rec: &StrategyRecorder,
+        camera_count: usize,
+        light_hits: usize,
+        end: StrategyEnd,
+    ) {
         let n = self.path.len();
         let camera_scattering = match end {
             StrategyEnd::Hit => camera_count - 1,
@@ -536,7 +602,12 @@ impl StrategySeeds<'_, '_> {
     /// chains"): the product over its Dirac runs x_a … x_b of G(x_{a−1}, x_a) / G(x_b, x_{b+1})
     /// times, per vertex k of the run, ρ_k = η'²_k · |n_g·ω_L||n_s·ω_E| / (|n_g·ω_E||n_s·ω_L|)
     /// (ω_E towards the eye side, ω_L towards the light side, η'_k the light subpath's).
-    fn light_runs_jacobian(&self, rec: &StrategyRecorder, camera_count: usize, light_hits: usize) -> f64 {
+    fn light_runs_jacobian(
+        &self,
+        rec: &StrategyRecorder,
+        camera_count: usize,
+        light_hits: usize,
+    ) -> f64 {
         let (p, n) = (&self.path, self.path.len());
         // Path index k of the light part is light vertex y_j, j = light_hits + camera_count + 1 − k;
         // η'² of the light subpath on arriving there.
@@ -561,9 +632,11 @@ impl StrategySeeds<'_, '_> {
             let (w_eye, w_light) = (direction(k, k - 1), direction(k, k + 1));
             let (v, cos) = (&p[k], |n: Vec3, w: Vec3| n.dot(w).abs() as f64);
             let eta2 = eta2_at(k - 1) / eta2_at(k);
-            factor *= eta2 * cos(v.ng, w_light) * cos(v.ns, w_eye) / (cos(v.ng, w_eye) * cos(v.ns, w_light));
+            factor *= eta2 * cos(v.ng, w_light) * cos(v.ns, w_eye)
+                / (cos(v.ng, w_eye) * cos(v.ns, w_light));
             if !p[k + 1].node.is_specular() {
-                factor *= geometry(self.scene, &p[a - 1], &p[a]) / geometry(self.scene, &p[k], &p[k + 1]);
+                factor *=
+                    geometry(self.scene, &p[a - 1], &p[a]) / geometry(self.scene, &p[k], &p[k + 1]);
                 run_start = None;
             }
         }
