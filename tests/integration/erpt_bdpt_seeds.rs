@@ -288,3 +288,73 @@ fn every_mutation_plugin_takes_bdpt_seeds() {
         );
     }
 }
+
+const SHORT_WALL: [[f32; 3]; 4] = [
+    [-10.0, 0.0, -1.0],
+    [10.0, 0.0, -1.0],
+    [10.0, 1.0, -1.0],
+    [-10.0, 1.0, -1.0],
+];
+
+/// A dark Lambert base under a Dirac dielectric coat of index 4 (36 % reflected at normal
+/// incidence): the sun mirrored by the floor carries a good share of the wall's light.
+const VARNISH: &str = r#"{"name": "varnish", "pbrMetallicRoughness": {"baseColorFactor": [0.2, 0.2, 0.2, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.0}, "extensions": {"KHR_materials_ior": {"ior": 4.0}}}"#;
+
+/// A varnished floor and wall under a sun alone (in front of the wall, so that the floor mirrors it
+/// onto the wall) at 32², rendered by `integrator`
+/// (lines of its `[integrator]` table) with `spp` samples per pixel.
+fn varnished_sun(name: &str, integrator: &str, spp: u32) -> flowlight_host::renderer::Renderer {
+    let gltf = common::quads_gltf(
+        &[common::FLOOR, SHORT_WALL],
+        VARNISH,
+        &[common::sun_node(-40.0)],
+        r#"[{"type": "directional", "intensity": 2000.0, "color": [1.0, 0.8, 0.6]}]"#,
+    );
+    let body = format!(
+        r#"[render]
+width = 32
+height = 32
+seed = 5
+intersector = "bvh"
+[camera]
+position = [0.0, 2.0, 3.0]
+look_at = [0.0, 0.5, -1.0]
+fov_y = 60.0
+[integrator]
+path_depth = 3
+{integrator}
+"#
+    );
+    common::renderer_from(name, &gltf, &body, spp)
+}
+
+/// The sun reflected by the varnish onto the wall (L S D … E: a directional light after a Dirac
+/// vertex) is light BDPT finds and the chains' target function cannot hold: those seeds go to
+/// their pixel (`seeds_outside_target`), and the image still agrees with BDPT's.
+#[test]
+fn bdpt_seeds_the_target_cannot_hold_go_to_their_pixel() {
+    let mut reference = varnished_sun("bdpt-seeds-ref", "plugin = \"bdpt\"", 256);
+    reference.options.seed = 77;
+    let reference = common::render(&reference).frame.image();
+    let erpt = r#"plugin = "erpt"
+seeds = "bdpt"
+mutations_per_sample = 16.0
+chain_length = 16
+film_window = 8
+[[integrator.mutations]]
+plugin = "blow"
+weight = 0.6
+[[integrator.mutations]]
+plugin = "hard-reconnection"
+weight = 0.4"#;
+    let label = "varnished floor under a sun, bdpt seeds";
+    let (images, out) = independent_runs(label, 6, 4000, &|| {
+        varnished_sun("bdpt-seeds-erpt", erpt, 4)
+    });
+    assert!(
+        stat(&out, "seeds_outside_target") > 0.0,
+        "{label}: no seed outside the target"
+    );
+    assert_regions_unbiased(label, &images, &reference);
+    assert_image_mean(label, &images, &reference, MeanRule::WithinOrZ(0.03, 4.0));
+}
