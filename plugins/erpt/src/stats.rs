@@ -237,8 +237,8 @@ mod tests {
         let mut b = StatsBuilder::new();
         let c = Counters::declare(&mut b, &names);
         assert!(b.error().is_none(), "{:?}", b.error());
-        // 17 globals + 4 ratios, and per group (total + 8) 20 counters + 10 ratios.
-        assert_eq!(b.len(), 17 + 4 + 9 * (20 + 10));
+        // 19 globals + 4 ratios, and per group (total + 8) 20 counters + 10 ratios.
+        assert_eq!(b.len(), 19 + 4 + 9 * (20 + 10));
         assert_eq!(c.groups.len(), 9);
         // The summary shows what the declarations ask, whatever the names.
         assert_eq!(
