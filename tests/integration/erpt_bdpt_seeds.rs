@@ -252,7 +252,8 @@ fn erpt_with_bdpt_seeds_is_unbiased_on_the_glass_caustic() {
 
 /// Every mutation plugin, alone, takes BDPT seeds on the glass caustic (light-tracing seeds,
 /// light-side chains through the sphere): the render finishes with a finite image, no invalid
-/// deposit, and every step counted as a domain hit or miss.
+/// deposit and no skipped seed, and every chain runs its N steps, each counted as a domain hit
+/// or a domain miss (a proposal a strategy cannot make).
 #[test]
 fn every_mutation_plugin_takes_bdpt_seeds() {
     for plugin in [
@@ -280,12 +281,14 @@ fn every_mutation_plugin_takes_bdpt_seeds() {
         });
         let mean = images[0].iter().map(|c| c.luminance() as f64).sum::<f64>();
         assert!(mean > 0.0, "{label}: a black image");
-        let steps = stat(&out, "total.mutations");
+        // Every chain ran its N = 8 steps, each counted as a domain hit or miss.
+        let (steps, chains) = (stat(&out, "total.mutations"), stat(&out, "chains"));
         let hits = stat(&out, "total.domain_hit") + stat(&out, "total.domain_miss");
         assert!(
-            steps > 100.0 && hits == steps,
-            "{label}: {steps} steps, {hits} hits and misses"
+            chains > 10.0 && steps == 8.0 * chains && hits == steps,
+            "{label}: {chains} chains, {steps} steps, {hits} hits and misses"
         );
+        assert_eq!(stat(&out, "seeds_skipped_invalid"), 0.0, "{label}");
     }
 }
 

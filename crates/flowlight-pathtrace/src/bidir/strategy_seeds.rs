@@ -351,14 +351,14 @@ impl<'a, 'b> StrategySeeds<'a, 'b> {
 
     /// Traces pixel sample (`x`, `y`, `s`) of a render seeded `seed` (the `bdpt` plugin's
     /// random streams) with or without the recorder; the camera path's contributions go to
-    /// `self.contributions`, the splats to `splat`.
+    /// `self.contributions`, the splats to `splat`. Returns the camera ray's raster position.
     fn trace(
         &mut self,
         seed: u64,
         (x, y, s): (u32, u32, u32),
         record: bool,
         splat: &mut dyn FnMut(Vec2, u32, Rgb),
-    ) {
+    ) -> Vec2 {
         let recorder = record.then_some(&self.recorder);
         if let Some(r) = recorder {
             r.borrow_mut().clear();
@@ -398,6 +398,7 @@ impl<'a, 'b> StrategySeeds<'a, 'b> {
             &mut self.contributions,
             &mut counts,
         );
+        raster
     }
 
     /// The deposits of pixel sample (`x`, `y`, `s`) as the `bdpt` plugin makes them (no
@@ -415,11 +416,7 @@ impl<'a, 'b> StrategySeeds<'a, 'b> {
     /// contribution (every strategy that carries light) to `store`.
     pub fn trace_sample(&mut self, seed: u64, sample: (u32, u32, u32), store: &mut SeedStore) {
         store.samples += 1;
-        self.trace(seed, sample, true, &mut |_, _, _| {});
-        let raster = {
-            let mut rng = Rng::new(pixel_seed(seed, sample.0, sample.1, sample.2), 0);
-            Vec2::new(sample.0 as f32, sample.1 as f32) + rng.uniform2()
-        };
+        let raster = self.trace(seed, sample, true, &mut |_, _, _| {});
         // Taken out for the loop and put back after it (the buffers are kept).
         let rec = std::mem::take(&mut *self.recorder.borrow_mut());
         for event in &rec.events {
