@@ -51,7 +51,15 @@ struct Kinds {
 /// deposits of that sample (camera contributions and light-tracing splats), and every seed with
 /// a path is X = w · f(x̄)/p(x̄) with `flowlight-mcmc`'s f.
 fn check_bdpt_seeds(config: &str, path_depth: u32) -> Kinds {
-    let renderer = renderer_at(config, 24, 24, 1, &[]);
+    check_bdpt_seeds_of(config, renderer_at(config, 24, 24, 1, &[]), path_depth)
+}
+
+/// [`check_bdpt_seeds`] of a prepared renderer (its first 24² pixels).
+fn check_bdpt_seeds_of(
+    config: &str,
+    renderer: flowlight_host::renderer::Renderer,
+    path_depth: u32,
+) -> Kinds {
     // SAFETY: the renderer keeps the view's data alive.
     let scene = unsafe { Scene::from_view(renderer.instance.view()) };
     let mut unit_tracer = UnitTracer::new(&renderer.scene, renderer.intersector.as_ref());
@@ -155,6 +163,15 @@ fn bdpt_seeds_are_mis_weighted_measurements_that_sum_to_bdpt() {
         "glass caustic: {k:?}"
     );
     assert!(k.light_side_dirac > 20, "glass caustic: {k:?}");
+    // Lights at infinity: a sun (a Dirac direction, its disc drawn by the light subpath) and a
+    // sky (a direction in solid angle), over a Dirac coat on both sides of the paths.
+    let k = check_bdpt_seeds_of(
+        "sun and sky",
+        varnished_sun("bdpt-seeds-check", "plugin = \"bdpt\"", 1, true),
+        3,
+    );
+    assert!(k.by_kind.iter().all(|&n| n > 40), "sun and sky: {k:?}");
+    assert!(k.light_side_dirac > 0, "sun and sky: {k:?}");
 }
 
 /// ERPT with BDPT seeds of `config` with `params` (M = 32, N = 32, K = 8 unless given) against
@@ -303,10 +320,20 @@ const SHORT_WALL: [[f32; 3]; 4] = [
 /// incidence): the sun mirrored by the floor carries a good share of the wall's light.
 const VARNISH: &str = r#"{"name": "varnish", "pbrMetallicRoughness": {"baseColorFactor": [0.2, 0.2, 0.2, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.0}, "extensions": {"KHR_materials_ior": {"ior": 4.0}}}"#;
 
-/// A varnished floor and wall under a sun alone (in front of the wall, so that the floor mirrors it
-/// onto the wall) at 32², rendered by `integrator`
+/// A varnished floor and wall under a sun (in front of the wall, so that the floor mirrors it
+/// onto the wall), with a constant sky where `sky`, at 32², rendered by `integrator`
 /// (lines of its `[integrator]` table) with `spp` samples per pixel.
-fn varnished_sun(name: &str, integrator: &str, spp: u32) -> flowlight_host::renderer::Renderer {
+fn varnished_sun(
+    name: &str,
+    integrator: &str,
+    spp: u32,
+    sky: bool,
+) -> flowlight_host::renderer::Renderer {
+    let sky = if sky {
+        "[environment]\ncolor = [0.6, 0.8, 1.0]\nstrength = 1.5\n"
+    } else {
+        ""
+    };
     let gltf = common::quads_gltf(
         &[common::FLOOR, SHORT_WALL],
         VARNISH,
@@ -323,7 +350,7 @@ intersector = "bvh"
 position = [0.0, 2.0, 3.0]
 look_at = [0.0, 0.5, -1.0]
 fov_y = 60.0
-[integrator]
+{sky}[integrator]
 path_depth = 3
 {integrator}
 "#
@@ -336,7 +363,7 @@ path_depth = 3
 /// their pixel (`seeds_outside_target`), and the image still agrees with BDPT's.
 #[test]
 fn bdpt_seeds_the_target_cannot_hold_go_to_their_pixel() {
-    let mut reference = varnished_sun("bdpt-seeds-ref", "plugin = \"bdpt\"", 256);
+    let mut reference = varnished_sun("bdpt-seeds-ref", "plugin = \"bdpt\"", 256, false);
     reference.options.seed = 77;
     let reference = common::render(&reference).frame.image();
     let erpt = r#"plugin = "erpt"
@@ -352,7 +379,7 @@ plugin = "hard-reconnection"
 weight = 0.4"#;
     let label = "varnished floor under a sun, bdpt seeds";
     let (images, out) = independent_runs(label, 6, 4000, &|| {
-        varnished_sun("bdpt-seeds-erpt", erpt, 4)
+        varnished_sun("bdpt-seeds-erpt", erpt, 4, false)
     });
     assert!(
         stat(&out, "seeds_outside_target") > 0.0,

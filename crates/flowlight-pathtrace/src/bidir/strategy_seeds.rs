@@ -140,7 +140,7 @@ struct Recorded {
     hit: SurfaceHit,
     dirac_in: bool,
     density: f64,
-    /// The subpath's product of η'² up to here (light side: the [`run_jacobian`]'s η').
+    /// The subpath's product of η'² up to here (on the light side for `StrategySeeds::light_runs_jacobian`).
     eta2: f32,
 }
 
