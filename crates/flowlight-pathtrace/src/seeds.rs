@@ -81,6 +81,9 @@ pub enum Technique {
     Escape,
     /// A whole untangled path ([`SeedStore::push_path`]).
     Untangled,
+    /// Strategy (s, t) of a BDPT sample: s light and t camera vertices
+    /// ([`crate::bidir::strategy_seeds`]).
+    Bidirectional { s: u32, t: u32 },
 }
 
 /// One seed: a path (a trunk prefix and a light vertex) with its estimate.
@@ -174,7 +177,7 @@ impl SeedStore {
 
 /// Node type and component index of the smooth component of `bsdf` that scatters most light
 /// from `wi` to `wo` (local frame): the type a connection vertex is stored with.
-fn connection_node(bsdf: &Bsdf, wo: Vec3, wi: Vec3) -> (NodeType, u8) {
+pub(crate) fn connection_node(bsdf: &Bsdf, wo: Vec3, wi: Vec3) -> (NodeType, u8) {
     let mut best = (NodeType::DiffuseReflection, 0u8, -1.0f32);
     for (i, (c, w)) in bsdf.components().enumerate() {
         if c.is_delta() {

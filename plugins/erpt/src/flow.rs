@@ -72,6 +72,10 @@ pub struct Flow<'a> {
     pub measure_calls: u64,
     pub measure_seconds: f64,
     pub part_misses: u64,
+    /// A seed whose path the target function gives no energy goes to its pixel with its
+    /// estimate (counted as `seeds_outside_target`) instead of being skipped: set for BDPT
+    /// seeds, some of whose paths (a Dirac light seen through a Dirac chain) no chain can hold.
+    pub deposit_unmeasured: bool,
     timer: StepTimer,
     pub proposal: Box<Path>,
     pub state: Box<Path>,
@@ -194,6 +198,7 @@ impl<'a> Flow<'a> {
             measure_calls: 0,
             measure_seconds: 0.0,
             part_misses: 0,
+            deposit_unmeasured: false,
             timer: StepTimer::default(),
             proposal: Box::new(Path::empty()),
             state: Box::new(Path::empty()),
@@ -247,6 +252,18 @@ impl<'a> Flow<'a> {
         let f_seed = measurement(self.scene, seed);
         let lum_f_seed = f_seed.luminance();
         if !(f_seed.is_valid_radiance() && lum_f_seed > 0.0 && lum_f_seed.is_finite()) {
+            if self.deposit_unmeasured && f_seed.is_black() {
+                // Outside the chains' target: path tracing's deposit, unbiased as the split's
+                // MCPT part is (the set {f = 0} depends on the path alone).
+                stats.add(c.seeds_outside_target, 1.0);
+                film.deposit(
+                    seed.raster.x.floor() + 0.5,
+                    seed.raster.y.floor() + 0.5,
+                    seed.layer,
+                    estimate,
+                );
+                return Ok(());
+            }
             // The sampler found light the target function does not see (or an overflow): a
             // chain could not start here.
             stats.add(c.seeds_skipped, 1.0);

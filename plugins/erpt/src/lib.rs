@@ -5,7 +5,10 @@
 //! paths, one light connection each (`seeds = "untangled"`, the thesis'), or entangled paths
 //! split into their techniques (`seeds = "entangled"`: every light connection, emitter hit
 //! and environment escape is a seed with its MIS-weighted estimate; `flowlight_pathtrace::seeds`
-//! has the argument why their energy density is f). Each seed spawns chains that redistribute
+//! has the argument why their energy density is f), or BDPT samples split into their
+//! connection strategies (`seeds = "bdpt"`, `flowlight_pathtrace::bidir::strategy_seeds`; a
+//! light-tracing seed runs its chains from its own raster position, wherever it lies, and a
+//! seed whose path the target function gives no energy goes to its pixel). Each seed spawns chains that redistribute
 //! its energy over nearby paths with the mutation strategies listed in the config, each its own
 //! plugin:
 //!
@@ -60,6 +63,8 @@ use flowlight_core::path::{NodeType, Path};
 use flowlight_core::rng::Rng;
 use flowlight_core::sobol::SobolSampler;
 use flowlight_core::Rgb;
+use flowlight_pathtrace::bidir::strategy_seeds::StrategySeeds;
+use flowlight_pathtrace::bidir::{BidirSettings, Heuristic, Techniques};
 use flowlight_pathtrace::sampler::{sample_start, PixelSampler, SamplerKind};
 use flowlight_pathtrace::seeds::{self, SeedFilter, SeedStore, SeedWavefront};
 use flowlight_pathtrace::walk::units;
@@ -172,6 +177,31 @@ fn chain_rng(seed: u64, x: u32, y: u32, s: u32) -> Rng {
     Rng::new(Rng::hash(&[seed, x as u64, y as u64, s as u64]), 1)
 }
 
+/// A unit's tile with its flange, in raster coordinates: where its chains are expected to
+/// deposit (the host keeps deposits elsewhere too).
+struct FlangedTile {
+    x0: f32,
+    y0: f32,
+    x1: f32,
+    y1: f32,
+}
+
+impl FlangedTile {
+    fn of(unit: &WorkUnit, flange: u32) -> Self {
+        let f = flange as f32;
+        FlangedTile {
+            x0: unit.x0 as f32 - f,
+            y0: unit.y0 as f32 - f,
+            x1: unit.x1 as f32 + f,
+            y1: unit.y1 as f32 + f,
+        }
+    }
+
+    fn contains(&self, raster: glam::Vec2) -> bool {
+        (self.x0..self.x1).contains(&raster.x) && (self.y0..self.y1).contains(&raster.y)
+    }
+}
+
 /// A camera sample of a unit and the first of its seeds in the unit's store.
 struct SampleKey {
     x: u32,
@@ -238,6 +268,7 @@ impl Erpt {
                     }
                 }
             }
+            SeedKind::Bdpt => self.trace_bdpt(tracer, seed, pixels, samples, out),
             SeedKind::Entangled => match self.settings.sampler {
                 SamplerKind::Independent => {
                     self.trace_entangled::<Rng>(tracer, seed, pixels, samples, out, rest)
@@ -258,6 +289,40 @@ impl Erpt {
                 }
             })
             .collect();
+    }
+
+    /// [`Self::trace_unit`]'s BDPT seeds: per pixel sample the `bdpt` plugin's light and camera
+    /// subpaths (its random streams; the chains draw from stream 1 of the same hash), every
+    /// connection strategy a seed (`flowlight_pathtrace::bidir::strategy_seeds`).
+    fn trace_bdpt(
+        &self,
+        tracer: &Tracer,
+        seed: u64,
+        pixels: impl Iterator<Item = (u32, u32)>,
+        samples: std::ops::Range<u32>,
+        out: &mut UnitSeeds,
+    ) {
+        let settings = BidirSettings {
+            path: self.settings.seeds.clone(),
+            heuristic: Heuristic::Power,
+            techniques: Techniques::BDPT,
+            lighting_layers: false,
+            strategy_layers: false,
+            radius: 0.0,
+            radius_alpha: 1.0,
+        };
+        let mut sampler = StrategySeeds::new(&self.scene, tracer, &settings);
+        for (x, y) in pixels {
+            for s in samples.clone() {
+                out.keys.push(SampleKey {
+                    x,
+                    y,
+                    s,
+                    first: out.store.seeds.len(),
+                });
+                sampler.trace_sample(seed, (x, y, s), &mut out.store);
+            }
+        }
     }
 
     /// [`Self::trace_unit`]'s entangled seeds, drawn with the pixel sampler `S`.
@@ -545,6 +610,10 @@ impl Integrator for Erpt {
         );
         let start = Instant::now();
         let mut flow = Flow::new(&self.scene, tracer, &self.settings, &self.mutations, c);
+        // BDPT seeds include paths the target function cannot hold (a Dirac light seen through
+        // a Dirac chain): they go to their pixel, as a split's MCPT part does.
+        flow.deposit_unmeasured = self.settings.seed_kind == SeedKind::Bdpt;
+        let flanged = FlangedTile::of(unit, 2 * self.settings.film_window);
         let count = seeds.store.seeds.len();
         for (k, key) in seeds.keys.iter().enumerate() {
             let end = seeds.keys.get(k + 1).map_or(count, |n| n.first);
@@ -554,6 +623,11 @@ impl Integrator for Erpt {
                 seeds.store.path(i, &mut path);
                 path.film_window = self.settings.film_window;
                 let estimate = seeds.store.seeds[i].estimate;
+                if !flanged.contains(path.raster) {
+                    // A light-tracing seed of another tile: its chains run from where it is
+                    // and the host keeps their deposits (docs/erpt.md, "Seed kinds").
+                    stats.add(c.seeds_outside_flange, 1.0);
+                }
                 if seeds.in_part[i] {
                     flow.run_seed(&path, estimate, quantum, &mut chain_rng, film, stats)?;
                     continue;

@@ -63,6 +63,9 @@ pub enum SeedKind {
     /// Every connection, emitter hit and escape of an entangled path, MIS-weighted
     /// (`flowlight_pathtrace::seeds`).
     Entangled,
+    /// Every connection strategy (s, t) of a BDPT sample, MIS-weighted
+    /// (`flowlight_pathtrace::bidir::strategy_seeds`).
+    Bdpt,
 }
 
 /// `mutations_per_sample`: M of §5.2.
@@ -143,8 +146,8 @@ pub const LAYERS: BoolParam = bool_param!(
 pub const SEEDS: ChoiceParam = choice_param!(
     "seeds",
     "untangled",
-    ["untangled", "entangled"],
-    "seed sampler: \"untangled\" (one light connection per path, the thesis') or \"entangled\" (every connection, emitter hit and escape of an entangled path, MIS-weighted)"
+    ["untangled", "entangled", "bdpt"],
+    "seed sampler: \"untangled\" (one light connection per path, the thesis'), \"entangled\" (every connection, emitter hit and escape of an entangled path, MIS-weighted) or \"bdpt\" (every connection strategy (s, t) of a bidirectional sample, MIS-weighted by the power heuristic)"
 );
 
 /// `direct`: who renders direct light.
@@ -193,11 +196,13 @@ impl ErptSettings {
     pub fn from_params(p: &Params) -> Result<Self, String> {
         let seed_kind = match SEEDS.get(p)? {
             "untangled" => SeedKind::Untangled,
+            "bdpt" => SeedKind::Bdpt,
             _ => SeedKind::Entangled,
         };
+        // BDPT's subpaths roll the roulette as the `bdpt` plugin's do (the entangled variant).
         let variant = match seed_kind {
             SeedKind::Untangled => Variant::Untangled,
-            SeedKind::Entangled => Variant::Entangled,
+            SeedKind::Entangled | SeedKind::Bdpt => Variant::Entangled,
         };
         let seeds = PathSettings::shared_from_params(p, variant, &MAX_RAY_DEPTH)?;
         let mutations_per_sample = MUTATIONS_PER_SAMPLE.get(p)?;

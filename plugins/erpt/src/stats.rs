@@ -11,7 +11,10 @@
 //! The split and the seeds: `camera_samples` (camera paths traced for seeds, once per unit),
 //! `seeds` (stored seeds: paths with an estimate), `seeds_per_sample`, `mcpt_part_seeds`
 //! (seeds outside the chains' part, deposited directly), `part_misses` (proposals outside it),
-//! `units_without_chains` (units path-traced because no path of the scene can be in the part).
+//! `units_without_chains` (units path-traced because no path of the scene can be in the part);
+//! with BDPT seeds `seeds_outside_target` (seeds whose path the target function gives no
+//! energy, deposited at their pixel) and `seeds_outside_flange` (light-tracing seeds that start
+//! outside their unit's flanged tile; their chains run all the same).
 //!
 //! Each counter declares how the render summary shows it ([`StatDisplay`]): per group the
 //! steps, the strengths (as percentages), the mean and longest streaks; the event counts,
@@ -76,6 +79,11 @@ pub struct Counters {
     pub mcpt_part_seeds: Counter,
     pub part_misses: Counter,
     pub units_without_chains: Counter,
+    /// BDPT seeds whose path the chains' target function gives no energy, deposited at their
+    /// pixel (`lib.rs`, seeds = "bdpt").
+    pub seeds_outside_target: Counter,
+    /// BDPT seeds (t = 1) that start outside their unit's flanged tile.
+    pub seeds_outside_flange: Counter,
     pub measure_calls: Counter,
     pub measure_seconds: Counter,
     pub seed_seconds: Counter,
@@ -100,6 +108,8 @@ impl Counters {
         let mcpt_part_seeds = b.sum("mcpt_part_seeds");
         let part_misses = b.sum("part_misses");
         let units_without_chains = b.sum("units_without_chains");
+        let seeds_outside_target = b.sum("seeds_outside_target");
+        let seeds_outside_flange = b.sum("seeds_outside_flange");
         let measure_calls = b.sum("measure_calls");
         let measure_seconds = b.sum_as("measure_seconds", StatDisplay::Seconds);
         let seed_seconds = b.sum_as("seed_seconds", StatDisplay::Seconds);
@@ -184,6 +194,8 @@ impl Counters {
             mcpt_part_seeds,
             part_misses,
             units_without_chains,
+            seeds_outside_target,
+            seeds_outside_flange,
             measure_calls,
             measure_seconds,
             seed_seconds,
@@ -225,8 +237,8 @@ mod tests {
         let mut b = StatsBuilder::new();
         let c = Counters::declare(&mut b, &names);
         assert!(b.error().is_none(), "{:?}", b.error());
-        // 17 globals + 4 ratios, and per group (total + 8) 20 counters + 10 ratios.
-        assert_eq!(b.len(), 17 + 4 + 9 * (20 + 10));
+        // 19 globals + 4 ratios, and per group (total + 8) 20 counters + 10 ratios.
+        assert_eq!(b.len(), 19 + 4 + 9 * (20 + 10));
         assert_eq!(c.groups.len(), 9);
         // The summary shows what the declarations ask, whatever the names.
         assert_eq!(

@@ -11,6 +11,7 @@
 use super::grid::HashGrid;
 use super::light_path::layer_of;
 use super::mis::{self, ConnectionDensities, Iteration, Partial, Techniques};
+use super::strategy_seeds::{StrategyEnd, StrategyEvent, StrategyRecorder};
 use super::vertex::{self, adjoint_cos, importance_bsdf, LightVertex, Side, Surface};
 use super::BidirSettings;
 use crate::shading::{light_connection, light_sample, side_consistent, Shading};
@@ -24,6 +25,7 @@ use flowlight_core::sampling::uniform_cone_pdf;
 use flowlight_core::Rgb;
 use flowlight_sdk::{Scene, Tracer};
 use glam::{Vec2, Vec3};
+use std::cell::RefCell;
 use std::f32::consts::PI;
 
 /// The light vertices a camera path merges with and the grid over them.
@@ -41,6 +43,8 @@ pub struct CameraPaths<'a, 'b> {
     pub it: &'a Iteration,
     /// Centre and radius of the sphere holding the scene ([`super::light_path::LightPaths`]).
     pub sphere: (Vec3, f32),
+    /// Where ERPT's BDPT seeds record the subpath and its strategies ([`StrategyRecorder`]).
+    pub recorder: Option<&'a RefCell<StrategyRecorder>>,
 }
 
 /// A camera vertex: what its strategies share.
@@ -102,6 +106,9 @@ impl CameraPaths<'_, '_> {
                 partial.arrive(it, hit.t * hit.t, cos_in, true);
             }
             t += 1;
+            if let Some(r) = self.recorder {
+                r.borrow_mut().camera_hit(&hit, state.step, state.prev_p);
+            }
             if hit.emitter >= 0 {
                 self.emitter_hit(&state, &hit, &partial, t, all_dirac, out);
             }
@@ -151,6 +158,11 @@ impl CameraPaths<'_, '_> {
                 state.beta.max_component() * state.eta2,
             );
             state.last = roulette >= 1.0 || state.physical >= settings.path.max_ray_depth;
+            if let Some(r) = self.recorder {
+                let rolled = !state.last && roulette > 0.0;
+                r.borrow_mut()
+                    .camera_scatter(if rolled { 1.0 - roulette } else { 1.0 });
+            }
             let surface = Surface {
                 hit: &hit,
                 bsdf: &bsdf,
@@ -201,6 +213,27 @@ impl CameraPaths<'_, '_> {
         let layer = layer_of(self.settings, state.depth, 0, t + 1);
         if let Some(v) = mis::weighted(state.beta * le, weight) {
             out.add(layer, v);
+            if let (Some(r), Some(light)) = (self.recorder, lights.environment_index()) {
+                let (pdf, dirac) = match state.step {
+                    Step::Eye => (1.0, false),
+                    Step::Dirac(p) => (p as f64, true),
+                    Step::Smooth(p) => (p as f64, false),
+                };
+                let end = StrategyEnd::Escape {
+                    dir,
+                    light,
+                    pdf,
+                    dirac,
+                };
+                r.borrow_mut().event(StrategyEvent {
+                    s: 0,
+                    t: t + 1,
+                    weight,
+                    value: v,
+                    layer,
+                    end,
+                });
+            }
         }
     }
 
@@ -232,6 +265,16 @@ impl CameraPaths<'_, '_> {
         let layer = layer_of(self.settings, state.depth, 0, t);
         if let Some(v) = mis::weighted(state.beta * le, weight) {
             out.add(layer, v);
+            if let Some(r) = self.recorder {
+                r.borrow_mut().event(StrategyEvent {
+                    s: 0,
+                    t,
+                    weight,
+                    value: v,
+                    layer,
+                    end: StrategyEnd::Hit,
+                });
+            }
         }
     }
 
@@ -265,7 +308,28 @@ impl CameraPaths<'_, '_> {
             return;
         };
         if !self.tracer.occluded(&shadow.ray(here.hit)) {
-            out.add(layer_of(self.settings, here.depth, 1, here.t), value);
+            let layer = layer_of(self.settings, here.depth, 1, here.t);
+            out.add(layer, value);
+            if let Some(r) = self.recorder {
+                // What next-event estimation divides by: the area density of an area light.
+                let pdf = if ls.kind == LightKind::Area {
+                    ls.pdf
+                } else {
+                    conn.pdf
+                };
+                let vertex = crate::untangled::light_vertex(scene, &ls, here.hit.p);
+                r.borrow_mut().event(StrategyEvent {
+                    s: 1,
+                    t: here.t,
+                    weight,
+                    value,
+                    layer,
+                    end: StrategyEnd::LightSample {
+                        vertex,
+                        pdf: pdf as f64,
+                    },
+                });
+            }
         }
     }
 
@@ -341,7 +405,18 @@ impl CameraPaths<'_, '_> {
         if self.tracer.occluded(&ray) {
             return false;
         }
-        out.add(layer_of(self.settings, depth, y.length + 1, here.t), value);
+        let layer = layer_of(self.settings, depth, y.length + 1, here.t);
+        out.add(layer, value);
+        if let Some(r) = self.recorder {
+            r.borrow_mut().event(StrategyEvent {
+                s: y.length + 1,
+                t: here.t,
+                weight,
+                value,
+                layer,
+                end: StrategyEnd::LightVertex,
+            });
+        }
         true
     }
 

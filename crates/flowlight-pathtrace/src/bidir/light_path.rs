@@ -28,6 +28,7 @@
 //! ([`super::render`]).
 
 use super::mis::{self, Iteration, Partial};
+use super::strategy_seeds::{StrategyEnd, StrategyEvent, StrategyRecorder};
 use super::vertex::{self, adjoint_cos, importance_bsdf, LightVertex, Side, Surface};
 use super::BidirSettings;
 use crate::shading::{side_consistent, Shading};
@@ -39,6 +40,7 @@ use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
 use flowlight_sdk::{Scene, Tracer};
 use glam::{Vec2, Vec3};
+use std::cell::RefCell;
 
 /// Where a light subpath's deposits go: raster position, layer and value.
 pub trait Splat {
@@ -59,6 +61,8 @@ pub struct LightPaths<'a, 'b> {
     pub it: &'a Iteration,
     /// Centre and radius of a sphere holding the scene (distant lights emit from its disc).
     pub sphere: (Vec3, f32),
+    /// Where ERPT's BDPT seeds record the subpath and its splats ([`StrategyRecorder`]).
+    pub recorder: Option<&'a RefCell<StrategyRecorder>>,
 }
 
 /// The layer a deposit goes to: the lighting layer `lighting`, or the strategy (s, t)'s
@@ -97,6 +101,9 @@ impl LightPaths<'_, '_> {
         };
         let beta = e.radiance * (e.cos / emission);
         let mut partial = Partial::light_start(self.it, direct, emission, e.cos, e.kind.is_delta());
+        if let Some(r) = self.recorder {
+            r.borrow_mut().light_start(&e);
+        }
         if self.it.techniques == mis::Techniques::LIGHT_TRACE && e.kind == LightKind::Area {
             self.connect_light_to_eye(&e, out);
         }
@@ -118,6 +125,10 @@ impl LightPaths<'_, '_> {
                 return;
             }
             partial.arrive(self.it, hit.t * hit.t, cos_in, length > 0 || !distant);
+            if let Some(r) = self.recorder {
+                r.borrow_mut()
+                    .light_hit(&hit, (state.step, state.eta2), state.prev_p);
+            }
             length += 1;
             state.physical += 1;
             let bsdf = importance_bsdf(self.scene, &hit);
@@ -149,6 +160,10 @@ impl LightPaths<'_, '_> {
                 bsdf.albedo(),
                 relative,
             );
+            if let Some(r) = self.recorder {
+                r.borrow_mut()
+                    .light_scatter(if t > 0.0 { 1.0 - t } else { 1.0 });
+            }
             let shading = Shading::new(&hit, -state.ray.dir);
             let surface = Surface {
                 hit: &hit,
@@ -209,6 +224,21 @@ impl LightPaths<'_, '_> {
         if self.visible_from_eye(v.hit.p, v.hit.p_error, v.hit.ng, eye.eye) {
             let layer = layer_of(self.settings, v.length, v.length + 1, 1);
             out.splat(eye.raster, layer, value);
+            if let Some(r) = self.recorder {
+                let cos = v.hit.ng.dot(eye.to_eye).abs();
+                r.borrow_mut().event(StrategyEvent {
+                    s: v.length + 1,
+                    t: 1,
+                    weight,
+                    value,
+                    layer,
+                    end: StrategyEnd::Eye {
+                        raster: eye.raster,
+                        eye: eye.eye,
+                        density: camera.hit_density(-eye.to_eye, eye.distance, cos) as f64,
+                    },
+                });
+            }
         }
     }
 

@@ -45,6 +45,7 @@ pub mod light_path;
 pub mod mis;
 pub mod params;
 pub mod render;
+pub mod strategy_seeds;
 pub mod vertex;
 
 #[cfg(test)]

@@ -35,7 +35,7 @@ use std::marker::PhantomData;
 
 /// The PCG stream of a pixel sample's light subpath (its camera subpath draws from stream 0
 /// of the same seed, as MCPT's samples do; ERPT's chains use stream 1).
-const LIGHT_STREAM: u64 = 2;
+pub(crate) const LIGHT_STREAM: u64 = 2;
 
 /// A thread's buffers (module docs).
 #[derive(Default)]
@@ -92,6 +92,7 @@ pub fn render_unit(
                 settings,
                 it: &it,
                 sphere,
+                recorder: None,
             };
             arena.vertices.clear();
             arena.starts.clear();
@@ -120,6 +121,7 @@ pub fn render_unit(
                 settings,
                 it: &it,
                 sphere,
+                recorder: None,
             };
             let merges = it.techniques.merge.then_some(MergeSet {
                 grid: &arena.grid,
@@ -146,7 +148,7 @@ pub fn render_unit(
 }
 
 /// The seed of pixel sample (`x`, `y`, `s`) of a render with seed `seed`.
-fn pixel_seed(seed: u64, x: u32, y: u32, s: u32) -> u64 {
+pub(crate) fn pixel_seed(seed: u64, x: u32, y: u32, s: u32) -> u64 {
     Rng::hash(&[seed, x as u64, y as u64, s as u64])
 }
 
