@@ -45,6 +45,7 @@ pub mod light_path;
 pub mod mis;
 pub mod params;
 pub mod render;
+pub mod sample;
 pub mod vertex;
 
 #[cfg(test)]
@@ -69,12 +70,22 @@ pub struct BidirSettings {
     pub radius: f32,
     /// α of the radius schedule (module docs); 1 keeps the radius constant.
     pub radius_alpha: f32,
+    /// Make strategy (s, t) alone ([`sample::strategy_sample`]): the camera subpath stops
+    /// at its t-th vertex and only (s, t)'s contribution is evaluated. `None` for every
+    /// strategy the techniques allow.
+    pub only_strategy: Option<(u32, u32)>,
 }
 
 impl BidirSettings {
     /// Whether deposits keep a layer (lighting or strategy).
     pub fn layers(&self) -> bool {
         self.lighting_layers || self.strategy_layers
+    }
+
+    /// Whether strategy (`s`, `t`) is evaluated ([`Self::only_strategy`]).
+    #[inline(always)]
+    pub fn wants(&self, s: u32, t: u32) -> bool {
+        self.only_strategy.is_none_or(|only| only == (s, t))
     }
 
     /// The merging radius of iteration (sample index) `i` for a scene of bounding-sphere
