@@ -20,6 +20,7 @@
 
 pub mod bidir;
 pub mod entangled;
+pub mod pss;
 pub mod sampler;
 pub mod seeds;
 pub mod settings;

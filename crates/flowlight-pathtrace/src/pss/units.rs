@@ -1,0 +1,57 @@
+//! How the host's work units map onto chains.
+//!
+//! The host renders work units, a tile of P pixels × a range of sample indices, and
+//! normalises a flanged integrator's film by the samples per pixel it completed (a pass cut
+//! short counts the share of its tiles done). A unit runs **one chain per sample index s of
+//! its range, of P mutations each**, seeded from (render seed, tile, s): the whole render is
+//! W·H mutations per sample index, W·H·spp in all, so by [`super::chain`]'s argument the
+//! film's sum per pixel is spp times the target's image in expectation, and the host's
+//! division by spp gives the image, under a time budget too. A chain's numbers depend only on
+//! (seed, tile, s), not on which unit or thread runs it, nor on how the samples are split
+//! into units: the image does not depend on the thread count (it does on the tile size,
+//! which sets the chains' length).
+//!
+//! Each chain starts from a bootstrap state resampled ∝ its scalar, so short chains (small
+//! tiles) cost one evaluation more per P mutations and explore less, but stay unbiased.
+
+use super::chain::{run_chain, Bootstrap, ChainBuffers, ChainCounts, PssTarget, Splat};
+use flowlight_core::rng::Rng;
+use flowlight_sdk::WorkUnit;
+
+/// The seed of the chain of sample index `s` of the tile of `unit`.
+pub fn chain_seed(unit: &WorkUnit, s: u32) -> u64 {
+    Rng::hash(&[
+        unit.seed,
+        0x5053_534d_4c54,
+        unit.x0 as u64,
+        unit.y0 as u64,
+        unit.x1 as u64,
+        unit.y1 as u64,
+        s as u64,
+    ])
+}
+
+/// Runs `unit`'s chains (module documentation), handing their splats to `deposit`.
+pub fn render_unit<T: PssTarget>(
+    target: &mut T,
+    bootstrap: &Bootstrap,
+    unit: &WorkUnit,
+    buffers: &mut ChainBuffers,
+    counts: &mut ChainCounts,
+    deposit: &mut impl FnMut(Splat),
+) {
+    let pixels = (unit.x1 - unit.x0) as u64 * (unit.y1 - unit.y0) as u64;
+    for s in unit.sample_begin..unit.sample_begin + unit.sample_count {
+        let seed = chain_seed(unit, s);
+        run_chain(
+            target,
+            bootstrap,
+            seed,
+            pixels,
+            buffers,
+            counts,
+            deposit,
+            &mut |_| {},
+        );
+    }
+}
