@@ -119,7 +119,7 @@ fn with_sampler<R>(
     let tracer = Tracer::new(&table);
     let settings = settings(heuristic);
     let film = Vec2::new(scene.camera.width as f32, scene.camera.height as f32);
-    let sampler = FilmSampler::new(&scene, &tracer, &settings, DEPTH);
+    let sampler = FilmSampler::new(&scene, &tracer, settings, DEPTH);
     f(&sampler, film)
 }
 

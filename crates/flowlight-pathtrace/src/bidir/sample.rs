@@ -40,10 +40,11 @@
 
 use super::camera_path::{CameraCounts, CameraPaths};
 use super::light_path::{LightPaths, Splat};
-use super::mis::{Iteration, Techniques};
+use super::mis::{Heuristic, Iteration, Techniques};
 use super::vertex::LightVertex;
 use super::{strategy_layer, strategy_layer_count, BidirSettings};
-use crate::SampleContributions;
+use crate::{PathSettings, SampleContributions, Variant};
+use flowlight_core::bsdf::NARROW_GLOSSY_ALPHA;
 use flowlight_core::light::emission::scene_sphere;
 use flowlight_core::sampler::SampleStream;
 use flowlight_core::termination::{TerminationDistribution, TerminationSchedule};
@@ -78,7 +79,7 @@ pub struct StrategySample {
 pub struct FilmSampler<'a, 'b> {
     scene: &'a Scene<'b>,
     tracer: &'a Tracer<'a>,
-    settings: &'a BidirSettings,
+    settings: BidirSettings,
     it: Iteration,
     sphere: (Vec3, f32),
     film: Vec2,
@@ -92,7 +93,7 @@ impl<'a, 'b> FilmSampler<'a, 'b> {
     pub fn new(
         scene: &'a Scene<'b>,
         tracer: &'a Tracer<'a>,
-        settings: &'a BidirSettings,
+        settings: BidirSettings,
         max_depth: u32,
     ) -> Self {
         let camera = &scene.camera;
@@ -109,7 +110,7 @@ impl<'a, 'b> FilmSampler<'a, 'b> {
         for d in 0..=max_depth {
             for s in 0..d + 2 {
                 debug_assert_eq!(strategy_layer(s, d + 2 - s) as usize, strategies.len());
-                strategies.push(strategy_settings(settings, s, d + 2 - s));
+                strategies.push(strategy_settings(&settings, s, d + 2 - s));
             }
         }
         FilmSampler {
@@ -142,7 +143,7 @@ impl<'a, 'b> FilmSampler<'a, 'b> {
         scratch: &mut SampleScratch,
         out: &mut impl Splat,
     ) {
-        let settings = self.settings;
+        let settings = &self.settings;
         let layers = settings.layers();
         let layer = |l: u32| if layers { l } else { 0 };
         let mut camera = camera;
@@ -232,6 +233,28 @@ impl<'a, 'b> FilmSampler<'a, 'b> {
             raster,
             value: value * (depth + 2) as f32,
         }
+    }
+}
+
+/// The settings of a sampler used for strategy samples alone ([`FilmSampler::strategy_sample`]
+/// overrides their depths and roulette): `heuristic`, no layers.
+pub fn strategy_only_settings(heuristic: Heuristic) -> BidirSettings {
+    BidirSettings {
+        path: PathSettings {
+            variant: Variant::Entangled,
+            path_depth: 1,
+            max_ray_depth: 1,
+            termination: TerminationSchedule::new(TerminationDistribution::Throughput, 1),
+            narrow_glossy_alpha: NARROW_GLOSSY_ALPHA,
+            branches: 1,
+        },
+        heuristic,
+        techniques: Techniques::BDPT,
+        lighting_layers: false,
+        strategy_layers: false,
+        radius: 0.0,
+        radius_alpha: 1.0,
+        only_strategy: None,
     }
 }
 
