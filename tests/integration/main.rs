@@ -35,6 +35,7 @@ mod mmlt;
 mod orthographic;
 mod outsider;
 mod plugins;
+mod pssmlt;
 mod ray_batches;
 mod sampler;
 mod stability;

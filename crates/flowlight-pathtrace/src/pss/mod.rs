@@ -28,4 +28,4 @@ mod tests;
 pub use chain::{run_chain, scalar, Bootstrap, ChainBuffers, ChainCounts, PssTarget, Splat};
 pub use mcpt::McptTarget;
 pub use samples::{Mutation, PrimarySamples, PssStream};
-pub use units::{chain_seed, render_unit};
+pub use units::{chain_seed, render_unit, BootstrapCell};

@@ -11,12 +11,41 @@
 //! into units: the image does not depend on the thread count (it does on the tile size,
 //! which sets the chains' length).
 //!
+//! The bootstrap must be drawn from the render seed: with one fixed bootstrap every render
+//! would share its b̂, and the mean of renders would be the image times b̂/b. The host's
+//! `prepare` does not know the seed, so the first work unit of a render computes it
+//! ([`BootstrapCell`]) while the others wait for it; its numbers depend only on the seed.
+//!
 //! Each chain starts from a bootstrap state resampled ∝ its scalar, so short chains (small
 //! tiles) cost one evaluation more per P mutations and explore less, but stay unbiased.
 
 use super::chain::{run_chain, Bootstrap, ChainBuffers, ChainCounts, PssTarget, Splat};
 use flowlight_core::rng::Rng;
 use flowlight_sdk::WorkUnit;
+use std::sync::{Arc, Mutex, PoisonError};
+
+/// The bootstrap of a render seed, computed once by the first work unit that asks for it
+/// (the others wait on the lock), and again only for another seed.
+#[derive(Default)]
+pub struct BootstrapCell {
+    inner: Mutex<Option<(u64, Arc<Bootstrap>)>>,
+}
+
+impl BootstrapCell {
+    /// The bootstrap of render seed `seed`, from `run` if none is stored for that seed, and
+    /// whether this call ran it (so that its cost is reported once).
+    pub fn get_or_run(&self, seed: u64, run: impl FnOnce() -> Bootstrap) -> (Arc<Bootstrap>, bool) {
+        let mut guard = self.inner.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some((stored, b)) = guard.as_ref() {
+            if *stored == seed {
+                return (b.clone(), false);
+            }
+        }
+        let b = Arc::new(run());
+        *guard = Some((seed, b.clone()));
+        (b, true)
+    }
+}
 
 /// The seed of the chain of sample index `s` of the tile of `unit`.
 pub fn chain_seed(unit: &WorkUnit, s: u32) -> u64 {

@@ -1,0 +1,215 @@
+//! # `pssmlt` — primary-sample-space Metropolis light transport
+//!
+//! Kelemen, Szirmay-Kalos, Antal and Csonka 2002: Markov chains over the uniform numbers a
+//! sampler turns into a path, with large steps (a fresh independent sample) and small steps
+//! (every number moved by a normal offset of size `sigma`, pbrt-v4's kernel), the scalar
+//! target being the luminance of the sample's estimate. A bootstrap of independent samples
+//! gives the normalisation b = ∫ f; chains start from bootstrap samples resampled ∝ f (no
+//! start-up bias) and splat the expected value of every mutation (proposal with weight
+//! a·b/f(y), current state with (1 − a)·b/f(x)). The library is
+//! `flowlight_pathtrace::pss`; docs/pssmlt.md has the formulas.
+//!
+//! `spp` keeps MCPT's meaning: a work unit of P pixels × n samples runs n chains of P
+//! mutations, W·H·spp mutations in all, and each chain's numbers depend only on (render seed,
+//! tile, sample index), so the image does not depend on the thread count (it does on the tile
+//! size). The first work unit of a render runs the bootstrap (from the render seed), the
+//! others wait for it.
+//!
+//! Parameters (`[integrator]` table): `sampler` (the sampler the chains run over: `"mcpt"`,
+//! entangled path tracing), `large_step` (probability of a large step), `sigma` (the small
+//! step's standard deviation per number), `bootstrap` (independent samples of the
+//! normalisation), and the path tracer's `path_depth`, `max_ray_depth`, `termination`,
+//! `rr_depth`, `rr_max_survival` and `layers`. The generated table is in docs/pssmlt.md
+//! ("Parameters"); `flowlight plugins --markdown` prints it.
+//!
+//! A sample whose contributions are not all finite and non-negative counts as f = 0: never a
+//! chain state, never deposited, counted (`invalid samples`).
+
+// A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
+#![forbid(unsafe_code)]
+
+use flowlight_pathtrace::pss::{
+    render_unit, Bootstrap, BootstrapCell, ChainBuffers, ChainCounts, McptTarget, Mutation,
+};
+use flowlight_pathtrace::{settings, PathSettings, Variant};
+use flowlight_sdk::abi::ParamSpec;
+use flowlight_sdk::declare::{ChoiceParam, FloatParam, IntParam};
+use flowlight_sdk::stats::Counter;
+use flowlight_sdk::{
+    choice_param, export_integrator, float_param, int_param, AccumulationStyle, Film, Integrator,
+    IntegratorInfo, MutationSet, Params, Scene, Stats, StatsBuilder, Tracer, WorkUnit,
+};
+use std::cell::RefCell;
+
+/// `sampler`: what the chains' primary samples are turned into.
+const SAMPLER: ChoiceParam = choice_param!(
+    "sampler",
+    "mcpt",
+    ["mcpt"],
+    "the sampler the chains run over: \"mcpt\", one entangled path-tracing camera sample (next-event estimation and BSDF sampling by MIS) whose first pair of numbers is its position on the film"
+);
+
+/// `large_step`: Kelemen's large-step probability (pbrt-v4's default).
+const LARGE_STEP: FloatParam = float_param!(
+    "large_step",
+    0.3,
+    0.0 <= x <= 1.0,
+    "probability that a mutation is a large step (every primary sample drawn afresh: an independent sample); otherwise a small step"
+);
+
+/// `sigma`: the small step's size (pbrt-v4's default).
+const SIGMA: FloatParam = float_param!(
+    "sigma",
+    0.01,
+    0.0 < x <= 1.0,
+    "standard deviation of a small step: every primary sample moves by a normal offset of this size, wrapped into [0, 1)"
+);
+
+/// `bootstrap`: independent samples of the normalisation (pbrt-v4's default).
+const BOOTSTRAP: IntParam = int_param!(
+    "bootstrap",
+    100000,
+    1..=100_000_000,
+    "independent samples that estimate the normalisation b (the image's mean luminance integral) and that the chains start from, resampled by luminance; run once per render, on one thread"
+);
+
+const PARAMS: [ParamSpec; 10] = [
+    SAMPLER.spec(),
+    LARGE_STEP.spec(),
+    SIGMA.spec(),
+    BOOTSTRAP.spec(),
+    settings::TERMINATION.spec(),
+    settings::PATH_DEPTH.spec(),
+    settings::MAX_RAY_DEPTH.spec(),
+    settings::RR_DEPTH.spec(),
+    settings::RR_MAX_SURVIVAL.spec(),
+    settings::LAYERS.spec(),
+];
+
+/// The counters the plugin reports.
+struct Counters {
+    chains: Counter,
+    mutations: Counter,
+    large_steps: Counter,
+    accepted_large: Counter,
+    accepted_small: Counter,
+    invalid: Counter,
+    bootstrap_samples: Counter,
+    normalisation: Counter,
+}
+
+impl Counters {
+    fn declare(stats: &mut StatsBuilder) -> Counters {
+        let mutations = stats.sum("mutations");
+        let large_steps = stats.sum("large steps");
+        let accepted_large = stats.sum("accepted large steps");
+        let accepted_small = stats.sum("accepted small steps");
+        stats.ratio("large-step acceptance", accepted_large, large_steps);
+        Counters {
+            chains: stats.sum("chains"),
+            mutations,
+            large_steps,
+            accepted_large,
+            accepted_small,
+            invalid: stats.sum("invalid samples"),
+            bootstrap_samples: stats.sum("bootstrap samples"),
+            normalisation: stats.max("bootstrap b"),
+        }
+    }
+
+    fn report(&self, stats: &mut Stats, c: &ChainCounts) {
+        stats.add(self.chains, c.chains as f64);
+        stats.add(self.mutations, c.mutations as f64);
+        stats.add(self.large_steps, c.large_steps as f64);
+        stats.add(self.accepted_large, c.accepted_large as f64);
+        stats.add(self.accepted_small, c.accepted_small as f64);
+        stats.add(self.invalid, c.invalid as f64);
+    }
+}
+
+pub struct Pssmlt {
+    scene: Scene<'static>,
+    settings: PathSettings,
+    layers: bool,
+    mutation: Mutation,
+    bootstrap_count: u32,
+    bootstrap: BootstrapCell,
+    counters: Counters,
+}
+
+thread_local! {
+    /// A thread's chain buffers, reused by its units.
+    static BUFFERS: RefCell<ChainBuffers> = RefCell::new(ChainBuffers::default());
+}
+
+impl Integrator for Pssmlt {
+    const NAME: &'static str = "pssmlt";
+    const DESCRIPTION: &'static str = "Primary-sample-space Metropolis light transport (Kelemen et al. 2002) over path tracing, with expected-value splatting";
+    const PARAMS: &'static [ParamSpec] = &PARAMS;
+
+    /// Deposits land anywhere on the film (flanged tiles without a flange: every deposit
+    /// kept, the film normalised by the samples per pixel).
+    fn create(
+        params: &Params,
+        _mutations: MutationSet<'static>,
+        scene: Scene<'static>,
+        stats: &mut StatsBuilder,
+    ) -> Result<(Self, IntegratorInfo), String> {
+        SAMPLER.get(params)?;
+        let settings =
+            PathSettings::shared_from_params(params, Variant::Entangled, &settings::MAX_RAY_DEPTH)?;
+        let layers = settings::LAYERS.get(params)?;
+        let mutation = Mutation::new(LARGE_STEP.get(params)? as f32, SIGMA.get(params)? as f32);
+        let bootstrap_count = BOOTSTRAP.get(params)? as u32;
+        let info = IntegratorInfo {
+            layer_count: if layers { settings.path_depth + 1 } else { 0 },
+            accumulation: AccumulationStyle::FlangedTile,
+            flange: 0,
+            biased: 0,
+        };
+        let counters = Counters::declare(stats);
+        let integrator = Pssmlt {
+            scene,
+            settings,
+            layers,
+            mutation,
+            bootstrap_count,
+            bootstrap: BootstrapCell::default(),
+            counters,
+        };
+        Ok((integrator, info))
+    }
+
+    fn render(
+        &self,
+        unit: &WorkUnit,
+        tracer: &Tracer,
+        film: &mut Film,
+        stats: &mut Stats,
+    ) -> Result<(), String> {
+        let mut target = McptTarget::new(&self.scene, tracer, &self.settings, self.layers);
+        let (bootstrap, ran) = self.bootstrap.get_or_run(unit.seed, || {
+            Bootstrap::run(&mut target, unit.seed, self.bootstrap_count, self.mutation)
+        });
+        if ran {
+            stats.add(self.counters.bootstrap_samples, bootstrap.len() as f64);
+            stats.add(self.counters.invalid, bootstrap.invalid() as f64);
+        }
+        stats.add(self.counters.normalisation, bootstrap.normalisation());
+        let mut counts = ChainCounts::default();
+        BUFFERS.with_borrow_mut(|buffers| {
+            render_unit(
+                &mut target,
+                &bootstrap,
+                unit,
+                buffers,
+                &mut counts,
+                &mut |s| film.deposit(s.raster.x, s.raster.y, s.layer, s.value),
+            )
+        });
+        self.counters.report(stats, &counts);
+        Ok(())
+    }
+}
+
+export_integrator!(Pssmlt);
