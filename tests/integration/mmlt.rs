@@ -1,9 +1,11 @@
-//! The `mmlt` plugin (multiplexed MLT over the BDPT strategies) through the host, on the
-//! Cornell box at 32×32 with `path_depth` 3 (Lambertian: a path's depth is its lighting
-//! layer, so `bdpt` at the same `path_depth` renders the same paths):
+//! The Metropolis samplers over BDPT through the host — the `mmlt` plugin (multiplexed MLT
+//! over the BDPT strategies) and `pssmlt` with `sampler = "bdpt"` — on the Cornell box at
+//! 32×32 with `path_depth` 3 (Lambertian: a path's depth is its lighting layer, so `bdpt` at
+//! the same `path_depth` renders the same paths):
 //!
-//! - **No start-up bias.** Many short independent runs (each its own bootstrap, chains of
-//!   one 16×16 tile's length started by resampling it) average to `bdpt`'s independent runs:
+//! - **No start-up bias.** Many short independent runs of either (each its own bootstrap,
+//!   chains of one 16×16 tile's length started by resampling it) average to `bdpt`'s
+//!   independent runs:
 //!   a z-test per 8×8 region (|z| < 5) and on the image mean (|z| < 4), with the
 //!   run-to-run variance of both sides. The test fails when the chains' deposits are 5% too
 //!   bright (checked by hand at this commit: the image mean at z = 4.8, regions up to 3.8;
@@ -44,43 +46,52 @@ fn region_moments(images: &[Vec<Rgb>]) -> Vec<(f64, f64)> {
         .collect()
 }
 
-#[test]
-fn short_mmlt_runs_average_to_bdpt() {
+/// 16 runs of `plugin` with `params` (and `path_depth` 3) at 64 spp against 16 of `bdpt`.
+fn assert_runs_average_to_bdpt(plugin: &str, params: &[(&str, toml::Value)]) {
     let size = (SIZE, SIZE);
     let depth = [("path_depth", int(3))];
     let bdpt = || common::renderer_with(CORNELL, Some("bdpt"), size, 64, &depth);
     let (reference, _) = independent_runs("bdpt", 16, 500, &bdpt);
-    let params = [("path_depth", int(3)), ("bootstrap", int(65536))];
-    let make = || common::renderer_with(CORNELL, Some("mmlt"), size, 64, &params);
-    let (images, outcome) = independent_runs("mmlt", 16, 100, &make);
+    let mut params = params.to_vec();
+    params.push(("path_depth", int(3)));
+    let make = || common::renderer_with(CORNELL, Some(plugin), size, 64, &params);
+    let (images, outcome) = independent_runs(plugin, 16, 100, &make);
+    let counters = &outcome.stats.integrator;
     assert!(
-        outcome
-            .stats
-            .integrator
+        counters
             .iter()
             .any(|(name, v)| name == "mutations" && *v > 0.0),
-        "mmlt reported no mutations: {:?}",
-        outcome.stats.integrator
+        "{plugin} reported no mutations: {counters:?}"
     );
     let (a, b) = (region_moments(&images), region_moments(&reference));
     for k in 0..17 {
         let ((ma, va), (mb, vb)) = (a[k], b[k]);
         let z = (ma - mb) / (va + vb).sqrt().max(1e-12);
-        let what = if k == 16 {
-            "image".to_string()
-        } else {
-            format!("region {k}")
+        let what = match k {
+            16 => "image".to_string(),
+            _ => format!("region {k}"),
         };
-        println!("{what}: mmlt {ma:.5} bdpt {mb:.5} z {z:.2}");
+        println!("{plugin} {what}: {ma:.5}, bdpt {mb:.5}, z {z:.2}");
         // 15 degrees of freedom per side: |z| ≥ 5 has probability about 1e-4 per region,
         // |z| ≥ 4 about 5e-4 for the image mean, whose bound is tighter for the power to see
         // a 5% bias.
         let bound = if k == 16 { 4.0 } else { 5.0 };
         assert!(
             z.abs() < bound,
-            "{what}: mmlt {ma:.5} against bdpt {mb:.5}, z = {z:.2}"
+            "{plugin} {what}: {ma:.5} against bdpt {mb:.5}, z = {z:.2}"
         );
     }
+}
+
+#[test]
+fn short_mmlt_runs_average_to_bdpt() {
+    assert_runs_average_to_bdpt("mmlt", &[("bootstrap", int(65536))]);
+}
+
+#[test]
+fn short_pssmlt_runs_over_bdpt_average_to_bdpt() {
+    let sampler = toml::Value::String("bdpt".into());
+    assert_runs_average_to_bdpt("pssmlt", &[("sampler", sampler), ("bootstrap", int(65536))]);
 }
 
 #[test]

@@ -40,7 +40,7 @@ use flowlight_sdk::{
     MutationSet, ParamRole, Params, Scene, Stats, StatsBuilder, Tracer, WorkUnit,
 };
 use std::cell::RefCell;
-use std::sync::OnceLock;
+use std::sync::{Arc, Mutex, PoisonError};
 
 /// `path_depth`: the deepest chain depth.
 const PATH_DEPTH: IntParam = int_param!(
@@ -97,8 +97,9 @@ pub struct Mmlt {
     depth: u32,
     mutation: Mutation,
     bootstrap_count: u32,
-    /// The per-depth bootstrap, run by the first work unit (it needs a tracer).
-    bootstrap: OnceLock<DepthBootstrap>,
+    /// The per-depth bootstrap of the render seed, run by the first work unit of a render
+    /// with that seed (it needs a tracer; the others wait on the lock).
+    bootstrap: Mutex<Option<(u64, Arc<DepthBootstrap>)>>,
     counters: Counters,
 }
 
@@ -140,7 +141,7 @@ impl Integrator for Mmlt {
             depth,
             mutation,
             bootstrap_count,
-            bootstrap: OnceLock::new(),
+            bootstrap: Mutex::new(None),
             counters,
         };
         Ok((integrator, info))
@@ -154,15 +155,8 @@ impl Integrator for Mmlt {
         stats: &mut Stats,
     ) -> Result<(), String> {
         let sampler = FilmSampler::new(&self.scene, tracer, self.settings.clone(), self.depth);
-        let bootstrap = self.bootstrap.get_or_init(|| {
-            DepthBootstrap::run(
-                &sampler,
-                self.depth,
-                unit.seed,
-                self.bootstrap_count,
-                self.mutation,
-            )
-        });
+        let bootstrap = self.bootstrap_of(&sampler, unit.seed);
+        let bootstrap = &*bootstrap;
         let mut counts = MmltCounts::default();
         BUFFERS.with(|buffers| {
             let buffers = &mut *buffers.borrow_mut();
@@ -183,6 +177,31 @@ impl Integrator for Mmlt {
         stats.add(self.counters.accepted, accepted as f64);
         stats.add(self.counters.invalid, c.invalid as f64);
         Ok(())
+    }
+}
+
+impl Mmlt {
+    /// The bootstrap of render seed `seed`, run now if none is stored for that seed (a new
+    /// seed needs its own: with a fixed one the mean over renders would be biased).
+    fn bootstrap_of(&self, sampler: &FilmSampler, seed: u64) -> Arc<DepthBootstrap> {
+        let mut guard = self
+            .bootstrap
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
+        if let Some((stored, b)) = guard.as_ref() {
+            if *stored == seed {
+                return b.clone();
+            }
+        }
+        let b = Arc::new(DepthBootstrap::run(
+            sampler,
+            self.depth,
+            seed,
+            self.bootstrap_count,
+            self.mutation,
+        ));
+        *guard = Some((seed, b.clone()));
+        b
     }
 }
 
