@@ -1,7 +1,10 @@
 //! Bidirectional path sampling, shared by the `lighttrace`, `bdpt` and `vcm` plugins: light
 //! subpaths ([`light_path`]), camera subpaths and the strategies that join them
 //! ([`camera_path`]), their multiple-importance weights ([`mis`]), the merging grid
-//! ([`grid`]) and the per-work-unit driver ([`render`]). Both subpaths scatter with the
+//! ([`grid`]) and the per-work-unit driver ([`render`]); [`sample`] makes film-wide samples
+//! (a whole BDPT sample, or one strategy of a fixed depth) from caller-given number streams
+//! for the Metropolis samplers in primary sample space. Both subpaths draw from any
+//! [`SampleStream`](flowlight_core::sampler::SampleStream) and scatter with the
 //! walker's [`extend`](crate::walk::step::extend) (roulette and BSDF sample), the light side
 //! with the adjoint BSDF ([`vertex`]).
 //!
