@@ -11,6 +11,7 @@
 //!   raster positions, histogrammed over 8×8-pixel regions, follow the MCPT image's
 //!   luminance shares.
 //! - **Thread count.** The image is the same with 1 and 2 threads.
+//! - **Layers** sum to the image.
 //! - **Bad values** get the host's one-line refusal naming the parameter.
 //!
 //! `PSSMLT_DEBUG=1` prints every region.
@@ -255,4 +256,32 @@ fn bad_values_are_refused_in_one_line() {
     assert!(e.contains("'bootstrap'"), "{e}");
     let e = refused(&[("sampler", "metropolis".into())]);
     assert!(e.contains("'sampler'") && e.contains("metropolis"), "{e}");
+}
+
+/// With `layers = true` every contribution is splatted in its lighting layer: the layers
+/// 0..=N sum to the image, and none is empty on the box.
+#[test]
+fn lighting_layers_sum_to_the_image() {
+    let n = 3;
+    let s = cornell(
+        "pssmlt",
+        2,
+        &[
+            int("path_depth", n),
+            int("bootstrap", 256),
+            ("layers", true.into()),
+        ],
+    );
+    let out = common::render(&s);
+    let image = out.frame.image();
+    let layers: Vec<Vec<Rgb>> = (0..=n as usize).map(|k| out.frame.layer(k)).collect();
+    for (i, c) in image.iter().enumerate() {
+        let sum = layers.iter().fold(Rgb::ZERO, |a, l| a + l[i]);
+        let tol = 1e-4 * c.luminance().max(1e-3);
+        assert!(
+            (sum.luminance() - c.luminance()).abs() <= tol,
+            "pixel {i}: layers sum to {sum:?}, image {c:?}"
+        );
+    }
+    assert!(layers.iter().all(|l| l.iter().any(|c| c.luminance() > 0.0)));
 }

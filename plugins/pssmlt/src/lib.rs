@@ -75,8 +75,8 @@ const SIGMA: FloatParam = float_param!(
 const BOOTSTRAP: IntParam = int_param!(
     "bootstrap",
     100000,
-    1..=100_000_000,
-    "independent samples that estimate the normalisation b (the image's mean luminance integral) and that the chains start from, resampled by luminance; run once per render, on one thread"
+    1..=10_000_000,
+    "independent samples that estimate the normalisation b (the image's mean luminance integral) and that the chains start from, resampled by luminance; run once per render by its first work unit (8 bytes each)"
 );
 
 const PARAMS: [ParamSpec; 11] = [

@@ -64,7 +64,7 @@ pub fn scalar(splats: &[Splat]) -> Option<f32> {
 
 /// The seed of bootstrap vector `i` of a render with seed `seed`.
 fn bootstrap_seed(seed: u64, i: u32) -> u64 {
-    Rng::hash(&[seed, 0x5053_5342_4f4f_54, i as u64])
+    Rng::hash(&[seed, 0x0050_5353_424f_4f54, i as u64])
 }
 
 /// B independent samples of the target: the normalisation b̂ and the weights the chains'
