@@ -20,8 +20,8 @@
 //! * `large_step` (default 0.3, (0, 1]): probability of a large step (a fresh independent
 //!   state) per mutation.
 //! * `sigma` (default 0.01, (0, 1]): standard deviation of a small step per primary sample.
-//! * `bootstrap` (default 16384, 1–16777216): independent samples per depth for b_d and the
-//!   chains' start states; computed once, before the first work unit.
+//! * `bootstrap` (default 16384, 1–1,000,000): independent samples per depth for b_d and the
+//!   chains' start states; computed once per render, by its first work unit (8 bytes each).
 //! * `heuristic` (`"power"` or `"balance"`): the MIS weights of a depth's strategies.
 
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
@@ -71,8 +71,8 @@ const SIGMA: FloatParam = float_param!(
 const BOOTSTRAP: IntParam = int_param!(
     "bootstrap",
     16384,
-    1..=16777216,
-    "independent samples per depth that estimate its brightness b_d (chains per depth are proportional to it; the film is normalised by the sum) and from which chains start"
+    1..=1_000_000,
+    "independent samples per depth that estimate its brightness b_d (chains per depth are proportional to it; the film is normalised by the sum) and from which chains start; run once per render by its first work unit (8 bytes each)"
 );
 
 const PARAMS: [ParamSpec; 5] = [
