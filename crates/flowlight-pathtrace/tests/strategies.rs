@@ -73,9 +73,9 @@ struct Moments {
 
 impl Moments {
     fn add(&mut self, x: &[f64; REGIONS]) {
-        for r in 0..REGIONS {
-            self.sum[r] += x[r];
-            self.sum2[r] += x[r] * x[r];
+        for ((sum, sum2), x) in self.sum.iter_mut().zip(&mut self.sum2).zip(x) {
+            *sum += x;
+            *sum2 += x * x;
         }
         self.n += 1;
     }
