@@ -4,7 +4,7 @@
 //! - **Stationarity in raster space.** The chains' states of depth 1, after every mutation,
 //!   fall into 4×4 film regions with the shares of the depth-1 image's luminance there (the
 //!   target f_1 marginalised over everything but the raster position), estimated by
-//!   independent BDPT samples' lighting layer 1. The same histogram is far from the uniform
+//!   independent full BDPT samples' lighting layer 1. The same histogram is far from the uniform
 //!   shares (the check has the power to see a wrong target).
 //! - **Stationarity over depths.** The share of mutations of each depth is b̂_d / Σ b̂
 //!   within the binomial noise of the chains' depth draws.
@@ -14,6 +14,7 @@
 mod loaded;
 
 use flowlight_core::rng::Rng;
+use flowlight_core::Rgb;
 use flowlight_host::intersector::UnitTracer;
 use flowlight_pathtrace::bidir::sample::{strategy_only_settings, FilmSampler, SampleScratch};
 use flowlight_pathtrace::bidir::Heuristic;
@@ -27,8 +28,8 @@ const CORNELL: &str = "scenes/cornell-box/cornell-box.toml";
 const DEPTH: u32 = 1;
 const BINS: usize = 4;
 
-/// Runs `f` with a strategy sampler of the Cornell box.
-fn with_sampler<R>(f: impl FnOnce(&FilmSampler, Vec2) -> R) -> R {
+/// Runs `f` with a strategy sampler of the Cornell box, its scene and tracer.
+fn with_sampler<R>(f: impl FnOnce(&FilmSampler, Vec2, &Scene, &Tracer) -> R) -> R {
     let loaded = load(CORNELL);
     // SAFETY: `loaded` owns what the view points into and outlives `scene`.
     let scene = unsafe { Scene::from_view(&loaded.view) };
@@ -42,7 +43,7 @@ fn with_sampler<R>(f: impl FnOnce(&FilmSampler, Vec2) -> R) -> R {
         strategy_only_settings(Heuristic::Power),
         DEPTH,
     );
-    f(&sampler, film)
+    f(&sampler, film, &scene, &tracer)
 }
 
 fn bin(film: Vec2, raster: Vec2) -> usize {
@@ -97,41 +98,48 @@ fn run_chains(
     (counts, histogram, deposited / pixels / f64::from(samples))
 }
 
-/// Per bin, the depth-1 image's luminance (mean of strategy samples with a uniform
-/// strategy choice, independent numbers), and the film's mean per depth (pixel units).
-fn independent_estimates(sampler: &FilmSampler, film: Vec2, n: u64) -> (Vec<f64>, [f64; 2]) {
+/// Per bin, the depth-1 image's luminance, and the film's mean pixel per depth, from
+/// independent BDPT samples (lighting layers 0 and 1 of `bdpt` at `path_depth` 1: the
+/// Cornell box is Lambertian, so a path's lighting layer is its depth).
+fn bdpt_estimates(scene: &Scene, tracer: &Tracer, film: Vec2, n: u64) -> (Vec<f64>, [f64; 2]) {
+    let mut settings = strategy_only_settings(Heuristic::Power);
+    settings.path.path_depth = DEPTH;
+    settings.path.max_ray_depth = 64;
+    settings.lighting_layers = true;
+    let bdpt = FilmSampler::new(scene, tracer, settings, 0);
     let mut scratch = SampleScratch::default();
     let mut bins = vec![0.0f64; BINS * BINS];
     let mut means = [0.0f64; 2];
-    for d in 0..=DEPTH {
-        for i in 0..n {
-            let mut choice = Rng::new(i, 10 + u64::from(d));
-            let u = choice.uniform();
-            let (camera, light) = (Rng::new(i ^ 0x77, 0), Rng::new(i ^ 0x77, 2));
-            if let Some(s) = sampler.strategy_sample(d, u, camera, light, &mut scratch) {
-                let l = f64::from(s.value.luminance());
-                means[d as usize] += l;
-                if d == 1 {
-                    bins[bin(film, s.raster)] += l;
+    for i in 0..n {
+        let (camera, light) = (Rng::new(i ^ 0x77, 0), Rng::new(i ^ 0x77, 2));
+        bdpt.bdpt_sample(
+            camera,
+            light,
+            &mut scratch,
+            &mut |r: Vec2, layer: u32, v: Rgb| {
+                let l = f64::from(v.luminance());
+                means[layer as usize] += l;
+                if layer == 1 {
+                    bins[bin(film, r)] += l;
                 }
-            }
-        }
-        // The film's mean pixel value is the mean of a sample's value (module docs of
-        // `bidir::sample`: I_j = W·H · E[value in j]).
-        means[d as usize] /= n as f64;
+            },
+        );
     }
+    // The film's mean pixel value is the mean of a sample's deposits (module docs of
+    // `bidir::sample`: I_j = W·H · E[deposits in j]).
+    means.iter_mut().for_each(|m| *m /= n as f64);
     (bins, means)
 }
 
 #[test]
 fn mmlt_chains_are_stationary_in_raster_space_and_over_depths() {
-    with_sampler(|sampler, film| {
+    with_sampler(|sampler, film, scene, tracer| {
         let mutation = Mutation::new(0.3, 0.01);
         let bootstrap = DepthBootstrap::run(sampler, DEPTH, 3, 20_000, mutation);
         let (b0, b1) = (bootstrap.brightness(0), bootstrap.brightness(1));
         assert!(b0 > 0.0 && b1 > 0.0, "both depths carry light: {b0} {b1}");
         let (counts, histogram, deposited) = run_chains(sampler, film, &bootstrap, 4);
-        let (reference, means) = independent_estimates(sampler, film, 200_000);
+        let (reference, means) = bdpt_estimates(scene, tracer, film, 200_000);
         // Expected-value splatting deposits Σ b̂ of luminance per mutation, whatever the
         // chain's depth (b̂_d, times 1/P_d = Σ b̂ / b̂_d): the film's mean pixel is Σ b̂.
         let total = bootstrap.total();
