@@ -10,6 +10,8 @@
 //!   run-to-run variance of both sides. The test fails when the chains' deposits are 5% too
 //!   bright (checked by hand at this commit: the image mean at z = 4.8, regions up to 3.8;
 //!   not a test of its own, since it needs another build of the plugin).
+//! - **Thread count.** An `mmlt` image is the same bit for bit with 1 and 2 threads (its
+//!   bootstrap and chains depend on the seed and the tiles only).
 //! - **Bad input.** A parameter out of its range is refused with one line naming it.
 
 use crate::common;
@@ -92,6 +94,21 @@ fn short_mmlt_runs_average_to_bdpt() {
 fn short_pssmlt_runs_over_bdpt_average_to_bdpt() {
     let sampler = toml::Value::String("bdpt".into());
     assert_runs_average_to_bdpt("pssmlt", &[("sampler", sampler), ("bootstrap", int(65536))]);
+}
+
+#[test]
+fn the_mmlt_image_does_not_depend_on_the_thread_count() {
+    let params = [("path_depth", int(4)), ("bootstrap", int(256))];
+    let image = |threads: usize| {
+        let mut s = common::renderer_with(CORNELL, Some("mmlt"), (SIZE, SIZE), 2, &params);
+        (s.options.seed, s.options.tile_size, s.options.threads) = (5, 8, threads);
+        let out = common::render(&s);
+        assert_eq!(out.stats.invalid_deposits, 0);
+        out.frame.image()
+    };
+    let one = image(1);
+    assert!(one.iter().any(|c| !c.is_black()), "a black image");
+    assert!(one == image(2), "the image changed with the thread count");
 }
 
 #[test]
