@@ -36,6 +36,7 @@ fn bidir_settings(path_depth: u32) -> BidirSettings {
         strategy_layers: false,
         radius: 0.0,
         radius_alpha: 1.0,
+        only_strategy: None,
     }
 }
 

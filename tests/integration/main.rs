@@ -32,6 +32,7 @@ mod gltf_material;
 mod hardening;
 mod instancing;
 mod lights;
+mod mmlt;
 mod orthographic;
 mod outsider;
 mod plugins;

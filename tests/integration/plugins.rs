@@ -594,7 +594,7 @@ fn the_mutation_list_is_read_under_the_declared_name() {
 }
 
 /// The plugins whose parameters the docs list, and the doc holding each table.
-const DOCUMENTED: [(&str, &str); 12] = [
+const DOCUMENTED: [(&str, &str); 13] = [
     ("mcpt", "docs/mcpt.md"),
     ("erpt", "docs/erpt.md"),
     ("soft-reconnection", "docs/erpt.md"),
@@ -606,6 +606,7 @@ const DOCUMENTED: [(&str, &str); 12] = [
     ("lighttrace", "docs/bdpt.md"),
     ("bdpt", "docs/bdpt.md"),
     ("vcm", "docs/bdpt.md"),
+    ("mmlt", "docs/mmlt.md"),
     ("pssmlt", "docs/pssmlt.md"),
 ];
 

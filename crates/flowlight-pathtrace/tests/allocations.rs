@@ -15,21 +15,19 @@
 //! figures are printed (`cargo test -p flowlight-pathtrace --test
 //! allocations -- --nocapture`).
 
+mod loaded;
+
 use flowlight_core::Rgb;
-use flowlight_host::intersector::{build_intersector, Intersector, UnitTracer};
-use flowlight_host::renderer::scene_view;
+use flowlight_host::intersector::UnitTracer;
 use flowlight_pathtrace::bidir::params::settings_from_params;
 use flowlight_pathtrace::bidir::render::{render_unit, UnitCounts};
 use flowlight_pathtrace::bidir::vertex::LightVertex;
 use flowlight_pathtrace::bidir::{BidirSettings, Techniques};
-use flowlight_scene::config::load_config;
-use flowlight_scene::lights::{light_power_cdf, load_environment, EnvironmentData};
-use flowlight_scene::load_gltf;
-use flowlight_sdk::abi::{Deposit, ParamValue, SceneView, StrRef};
+use flowlight_sdk::abi::{Deposit, ParamValue, StrRef};
 use flowlight_sdk::{Accumulator, Film, ParamKind, Params, Scene, Tracer, WorkUnit};
+use loaded::{load, LoadedScene};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
-use std::path::Path;
 
 /// The system allocator, counting the allocations (and reallocations) of each thread.
 struct CountingAllocator;
@@ -78,56 +76,6 @@ unsafe impl GlobalAlloc for CountingAllocator {
 
 #[global_allocator]
 static GLOBAL: CountingAllocator = CountingAllocator;
-
-/// A scene loaded as the host loads it, without an integrator plugin: what the view points
-/// into is owned here and outlives every [`Scene`] made from `view`.
-struct LoadedScene {
-    view: SceneView,
-    intersector: Box<dyn Intersector>,
-    scene: flowlight_scene::Scene,
-    _textures: Vec<flowlight_core::material::Texture>,
-    _environment: EnvironmentData,
-    _light_cdf: Vec<f32>,
-    /// The config's `path_depth`, if it sets one.
-    path_depth: Option<i64>,
-}
-
-/// Loads the scene of config `relative` (to the repository root).
-fn load(relative: &str) -> LoadedScene {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../..")
-        .join(relative);
-    let config = load_config(&path).unwrap_or_else(|e| panic!("{relative}: {e}"));
-    let scene = load_gltf(&config.scene, &config.material_overrides)
-        .unwrap_or_else(|e| panic!("{relative}: {e}"));
-    let camera = config
-        .camera(&scene)
-        .unwrap_or_else(|e| panic!("{relative}: {e}"));
-    let (intersector, _) =
-        build_intersector(config.intersector, &scene).unwrap_or_else(|e| panic!("{relative}: {e}"));
-    let textures = scene.texture_views();
-    let environment = match &config.environment {
-        Some(e) => load_environment(&config.path, e).unwrap_or_else(|e| panic!("{relative}: {e}")),
-        None => EnvironmentData::default(),
-    };
-    let env_view = environment.view();
-    let light_cdf = light_power_cdf(&scene, &env_view);
-    let view = scene_view(&scene, camera, &textures, env_view, &light_cdf);
-    let path_depth = config
-        .integrator_params
-        .iter()
-        .find(|(name, _)| name == "path_depth")
-        .and_then(|(_, v)| v.as_integer());
-    LoadedScene {
-        view,
-        intersector,
-        scene,
-        _textures: textures,
-        _environment: environment,
-        _light_cdf: light_cdf,
-        path_depth,
-    }
-}
 
 /// Sums what is deposited (the test reads that the units rendered something).
 #[derive(Default)]

@@ -310,6 +310,7 @@ impl Erpt {
             strategy_layers: false,
             radius: 0.0,
             radius_alpha: 1.0,
+            only_strategy: None,
         };
         let mut sampler = StrategySeeds::new(&self.scene, tracer, &settings);
         for (x, y) in pixels {

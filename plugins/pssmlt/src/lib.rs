@@ -16,7 +16,8 @@
 //! others wait for it.
 //!
 //! Parameters (`[integrator]` table): `sampler` (the sampler the chains run over: `"mcpt"`,
-//! entangled path tracing), `large_step` (probability of a large step), `sigma` (the small
+//! entangled path tracing, or `"bdpt"`, one bidirectional sample with every (s, t) strategy
+//! weighed by `heuristic`, each splatted at its own raster position), `large_step` (probability of a large step), `sigma` (the small
 //! step's standard deviation per number), `bootstrap` (independent samples of the
 //! normalisation), and the path tracer's `path_depth`, `max_ray_depth`, `termination`,
 //! `rr_depth`, `rr_max_survival` and `layers`. The generated table is in docs/pssmlt.md
@@ -28,8 +29,13 @@
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]
 
+use flowlight_pathtrace::bidir::params::HEURISTIC;
+use flowlight_pathtrace::bidir::sample::{strategy_only_settings, FilmSampler};
+use flowlight_pathtrace::bidir::{BidirSettings, Heuristic};
+use flowlight_pathtrace::pss::bdpt::BdptTarget;
 use flowlight_pathtrace::pss::{
     render_unit, Bootstrap, BootstrapCell, ChainBuffers, ChainCounts, McptTarget, Mutation,
+    PssTarget,
 };
 use flowlight_pathtrace::{settings, PathSettings, Variant};
 use flowlight_sdk::abi::ParamSpec;
@@ -45,8 +51,8 @@ use std::cell::RefCell;
 const SAMPLER: ChoiceParam = choice_param!(
     "sampler",
     "mcpt",
-    ["mcpt"],
-    "the sampler the chains run over: \"mcpt\", one entangled path-tracing camera sample (next-event estimation and BSDF sampling by MIS) whose first pair of numbers is its position on the film"
+    ["mcpt", "bdpt"],
+    "the sampler the chains run over: \"mcpt\", one entangled path-tracing camera sample (next-event estimation and BSDF sampling by MIS) whose first pair of numbers is its position on the film; \"bdpt\", one light and one camera subpath (two streams) with every (s, t) strategy weighed by heuristic, each splatted at its own raster position"
 );
 
 /// `large_step`: Kelemen's large-step probability (pbrt-v4's default).
@@ -73,7 +79,7 @@ const BOOTSTRAP: IntParam = int_param!(
     "independent samples that estimate the normalisation b (the image's mean luminance integral) and that the chains start from, resampled by luminance; run once per render by its first work unit (8 bytes each)"
 );
 
-const PARAMS: [ParamSpec; 10] = [
+const PARAMS: [ParamSpec; 11] = [
     SAMPLER.spec(),
     LARGE_STEP.spec(),
     SIGMA.spec(),
@@ -84,6 +90,7 @@ const PARAMS: [ParamSpec; 10] = [
     settings::RR_DEPTH.spec(),
     settings::RR_MAX_SURVIVAL.spec(),
     settings::LAYERS.spec(),
+    HEURISTIC.spec(),
 ];
 
 /// The counters the plugin reports.
@@ -127,8 +134,16 @@ impl Counters {
     }
 }
 
+/// The sampler the chains run over.
+enum Sampler {
+    Mcpt,
+    /// BDPT with these settings (the path settings and layers of the plugin's).
+    Bdpt(BidirSettings),
+}
+
 pub struct Pssmlt {
     scene: Scene<'static>,
+    sampler: Sampler,
     settings: PathSettings,
     layers: bool,
     mutation: Mutation,
@@ -155,10 +170,20 @@ impl Integrator for Pssmlt {
         scene: Scene<'static>,
         stats: &mut StatsBuilder,
     ) -> Result<(Self, IntegratorInfo), String> {
-        SAMPLER.get(params)?;
+        let sampler = SAMPLER.get(params)?;
         let settings =
             PathSettings::shared_from_params(params, Variant::Entangled, &settings::MAX_RAY_DEPTH)?;
         let layers = settings::LAYERS.get(params)?;
+        let sampler = match sampler {
+            "bdpt" => {
+                let heuristic = Heuristic::parse(HEURISTIC.get(params)?).expect("declared choice");
+                let mut bidir = strategy_only_settings(heuristic);
+                bidir.path = settings.clone();
+                bidir.lighting_layers = layers;
+                Sampler::Bdpt(bidir)
+            }
+            _ => Sampler::Mcpt,
+        };
         let mutation = Mutation::new(LARGE_STEP.get(params)? as f32, SIGMA.get(params)? as f32);
         let bootstrap_count = BOOTSTRAP.get(params)? as u32;
         let info = IntegratorInfo {
@@ -170,6 +195,7 @@ impl Integrator for Pssmlt {
         let counters = Counters::declare(stats);
         let integrator = Pssmlt {
             scene,
+            sampler,
             settings,
             layers,
             mutation,
@@ -187,9 +213,31 @@ impl Integrator for Pssmlt {
         film: &mut Film,
         stats: &mut Stats,
     ) -> Result<(), String> {
-        let mut target = McptTarget::new(&self.scene, tracer, &self.settings, self.layers);
+        match &self.sampler {
+            Sampler::Mcpt => {
+                let mut target = McptTarget::new(&self.scene, tracer, &self.settings, self.layers);
+                self.render_target(&mut target, unit, film, stats);
+            }
+            Sampler::Bdpt(bidir) => {
+                let sampler = FilmSampler::new(&self.scene, tracer, bidir.clone(), 0);
+                self.render_target(&mut BdptTarget::new(&sampler), unit, film, stats);
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Pssmlt {
+    /// Runs `unit`'s chains over `target`, the bootstrap first if this render has none yet.
+    fn render_target<T: PssTarget>(
+        &self,
+        target: &mut T,
+        unit: &WorkUnit,
+        film: &mut Film,
+        stats: &mut Stats,
+    ) {
         let (bootstrap, ran) = self.bootstrap.get_or_run(unit.seed, || {
-            Bootstrap::run(&mut target, unit.seed, self.bootstrap_count, self.mutation)
+            Bootstrap::run(target, unit.seed, self.bootstrap_count, self.mutation)
         });
         if ran {
             stats.add(self.counters.bootstrap_samples, bootstrap.len() as f64);
@@ -198,17 +246,11 @@ impl Integrator for Pssmlt {
         stats.add(self.counters.normalisation, bootstrap.normalisation());
         let mut counts = ChainCounts::default();
         BUFFERS.with_borrow_mut(|buffers| {
-            render_unit(
-                &mut target,
-                &bootstrap,
-                unit,
-                buffers,
-                &mut counts,
-                &mut |s| film.deposit(s.raster.x, s.raster.y, s.layer, s.value),
-            )
+            render_unit(target, &bootstrap, unit, buffers, &mut counts, &mut |s| {
+                film.deposit(s.raster.x, s.raster.y, s.layer, s.value)
+            })
         });
         self.counters.report(stats, &counts);
-        Ok(())
     }
 }
 

@@ -20,7 +20,7 @@ use crate::SampleContributions;
 use flowlight_core::bsdf::{volume, Bsdf, BsdfAt};
 use flowlight_core::geometry::{Frame, Ray, SurfaceHit};
 use flowlight_core::light::{LightKind, LightSample, PunctualKind};
-use flowlight_core::rng::Rng;
+use flowlight_core::sampler::SampleStream;
 use flowlight_core::sampling::uniform_cone_pdf;
 use flowlight_core::Rgb;
 use flowlight_sdk::{Scene, Tracer};
@@ -70,12 +70,14 @@ pub struct CameraCounts {
 }
 
 impl CameraPaths<'_, '_> {
-    /// Traces the camera subpath through `raster` with `rng`, adding its weighed
-    /// contributions to `out`: connections to `own` (the vertices of the sample's light
-    /// subpath) and merges with `merges`.
-    pub fn trace(
+    /// Traces the camera subpath through `raster` with the numbers of `rng` (any
+    /// [`SampleStream`]), adding its weighed contributions to `out`: connections to `own`
+    /// (the vertices of the sample's light subpath) and merges with `merges`. With
+    /// [`BidirSettings::only_strategy`] (s, t) it makes that strategy alone and stops at its
+    /// t-th vertex.
+    pub fn trace<S: SampleStream>(
         &self,
-        rng: Rng,
+        rng: S,
         raster: Vec2,
         own: &[LightVertex],
         merges: Option<MergeSet>,
@@ -89,6 +91,9 @@ impl CameraPaths<'_, '_> {
         let mut all_dirac = true;
         loop {
             let Some(hit) = self.tracer.intersect(&state.ray) else {
+                if !settings.wants(0, t + 1) {
+                    return;
+                }
                 self.escaped(&state, &partial, t, all_dirac, out);
                 return;
             };
@@ -109,7 +114,7 @@ impl CameraPaths<'_, '_> {
             if let Some(r) = self.recorder {
                 r.borrow_mut().camera_hit(&hit, state.step, state.prev_p);
             }
-            if hit.emitter >= 0 {
+            if hit.emitter >= 0 && settings.wants(0, t) {
                 self.emitter_hit(&state, &hit, &partial, t, all_dirac, out);
             }
             if state.last {
@@ -142,14 +147,19 @@ impl CameraPaths<'_, '_> {
                 };
                 if it.techniques.connect {
                     let u = state.rng.uniform2();
-                    self.sample_light(&here, u, out);
-                    for y in own {
+                    if settings.wants(1, t) {
+                        self.sample_light(&here, u, out);
+                    }
+                    for y in own.iter().filter(|y| settings.wants(y.length + 1, t)) {
                         counts.connections += u64::from(self.connect(&here, y, out));
                     }
                 }
                 if let Some(set) = merges {
                     counts.merges += self.merge(&here, set, out);
                 }
+            }
+            if settings.only_strategy.is_some_and(|(_, last)| t >= last) {
+                return;
             }
             let roulette = vertex::termination(
                 &settings.path.termination,
@@ -187,9 +197,9 @@ impl CameraPaths<'_, '_> {
 
     /// The environment along an escaped ray, weighed against its light sample and light
     /// tracing from it.
-    fn escaped(
+    fn escaped<S>(
         &self,
-        state: &WalkState<Rng>,
+        state: &WalkState<S>,
         partial: &Partial,
         t: u32,
         all_dirac: bool,
@@ -239,9 +249,9 @@ impl CameraPaths<'_, '_> {
 
     /// The emission of the emitter at `hit`, weighed against its light sample and light
     /// tracing from it.
-    fn emitter_hit(
+    fn emitter_hit<S>(
         &self,
-        state: &WalkState<Rng>,
+        state: &WalkState<S>,
         hit: &SurfaceHit,
         partial: &Partial,
         t: u32,

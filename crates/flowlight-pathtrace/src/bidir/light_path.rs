@@ -36,7 +36,7 @@ use crate::walk::WalkState;
 use flowlight_core::bsdf::volume;
 use flowlight_core::geometry::{offset_ray_origin, Frame, Ray};
 use flowlight_core::light::{EmissionSample, LightKind};
-use flowlight_core::rng::Rng;
+use flowlight_core::sampler::SampleStream;
 use flowlight_core::Rgb;
 use flowlight_sdk::{Scene, Tracer};
 use glam::{Vec2, Vec3};
@@ -77,9 +77,16 @@ pub fn layer_of(settings: &BidirSettings, lighting: u32, s: u32, t: u32) -> u32 
 }
 
 impl LightPaths<'_, '_> {
-    /// Traces one light subpath with `rng`, pushing its kept vertices onto `vertices` (where
-    /// anything connects or merges to them) and splatting its eye connections to `out`.
-    pub fn trace(&self, rng: Rng, vertices: &mut Vec<LightVertex>, out: &mut impl Splat) {
+    /// Traces one light subpath with the numbers of `rng` (any [`SampleStream`]: PCG for the
+    /// plugins, primary samples for the Metropolis samplers), pushing its kept vertices onto
+    /// `vertices` (where anything connects or merges to them) and splatting its eye
+    /// connections to `out`.
+    pub fn trace<S: SampleStream>(
+        &self,
+        rng: S,
+        vertices: &mut Vec<LightVertex>,
+        out: &mut impl Splat,
+    ) {
         let mut rng = rng;
         let (u_light, u_pos, u_dir) = (rng.uniform(), rng.uniform2(), rng.uniform2());
         let lights = &self.scene.lights;
@@ -140,7 +147,7 @@ impl LightPaths<'_, '_> {
                     partial,
                     length,
                 };
-                if self.it.techniques.light_trace {
+                if self.it.techniques.light_trace && self.settings.wants(v.length + 1, 1) {
                     self.connect_to_eye(&v, &bsdf, out);
                 }
                 if keep {

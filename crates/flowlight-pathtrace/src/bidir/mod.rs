@@ -1,7 +1,10 @@
 //! Bidirectional path sampling, shared by the `lighttrace`, `bdpt` and `vcm` plugins: light
 //! subpaths ([`light_path`]), camera subpaths and the strategies that join them
 //! ([`camera_path`]), their multiple-importance weights ([`mis`]), the merging grid
-//! ([`grid`]) and the per-work-unit driver ([`render`]). Both subpaths scatter with the
+//! ([`grid`]) and the per-work-unit driver ([`render`]); [`sample`] makes film-wide samples
+//! (a whole BDPT sample, or one strategy of a fixed depth) from caller-given number streams
+//! for the Metropolis samplers in primary sample space. Both subpaths draw from any
+//! [`SampleStream`](flowlight_core::sampler::SampleStream) and scatter with the
 //! walker's [`extend`](crate::walk::step::extend) (roulette and BSDF sample), the light side
 //! with the adjoint BSDF ([`vertex`]).
 //!
@@ -45,6 +48,7 @@ pub mod light_path;
 pub mod mis;
 pub mod params;
 pub mod render;
+pub mod sample;
 pub mod strategy_seeds;
 pub mod vertex;
 
@@ -70,12 +74,22 @@ pub struct BidirSettings {
     pub radius: f32,
     /// α of the radius schedule (module docs); 1 keeps the radius constant.
     pub radius_alpha: f32,
+    /// Make strategy (s, t) alone ([`sample::strategy_sample`]): the camera subpath stops
+    /// at its t-th vertex and only (s, t)'s contribution is evaluated. `None` for every
+    /// strategy the techniques allow.
+    pub only_strategy: Option<(u32, u32)>,
 }
 
 impl BidirSettings {
     /// Whether deposits keep a layer (lighting or strategy).
     pub fn layers(&self) -> bool {
         self.lighting_layers || self.strategy_layers
+    }
+
+    /// Whether strategy (`s`, `t`) is evaluated ([`Self::only_strategy`]).
+    #[inline(always)]
+    pub fn wants(&self, s: u32, t: u32) -> bool {
+        self.only_strategy.is_none_or(|only| only == (s, t))
     }
 
     /// The merging radius of iteration (sample index) `i` for a scene of bounding-sphere

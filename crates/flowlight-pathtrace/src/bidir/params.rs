@@ -108,5 +108,6 @@ pub fn settings_from_params(
         strategy_layers,
         radius,
         radius_alpha,
+        only_strategy: None,
     })
 }

@@ -21,7 +21,7 @@ use crate::shading::Shading;
 use crate::walk::{step, Step, WalkState};
 use flowlight_core::bsdf::{Bsdf, BsdfAt, TransportMode};
 use flowlight_core::geometry::SurfaceHit;
-use flowlight_core::rng::Rng;
+use flowlight_core::sampler::SampleStream;
 use flowlight_core::termination::TerminationSchedule;
 use flowlight_core::Rgb;
 use flowlight_sdk::Scene;
@@ -86,11 +86,11 @@ pub struct Surface<'a> {
 /// One BSDF sample of a subpath at `surface`: the walker's roulette and sample
 /// ([`step::extend`] with stop probability `t`), then, on a light subpath, the adjoint value;
 /// the partial weights follow. Returns whether the path goes on.
-pub fn scatter(
+pub fn scatter<S: SampleStream>(
     scene: &Scene,
     it: &Iteration,
     side: Side,
-    (state, partial): (&mut WalkState<Rng>, &mut Partial),
+    (state, partial): (&mut WalkState<S>, &mut Partial),
     surface: &Surface,
     t: f32,
 ) -> bool {

@@ -10,11 +10,15 @@
 //!   ([`run_chain`]); the formulas are there.
 //! * [`units`]: chains per host work unit, so that `spp` keeps MCPT's meaning.
 //! * [`mcpt`]: entangled MCPT as a target.
+//! * [`bdpt`]: BDPT (every strategy of one sample) as a target.
+//! * [`mmlt`]: multiplexed MLT: one BDPT strategy per sample, per-depth chains.
 //!
 //! The `pssmlt` plugin is the user; docs/pssmlt.md is the user documentation.
 
+pub mod bdpt;
 pub mod chain;
 pub mod mcpt;
+pub mod mmlt;
 pub mod samples;
 pub mod units;
 

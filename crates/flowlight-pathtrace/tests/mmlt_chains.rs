@@ -1,0 +1,181 @@
+//! Multiplexed MLT's chains (`flowlight_pathtrace::pss::mmlt`) on the Cornell box with
+//! depths 0 and 1 (the lamp seen directly, and one bounce):
+//!
+//! - **Stationarity in raster space.** The chains' states of depth 1, after every mutation,
+//!   fall into 4×4 film regions with the shares of the depth-1 image's luminance there (the
+//!   target f_1 marginalised over everything but the raster position), estimated by
+//!   independent full BDPT samples' lighting layer 1. The same histogram is far from the uniform
+//!   shares (the check has the power to see a wrong target).
+//! - **Stationarity over depths.** The share of mutations of each depth is b̂_d / Σ b̂
+//!   within the binomial noise of the chains' depth draws.
+//! - **Deposits.** A whole film's worth of work units deposits Σ_d b̂_d per pixel on
+//!   average: every mutation deposits Σ b̂ of luminance, whatever its chain's depth.
+
+mod loaded;
+
+use flowlight_core::rng::Rng;
+use flowlight_core::Rgb;
+use flowlight_host::intersector::UnitTracer;
+use flowlight_pathtrace::bidir::sample::{strategy_only_settings, FilmSampler, SampleScratch};
+use flowlight_pathtrace::bidir::Heuristic;
+use flowlight_pathtrace::pss::mmlt::{render_unit, DepthBootstrap, MmltBuffers, MmltCounts};
+use flowlight_pathtrace::pss::Mutation;
+use flowlight_sdk::{Scene, Tracer, WorkUnit};
+use glam::Vec2;
+use loaded::load;
+
+const CORNELL: &str = "scenes/cornell-box/cornell-box.toml";
+const DEPTH: u32 = 1;
+const BINS: usize = 4;
+
+/// Runs `f` with a strategy sampler of the Cornell box, its scene and tracer.
+fn with_sampler<R>(f: impl FnOnce(&FilmSampler, Vec2, &Scene, &Tracer) -> R) -> R {
+    let loaded = load(CORNELL);
+    // SAFETY: `loaded` owns what the view points into and outlives `scene`.
+    let scene = unsafe { Scene::from_view(&loaded.view) };
+    let mut unit_tracer = UnitTracer::new(&loaded.scene, loaded.intersector.as_ref());
+    let table = unit_tracer.table();
+    let tracer = Tracer::new(&table);
+    let film = Vec2::new(scene.camera.width as f32, scene.camera.height as f32);
+    let sampler = FilmSampler::new(
+        &scene,
+        &tracer,
+        strategy_only_settings(Heuristic::Power),
+        DEPTH,
+    );
+    f(&sampler, film, &scene, &tracer)
+}
+
+fn bin(film: Vec2, raster: Vec2) -> usize {
+    let x = ((raster.x / film.x * BINS as f32) as usize).min(BINS - 1);
+    let y = ((raster.y / film.y * BINS as f32) as usize).min(BINS - 1);
+    y * BINS + x
+}
+
+/// Chains over the whole film split into 16×16 tiles, `samples` sample indices each; returns the counts and the per-bin histogram of depth-1 states and the
+/// deposits' mean luminance per pixel (in pixel-value units: ÷ spp = 1).
+fn run_chains(
+    sampler: &FilmSampler,
+    film: Vec2,
+    bootstrap: &DepthBootstrap,
+    samples: u32,
+) -> (MmltCounts, Vec<f64>, f64) {
+    let (w, h) = (film.x as u32, film.y as u32);
+    let mut buffers = MmltBuffers::default();
+    let mut counts = MmltCounts::default();
+    let mut histogram = vec![0.0f64; BINS * BINS];
+    let mut deposited = 0.0f64;
+    let tile = 16;
+    for y0 in (0..h).step_by(tile) {
+        for x0 in (0..w).step_by(tile) {
+            let unit = WorkUnit {
+                x0,
+                y0,
+                x1: (x0 + tile as u32).min(w),
+                y1: (y0 + tile as u32).min(h),
+                sample_begin: 0,
+                sample_count: samples,
+                seed: 7,
+            };
+            render_unit(
+                sampler,
+                bootstrap,
+                &unit,
+                &mut buffers,
+                &mut counts,
+                &mut |s| deposited += f64::from(s.value.luminance()),
+                &mut |d, state| {
+                    if d == 1 {
+                        if let Some(s) = state.first() {
+                            histogram[bin(film, s.raster)] += 1.0;
+                        }
+                    }
+                },
+            );
+        }
+    }
+    let pixels = f64::from(w) * f64::from(h);
+    (counts, histogram, deposited / pixels / f64::from(samples))
+}
+
+/// Per bin, the depth-1 image's luminance, and the film's mean pixel per depth, from
+/// independent BDPT samples (lighting layers 0 and 1 of `bdpt` at `path_depth` 1: the
+/// Cornell box is Lambertian, so a path's lighting layer is its depth).
+fn bdpt_estimates(scene: &Scene, tracer: &Tracer, film: Vec2, n: u64) -> (Vec<f64>, [f64; 2]) {
+    let mut settings = strategy_only_settings(Heuristic::Power);
+    settings.path.path_depth = DEPTH;
+    settings.path.max_ray_depth = 64;
+    settings.lighting_layers = true;
+    let bdpt = FilmSampler::new(scene, tracer, settings, 0);
+    let mut scratch = SampleScratch::default();
+    let mut bins = vec![0.0f64; BINS * BINS];
+    let mut means = [0.0f64; 2];
+    for i in 0..n {
+        let (camera, light) = (Rng::new(i ^ 0x77, 0), Rng::new(i ^ 0x77, 2));
+        bdpt.bdpt_sample(
+            camera,
+            light,
+            &mut scratch,
+            &mut |r: Vec2, layer: u32, v: Rgb| {
+                let l = f64::from(v.luminance());
+                means[layer as usize] += l;
+                if layer == 1 {
+                    bins[bin(film, r)] += l;
+                }
+            },
+        );
+    }
+    // The film's mean pixel value is the mean of a sample's deposits (module docs of
+    // `bidir::sample`: I_j = W·H · E[deposits in j]).
+    means.iter_mut().for_each(|m| *m /= n as f64);
+    (bins, means)
+}
+
+#[test]
+fn mmlt_chains_are_stationary_in_raster_space_and_over_depths() {
+    with_sampler(|sampler, film, scene, tracer| {
+        let mutation = Mutation::new(0.3, 0.01);
+        let bootstrap = DepthBootstrap::run(sampler, DEPTH, 3, 20_000, mutation);
+        let (b0, b1) = (bootstrap.brightness(0), bootstrap.brightness(1));
+        assert!(b0 > 0.0 && b1 > 0.0, "both depths carry light: {b0} {b1}");
+        let (counts, histogram, deposited) = run_chains(sampler, film, &bootstrap, 4);
+        let (reference, means) = bdpt_estimates(scene, tracer, film, 200_000);
+        // Expected-value splatting deposits Σ b̂ of luminance per mutation, whatever the
+        // chain's depth (b̂_d, times 1/P_d = Σ b̂ / b̂_d): the film's mean pixel is Σ b̂.
+        let total = bootstrap.total();
+        println!(
+            "deposits: mean pixel {deposited:.5e}, Σ b̂ = {total:.5e}, independent samples {:.5e}",
+            means[0] + means[1]
+        );
+        assert!(
+            (deposited / total - 1.0).abs() < 1e-3,
+            "the chains' mean pixel {deposited:.5e} against Σ b̂ = {total:.5e}"
+        );
+        let total_ref: f64 = reference.iter().sum();
+        let total_hist: f64 = histogram.iter().sum();
+        let mut worst = 0.0f64;
+        let mut from_uniform = 0.0f64;
+        for k in 0..BINS * BINS {
+            let (p, q) = (reference[k] / total_ref, histogram[k] / total_hist);
+            println!("bin {k}: target share {p:.4}, chain states {q:.4}");
+            worst = worst.max((p - q).abs());
+            from_uniform = from_uniform.max((q - 1.0 / (BINS * BINS) as f64).abs());
+        }
+        assert!(worst < 0.02, "a bin's share of states is off by {worst:.4}");
+        assert!(
+            from_uniform > 5.0 * worst,
+            "the target is too close to uniform for the check to see a wrong one ({from_uniform:.4})"
+        );
+        // Depth shares: each of the chains drew its depth with probability b_d / Σ b.
+        let chains = counts.chains.chains as f64;
+        let per_chain = counts.chains.mutations as f64 / chains;
+        let share1 = counts.mutations_per_depth[1] as f64 / counts.chains.mutations as f64;
+        let p1 = b1 / (b0 + b1);
+        let sd = (p1 * (1.0 - p1) / chains).sqrt();
+        println!("depth 1: share of mutations {share1:.4}, b1 / (b0 + b1) = {p1:.4} ± {sd:.4} ({chains} chains of {per_chain} mutations)");
+        assert!(
+            ((share1 - p1) / sd).abs() < 5.0,
+            "depth 1's share {share1:.4} against {p1:.4}"
+        );
+    });
+}

@@ -1,0 +1,208 @@
+//! # `mmlt` — multiplexed Metropolis light transport
+//!
+//! Hachisuka, Kaplanyan and Dachsbacher (2014), as pbrt-v4's `MLTIntegrator` implements it:
+//! Markov chains in primary sample space whose target is one bidirectional strategy (s, t)
+//! at a time, the strategy chosen by a primary sample that the chain mutates with the rest,
+//! so a chain settles on the strategies that sample its paths well. Each chain has a fixed
+//! depth d (interior vertices, Dirac ones included; paths of d + 2 vertices). A bootstrap of
+//! `bootstrap` independent samples per depth estimates each depth's brightness b_d; a chain
+//! picks its depth with probability b_d / Σ b, starts from a bootstrap sample of that depth
+//! chosen ∝ its value (no start-up bias), and deposits by expected-value splatting; the
+//! film's normalisation is Σ_d b_d. The chain driver is `flowlight_pathtrace::pss`
+//! (shared with `pssmlt`), the strategies are `bdpt`'s (`flowlight_pathtrace::bidir`), the
+//! per-depth part is `flowlight_pathtrace::pss::mmlt`. One chain per pixel sample index of
+//! a work unit, of (tile pixels) mutations, so `spp` means W·H·spp mutations in all.
+//!
+//! Parameters (`[integrator]`; table generated in docs/mmlt.md, "Parameters"):
+//!
+//! * `path_depth` (default 8, 1–32): the deepest depth d, so paths of at most
+//!   `path_depth` + 2 vertices; every interior vertex counts, mirrors and glass included.
+//! * `large_step` (default 0.3, (0, 1]): probability of a large step (a fresh independent
+//!   state) per mutation.
+//! * `sigma` (default 0.01, (0, 1]): standard deviation of a small step per primary sample.
+//! * `bootstrap` (default 16384, 1–1,000,000): independent samples per depth for b_d and the
+//!   chains' start states; computed once per render, by its first work unit (8 bytes each).
+//! * `heuristic` (`"power"` or `"balance"`): the MIS weights of a depth's strategies.
+
+// A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
+#![forbid(unsafe_code)]
+
+use flowlight_pathtrace::bidir::params::HEURISTIC;
+use flowlight_pathtrace::bidir::sample::{strategy_only_settings, FilmSampler};
+use flowlight_pathtrace::bidir::{BidirSettings, Heuristic};
+use flowlight_pathtrace::pss::mmlt::{render_unit, DepthBootstrap, MmltBuffers, MmltCounts};
+use flowlight_pathtrace::pss::Mutation;
+use flowlight_sdk::abi::ParamSpec;
+use flowlight_sdk::declare::{FloatParam, IntParam};
+use flowlight_sdk::stats::Counter;
+use flowlight_sdk::{
+    export_integrator, float_param, int_param, AccumulationStyle, Film, Integrator, IntegratorInfo,
+    MutationSet, ParamRole, Params, Scene, Stats, StatsBuilder, Tracer, WorkUnit,
+};
+use std::cell::RefCell;
+use std::sync::{Arc, Mutex, PoisonError};
+
+/// `path_depth`: the deepest chain depth.
+const PATH_DEPTH: IntParam = int_param!(
+    "path_depth",
+    8,
+    1..=32,
+    "deepest depth d of a chain: paths of at most path_depth + 2 vertices, every interior vertex counted (mirrors and glass included)"
+)
+.role(ParamRole::PathDepth);
+
+/// `large_step`: pbrt-v4's default large-step probability.
+const LARGE_STEP: FloatParam = float_param!(
+    "large_step",
+    0.3,
+    0.0 < x <= 1.0,
+    "probability that a mutation is a large step (every primary sample fresh and independent)"
+);
+
+/// `sigma`: pbrt-v4's default small-step size.
+const SIGMA: FloatParam = float_param!(
+    "sigma",
+    0.01,
+    0.0 < x <= 1.0,
+    "standard deviation of a small step's normal offset of each primary sample"
+);
+
+/// `bootstrap`: independent samples per depth.
+const BOOTSTRAP: IntParam = int_param!(
+    "bootstrap",
+    16384,
+    1..=1_000_000,
+    "independent samples per depth that estimate its brightness b_d (chains per depth are proportional to it; the film is normalised by the sum) and from which chains start; run once per render by its first work unit (8 bytes each)"
+);
+
+const PARAMS: [ParamSpec; 5] = [
+    PATH_DEPTH.spec(),
+    LARGE_STEP.spec(),
+    SIGMA.spec(),
+    BOOTSTRAP.spec(),
+    HEURISTIC.spec(),
+];
+
+/// The counters the plugin reports.
+struct Counters {
+    chains: Counter,
+    mutations: Counter,
+    accepted: Counter,
+    invalid: Counter,
+}
+
+pub struct Mmlt {
+    scene: Scene<'static>,
+    settings: BidirSettings,
+    depth: u32,
+    mutation: Mutation,
+    bootstrap_count: u32,
+    /// The per-depth bootstrap of the render seed, run by the first work unit of a render
+    /// with that seed (it needs a tracer; the others wait on the lock).
+    bootstrap: Mutex<Option<(u64, Arc<DepthBootstrap>)>>,
+    counters: Counters,
+}
+
+thread_local! {
+    static BUFFERS: RefCell<MmltBuffers> = RefCell::new(MmltBuffers::default());
+}
+
+impl Integrator for Mmlt {
+    const NAME: &'static str = "mmlt";
+    const DESCRIPTION: &'static str = "Multiplexed Metropolis light transport: primary-sample-space chains over the BDPT strategies, one depth per chain (Hachisuka et al. 2014)";
+    const PARAMS: &'static [ParamSpec] = &PARAMS;
+
+    /// Deposits land anywhere on the film (flanged tiles without a flange, as `bdpt`).
+    fn create(
+        params: &Params,
+        _mutations: MutationSet<'static>,
+        scene: Scene<'static>,
+        stats: &mut StatsBuilder,
+    ) -> Result<(Self, IntegratorInfo), String> {
+        let depth = PATH_DEPTH.get(params)? as u32;
+        let mutation = Mutation::new(LARGE_STEP.get(params)? as f32, SIGMA.get(params)? as f32);
+        let bootstrap_count = BOOTSTRAP.get(params)? as u32;
+        let heuristic = Heuristic::parse(HEURISTIC.get(params)?).expect("declared choice");
+        let counters = Counters {
+            chains: stats.sum("chains"),
+            mutations: stats.sum("mutations"),
+            accepted: stats.sum("accepted mutations"),
+            invalid: stats.sum("invalid proposals"),
+        };
+        let info = IntegratorInfo {
+            layer_count: 0,
+            accumulation: AccumulationStyle::FlangedTile,
+            flange: 0,
+            biased: 0,
+        };
+        let integrator = Mmlt {
+            scene,
+            settings: strategy_only_settings(heuristic),
+            depth,
+            mutation,
+            bootstrap_count,
+            bootstrap: Mutex::new(None),
+            counters,
+        };
+        Ok((integrator, info))
+    }
+
+    fn render(
+        &self,
+        unit: &WorkUnit,
+        tracer: &Tracer,
+        film: &mut Film,
+        stats: &mut Stats,
+    ) -> Result<(), String> {
+        let sampler = FilmSampler::new(&self.scene, tracer, self.settings.clone(), self.depth);
+        let bootstrap = self.bootstrap_of(&sampler, unit.seed);
+        let bootstrap = &*bootstrap;
+        let mut counts = MmltCounts::default();
+        BUFFERS.with(|buffers| {
+            let buffers = &mut *buffers.borrow_mut();
+            render_unit(
+                &sampler,
+                bootstrap,
+                unit,
+                buffers,
+                &mut counts,
+                &mut |s| film.deposit(s.raster.x, s.raster.y, 0, s.value),
+                &mut |_, _| {},
+            );
+        });
+        let c = &counts.chains;
+        stats.add(self.counters.chains, c.chains as f64);
+        stats.add(self.counters.mutations, c.mutations as f64);
+        let accepted = c.accepted_large + c.accepted_small;
+        stats.add(self.counters.accepted, accepted as f64);
+        stats.add(self.counters.invalid, c.invalid as f64);
+        Ok(())
+    }
+}
+
+impl Mmlt {
+    /// The bootstrap of render seed `seed`, run now if none is stored for that seed (a new
+    /// seed needs its own: with a fixed one the mean over renders would be biased).
+    fn bootstrap_of(&self, sampler: &FilmSampler, seed: u64) -> Arc<DepthBootstrap> {
+        let mut guard = self
+            .bootstrap
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
+        if let Some((stored, b)) = guard.as_ref() {
+            if *stored == seed {
+                return b.clone();
+            }
+        }
+        let b = Arc::new(DepthBootstrap::run(
+            sampler,
+            self.depth,
+            seed,
+            self.bootstrap_count,
+            self.mutation,
+        ));
+        *guard = Some((seed, b.clone()));
+        b
+    }
+}
+
+export_integrator!(Mmlt);
