@@ -49,9 +49,11 @@
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]
 
+mod auto;
 mod automaton;
 mod flow;
 mod part;
+mod pilot;
 mod settings;
 mod stats;
 
@@ -84,6 +86,10 @@ pub struct Erpt {
     /// No path of this scene can be in the chains' part ([`scene_letters`]): entangled seeds
     /// are then path tracing, and are traced and deposited as MCPT does.
     chains_part_empty: bool,
+    /// Selection probability per strategy: the host's normalised weights, or `auto`'s.
+    weights: Vec<f64>,
+    /// `preset = "auto"`: its counters, and after `prepare` its choices (`auto.rs`).
+    auto: Option<(auto::Counters, Option<auto::Report>)>,
 }
 
 /// The Heckbert letters (`part::letter_bit_of`) the scene's surfaces can give a vertex: per
@@ -426,6 +432,9 @@ impl Integrator for Erpt {
             })
             .collect();
         let counters = stats::Counters::declare(stats, &names);
+        let auto = settings
+            .auto
+            .map(|_| (auto::Counters::declare(stats, &names), None));
         let chains_part_empty = settings.seed_kind == SeedKind::Entangled
             && settings.part.is_empty_for(scene_letters(&scene));
         let info = IntegratorInfo {
@@ -458,13 +467,21 @@ impl Integrator for Erpt {
                 image_quantum: None,
                 counters,
                 chains_part_empty,
+                weights: (0..mutations.len()).map(|i| mutations.weight(i)).collect(),
+                auto,
             },
             info,
         ))
     }
 
     fn prepare(&mut self, tracer: &Tracer) -> Result<(), String> {
-        if self.settings.quantum != QuantumScope::Image || self.chains_part_empty {
+        if self.auto.is_some() {
+            self.run_auto_pilot(tracer)?;
+        }
+        if self.settings.quantum != QuantumScope::Image
+            || self.chains_part_empty
+            || self.image_quantum.is_some()
+        {
             return Ok(());
         }
         // Algorithm 1 over the whole image: one camera sample per pixel, a row at a time.
@@ -502,6 +519,9 @@ impl Integrator for Erpt {
         film: &mut Film,
         stats: &mut Stats,
     ) -> Result<(), String> {
+        if let Some((counters, Some(report))) = &self.auto {
+            counters.add(stats, report);
+        }
         if self.chains_part_empty {
             self.render_without_chains(unit, tracer, film, stats);
             return Ok(());
@@ -544,7 +564,14 @@ impl Integrator for Erpt {
             (self.scene.camera.width as f64) * (self.scene.camera.height as f64),
         );
         let start = Instant::now();
-        let mut flow = Flow::new(&self.scene, tracer, &self.settings, &self.mutations, c);
+        let mut flow = Flow::new(
+            &self.scene,
+            tracer,
+            &self.settings,
+            &self.mutations,
+            &self.weights,
+            c,
+        );
         let count = seeds.store.seeds.len();
         for (k, key) in seeds.keys.iter().enumerate() {
             let end = seeds.keys.get(k + 1).map_or(count, |n| n.first);
@@ -579,6 +606,13 @@ impl Integrator for Erpt {
         stats.add(c.flow_seconds, start.elapsed().as_secs_f64());
         flow.report(stats);
         Ok(())
+    }
+
+    fn decided_params(&self) -> Vec<(String, String)> {
+        match &self.auto {
+            Some((_, Some(report))) => report.decided_params(),
+            _ => Vec::new(),
+        }
     }
 }
 

@@ -1,0 +1,483 @@
+//! `preset = "auto"`: a pilot measures, and a short rule fixes, what ERPT's config leaves out —
+//! the split (which path classes get chains), the seeds, the chain budget (M and N) and the
+//! mixture weights — from the norms of thesis §5.5 per path class of §5.6.
+//!
+//! **Candidates.** The strategies listed under `[[integrator.mutations]]`, or, when the config
+//! lists none, [`CANDIDATES`]: every mutation plugin the project installs, with its default
+//! parameters (the host creates this declared default list and marks it, so the integrator
+//! knows no user chose it; without a list `preset` defaults to `"auto"`, with one to
+//! `"manual"`).
+//!
+//! **Classes.** A seed's Heckbert type (`part.rs`) puts it in the *caustic* class
+//! `E.*[DG].*S.*L` (a Dirac vertex between the light and a smooth vertex: the paths path
+//! tracing finds only through a lucky BSDF sample, rare and bright) or in the rest; its
+//! lighting layer separates direct light (layer ≤ 1), which path tracing with next-event
+//! estimation renders with low variance, from indirect light.
+//!
+//! **The pilot** (`pilot.rs`, in `prepare`, before any unit, counted in the time budget):
+//! one entangled camera sample on a pixel grid of at most [`PILOT_SAMPLES`] pixels gives the
+//! census — per class and layer the seeds and their energy Σ lum X, and the seconds per camera
+//! sample t_s. Then each candidate s runs [`PILOT_STEPS`]-step chains alone (its own
+//! transition ratio, target lum f on the caustic class) from [`PILOT_CHAIN_SEEDS`] caustic
+//! seeds drawn by energy, as the flow starts chains: per strategy the acceptance strength
+//! a_s, the domain-miss strength (part misses included) and the seconds per proposal t_s.
+//!
+//! **The rule** ([`decide`]):
+//!
+//! * *Split*: chains only for the caustic class above direct light (`chains_for = "caustics"`,
+//!   `direct = "mcpt"`); every other class is path traced, where path tracing is efficient.
+//!   No chains at all (the render is path tracing) when the scene has no Dirac surface, when
+//!   the pilot found fewer than [`MIN_CAUSTIC_SEEDS`] caustic seeds, or when no candidate
+//!   moves a chain.
+//! * *Seeds*: entangled (each light connection, emitter hit and escape a MIS-weighted seed),
+//!   which find caustic seeds by BSDF sampling as path tracing does.
+//! * *Weights*: w_s ∝ r_s = accepted moves per second of s (a_s / t_s, the useful moves a
+//!   second of its steps buys); a strategy below [`WEIGHT_FLOOR`] of the best rate gets 0 (its
+//!   steps cost more than they move), and so does every strategy that only misses the domain.
+//!   The acceptance ratio is each strategy's own (`mixture = "selected"`: a mixture of kernels
+//!   each in detailed balance is in detailed balance, and needs no 2k density calls a step).
+//! * *Chain length*: N = [`ACCEPTED_PER_CHAIN`] / a, a = Σ w_s a_s the mixture's acceptance,
+//!   rounded up to a power of two in [16, 64]: a chain makes about that many moves, whatever
+//!   its strategies accept.
+//! * *Budget*: M = c · t_s / t_m, t_m = Σ w_s t_s the mixture's seconds per step and c the
+//!   caustic class' share of the pilot's energy, in [1/16, 16]: the chains get the share of the
+//!   render's time that their class has of its light, as the deposition quantum gives every
+//!   deposit the same energy.
+//! * *Quantum*: e_d = lum(Σ X_caustic) / (samples · M) from the pilot's own seeds, once for the
+//!   image (`quantum = "image"` without another pre-pass).
+//!
+//! Parameters the config sets are kept: the pilot fixes only the rest ([`Free`]).
+//!
+//! **Unbiasedness.** The pilot's samples are discarded, never deposited: its random numbers
+//! are a fixed stream ([`PILOT_SEED`]) independent of every unit's, and its choices are a
+//! function of them alone. Conditioned on the choices, the render is ERPT with fixed
+//! parameters — unbiased for any split, weights, M, N and quantum e_d > 0 (the split's sum and
+//! the flow's stationarity do not depend on them) — so it is unbiased unconditionally.
+//! Depositing the pilot's seeds too would tie their weight to choices made from them (the
+//! pilot chains where it saw bright caustics). The pilot's time is counted: it runs in
+//! `prepare`, inside the render's time budget.
+//!
+//! **Report.** The choices replace the parameters' resolved values in the EXR metadata
+//! (`flowlight.param.chains_for`, `….mutations_per_sample`, `….mutations` as the list to
+//! freeze, …), the host logs them as a TOML snippet, and the stats JSON has them with the
+//! pilot's norms (`auto.*`).
+
+use crate::settings::MixtureRatio;
+use flowlight_sdk::stats::{Counter, Stats, StatsBuilder};
+use flowlight_sdk::{Params, StatDisplay};
+
+/// The default candidate list: every mutation plugin of the project with its default
+/// parameters, as TOML (the host reads it when the config lists no mutations).
+pub const CANDIDATES: &str = "[{ plugin = \"multichain-perturbation\" }, { plugin = \"caustic-perturbation\" }, { plugin = \"lens-perturbation\" }, { plugin = \"drill\" }, { plugin = \"blow\" }, { plugin = \"hard-reconnection\" }, { plugin = \"soft-reconnection\" }, { plugin = \"bxdf-extension\" }]";
+
+/// Camera samples of the pilot's census (one per pixel of a grid over the image).
+pub const PILOT_SAMPLES: u32 = 4096;
+/// Caustic seeds each candidate's pilot chains start from.
+pub const PILOT_CHAIN_SEEDS: usize = 64;
+/// Steps of each pilot chain.
+pub const PILOT_STEPS: u32 = 32;
+/// Fewer caustic seeds than this in the census: no chains.
+pub const MIN_CAUSTIC_SEEDS: u64 = 8;
+/// A strategy whose accepted moves per second are below this fraction of the best's gets
+/// weight 0.
+pub const WEIGHT_FLOOR: f64 = 0.1;
+/// Accepted moves a chain should make (sets N).
+pub const ACCEPTED_PER_CHAIN: f64 = 8.0;
+/// The random stream of the pilot, independent of the units' (hashes of their seeds).
+pub const PILOT_SEED: u64 = 0xa070_9170_7e5e_ed00;
+
+/// Which of the chains' parameters the config left to the pilot.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Free {
+    pub mutations_per_sample: bool,
+    pub chain_length: bool,
+    pub mixture: bool,
+    pub quantum: bool,
+}
+
+impl Free {
+    /// `Some` under `preset = "auto"`: set, or left out with the declared default mutation
+    /// list (the host's mark). Records the resolved `preset`.
+    pub fn from_params(p: &Params) -> Result<Option<Free>, String> {
+        use crate::settings::{CHAIN_LENGTH, MIXTURE, MUTATIONS_PER_SAMPLE, PRESET, QUANTUM};
+        let auto = if p.is_set(PRESET.name()) {
+            PRESET.get(p)? == "auto"
+        } else {
+            let auto = p.mutation_list_defaulted("mutations");
+            p.record(PRESET.name(), format!("{:?}", if auto { "auto" } else { "manual" }));
+            auto
+        };
+        Ok(auto.then(|| Free {
+            mutations_per_sample: !p.is_set(MUTATIONS_PER_SAMPLE.name()),
+            chain_length: !p.is_set(CHAIN_LENGTH.name()),
+            mixture: !p.is_set(MIXTURE.name()),
+            quantum: !p.is_set(QUANTUM.name()),
+        }))
+    }
+}
+
+/// The census of the pilot's seeds: class 0 the rest, class 1 the caustic class.
+#[derive(Clone, Debug, Default)]
+pub struct Census {
+    /// Camera samples traced.
+    pub samples: u64,
+    /// Seconds tracing them.
+    pub seconds: f64,
+    /// Valid seeds with energy, per class.
+    pub seeds: [u64; 2],
+    /// Σ lum X per class.
+    pub energy: [f64; 2],
+    /// Σ lum X per lighting layer and class.
+    pub layer_energy: Vec<[f64; 2]>,
+}
+
+impl Census {
+    /// The caustic class' share of the pilot's energy.
+    pub fn caustic_share(&self) -> f64 {
+        let total = self.energy[0] + self.energy[1];
+        if total > 0.0 {
+            self.energy[1] / total
+        } else {
+            0.0
+        }
+    }
+
+    /// Seconds per camera sample.
+    pub fn seconds_per_sample(&self) -> f64 {
+        self.seconds / self.samples.max(1) as f64
+    }
+}
+
+/// The §5.5 norms of one strategy's pilot chains, and their cost.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Norms {
+    pub proposals: u64,
+    pub accepted: u64,
+    /// Domain misses, part misses (proposals outside the caustic class) included.
+    pub misses: u64,
+    pub seconds: f64,
+}
+
+impl Norms {
+    fn ratio(n: u64, d: u64) -> f64 {
+        if d == 0 {
+            0.0
+        } else {
+            n as f64 / d as f64
+        }
+    }
+    pub fn acceptance(&self) -> f64 {
+        Self::ratio(self.accepted, self.proposals)
+    }
+    pub fn domain_miss(&self) -> f64 {
+        Self::ratio(self.misses, self.proposals)
+    }
+    pub fn seconds_per_proposal(&self) -> f64 {
+        if self.proposals == 0 {
+            0.0
+        } else {
+            self.seconds / self.proposals as f64
+        }
+    }
+    /// r_s: accepted moves per second of the strategy's steps.
+    pub fn accepted_per_second(&self) -> f64 {
+        if self.seconds > 0.0 {
+            self.accepted as f64 / self.seconds
+        } else {
+            0.0
+        }
+    }
+}
+
+/// What the rule fixed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Plan {
+    /// Chains for the caustic class; false: the render is path tracing.
+    pub chains: bool,
+    /// Why, in a few words (for the report).
+    pub reason: &'static str,
+    /// Selection probability per candidate (sums to 1 when `chains`).
+    pub weights: Vec<f64>,
+    pub mutations_per_sample: f64,
+    pub chain_length: u32,
+}
+
+/// The smallest power of two ≥ x, in [lo, hi].
+fn power_of_two_in(x: f64, lo: u32, hi: u32) -> u32 {
+    let mut n = lo;
+    while (n as f64) < x && n < hi {
+        n *= 2;
+    }
+    n
+}
+
+/// The rule of the module docs: from the census and each candidate's norms, the split, the
+/// weights, N and M. `fallback` holds the weights, M and N a plan without chains keeps.
+pub fn decide(census: &Census, norms: &[Norms], fallback: (&[f64], f64, u32)) -> Plan {
+    let no_chains = |reason| Plan {
+        chains: false,
+        reason,
+        weights: fallback.0.to_vec(),
+        mutations_per_sample: fallback.1,
+        chain_length: fallback.2,
+    };
+    if census.seeds[1] < MIN_CAUSTIC_SEEDS || census.energy[1] <= 0.0 {
+        return no_chains("too few caustic seeds: path tracing");
+    }
+    let rates: Vec<f64> = norms.iter().map(Norms::accepted_per_second).collect();
+    let best = rates.iter().cloned().fold(0.0, f64::max);
+    if !(best > 0.0) {
+        return no_chains("no strategy moves a caustic chain: path tracing");
+    }
+    let kept: Vec<f64> = rates
+        .iter()
+        .map(|&r| if r >= WEIGHT_FLOOR * best { r } else { 0.0 })
+        .collect();
+    let sum: f64 = kept.iter().sum();
+    let weights: Vec<f64> = kept.iter().map(|r| r / sum).collect();
+    let acceptance: f64 = weights.iter().zip(norms).map(|(w, n)| w * n.acceptance()).sum();
+    let step_seconds: f64 = weights
+        .iter()
+        .zip(norms)
+        .map(|(w, n)| w * n.seconds_per_proposal())
+        .sum();
+    let chain_length = power_of_two_in(ACCEPTED_PER_CHAIN / acceptance, 16, 64);
+    let m = if step_seconds > 0.0 {
+        census.caustic_share() * census.seconds_per_sample() / step_seconds
+    } else {
+        1.0
+    };
+    Plan {
+        chains: true,
+        reason: "caustic seeds and a strategy that moves them: chains for caustics",
+        weights,
+        mutations_per_sample: m.clamp(1.0 / 16.0, 16.0),
+        chain_length,
+    }
+}
+
+/// The pilot's choices and norms, for the metadata, the log and the stats.
+#[derive(Clone, Debug)]
+pub struct Report {
+    pub plan: Plan,
+    pub census: Census,
+    pub norms: Vec<Norms>,
+    /// The quantum fixed for the image (`None`: per tile, or no chains).
+    pub quantum: Option<f64>,
+    pub mixture: MixtureRatio,
+    /// The candidates' plugin names.
+    pub plugins: Vec<String>,
+    /// No chains because the scene's surfaces give no path of the chained class (no pilot
+    /// ran): the resolved split already renders without chains.
+    pub by_letters: bool,
+}
+
+impl Report {
+    /// The decided parameters, `(name, TOML text)`: what a config freezes to render the same
+    /// way without the pilot (`preset = "manual"` and these).
+    pub fn decided_params(&self) -> Vec<(String, String)> {
+        let p = &self.plan;
+        let mut out = vec![("preset".to_string(), "\"manual\"".to_string())];
+        if !p.chains {
+            if !self.by_letters {
+                // `E`, the eye alone, is the type of no path: every seed is path traced.
+                out.push(("chains_for".into(), "\"E\"".into()));
+            }
+            return out;
+        }
+        out.push(("chains_for".into(), "\"caustics\"".into()));
+        out.push((
+            "mutations_per_sample".into(),
+            format!("{}", p.mutations_per_sample),
+        ));
+        out.push(("chain_length".into(), p.chain_length.to_string()));
+        out.push((
+            "mixture".into(),
+            match self.mixture {
+                MixtureRatio::Mixture => "\"mixture\"",
+                MixtureRatio::Selected => "\"selected\"",
+            }
+            .into(),
+        ));
+        if self.quantum.is_some() {
+            out.push(("quantum".into(), "\"image\"".into()));
+        }
+        let list: Vec<String> = self
+            .plugins
+            .iter()
+            .zip(&p.weights)
+            .filter(|(_, &w)| w > 0.0)
+            .map(|(name, w)| format!("{{ plugin = \"{name}\", weight = {w:.4} }}"))
+            .collect();
+        out.push(("mutations".into(), format!("[{}]", list.join(", "))));
+        out
+    }
+}
+
+/// The `auto.*` counters: the choices and the pilot's norms, the same in every unit (`max`).
+#[derive(Clone, Debug)]
+pub struct Counters {
+    chains: Counter,
+    mutations_per_sample: Counter,
+    chain_length: Counter,
+    quantum: Counter,
+    samples: Counter,
+    seconds_per_sample: Counter,
+    caustic_seeds: Counter,
+    caustic_share: Counter,
+    /// Per candidate: weight, acceptance, domain miss, seconds per proposal, accepted/s.
+    per_strategy: Vec<[Counter; 5]>,
+}
+
+impl Counters {
+    pub fn declare(b: &mut StatsBuilder, names: &[String]) -> Counters {
+        let n = |b: &mut StatsBuilder, name: String| b.max_as(name, StatDisplay::Number);
+        let hidden = |b: &mut StatsBuilder, name: String| b.max_as(name, StatDisplay::Hidden);
+        Counters {
+            chains: n(b, "auto.chains".into()),
+            mutations_per_sample: n(b, "auto.mutations_per_sample".into()),
+            chain_length: n(b, "auto.chain_length".into()),
+            quantum: hidden(b, "auto.quantum".into()),
+            samples: hidden(b, "auto.pilot.samples".into()),
+            seconds_per_sample: hidden(b, "auto.pilot.seconds_per_sample".into()),
+            caustic_seeds: hidden(b, "auto.pilot.caustic_seeds".into()),
+            caustic_share: n(b, "auto.pilot.caustic_energy_share".into()),
+            per_strategy: names
+                .iter()
+                .map(|s| {
+                    [
+                        n(b, format!("auto.weight.{s}")),
+                        hidden(b, format!("auto.pilot.{s}.acceptance_strength")),
+                        hidden(b, format!("auto.pilot.{s}.domain_miss_strength")),
+                        hidden(b, format!("auto.pilot.{s}.seconds_per_proposal")),
+                        hidden(b, format!("auto.pilot.{s}.accepted_per_second")),
+                    ]
+                })
+                .collect(),
+        }
+    }
+
+    /// Adds the report into a unit's counters (each a maximum: every unit adds the same).
+    pub fn add(&self, stats: &mut Stats, r: &Report) {
+        let p = &r.plan;
+        stats.add(self.chains, p.chains as u32 as f64);
+        stats.add(self.mutations_per_sample, p.mutations_per_sample);
+        stats.add(self.chain_length, p.chain_length as f64);
+        stats.add(self.quantum, r.quantum.unwrap_or(0.0));
+        stats.add(self.samples, r.census.samples as f64);
+        stats.add(self.seconds_per_sample, r.census.seconds_per_sample());
+        stats.add(self.caustic_seeds, r.census.seeds[1] as f64);
+        stats.add(self.caustic_share, r.census.caustic_share());
+        for (i, c) in self.per_strategy.iter().enumerate() {
+            let n = r.norms.get(i).copied().unwrap_or_default();
+            let values = [
+                p.weights.get(i).copied().unwrap_or(0.0),
+                n.acceptance(),
+                n.domain_miss(),
+                n.seconds_per_proposal(),
+                n.accepted_per_second(),
+            ];
+            for (&counter, v) in c.iter().zip(values) {
+                stats.add(counter, v);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn census(caustic_seeds: u64, share: f64) -> Census {
+        Census {
+            samples: 1000,
+            seconds: 1000.0 * 4e-6,
+            seeds: [5000, caustic_seeds],
+            energy: [1.0 - share, share],
+            layer_energy: Vec::new(),
+        }
+    }
+
+    fn norms(proposals: u64, accepted: u64, misses: u64, seconds: f64) -> Norms {
+        Norms {
+            proposals,
+            accepted,
+            misses,
+            seconds,
+        }
+    }
+
+    #[test]
+    fn without_caustic_seeds_or_moves_the_render_is_path_tracing() {
+        let fallback = (&[0.5, 0.5][..], 8.0, 16);
+        let good = [norms(1000, 500, 0, 1e-3), norms(1000, 100, 0, 1e-3)];
+        let p = decide(&census(2, 0.2), &good, fallback);
+        assert!(!p.chains && p.weights == [0.5, 0.5] && p.chain_length == 16);
+        let stuck = [norms(1000, 0, 1000, 1e-3), norms(1000, 0, 10, 1e-3)];
+        assert!(!decide(&census(100, 0.2), &stuck, fallback).chains);
+        assert!(decide(&census(100, 0.2), &good, fallback).chains);
+    }
+
+    #[test]
+    fn weights_follow_accepted_moves_per_second_above_the_floor() {
+        let fallback = (&[1.0 / 3.0; 3][..], 8.0, 16);
+        // 500/ms, 250/ms (twice as slow), 20/ms (under the floor of 50/ms).
+        let n = [
+            norms(1000, 500, 0, 1e-3),
+            norms(1000, 500, 100, 2e-3),
+            norms(1000, 20, 900, 1e-3),
+        ];
+        let p = decide(&census(100, 0.25), &n, fallback);
+        assert!(p.chains);
+        assert!((p.weights[0] - 2.0 / 3.0).abs() < 1e-12, "{:?}", p.weights);
+        assert!((p.weights[1] - 1.0 / 3.0).abs() < 1e-12);
+        assert_eq!(p.weights[2], 0.0);
+        // Mixture acceptance 0.5: 16 steps make 8 moves.
+        assert_eq!(p.chain_length, 16);
+        // t_m = (2/3)·1 µs + (1/3)·2 µs = 4/3 µs; M = 0.25 · 4 µs / (4/3 µs) = 0.75.
+        assert!((p.mutations_per_sample - 0.75).abs() < 1e-9, "{p:?}");
+    }
+
+    #[test]
+    fn rare_acceptance_lengthens_chains_within_bounds() {
+        let fallback = (&[1.0][..], 8.0, 16);
+        let at = |acc: u64| decide(&census(100, 0.5), &[norms(1000, acc, 0, 1e-3)], fallback);
+        assert_eq!(at(1000).chain_length, 16);
+        assert_eq!(at(250).chain_length, 32);
+        assert_eq!(at(10).chain_length, 64);
+        // M within [1/16, 16].
+        assert_eq!(at(1000).mutations_per_sample, 2.0);
+        let cheap = decide(&census(100, 1.0), &[norms(1000, 900, 0, 1e-9)], fallback);
+        assert_eq!(cheap.mutations_per_sample, 16.0);
+    }
+
+    #[test]
+    fn the_report_freezes_into_a_manual_config() {
+        let plan = decide(
+            &census(100, 0.5),
+            &[norms(1000, 500, 0, 1e-3), norms(1000, 0, 1000, 1e-3)],
+            (&[0.5, 0.5], 8.0, 16),
+        );
+        let r = Report {
+            plan,
+            census: census(100, 0.5),
+            norms: vec![],
+            quantum: Some(0.01),
+            mixture: MixtureRatio::Selected,
+            plugins: vec!["drill".into(), "blow".into()],
+            by_letters: false,
+        };
+        let text: String = r
+            .decided_params()
+            .iter()
+            .map(|(k, v)| format!("{k} = {v}\n"))
+            .collect();
+        let table: toml::Table = text.parse().expect("TOML");
+        assert_eq!(table["preset"].as_str(), Some("manual"));
+        assert_eq!(table["chains_for"].as_str(), Some("caustics"));
+        let list = table["mutations"].as_array().unwrap();
+        assert_eq!(list.len(), 1, "blow moved nothing: {text}");
+        assert_eq!(list[0]["plugin"].as_str(), Some("drill"));
+        assert_eq!(table["mixture"].as_str(), Some("selected"));
+    }
+}
