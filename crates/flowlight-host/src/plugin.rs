@@ -608,6 +608,8 @@ pub struct IntegratorInstance {
     _mutation_refs: Vec<MutationRef>,
     mutations: Vec<MutationInstance>,
     prepared: std::sync::Mutex<bool>,
+    /// What `prepare` decided, as TOML lines ([`decided_snippet`]).
+    decided: std::sync::Mutex<String>,
 }
 
 // SAFETY: the SDK requires integrators to be Send + Sync; the host calls `render` concurrently.
@@ -703,6 +705,7 @@ impl IntegratorInstance {
             _mutation_refs: refs,
             mutations,
             prepared: std::sync::Mutex::new(false),
+            decided: std::sync::Mutex::new(String::new()),
         };
         // The SDK's builder refuses more; a plugin that wrote its own glue might not.
         if inst.stats.count > MAX_COUNTERS || (inst.stats.count > 0 && inst.stats.specs.is_null()) {
@@ -820,6 +823,13 @@ impl IntegratorInstance {
         unsafe { std::slice::from_raw_parts(self.stats.specs, self.stats.count) }
     }
 
+    /// The parameter values the integrator decided in `prepare` (changed or added to what
+    /// `create` resolved), as TOML lines `name = value`; empty before `prepare` or when it
+    /// decided nothing.
+    pub fn decided(&self) -> String {
+        self.decided.lock().unwrap().clone()
+    }
+
     /// Runs the plugin's one-time preparation, the first time it is called. The scheduler
     /// calls it before any unit, from one thread.
     pub fn prepare_once(&self, tracer: &TracerTable) -> Result<(), PluginError> {
@@ -847,6 +857,7 @@ impl IntegratorInstance {
                 self.plugin.name
             );
         }
+        *self.decided.lock().unwrap() = decided;
         Ok(())
     }
 
@@ -901,6 +912,15 @@ impl Drop for IntegratorInstance {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_decided_snippet_holds_what_prepare_changed_or_added() {
+        let pair = |n: &str, v: &str| (n.to_string(), v.to_string());
+        let before = [pair("a", "1"), pair("b", "\"x\"")];
+        let after = [pair("a", "1"), pair("b", "\"y\""), pair("c", "[1, 2]")];
+        assert_eq!(decided_snippet(&before, &after), "b = \"y\"\nc = [1, 2]\n");
+        assert_eq!(decided_snippet(&before, &before), "");
+    }
 
     #[test]
     fn weights_are_normalised_to_sum_to_one() {

@@ -372,6 +372,22 @@ pub(super) fn take_mutations(
 mod tests {
     use super::*;
 
+    /// A declared default list reads as the config's would: entries, their parameters and
+    /// the default weight 1; text that is not a TOML array of tables is a one-line error.
+    #[test]
+    fn a_declared_default_list_reads_as_a_config_list() {
+        let text = "[{ plugin = \"drill\", width = \"narrow\" }, { plugin = \"blow\" }]";
+        let mut params = default_list_params("mutations", text).unwrap();
+        let list = take_mutations(&mut params, "mutations", Path::new("c.toml")).unwrap();
+        assert!(params.is_empty());
+        assert_eq!(list.len(), 2);
+        assert_eq!((list[0].plugin.as_str(), list[0].weight), ("drill", 1.0));
+        assert_eq!(list[0].params[0].0, "width");
+        assert_eq!(list[1].plugin, "blow");
+        let e = default_list_params("mutations", "[{ plugin = ").unwrap_err();
+        assert!(e.starts_with("default mutation list is not TOML") && !e.contains('\n'), "{e}");
+    }
+
     #[test]
     fn embree_variables_set_for_a_render_are_named_with_the_config_key() {
         let cfg = Path::new("scenes/cornell-box/cornell-box.toml");
