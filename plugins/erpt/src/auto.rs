@@ -16,11 +16,18 @@
 //!
 //! **The pilot** (`pilot.rs`, in `prepare`, before any unit, counted in the time budget):
 //! one entangled camera sample on a pixel grid of at most [`PILOT_SAMPLES`] pixels gives the
-//! census — per class and layer the seeds and their energy Σ lum X, and the seconds per camera
-//! sample t_s. Then each candidate s runs [`PILOT_STEPS`]-step chains alone (its own
+//! census — per class and layer the seeds and their energy Σ lum X, and the rays per camera
+//! sample w_c. Then each candidate s runs [`PILOT_STEPS`]-step chains alone (its own
 //! transition ratio, target lum f on the caustic class) from [`PILOT_CHAIN_SEEDS`] caustic
 //! seeds drawn by energy, as the flow starts chains: per strategy the acceptance strength
-//! a_s, the domain-miss strength (part misses included) and the seconds per proposal t_s.
+//! a_s, the domain-miss strength (part misses included) and the rays per proposal w_s.
+//!
+//! **Cost in rays, not seconds.** The rule's costs are rays counted from the paths (a ray per
+//! vertex traced or moved, and per seed; [`Census::work`], [`Norms::work`]), not wall-clock
+//! time: the choices, and so the image, must depend on the render's seed alone, and a clock
+//! differs from run to run (two pilots on the glass caustic timed the same strategies 30%
+//! apart and gave weights 0.52 and 0.73 to the caustic perturbation). The seconds are
+//! measured and reported beside them.
 //!
 //! **The rule** ([`decide`]):
 //!
@@ -31,17 +38,17 @@
 //!   moves a chain.
 //! * *Seeds*: entangled (each light connection, emitter hit and escape a MIS-weighted seed),
 //!   which find caustic seeds by BSDF sampling as path tracing does.
-//! * *Weights*: w_s ∝ r_s = accepted moves per second of s (a_s / t_s, the useful moves a
-//!   second of its steps buys); a strategy below [`WEIGHT_FLOOR`] of the best rate gets 0 (its
-//!   steps cost more than they move), and so does every strategy that only misses the domain.
+//! * *Weights*: p_s ∝ r_s = accepted moves per ray of s (a_s / w_s, the useful moves its
+//!   work buys); a strategy below [`WEIGHT_FLOOR`] of the best rate gets 0 (its steps cost more
+//!   than they move), and so does every strategy that only misses the domain.
 //!   The acceptance ratio is each strategy's own (`mixture = "selected"`: a mixture of kernels
 //!   each in detailed balance is in detailed balance, and needs no 2k density calls a step).
-//! * *Chain length*: N = [`ACCEPTED_PER_CHAIN`] / a, a = Σ w_s a_s the mixture's acceptance,
+//! * *Chain length*: N = [`ACCEPTED_PER_CHAIN`] / a, a = Σ p_s a_s the mixture's acceptance,
 //!   rounded up to a power of two in [16, 64]: a chain makes about that many moves, whatever
 //!   its strategies accept.
-//! * *Budget*: M = c · t_s / t_m, t_m = Σ w_s t_s the mixture's seconds per step and c the
+//! * *Budget*: M = c · w_c / w_m, w_m = Σ p_s w_s the mixture's rays per step and c the
 //!   caustic class' share of the pilot's energy, in [1/16, 16]: the chains get the share of the
-//!   render's time that their class has of its light, as the deposition quantum gives every
+//!   render's work that their class has of its light, as the deposition quantum gives every
 //!   deposit the same energy.
 //! * *Quantum*: e_d = lum(Σ X_caustic) / (samples · M) from the pilot's own seeds, once for the
 //!   image (`quantum = "image"` without another pre-pass).
@@ -89,6 +96,9 @@ pub const PILOT_SEED: u64 = 0xa070_9170_7e5e_ed00;
 /// Which of the chains' parameters the config left to the pilot.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Free {
+    pub seeds: bool,
+    pub direct: bool,
+    pub chains_for: bool,
     pub mutations_per_sample: bool,
     pub chain_length: bool,
     pub mixture: bool,
@@ -99,7 +109,9 @@ impl Free {
     /// `Some` under `preset = "auto"`: set, or left out with the declared default mutation
     /// list (the host's mark). Records the resolved `preset`.
     pub fn from_params(p: &Params) -> Result<Option<Free>, String> {
-        use crate::settings::{CHAIN_LENGTH, MIXTURE, MUTATIONS_PER_SAMPLE, PRESET, QUANTUM};
+        use crate::settings::{
+            CHAINS_FOR, CHAIN_LENGTH, DIRECT, MIXTURE, MUTATIONS_PER_SAMPLE, PRESET, QUANTUM, SEEDS,
+        };
         let auto = if p.is_set(PRESET.name()) {
             PRESET.get(p)? == "auto"
         } else {
@@ -108,6 +120,9 @@ impl Free {
             auto
         };
         Ok(auto.then(|| Free {
+            seeds: !p.is_set(SEEDS.name()),
+            direct: !p.is_set(DIRECT.name()),
+            chains_for: !p.is_set(CHAINS_FOR.name()),
             mutations_per_sample: !p.is_set(MUTATIONS_PER_SAMPLE.name()),
             chain_length: !p.is_set(CHAIN_LENGTH.name()),
             mixture: !p.is_set(MIXTURE.name()),
@@ -121,8 +136,11 @@ impl Free {
 pub struct Census {
     /// Camera samples traced.
     pub samples: u64,
-    /// Seconds tracing them.
+    /// Seconds tracing them (reported; the rule uses `work`, which is deterministic).
     pub seconds: f64,
+    /// Rays traced for them, counted from the stored seeds: a closest-hit ray per trunk
+    /// vertex and a shadow ray or hit per seed.
+    pub work: f64,
     /// Valid seeds with energy, per class.
     pub seeds: [u64; 2],
     /// Σ lum X per class.
@@ -146,6 +164,11 @@ impl Census {
     pub fn seconds_per_sample(&self) -> f64 {
         self.seconds / self.samples.max(1) as f64
     }
+
+    /// w_s: rays per camera sample.
+    pub fn work_per_sample(&self) -> f64 {
+        self.work / self.samples.max(1) as f64
+    }
 }
 
 /// The §5.5 norms of one strategy's pilot chains, and their cost.
@@ -155,7 +178,12 @@ pub struct Norms {
     pub accepted: u64,
     /// Domain misses, part misses (proposals outside the caustic class) included.
     pub misses: u64,
+    /// Seconds of the pilot chains (reported only: wall-clock time varies from run to run).
     pub seconds: f64,
+    /// Rays the proposals traced, counted from the paths: per proposal one for its fixed
+    /// costs (the choice, the target function) and one per vertex it moved (a miss: every
+    /// vertex after the eye, as if it traced the whole path).
+    pub work: f64,
 }
 
 impl Norms {
@@ -179,10 +207,26 @@ impl Norms {
             self.seconds / self.proposals as f64
         }
     }
-    /// r_s: accepted moves per second of the strategy's steps.
+    /// Accepted moves per second of the strategy's steps (reported).
     pub fn accepted_per_second(&self) -> f64 {
         if self.seconds > 0.0 {
             self.accepted as f64 / self.seconds
+        } else {
+            0.0
+        }
+    }
+    /// w_s: rays per proposal.
+    pub fn work_per_proposal(&self) -> f64 {
+        if self.proposals == 0 {
+            0.0
+        } else {
+            self.work / self.proposals as f64
+        }
+    }
+    /// r_s: accepted moves per ray of the strategy's steps.
+    pub fn accepted_per_work(&self) -> f64 {
+        if self.work > 0.0 {
+            self.accepted as f64 / self.work
         } else {
             0.0
         }
@@ -224,7 +268,7 @@ pub fn decide(census: &Census, norms: &[Norms], fallback: (&[f64], f64, u32)) ->
     if census.seeds[1] < MIN_CAUSTIC_SEEDS || census.energy[1] <= 0.0 {
         return no_chains("too few caustic seeds: path tracing");
     }
-    let rates: Vec<f64> = norms.iter().map(Norms::accepted_per_second).collect();
+    let rates: Vec<f64> = norms.iter().map(Norms::accepted_per_work).collect();
     let best = rates.iter().cloned().fold(0.0, f64::max);
     if !(best > 0.0) {
         return no_chains("no strategy moves a caustic chain: path tracing");
@@ -236,14 +280,14 @@ pub fn decide(census: &Census, norms: &[Norms], fallback: (&[f64], f64, u32)) ->
     let sum: f64 = kept.iter().sum();
     let weights: Vec<f64> = kept.iter().map(|r| r / sum).collect();
     let acceptance: f64 = weights.iter().zip(norms).map(|(w, n)| w * n.acceptance()).sum();
-    let step_seconds: f64 = weights
+    let step_work: f64 = weights
         .iter()
         .zip(norms)
-        .map(|(w, n)| w * n.seconds_per_proposal())
+        .map(|(w, n)| w * n.work_per_proposal())
         .sum();
     let chain_length = power_of_two_in(ACCEPTED_PER_CHAIN / acceptance, 16, 64);
-    let m = if step_seconds > 0.0 {
-        census.caustic_share() * census.seconds_per_sample() / step_seconds
+    let m = if step_work > 0.0 {
+        census.caustic_share() * census.work_per_sample() / step_work
     } else {
         1.0
     };
@@ -270,22 +314,32 @@ pub struct Report {
     /// No chains because the scene's surfaces give no path of the chained class (no pilot
     /// ran): the resolved split already renders without chains.
     pub by_letters: bool,
+    /// What the config left to `auto`.
+    pub free: Free,
 }
 
 impl Report {
     /// The decided parameters, `(name, TOML text)`: what a config freezes to render the same
     /// way without the pilot (`preset = "manual"` and these).
     pub fn decided_params(&self) -> Vec<(String, String)> {
-        let p = &self.plan;
+        let (p, free) = (&self.plan, &self.free);
         let mut out = vec![("preset".to_string(), "\"manual\"".to_string())];
-        if !p.chains {
-            if !self.by_letters {
-                // `E`, the eye alone, is the type of no path: every seed is path traced.
-                out.push(("chains_for".into(), "\"E\"".into()));
+        let mut fix = |free: bool, name: &str, value: &str| {
+            if free {
+                out.push((name.to_string(), value.to_string()));
             }
+        };
+        fix(free.seeds, "seeds", "\"entangled\"");
+        fix(free.direct, "direct", "\"mcpt\"");
+        if !p.chains && !self.by_letters {
+            // `E`, the eye alone, is the type of no path: every seed is path traced.
+            fix(true, "chains_for", "\"E\"");
             return out;
         }
-        out.push(("chains_for".into(), "\"caustics\"".into()));
+        fix(free.chains_for, "chains_for", "\"caustics\"");
+        if !p.chains {
+            return out;
+        }
         out.push((
             "mutations_per_sample".into(),
             format!("{}", p.mutations_per_sample),
@@ -323,10 +377,12 @@ pub struct Counters {
     quantum: Counter,
     samples: Counter,
     seconds_per_sample: Counter,
+    rays_per_sample: Counter,
     caustic_seeds: Counter,
     caustic_share: Counter,
-    /// Per candidate: weight, acceptance, domain miss, seconds per proposal, accepted/s.
-    per_strategy: Vec<[Counter; 5]>,
+    /// Per candidate: weight, acceptance, domain miss, seconds and rays per proposal,
+    /// accepted moves per second and per ray.
+    per_strategy: Vec<[Counter; 7]>,
 }
 
 impl Counters {
@@ -340,6 +396,7 @@ impl Counters {
             quantum: hidden(b, "auto.quantum".into()),
             samples: hidden(b, "auto.pilot.samples".into()),
             seconds_per_sample: hidden(b, "auto.pilot.seconds_per_sample".into()),
+            rays_per_sample: hidden(b, "auto.pilot.rays_per_sample".into()),
             caustic_seeds: hidden(b, "auto.pilot.caustic_seeds".into()),
             caustic_share: n(b, "auto.pilot.caustic_energy_share".into()),
             per_strategy: names
@@ -350,7 +407,9 @@ impl Counters {
                         hidden(b, format!("auto.pilot.{s}.acceptance_strength")),
                         hidden(b, format!("auto.pilot.{s}.domain_miss_strength")),
                         hidden(b, format!("auto.pilot.{s}.seconds_per_proposal")),
+                        hidden(b, format!("auto.pilot.{s}.rays_per_proposal")),
                         hidden(b, format!("auto.pilot.{s}.accepted_per_second")),
+                        hidden(b, format!("auto.pilot.{s}.accepted_per_ray")),
                     ]
                 })
                 .collect(),
@@ -366,6 +425,7 @@ impl Counters {
         stats.add(self.quantum, r.quantum.unwrap_or(0.0));
         stats.add(self.samples, r.census.samples as f64);
         stats.add(self.seconds_per_sample, r.census.seconds_per_sample());
+        stats.add(self.rays_per_sample, r.census.work_per_sample());
         stats.add(self.caustic_seeds, r.census.seeds[1] as f64);
         stats.add(self.caustic_share, r.census.caustic_share());
         for (i, c) in self.per_strategy.iter().enumerate() {
@@ -375,7 +435,9 @@ impl Counters {
                 n.acceptance(),
                 n.domain_miss(),
                 n.seconds_per_proposal(),
+                n.work_per_proposal(),
                 n.accepted_per_second(),
+                n.accepted_per_work(),
             ];
             for (&counter, v) in c.iter().zip(values) {
                 stats.add(counter, v);
@@ -392,28 +454,31 @@ mod tests {
         Census {
             samples: 1000,
             seconds: 1000.0 * 4e-6,
+            work: 4000.0,
             seeds: [5000, caustic_seeds],
             energy: [1.0 - share, share],
             layer_energy: Vec::new(),
         }
     }
 
-    fn norms(proposals: u64, accepted: u64, misses: u64, seconds: f64) -> Norms {
+    /// Norms with `work` rays in all (and as many microseconds).
+    fn norms(proposals: u64, accepted: u64, misses: u64, work: f64) -> Norms {
         Norms {
             proposals,
             accepted,
             misses,
-            seconds,
+            seconds: work * 1e-6,
+            work,
         }
     }
 
     #[test]
     fn without_caustic_seeds_or_moves_the_render_is_path_tracing() {
         let fallback = (&[0.5, 0.5][..], 8.0, 16);
-        let good = [norms(1000, 500, 0, 1e-3), norms(1000, 100, 0, 1e-3)];
+        let good = [norms(1000, 500, 0, 1000.0), norms(1000, 100, 0, 1000.0)];
         let p = decide(&census(2, 0.2), &good, fallback);
         assert!(!p.chains && p.weights == [0.5, 0.5] && p.chain_length == 16);
-        let stuck = [norms(1000, 0, 1000, 1e-3), norms(1000, 0, 10, 1e-3)];
+        let stuck = [norms(1000, 0, 1000, 1000.0), norms(1000, 0, 10, 1000.0)];
         assert!(!decide(&census(100, 0.2), &stuck, fallback).chains);
         assert!(decide(&census(100, 0.2), &good, fallback).chains);
     }
@@ -421,11 +486,11 @@ mod tests {
     #[test]
     fn weights_follow_accepted_moves_per_second_above_the_floor() {
         let fallback = (&[1.0 / 3.0; 3][..], 8.0, 16);
-        // 500/ms, 250/ms (twice as slow), 20/ms (under the floor of 50/ms).
+        // 0.5, 0.25 (twice as costly) and 0.02 (under the floor of 0.05) moves per ray.
         let n = [
-            norms(1000, 500, 0, 1e-3),
-            norms(1000, 500, 100, 2e-3),
-            norms(1000, 20, 900, 1e-3),
+            norms(1000, 500, 0, 1000.0),
+            norms(1000, 500, 100, 2000.0),
+            norms(1000, 20, 900, 1000.0),
         ];
         let p = decide(&census(100, 0.25), &n, fallback);
         assert!(p.chains);
@@ -434,20 +499,20 @@ mod tests {
         assert_eq!(p.weights[2], 0.0);
         // Mixture acceptance 0.5: 16 steps make 8 moves.
         assert_eq!(p.chain_length, 16);
-        // t_m = (2/3)·1 µs + (1/3)·2 µs = 4/3 µs; M = 0.25 · 4 µs / (4/3 µs) = 0.75.
+        // w_m = (2/3)·1 + (1/3)·2 = 4/3 rays a step; M = 0.25 · 4 / (4/3) = 0.75.
         assert!((p.mutations_per_sample - 0.75).abs() < 1e-9, "{p:?}");
     }
 
     #[test]
     fn rare_acceptance_lengthens_chains_within_bounds() {
         let fallback = (&[1.0][..], 8.0, 16);
-        let at = |acc: u64| decide(&census(100, 0.5), &[norms(1000, acc, 0, 1e-3)], fallback);
+        let at = |acc: u64| decide(&census(100, 0.5), &[norms(1000, acc, 0, 1000.0)], fallback);
         assert_eq!(at(1000).chain_length, 16);
         assert_eq!(at(250).chain_length, 32);
         assert_eq!(at(10).chain_length, 64);
         // M within [1/16, 16].
         assert_eq!(at(1000).mutations_per_sample, 2.0);
-        let cheap = decide(&census(100, 1.0), &[norms(1000, 900, 0, 1e-9)], fallback);
+        let cheap = decide(&census(100, 1.0), &[norms(1000, 900, 0, 1e-3)], fallback);
         assert_eq!(cheap.mutations_per_sample, 16.0);
     }
 
@@ -455,7 +520,7 @@ mod tests {
     fn the_report_freezes_into_a_manual_config() {
         let plan = decide(
             &census(100, 0.5),
-            &[norms(1000, 500, 0, 1e-3), norms(1000, 0, 1000, 1e-3)],
+            &[norms(1000, 500, 0, 1000.0), norms(1000, 0, 1000, 1000.0)],
             (&[0.5, 0.5], 8.0, 16),
         );
         let r = Report {
@@ -466,6 +531,15 @@ mod tests {
             mixture: MixtureRatio::Selected,
             plugins: vec!["drill".into(), "blow".into()],
             by_letters: false,
+            free: Free {
+                seeds: true,
+                direct: true,
+                chains_for: true,
+                mutations_per_sample: true,
+                chain_length: true,
+                mixture: true,
+                quantum: true,
+            },
         };
         let text: String = r
             .decided_params()
@@ -475,6 +549,8 @@ mod tests {
         let table: toml::Table = text.parse().expect("TOML");
         assert_eq!(table["preset"].as_str(), Some("manual"));
         assert_eq!(table["chains_for"].as_str(), Some("caustics"));
+        assert_eq!(table["seeds"].as_str(), Some("entangled"));
+        assert_eq!(table["direct"].as_str(), Some("mcpt"));
         let list = table["mutations"].as_array().unwrap();
         assert_eq!(list.len(), 1, "blow moved nothing: {text}");
         assert_eq!(list[0]["plugin"].as_str(), Some("drill"));

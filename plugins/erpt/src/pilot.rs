@@ -90,6 +90,7 @@ impl Erpt {
             mixture: self.settings.mixture,
             plugins: (0..n).map(|i| self.mutations.name(i).to_string()).collect(),
             by_letters,
+            free,
         };
         self.auto = Some((counters, Some(report)));
         Ok(())
@@ -120,6 +121,7 @@ impl Erpt {
         let mut census = Census {
             samples: seeds.store.samples,
             seconds,
+            work: (seeds.store.vertices.len() + seeds.store.seeds.len()) as f64,
             layer_energy: vec![[0.0; 2]; depth + 2],
             ..Census::default()
         };
@@ -173,6 +175,7 @@ impl Erpt {
                         .mutations
                         .propose(m, tracer, &mut rng, &state, &mut proposal, &mut stats)?;
                     n.proposals += 1;
+                    n.work += 1.0 + moved_vertices(&state, &proposal, p.is_move()) as f64;
                     let inside = within_depth(
                         proposal.vertex_count,
                         proposal.layer,
@@ -197,6 +200,20 @@ impl Erpt {
         }
         Ok(all)
     }
+}
+
+/// Vertices a proposal traced: those after the eye whose position differs from the current
+/// state's (every one of a longer proposal's extra vertices); for a miss, every vertex of the
+/// state after the eye (the proposal's contents are meaningless; a miss is charged a whole
+/// path).
+fn moved_vertices(state: &Path, proposal: &Path, valid: bool) -> usize {
+    let (v, w) = (state.vertices(), proposal.vertices());
+    if !valid {
+        return v.len().saturating_sub(1);
+    }
+    (1..w.len())
+        .filter(|&i| v.get(i).is_none_or(|x| x.p != w[i].p))
+        .count()
 }
 
 /// `count` indices of `items` drawn with probability ∝ their energy by systematic

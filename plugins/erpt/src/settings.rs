@@ -204,13 +204,10 @@ impl ErptSettings {
     /// Reads ERPT's parameters (all but `mutations`, which the host hands over as strategies).
     pub fn from_params(p: &Params) -> Result<Self, String> {
         let auto = crate::auto::Free::from_params(p)?;
-        // Under `auto` the split and the seeds default to the pilot's candidates.
-        let auto_default = |name: &str, value: &'static str| {
-            (auto.is_some() && !p.is_set(name)).then(|| {
-                p.record(name, format!("{value:?}"));
-                value
-            })
-        };
+        // Under `auto` the split and the seeds default to the pilot's candidates; they are
+        // resolved (recorded) by the pilot, which may change the split.
+        let auto_default =
+            |name: &str, value: &'static str| (auto.is_some() && !p.is_set(name)).then_some(value);
         let seeds_choice = match auto_default(SEEDS.name(), "entangled") {
             Some(v) => v,
             None => SEEDS.get(p)?,
