@@ -7,8 +7,7 @@
 use crate::common;
 
 use common::{
-    assert_image_mean, assert_regions_unbiased, independent_runs, render, renderer_with,
-    MeanRule,
+    assert_image_mean, assert_regions_unbiased, independent_runs, render, renderer_with, MeanRule,
 };
 use flowlight_core::Rgb;
 use flowlight_host::render::RenderOutcome;
@@ -76,7 +75,12 @@ fn auto_picks_the_caustic_classes_through_the_glass() {
     let sum: f64 = list.iter().map(|e| e["weight"].as_float().unwrap()).sum();
     assert!((sum - 1.0).abs() < 1e-3, "{list:?}");
     let weights: f64 = (0..s.instance.mutations().len())
-        .map(|i| stat(&out, &format!("auto.weight.{}", s.instance.mutations()[i].plugin().name)))
+        .map(|i| {
+            stat(
+                &out,
+                &format!("auto.weight.{}", s.instance.mutations()[i].plugin().name),
+            )
+        })
         .sum();
     assert!((weights - 1.0).abs() < 1e-9, "{weights}");
 }
@@ -96,7 +100,12 @@ fn auto_is_unbiased_through_the_glass_caustic_with_its_pilot() {
     assert_eq!(stat(&last, "auto.chains"), 1.0);
     assert!(stat(&last, "chains") > 0.0);
     assert_regions_unbiased("auto glass", &images, &reference);
-    assert_image_mean("auto glass", &images, &reference, MeanRule::WithinOrZ(0.03, 4.0));
+    assert_image_mean(
+        "auto glass",
+        &images,
+        &reference,
+        MeanRule::WithinOrZ(0.03, 4.0),
+    );
 }
 
 /// `plugin = "erpt"` with no mutation list renders (as `auto`) and its choices are in the
@@ -123,14 +132,30 @@ fn erpt_without_a_mutation_list_is_auto_and_writes_its_choices() {
     assert!([16, 32, 64].contains(&n), "{n}");
     assert!(get("flowlight.param.mutations").contains("plugin = "));
     // The candidates the host created are in the header too.
-    assert_eq!(get("flowlight.mutations.0.plugin"), "multichain-perturbation");
+    assert_eq!(
+        get("flowlight.mutations.0.plugin"),
+        "multichain-perturbation"
+    );
     // A list given by the config keeps the manual preset: no pilot, no `auto.*` counters.
     let list = common::mutations(&[("drill", &[])]);
     let mut params = depths();
     params.push(("mutations", list));
-    let s = renderer_with("glass-caustic/glass-caustic.toml", Some("erpt"), (16, 16), 1, &params);
+    let s = renderer_with(
+        "glass-caustic/glass-caustic.toml",
+        Some("erpt"),
+        (16, 16),
+        1,
+        &params,
+    );
     let out = render(&s);
-    assert!(out.stats.integrator.iter().all(|(n, _)| !n.starts_with("auto.")));
+    assert!(out
+        .stats
+        .integrator
+        .iter()
+        .all(|(n, _)| !n.starts_with("auto.")));
     let preset = s.instance.resolved_params();
-    assert!(preset.contains(&("preset".into(), "\"manual\"".into())), "{preset:?}");
+    assert!(
+        preset.contains(&("preset".into(), "\"manual\"".into())),
+        "{preset:?}"
+    );
 }

@@ -54,9 +54,6 @@ impl Erpt {
             (census, norms)
         };
         let mut plan = auto::decide(&census, &norms, (&fallback.0, fallback.1, fallback.2));
-        if by_letters {
-            plan.reason = "no Dirac surface gives a path of the class: path tracing";
-        }
         if plan.chains {
             self.weights = plan.weights.clone();
             if free.mutations_per_sample {
@@ -72,8 +69,7 @@ impl Erpt {
                 // e_d of Algorithm 1 from the pilot's seeds of the chained class.
                 self.settings.quantum = QuantumScope::Image;
                 self.image_quantum = Some(
-                    census.energy[1]
-                        / (census.samples as f64 * self.settings.mutations_per_sample),
+                    census.energy[1] / (census.samples as f64 * self.settings.mutations_per_sample),
                 );
             }
         } else {
@@ -96,51 +92,60 @@ impl Erpt {
         Ok(())
     }
 
-    /// The census, and the caustic seeds with their energies (at most [`PILOT_SAMPLES`]).
-    /// Every seed is stored (no split while tracing): the settings' part is set to everything
-    /// for the call.
+    /// The census, and the caustic seeds with their energies (at most [`PILOT_SAMPLES`]):
+    /// one camera sample per pixel of the grid per pass, passes until
+    /// [`auto::MIN_CAUSTIC_SEEDS`] seeds of the chains' part are found (at most
+    /// [`auto::PILOT_PASSES`]). Every seed is stored (no split while tracing): the settings'
+    /// part is set to everything for the call.
     pub(crate) fn pilot_census(&mut self, tracer: &Tracer) -> (Census, Vec<(Box<Path>, f64)>) {
         let saved = std::mem::replace(&mut self.settings.part, Part::new("all", false).unwrap());
         let (w, h) = (self.scene.camera.width, self.scene.camera.height);
-        let mut seeds = UnitSeeds::default();
-        let mut path = Box::new(Path::empty());
-        let start = Instant::now();
-        self.trace_unit(
-            tracer,
-            auto::PILOT_SEED,
-            grid(w, h),
-            0..1,
-            &mut seeds,
-            &mut path,
-            &mut |_, _, _, _| {},
-        );
-        let seconds = start.elapsed().as_secs_f64();
-        self.settings.part = saved;
-        let class = &self.settings.part;
         let depth = self.settings.seeds.path_depth as usize;
         let mut census = Census {
-            samples: seeds.store.samples,
-            seconds,
-            work: (seeds.store.vertices.len() + seeds.store.seeds.len()) as f64,
             layer_energy: vec![[0.0; 2]; depth + 2],
             ..Census::default()
         };
+        let mut seeds = UnitSeeds::default();
+        let mut path = Box::new(Path::empty());
         let mut caustic = Vec::new();
-        for (i, seed) in seeds.store.seeds.iter().enumerate() {
-            let lum = seed.estimate.luminance() as f64;
-            if !(seed.estimate.is_valid_radiance() && lum.is_finite() && lum > 0.0) {
-                continue;
+        // Pass after pass over the grid (sample index `pass`), until the class has enough
+        // seeds to measure or the passes run out: rare caustics are the ones chains are for.
+        for pass in 0..auto::PILOT_PASSES {
+            if census.seeds[1] >= auto::MIN_CAUSTIC_SEEDS {
+                break;
             }
-            seeds.store.path(i, &mut path);
-            let c = class.contains(&path) as usize;
-            census.seeds[c] += 1;
-            census.energy[c] += lum;
-            let layer = (path.layer as usize).min(depth + 1);
-            census.layer_energy[layer][c] += lum;
-            if c == 1 && caustic.len() < PILOT_SAMPLES as usize {
-                caustic.push((path.clone(), lum));
+            seeds.store.clear();
+            seeds.keys.clear();
+            let start = Instant::now();
+            self.trace_unit(
+                tracer,
+                auto::PILOT_SEED,
+                grid(w, h),
+                pass..pass + 1,
+                &mut seeds,
+                &mut path,
+                &mut |_, _, _, _| {},
+            );
+            census.seconds += start.elapsed().as_secs_f64();
+            census.samples += seeds.store.samples;
+            census.work += (seeds.store.vertices.len() + seeds.store.seeds.len()) as f64;
+            for (i, seed) in seeds.store.seeds.iter().enumerate() {
+                let lum = seed.estimate.luminance() as f64;
+                if !(seed.estimate.is_valid_radiance() && lum.is_finite() && lum > 0.0) {
+                    continue;
+                }
+                seeds.store.path(i, &mut path);
+                let c = saved.contains(&path) as usize;
+                census.seeds[c] += 1;
+                census.energy[c] += lum;
+                let layer = (path.layer as usize).min(depth + 1);
+                census.layer_energy[layer][c] += lum;
+                if c == 1 && caustic.len() < PILOT_SAMPLES as usize {
+                    caustic.push((path.clone(), lum));
+                }
             }
         }
+        self.settings.part = saved;
         (census, caustic)
     }
 
@@ -171,9 +176,14 @@ impl Erpt {
                     continue;
                 }
                 for _ in 0..PILOT_STEPS {
-                    let p = self
-                        .mutations
-                        .propose(m, tracer, &mut rng, &state, &mut proposal, &mut stats)?;
+                    let p = self.mutations.propose(
+                        m,
+                        tracer,
+                        &mut rng,
+                        &state,
+                        &mut proposal,
+                        &mut stats,
+                    )?;
                     n.proposals += 1;
                     n.work += 1.0 + moved_vertices(&state, &proposal, p.is_move()) as f64;
                     let inside = within_depth(

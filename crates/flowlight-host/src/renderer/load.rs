@@ -166,17 +166,14 @@ pub(super) fn mutation_list(
     let mut mutation_entries = match (&list_name, default) {
         (Some(list), Some(text)) => {
             // The plugin's declared default, read as the config's list would be.
-            let mut params = default_list_params(list, &text).map_err(|msg| {
-                HostError::Mutations {
+            let mut params =
+                default_list_params(list, &text).map_err(|msg| HostError::Mutations {
                     file: config.path.clone(),
                     msg: format!("the default of plugin '{}': {msg}", plugin.name),
-                }
-            })?;
+                })?;
             take_mutations(&mut params, list, &config.path)?
         }
-        (Some(list), None) => {
-            take_mutations(&mut config.integrator_params, list, &config.path)?
-        }
+        (Some(list), None) => take_mutations(&mut config.integrator_params, list, &config.path)?,
         (None, _) => Vec::new(),
     };
     // The one normalisation of the list's weights: each entry's weight becomes its
@@ -201,7 +198,9 @@ pub(super) fn mutation_list(
 fn default_list_params(list: &str, text: &str) -> Result<Vec<(String, toml::Value)>, String> {
     let table: toml::Table = format!("{list} = {text}")
         .parse()
-        .map_err(|e: toml::de::Error| format!("default mutation list is not TOML: {}", e.message()))?;
+        .map_err(|e: toml::de::Error| {
+            format!("default mutation list is not TOML: {}", e.message())
+        })?;
     Ok(table.into_iter().collect())
 }
 
@@ -385,7 +384,10 @@ mod tests {
         assert_eq!(list[0].params[0].0, "width");
         assert_eq!(list[1].plugin, "blow");
         let e = default_list_params("mutations", "[{ plugin = ").unwrap_err();
-        assert!(e.starts_with("default mutation list is not TOML") && !e.contains('\n'), "{e}");
+        assert!(
+            e.starts_with("default mutation list is not TOML") && !e.contains('\n'),
+            "{e}"
+        );
     }
 
     #[test]
