@@ -281,7 +281,7 @@ pub fn decide(census: &Census, norms: &[Norms], fallback: (&[f64], f64, u32)) ->
     }
     let rates: Vec<f64> = norms.iter().map(Norms::accepted_per_work).collect();
     let best = rates.iter().cloned().fold(0.0, f64::max);
-    if !(best > 0.0) {
+    if best <= 0.0 {
         // No strategy moves a caustic chain: path tracing.
         return no_chains();
     }

@@ -231,7 +231,7 @@ fn moved_vertices(state: &Path, proposal: &Path, valid: bool) -> usize {
 /// energy is drawn).
 fn draw_by_energy(items: &[(Box<Path>, f64)], count: usize) -> Vec<usize> {
     let total: f64 = items.iter().map(|(_, e)| e).sum();
-    if items.is_empty() || !(total > 0.0) {
+    if items.is_empty() || total.is_nan() || total <= 0.0 {
         return Vec::new();
     }
     let step = total / count as f64;
