@@ -35,6 +35,10 @@
 //! the film in a `film_window`² window around their current position, so their deposits land
 //! around the seed's tile: units use flanged tiles (§5.9).
 //!
+//! Without a mutation list the host hands over every installed strategy and `preset =
+//! "auto"` (`auto.rs`, `pilot.rs`) picks the split, the chain budget and the weights from a
+//! pilot's norms in `prepare`.
+//!
 //! The parameters are declared once, in `settings.rs`; the table generated from the
 //! declarations is in docs/erpt.md ("Parameters"), and `flowlight plugins --markdown` prints it.
 //!
