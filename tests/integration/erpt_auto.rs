@@ -41,6 +41,7 @@ fn auto_picks_no_chains_on_a_scene_without_dirac_surfaces() {
     assert_eq!(s.instance.mutations().len(), 8);
     let out = render(&s);
     assert_eq!(stat(&out, "auto.chains"), 0.0);
+    assert!(stat(&out, "auto.pilot.indirect_relative_second_moment") < 20.0);
     assert_eq!(stat(&out, "chains"), 0.0);
     assert_eq!(stat(&out, "units_without_chains"), stat(&out, "units"));
     let meta: Vec<(String, String)> = s.instance.resolved_params();
@@ -54,7 +55,7 @@ fn auto_picks_the_caustic_classes_through_the_glass() {
     let s = auto_erpt("glass-caustic/glass-caustic.toml", 32, 2);
     let out = render(&s);
     assert_eq!(stat(&out, "auto.chains"), 1.0);
-    assert!(stat(&out, "auto.pilot.caustic_seeds") >= 8.0);
+    assert!(stat(&out, "auto.pilot.chained_seeds") >= 8.0);
     assert!(stat(&out, "chains") > 0.0, "no chain ran");
     // Direct light and the non-caustic classes are path traced.
     assert!(stat(&out, "mcpt_part_seeds") > 0.0);
@@ -102,6 +103,29 @@ fn auto_is_unbiased_through_the_glass_caustic_with_its_pilot() {
     assert_regions_unbiased("auto glass", &images, &reference);
     assert_image_mean(
         "auto glass",
+        &images,
+        &reference,
+        MeanRule::WithinOrZ(0.03, 4.0),
+    );
+}
+
+/// Without caustic seeds but with indirect light that a few samples carry (the indirect room,
+/// lit through a gap), `auto` chains every path above direct light, and stays unbiased.
+#[test]
+fn auto_chains_indirect_light_through_a_gap_and_stays_unbiased() {
+    let config = "indirect-room/indirect-room.toml";
+    let mut params = depths();
+    params.push(("variant", toml::Value::String("entangled".into())));
+    let mut reference = renderer_with(config, Some("mcpt"), (32, 32), 4096, &params);
+    reference.options.seed = 78;
+    let reference: Vec<Rgb> = render(&reference).frame.image();
+    let (images, last) = independent_runs("auto room", 6, 4000, &|| auto_erpt(config, 32, 8));
+    assert_eq!(stat(&last, "auto.chains"), 2.0);
+    assert!(stat(&last, "auto.pilot.indirect_relative_second_moment") >= 20.0);
+    assert!(stat(&last, "chains") > 0.0);
+    assert_regions_unbiased("auto room", &images, &reference);
+    assert_image_mean(
+        "auto room",
         &images,
         &reference,
         MeanRule::WithinOrZ(0.03, 4.0),

@@ -32,11 +32,14 @@
 //!
 //! **The rule** ([`decide`]):
 //!
-//! * *Split*: chains only for the caustic class above direct light (`chains_for = "caustics"`,
-//!   `direct = "mcpt"`); every other class is path traced, where path tracing is efficient.
-//!   No chains at all (the render is path tracing) when the scene has no Dirac surface, when
-//!   the pilot found fewer than [`MIN_CAUSTIC_SEEDS`] caustic seeds, or when no candidate
-//!   moves a chain.
+//! * *Split*: chains for the caustic class above direct light (`chains_for = "caustics"`,
+//!   `direct = "mcpt"`) when the census found [`MIN_CAUSTIC_SEEDS`] caustic seeds; else chains
+//!   for every path above direct light (`chains_for = "all"`) when path tracing is far from its
+//!   mean on indirect light, R = E[X²]/E[X]² of a camera sample's indirect light ≥
+//!   [`HARD_INDIRECT`] (1 for a constant; 3.6–6.6 measured on the Cornell box, the narrow gap
+//!   and the glass caustic's non-caustic light, 80 on the indirect room, lit through a gap);
+//!   else none (path tracing), and none when no candidate moves a chain. Direct light is
+//!   always path traced, where next-event estimation is efficient.
 //! * *Seeds*: entangled (each light connection, emitter hit and escape a MIS-weighted seed),
 //!   which find caustic seeds by BSDF sampling as path tracing does.
 //! * *Weights*: p_s ∝ r_s = accepted moves per ray of s (a_s / w_s, the useful moves its
@@ -98,6 +101,9 @@ pub const MIN_CAUSTIC_SEEDS: u64 = 8;
 /// A strategy whose accepted moves per second are below this fraction of the best's gets
 /// weight 0.
 pub const WEIGHT_FLOOR: f64 = 2.0 / 3.0;
+/// Relative second moment of a camera sample's indirect light above which path tracing
+/// leaves it to chains.
+pub const HARD_INDIRECT: f64 = 20.0;
 /// Chain steps per camera sample between two seeds of the chained class (sets N).
 pub const STEPS_PER_SEED_GAP: f64 = 2.0;
 /// The random stream of the pilot, independent of the units' (hashes of their seeds).
@@ -160,6 +166,11 @@ pub struct Census {
     pub energy: [f64; 2],
     /// Σ lum X per lighting layer and class.
     pub layer_energy: Vec<[f64; 2]>,
+    /// Indirect light outside the class (layer ≥ 2, not caustic): valid seeds with energy,
+    /// Σ lum X, and Σ over camera samples of the square of the sample's sum.
+    pub indirect_seeds: u64,
+    pub indirect_energy: f64,
+    pub indirect_sample_squares: f64,
 }
 
 impl Census {
@@ -176,6 +187,32 @@ impl Census {
     /// Seconds per camera sample.
     pub fn seconds_per_sample(&self) -> f64 {
         self.seconds / self.samples.max(1) as f64
+    }
+
+    /// R = E[X²] / E[X]² of a camera sample's indirect light outside the class: how far path
+    /// tracing is from its mean there (1 for a constant; large where a few samples carry it).
+    pub fn indirect_relative_second_moment(&self) -> f64 {
+        if self.indirect_energy > 0.0 {
+            self.samples as f64 * self.indirect_sample_squares / self.indirect_energy.powi(2)
+        } else {
+            0.0
+        }
+    }
+
+    /// Whether path tracing is inefficient on indirect light outside the class: enough seeds
+    /// and R ≥ [`HARD_INDIRECT`].
+    pub fn indirect_is_hard(&self) -> bool {
+        self.indirect_seeds >= MIN_CAUSTIC_SEEDS
+            && self.indirect_relative_second_moment() >= HARD_INDIRECT
+    }
+
+    /// Moves indirect light outside the class into it (the chains then render every path
+    /// above direct light).
+    pub fn chain_indirect(&mut self) {
+        self.seeds[0] -= self.indirect_seeds.min(self.seeds[0]);
+        self.seeds[1] += self.indirect_seeds;
+        self.energy[0] = (self.energy[0] - self.indirect_energy).max(0.0);
+        self.energy[1] += self.indirect_energy;
     }
 
     /// w_s: rays per camera sample.
@@ -323,6 +360,8 @@ pub struct Report {
     pub mixture: MixtureRatio,
     /// The candidates' plugin names.
     pub plugins: Vec<String>,
+    /// The chained part: `"caustics"`, or `"all"` when indirect light is chained too.
+    pub chains_for: &'static str,
     /// No chains because the scene's surfaces give no path of the chained class (no pilot
     /// ran): the resolved split already renders without chains.
     pub by_letters: bool,
@@ -348,7 +387,11 @@ impl Report {
             fix(true, "chains_for", "\"E\"");
             return out;
         }
-        fix(free.chains_for, "chains_for", "\"caustics\"");
+        fix(
+            free.chains_for,
+            "chains_for",
+            &format!("{:?}", self.chains_for),
+        );
         if !p.chains {
             return out;
         }
@@ -392,6 +435,7 @@ pub struct Counters {
     rays_per_sample: Counter,
     caustic_seeds: Counter,
     caustic_share: Counter,
+    indirect_r: Counter,
     /// Per candidate: weight, acceptance, domain miss, seconds and rays per proposal,
     /// accepted moves per second and per ray.
     per_strategy: Vec<[Counter; 7]>,
@@ -409,8 +453,9 @@ impl Counters {
             samples: hidden(b, "auto.pilot.samples".into()),
             seconds_per_sample: hidden(b, "auto.pilot.seconds_per_sample".into()),
             rays_per_sample: hidden(b, "auto.pilot.rays_per_sample".into()),
-            caustic_seeds: hidden(b, "auto.pilot.caustic_seeds".into()),
-            caustic_share: n(b, "auto.pilot.caustic_energy_share".into()),
+            caustic_seeds: hidden(b, "auto.pilot.chained_seeds".into()),
+            caustic_share: n(b, "auto.pilot.chained_energy_share".into()),
+            indirect_r: n(b, "auto.pilot.indirect_relative_second_moment".into()),
             per_strategy: names
                 .iter()
                 .map(|s| {
@@ -431,7 +476,13 @@ impl Counters {
     /// Adds the report into a unit's counters (each a maximum: every unit adds the same).
     pub fn add(&self, stats: &mut Stats, r: &Report) {
         let p = &r.plan;
-        stats.add(self.chains, p.chains as u32 as f64);
+        // 0: path tracing, 1: chains for the caustic class, 2: for every indirect path.
+        let chains = match (p.chains, r.chains_for) {
+            (false, _) => 0.0,
+            (true, "all") => 2.0,
+            (true, _) => 1.0,
+        };
+        stats.add(self.chains, chains);
         stats.add(self.mutations_per_sample, p.mutations_per_sample);
         stats.add(self.chain_length, p.chain_length as f64);
         stats.add(self.quantum, r.quantum.unwrap_or(0.0));
@@ -440,6 +491,7 @@ impl Counters {
         stats.add(self.rays_per_sample, r.census.work_per_sample());
         stats.add(self.caustic_seeds, r.census.seeds[1] as f64);
         stats.add(self.caustic_share, r.census.caustic_share());
+        stats.add(self.indirect_r, r.census.indirect_relative_second_moment());
         for (i, c) in self.per_strategy.iter().enumerate() {
             let n = r.norms.get(i).copied().unwrap_or_default();
             let values = [
@@ -469,8 +521,25 @@ mod tests {
             work: 4000.0,
             seeds: [5000, caustic_seeds],
             energy: [1.0 - share, share],
-            layer_energy: Vec::new(),
+            ..Census::default()
         }
+    }
+
+    #[test]
+    fn indirect_light_is_hard_when_a_few_samples_carry_it() {
+        // 1000 samples, indirect energy 0.5 of the rest's 1: spread evenly R = 1, in one
+        // sample R = 1000.
+        let mut c = census(0, 0.0);
+        c.indirect_seeds = 1000;
+        c.indirect_energy = 0.5;
+        c.indirect_sample_squares = 1000.0 * 0.0005f64.powi(2);
+        assert!((c.indirect_relative_second_moment() - 1.0).abs() < 1e-9);
+        assert!(!c.indirect_is_hard());
+        c.indirect_sample_squares = 0.25;
+        assert!((c.indirect_relative_second_moment() - 1000.0).abs() < 1e-9);
+        assert!(c.indirect_is_hard());
+        c.chain_indirect();
+        assert_eq!((c.seeds, c.energy), ([4000, 1000], [0.5, 0.5]));
     }
 
     /// Norms with `work` rays in all (and as many microseconds).
@@ -545,6 +614,7 @@ mod tests {
             quantum: Some(0.01),
             mixture: MixtureRatio::Selected,
             plugins: vec!["drill".into(), "blow".into()],
+            chains_for: "caustics",
             by_letters: false,
             free: Free {
                 seeds: true,

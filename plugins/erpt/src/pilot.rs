@@ -16,6 +16,9 @@ use flowlight_mcmc::regenerate::within_depth;
 use flowlight_sdk::{Stats, Tracer};
 use std::time::Instant;
 
+/// A seed path of the census with its energy lum X.
+pub type WeightedSeed = (Box<Path>, f64);
+
 /// Pixels of the census grid: every `stride`-th pixel of every `stride`-th row, the stride
 /// the smallest with at most [`PILOT_SAMPLES`] pixels.
 fn grid(width: u32, height: u32) -> impl Iterator<Item = (u32, u32)> {
@@ -42,16 +45,31 @@ impl Erpt {
             self.settings.chain_length,
         );
         let by_letters = self.chains_part_empty;
-        let (census, norms) = if by_letters {
-            (Census::default(), vec![Norms::default(); n])
+        // The split is the pilot's to choose: it may chain indirect light too.
+        let free_split = free.chains_for && free.direct;
+        let (mut census, class_seeds, deep_seeds) = if by_letters && !free_split {
+            (Census::default(), Vec::new(), Vec::new())
         } else {
-            let (census, caustic) = self.pilot_census(tracer);
-            let norms = if census.seeds[1] >= auto::MIN_CAUSTIC_SEEDS {
-                self.pilot_norms(tracer, &caustic)?
-            } else {
-                vec![Norms::default(); n]
-            };
-            (census, norms)
+            self.pilot_census(tracer, !by_letters)
+        };
+        // The caustic class first (its chains are the measured win); indirect light when the
+        // class has too few seeds to chain.
+        let indirect =
+            free_split && census.seeds[1] < auto::MIN_CAUSTIC_SEEDS && census.indirect_is_hard();
+        let chained = if indirect {
+            // Path tracing is far from its mean on indirect light: chains for every path
+            // above direct light.
+            census.chain_indirect();
+            self.settings.part = Part::new("all", true)?;
+            self.chains_part_empty = false;
+            deep_seeds
+        } else {
+            class_seeds
+        };
+        let norms = if census.seeds[1] >= auto::MIN_CAUSTIC_SEEDS {
+            self.pilot_norms(tracer, &chained)?
+        } else {
+            vec![Norms::default(); n]
         };
         let mut plan = auto::decide(&census, &norms, (&fallback.0, fallback.1, fallback.2));
         if plan.chains {
@@ -85,6 +103,7 @@ impl Erpt {
             quantum: self.image_quantum.filter(|_| !self.chains_part_empty),
             mixture: self.settings.mixture,
             plugins: (0..n).map(|i| self.mutations.name(i).to_string()).collect(),
+            chains_for: if indirect { "all" } else { "caustics" },
             by_letters,
             free,
         };
@@ -92,12 +111,17 @@ impl Erpt {
         Ok(())
     }
 
-    /// The census, and the caustic seeds with their energies (at most [`PILOT_SAMPLES`]):
-    /// one camera sample per pixel of the grid per pass, passes until
-    /// [`auto::MIN_CAUSTIC_SEEDS`] seeds of the chains' part are found (at most
-    /// [`auto::PILOT_PASSES`]). Every seed is stored (no split while tracing): the settings'
-    /// part is set to everything for the call.
-    pub(crate) fn pilot_census(&mut self, tracer: &Tracer) -> (Census, Vec<(Box<Path>, f64)>) {
+    /// The census, the seeds of the chains' part and those of every path above direct light
+    /// (layer ≥ 2), with their energies (at most [`PILOT_SAMPLES`] of each): one camera sample
+    /// per pixel of the grid per pass, passes until [`auto::MIN_CAUSTIC_SEEDS`] seeds of the
+    /// chains' part are found (at most [`auto::PILOT_PASSES`]; one when `want_class` is false:
+    /// the scene has no path of the part). Every seed is stored (no split while tracing): the
+    /// settings' part is set to everything for the call.
+    pub(crate) fn pilot_census(
+        &mut self,
+        tracer: &Tracer,
+        want_class: bool,
+    ) -> (Census, Vec<WeightedSeed>, Vec<WeightedSeed>) {
         let saved = std::mem::replace(&mut self.settings.part, Part::new("all", false).unwrap());
         let (w, h) = (self.scene.camera.width, self.scene.camera.height);
         let depth = self.settings.seeds.path_depth as usize;
@@ -107,11 +131,11 @@ impl Erpt {
         };
         let mut seeds = UnitSeeds::default();
         let mut path = Box::new(Path::empty());
-        let mut caustic = Vec::new();
+        let (mut class_seeds, mut deep_seeds) = (Vec::new(), Vec::new());
         // Pass after pass over the grid (sample index `pass`), until the class has enough
         // seeds to measure or the passes run out: rare caustics are the ones chains are for.
         for pass in 0..auto::PILOT_PASSES {
-            if census.seeds[1] >= auto::MIN_CAUSTIC_SEEDS {
+            if census.seeds[1] >= auto::MIN_CAUSTIC_SEEDS || (pass > 0 && !want_class) {
                 break;
             }
             seeds.store.clear();
@@ -129,24 +153,40 @@ impl Erpt {
             census.seconds += start.elapsed().as_secs_f64();
             census.samples += seeds.store.samples;
             census.work += (seeds.store.vertices.len() + seeds.store.seeds.len()) as f64;
-            for (i, seed) in seeds.store.seeds.iter().enumerate() {
-                let lum = seed.estimate.luminance() as f64;
-                if !(seed.estimate.is_valid_radiance() && lum.is_finite() && lum > 0.0) {
-                    continue;
+            let count = seeds.store.seeds.len();
+            for (k, key) in seeds.keys.iter().enumerate() {
+                let end = seeds.keys.get(k + 1).map_or(count, |n| n.first);
+                let mut indirect = 0.0;
+                for i in key.first..end {
+                    let estimate = seeds.store.seeds[i].estimate;
+                    let lum = estimate.luminance() as f64;
+                    if !(estimate.is_valid_radiance() && lum.is_finite() && lum > 0.0) {
+                        continue;
+                    }
+                    seeds.store.path(i, &mut path);
+                    let c = saved.contains(&path) as usize;
+                    census.seeds[c] += 1;
+                    census.energy[c] += lum;
+                    let layer = (path.layer as usize).min(depth + 1);
+                    census.layer_energy[layer][c] += lum;
+                    let deep = layer >= 2;
+                    if c == 0 && deep {
+                        census.indirect_seeds += 1;
+                        census.indirect_energy += lum;
+                        indirect += lum;
+                    }
+                    if c == 1 && class_seeds.len() < PILOT_SAMPLES as usize {
+                        class_seeds.push((path.clone(), lum));
+                    }
+                    if deep && deep_seeds.len() < PILOT_SAMPLES as usize {
+                        deep_seeds.push((path.clone(), lum));
+                    }
                 }
-                seeds.store.path(i, &mut path);
-                let c = saved.contains(&path) as usize;
-                census.seeds[c] += 1;
-                census.energy[c] += lum;
-                let layer = (path.layer as usize).min(depth + 1);
-                census.layer_energy[layer][c] += lum;
-                if c == 1 && caustic.len() < PILOT_SAMPLES as usize {
-                    caustic.push((path.clone(), lum));
-                }
+                census.indirect_sample_squares += indirect * indirect;
             }
         }
         self.settings.part = saved;
-        (census, caustic)
+        (census, class_seeds, deep_seeds)
     }
 
     /// The §5.5 norms of each candidate alone on [`PILOT_STEPS`]-step chains from
@@ -155,7 +195,7 @@ impl Erpt {
     pub(crate) fn pilot_norms(
         &self,
         tracer: &Tracer,
-        caustic: &[(Box<Path>, f64)],
+        caustic: &[WeightedSeed],
     ) -> Result<Vec<Norms>, String> {
         let starts = draw_by_energy(caustic, PILOT_CHAIN_SEEDS);
         let class = &self.settings.part;
@@ -229,7 +269,7 @@ fn moved_vertices(state: &Path, proposal: &Path, valid: bool) -> usize {
 /// `count` indices of `items` drawn with probability ∝ their energy by systematic
 /// resampling (one fixed offset: deterministic, and every item of more than 1/count of the
 /// energy is drawn).
-fn draw_by_energy(items: &[(Box<Path>, f64)], count: usize) -> Vec<usize> {
+fn draw_by_energy(items: &[WeightedSeed], count: usize) -> Vec<usize> {
     let total: f64 = items.iter().map(|(_, e)| e).sum();
     if items.is_empty() || total.is_nan() || total <= 0.0 {
         return Vec::new();
