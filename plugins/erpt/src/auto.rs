@@ -436,13 +436,18 @@ pub struct Counters {
     caustic_seeds: Counter,
     caustic_share: Counter,
     indirect_r: Counter,
+    /// Per lighting layer: Σ lum X per camera sample outside and inside the census' class
+    /// (the caustic class, or the config's `chains_for`).
+    per_layer: Vec<[Counter; 2]>,
     /// Per candidate: weight, acceptance, domain miss, seconds and rays per proposal,
     /// accepted moves per second and per ray.
     per_strategy: Vec<[Counter; 7]>,
 }
 
 impl Counters {
-    pub fn declare(b: &mut StatsBuilder, names: &[String]) -> Counters {
+    /// `layers`: the census' lighting layers (path depth + 2, the last holding every deeper
+    /// one).
+    pub fn declare(b: &mut StatsBuilder, names: &[String], layers: usize) -> Counters {
         let n = |b: &mut StatsBuilder, name: String| b.max_as(name, StatDisplay::Number);
         let hidden = |b: &mut StatsBuilder, name: String| b.max_as(name, StatDisplay::Hidden);
         Counters {
@@ -456,6 +461,14 @@ impl Counters {
             caustic_seeds: hidden(b, "auto.pilot.chained_seeds".into()),
             caustic_share: n(b, "auto.pilot.chained_energy_share".into()),
             indirect_r: n(b, "auto.pilot.indirect_relative_second_moment".into()),
+            per_layer: (0..layers)
+                .map(|k| {
+                    [
+                        hidden(b, format!("auto.pilot.layer{k}.other_energy_per_sample")),
+                        hidden(b, format!("auto.pilot.layer{k}.class_energy_per_sample")),
+                    ]
+                })
+                .collect(),
             per_strategy: names
                 .iter()
                 .map(|s| {
@@ -492,6 +505,11 @@ impl Counters {
         stats.add(self.caustic_seeds, r.census.seeds[1] as f64);
         stats.add(self.caustic_share, r.census.caustic_share());
         stats.add(self.indirect_r, r.census.indirect_relative_second_moment());
+        let samples = r.census.samples.max(1) as f64;
+        for (c, e) in self.per_layer.iter().zip(&r.census.layer_energy) {
+            stats.add(c[0], e[0] / samples);
+            stats.add(c[1], e[1] / samples);
+        }
         for (i, c) in self.per_strategy.iter().enumerate() {
             let n = r.norms.get(i).copied().unwrap_or_default();
             let values = [

@@ -436,9 +436,10 @@ impl Integrator for Erpt {
             })
             .collect();
         let counters = stats::Counters::declare(stats, &names);
-        let auto = settings
-            .auto
-            .map(|_| (auto::Counters::declare(stats, &names), None));
+        let auto = settings.auto.map(|_| {
+            let layers = settings.seeds.path_depth as usize + 2;
+            (auto::Counters::declare(stats, &names, layers), None)
+        });
         let chains_part_empty = settings.seed_kind == SeedKind::Entangled
             && settings.part.is_empty_for(scene_letters(&scene));
         let info = IntegratorInfo {
