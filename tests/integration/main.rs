@@ -22,6 +22,7 @@ mod distributed;
 mod elf_mutations;
 mod embree;
 mod erpt;
+mod erpt_auto;
 mod erpt_bdpt_seeds;
 mod erpt_perturbations;
 mod erpt_seeds;

@@ -193,6 +193,14 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
         );
     }
     print_integrator_stats(&s.integrator, renderer.instance.stat_specs());
+    let decided = renderer.instance.decided();
+    if !decided.is_empty() {
+        println!("  decided         by the integrator while preparing; to freeze into the config:");
+        println!("    [integrator]");
+        for line in decided.lines() {
+            println!("    {line}");
+        }
+    }
     if s.interrupted {
         println!("  interrupted     yes: the image holds the samples finished before the stop");
     }

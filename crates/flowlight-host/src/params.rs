@@ -15,6 +15,23 @@ impl ParamList {
     pub fn as_slice(&self) -> &[ParamValue] {
         &self.values
     }
+
+    /// Adds the mark of a defaulted mutation list: a [`ParamKind::MutationList`] value under
+    /// the list's name, `int` its number of entries (ABI 7; the config cannot set one,
+    /// [`build_params`] refuses it).
+    pub fn mark_defaulted_list(&mut self, name: &str, count: usize) {
+        self._names.push(name.to_string());
+        // The String's heap buffer does not move when the Vec grows: the StrRef stays valid.
+        let name = self._names.last().expect("just pushed");
+        self.values.push(ParamValue {
+            name: StrRef::new(name),
+            kind: ParamKind::MutationList,
+            int: count as i64,
+            float: 0.0,
+            boolean: 0,
+            string: StrRef::EMPTY,
+        });
+    }
 }
 
 /// Describes a TOML value's type for messages.

@@ -323,6 +323,17 @@ impl PluginLibrary {
             .collect()
     }
 
+    /// The default of the integrator's mutation list, when its spec declares one: the TOML
+    /// text of an array of inline tables, the list the host creates when the config gives
+    /// none (ABI 7; `flowlight_sdk::declare::mutation_list_or`).
+    pub fn mutation_list_default(&self) -> Option<String> {
+        self.params()
+            .into_iter()
+            .find(|p| p.kind == ParamKind::MutationList)
+            .map(|p| p.default)
+            .filter(|d| d.trim_start().starts_with('['))
+    }
+
     /// The name of the integrator's [`ParamKind::MutationList`] parameter, the one config key
     /// the host reads a mutation list from (`None`: the integrator takes no mutations). An
     /// integrator declaring two is refused: the host would not know which list is meant.
@@ -390,6 +401,16 @@ impl PluginLibrary {
             },
         }
     }
+}
+
+/// The values of `after` that `before` lacks or holds otherwise, as TOML lines
+/// (`name = value`): what an integrator decided in `prepare`.
+pub fn decided_snippet(before: &[(String, String)], after: &[(String, String)]) -> String {
+    after
+        .iter()
+        .filter(|(n, v)| !before.iter().any(|(bn, bv)| bn == n && bv == v))
+        .map(|(n, v)| format!("{n} = {v}\n"))
+        .collect()
 }
 
 /// A mutation plugin instance created from a `[[integrator.mutations]]` entry.
@@ -575,8 +596,9 @@ pub struct IntegratorInstance {
     pub info: IntegratorInfo,
     /// The counters the instance declared (owned by the instance, valid until `destroy`).
     stats: StatList,
-    /// The parameter values the instance resolved (owned likewise).
-    resolved: ResolvedList,
+    /// The parameter values the instance resolved (owned likewise), written again by its
+    /// `prepare` (ABI 7).
+    resolved: std::sync::Mutex<ResolvedList>,
     /// The integrator's counters, then each mutation's as `NAME.counter` (names owned by
     /// `_stat_names`): what a unit's slots hold and what is reported.
     all_stats: Vec<StatSpec>,
@@ -586,6 +608,8 @@ pub struct IntegratorInstance {
     _mutation_refs: Vec<MutationRef>,
     mutations: Vec<MutationInstance>,
     prepared: std::sync::Mutex<bool>,
+    /// What `prepare` decided, as TOML lines ([`decided_snippet`]).
+    decided: std::sync::Mutex<String>,
 }
 
 // SAFETY: the SDK requires integrators to be Send + Sync; the host calls `render` concurrently.
@@ -599,10 +623,13 @@ impl IntegratorInstance {
     ///
     /// # Safety
     /// The data `view` points to must outlive the instance.
+    /// `defaulted`: the mutations are the default list the integrator's spec declares (the
+    /// config gave none); the instance is told so by a [`ParamKind::MutationList`] value.
     pub unsafe fn create(
         plugin: Arc<PluginLibrary>,
         params: &[(String, toml::Value)],
         mutations: Vec<MutationInstance>,
+        defaulted: bool,
         view: SceneView,
     ) -> Result<IntegratorInstance, PluginError> {
         let table = plugin.integrator_table()?;
@@ -611,8 +638,12 @@ impl IntegratorInstance {
             path: plugin.path.clone(),
             message,
         };
-        let list = build_params(&plugin.name, plugin.param_specs(), params).map_err(call_error)?;
+        let mut list =
+            build_params(&plugin.name, plugin.param_specs(), params).map_err(call_error)?;
         let list_name = plugin.mutation_list_param()?;
+        if let (true, Some(name)) = (defaulted, &list_name) {
+            list.mark_defaulted_list(name, mutations.len());
+        }
         if let (None, Some(m)) = (&list_name, mutations.first()) {
             return Err(call_error(format!(
                 "takes no mutation list, but was given mutation '{}'",
@@ -667,13 +698,14 @@ impl IntegratorInstance {
             instance,
             info,
             stats,
-            resolved,
+            resolved: std::sync::Mutex::new(resolved),
             all_stats: Vec::new(),
             _stat_names: Vec::new(),
             _view: view,
             _mutation_refs: refs,
             mutations,
             prepared: std::sync::Mutex::new(false),
+            decided: std::sync::Mutex::new(String::new()),
         };
         // The SDK's builder refuses more; a plugin that wrote its own glue might not.
         if inst.stats.count > MAX_COUNTERS || (inst.stats.count > 0 && inst.stats.specs.is_null()) {
@@ -753,8 +785,10 @@ impl IntegratorInstance {
 
     /// The parameter values the integrator resolved (after defaults), `(name, TOML text)`.
     pub fn resolved_params(&self) -> Vec<(String, String)> {
-        // SAFETY: owned by the instance until `destroy` (in our Drop).
-        unsafe { resolved_pairs(&self.resolved) }
+        let list = *self.resolved.lock().unwrap();
+        // SAFETY: owned by the instance until `destroy` (in our Drop), and rewritten only by
+        // `prepare` under the lock.
+        unsafe { resolved_pairs(&list) }
     }
 
     /// The mutation strategies as the integrator sees them (normalised weights), e.g. for
@@ -789,6 +823,13 @@ impl IntegratorInstance {
         unsafe { std::slice::from_raw_parts(self.stats.specs, self.stats.count) }
     }
 
+    /// The parameter values the integrator decided in `prepare` (changed or added to what
+    /// `create` resolved), as TOML lines `name = value`; empty before `prepare` or when it
+    /// decided nothing.
+    pub fn decided(&self) -> String {
+        self.decided.lock().unwrap().clone()
+    }
+
     /// Runs the plugin's one-time preparation, the first time it is called. The scheduler
     /// calls it before any unit, from one thread.
     pub fn prepare_once(&self, tracer: &TracerTable) -> Result<(), PluginError> {
@@ -800,10 +841,23 @@ impl IntegratorInstance {
         let mut err = ErrorBuf::default();
         // SAFETY: the lock is held and no unit runs before preparation, so this is the only
         // access to the instance (the plugin's `prepare` takes it mutably).
-        let status = unsafe { (self.table.prepare)(self.instance, tracer, &mut err) };
+        let before = self.resolved_params();
+        let mut resolved = *self.resolved.lock().unwrap();
+        let status =
+            unsafe { (self.table.prepare)(self.instance, tracer, &mut resolved, &mut err) };
         if status != Status::Ok {
             return Err(self.plugin.call_error(status, &err));
         }
+        // The list `create` wrote may have been freed: only the new one is read from now on.
+        *self.resolved.lock().unwrap() = resolved;
+        let decided = decided_snippet(&before, &self.resolved_params());
+        if !decided.is_empty() {
+            tracing::info!(
+                "{} decided while preparing (to freeze into the config):\n[integrator]\n{decided}",
+                self.plugin.name
+            );
+        }
+        *self.decided.lock().unwrap() = decided;
         Ok(())
     }
 
@@ -858,6 +912,15 @@ impl Drop for IntegratorInstance {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_decided_snippet_holds_what_prepare_changed_or_added() {
+        let pair = |n: &str, v: &str| (n.to_string(), v.to_string());
+        let before = [pair("a", "1"), pair("b", "\"x\"")];
+        let after = [pair("a", "1"), pair("b", "\"y\""), pair("c", "[1, 2]")];
+        assert_eq!(decided_snippet(&before, &after), "b = \"y\"\nc = [1, 2]\n");
+        assert_eq!(decided_snippet(&before, &before), "");
+    }
 
     #[test]
     fn weights_are_normalised_to_sum_to_one() {

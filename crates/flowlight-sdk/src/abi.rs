@@ -20,7 +20,7 @@ use std::ffi::c_void;
 
 /// Bumped whenever any type or function table in this module changes incompatibly; every
 /// version and what changed is listed in the repository's `CHANGELOG.md`.
-pub const ABI_VERSION: u32 = 6;
+pub const ABI_VERSION: u32 = 7;
 /// Version of the SDK crate compiled into this binary.
 pub const SDK_VERSION: &str = env!("CARGO_PKG_VERSION");
 /// `rustc --version` of the compiler that built this binary.
@@ -197,6 +197,11 @@ impl ResolvedList {
 }
 
 /// One parameter value from the config, already checked against the plugin's [`ParamSpec`]s.
+///
+/// A value of kind [`ParamKind::MutationList`] (ABI 7) is never the config's: the host adds
+/// it, under the list's name, when the config gave no list and the host created the list
+/// the integrator's spec declares as its default (`int`: the number of entries), so that the
+/// integrator can tell the declared defaults from a list a user wrote.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct ParamValue {
@@ -569,10 +574,13 @@ pub struct IntegratorTable {
     /// Frees an instance made by `create` (null is ignored).
     pub destroy: unsafe extern "C" fn(instance: *mut c_void),
     /// Called once before the first unit, on one thread, with ray queries available
-    /// (e.g. ERPT's whole-image deposition quantum pre-pass).
+    /// (e.g. ERPT's whole-image deposition quantum pre-pass, or its `auto` pilot). Writes the
+    /// instance's resolved parameters again into `resolved` (ABI 7): `create`'s, with the
+    /// values the instance decided while preparing; the list `create` wrote is then stale.
     pub prepare: unsafe extern "C" fn(
         instance: *mut c_void,
         tracer: *const TracerTable,
+        resolved: *mut ResolvedList,
         err: *mut ErrorBuf,
     ) -> Status,
     /// Renders one unit. Called concurrently from the host's threads with the same instance.

@@ -514,6 +514,25 @@ pub const fn mutation_list(name: &'static str, doc: &'static str) -> ParamSpec {
     )
 }
 
+/// The spec of a [`ParamKind::MutationList`] parameter with a default: `default` is the list
+/// the host creates when the config gives none, as TOML writes it, an array of inline tables
+/// (`[{ plugin = "blow" }, { plugin = "drill", width = "narrow" }]`; ABI 7). The host marks
+/// such a list ([`Params::mutation_list_defaulted`](crate::Params::mutation_list_defaulted)).
+pub const fn mutation_list_or(
+    name: &'static str,
+    default: &'static str,
+    doc: &'static str,
+) -> ParamSpec {
+    spec(
+        name,
+        ParamKind::MutationList,
+        default,
+        "1 to 8 entries",
+        doc,
+        ParamRole::None,
+    )
+}
+
 const fn spec(
     name: &'static str,
     kind: ParamKind,

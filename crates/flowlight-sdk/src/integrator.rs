@@ -45,6 +45,13 @@ pub trait Integrator: Sized + Send + Sync + 'static {
         Ok(())
     }
 
+    /// Parameter values the instance decided in [`Integrator::prepare`] (e.g. from a pilot),
+    /// `(name, TOML text)`: after `prepare` they replace the values of the same names that
+    /// `create` resolved, or join them, in the output's metadata (ABI 7).
+    fn decided_params(&self) -> Vec<(String, String)> {
+        Vec::new()
+    }
+
     /// Renders one work unit, depositing into `film` and adding to the counters declared in
     /// `create` through `stats` (zeroed for the unit). Must not start threads.
     fn render(
@@ -133,6 +140,7 @@ unsafe extern "C" fn destroy<T: Integrator>(instance: *mut c_void) {
 unsafe extern "C" fn prepare<T: Integrator>(
     instance: *mut c_void,
     tracer: *const TracerTable,
+    resolved: *mut ResolvedList,
     err: *mut ErrorBuf,
 ) -> Status {
     // SAFETY: the caller upholds this function's contract (its `# Safety` section, or the
@@ -140,7 +148,13 @@ unsafe extern "C" fn prepare<T: Integrator>(
     unsafe {
         guard(err, || {
             let inst = &mut *(instance as *mut Instance<T>);
-            inst.integrator.prepare(&Tracer::new(&*tracer))
+            inst.integrator.prepare(&Tracer::new(&*tracer))?;
+            let decided = inst.integrator.decided_params();
+            if !decided.is_empty() {
+                inst.resolved = inst.resolved.with(decided);
+            }
+            *resolved = inst.resolved.list();
+            Ok(())
         })
     }
 }

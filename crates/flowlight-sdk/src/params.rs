@@ -93,6 +93,14 @@ impl<'a> Params<'a> {
         self.find(name).is_some()
     }
 
+    /// Whether the mutation list `name` the integrator was handed is the default its spec
+    /// declares ([`crate::declare::mutation_list_or`]): the config gave no list, and the host
+    /// marked the defaults it created with a [`ParamKind::MutationList`] value (ABI 7).
+    pub fn mutation_list_defaulted(&self, name: &str) -> bool {
+        self.find(name)
+            .is_some_and(|v| v.kind == ParamKind::MutationList)
+    }
+
     /// Records `value` (TOML text) as the resolved value of `name`, replacing an earlier
     /// record of the same name (a later read decides).
     pub fn record(&self, name: &str, value: String) {
@@ -240,6 +248,23 @@ impl ResolvedTable {
             _strings: strings,
             entries,
         }
+    }
+
+    /// This table with `decided`'s values: each replaces the entry of its name, or is
+    /// appended.
+    pub(crate) fn with(&self, decided: Vec<(String, String)>) -> ResolvedTable {
+        let mut values: Vec<(String, String)> = self
+            ._strings
+            .iter()
+            .map(|(n, v)| (n.to_string(), v.to_string()))
+            .collect();
+        for (name, value) in decided {
+            match values.iter_mut().find(|(n, _)| *n == name) {
+                Some(entry) => entry.1 = value,
+                None => values.push((name, value)),
+            }
+        }
+        ResolvedTable::new(values)
     }
 
     /// The list the host reads until `destroy`.

@@ -65,6 +65,8 @@ pub struct Flow<'a> {
     pub tracer: &'a Tracer<'a>,
     pub settings: &'a ErptSettings,
     pub mutations: &'a MutationSet<'a>,
+    /// Selection probability per strategy: the host's normalised weights, or `auto`'s.
+    pub weights: &'a [f64],
     pub counters: &'a Counters,
     pub total: Tally,
     pub per_strategy: Vec<Tally>,
@@ -135,6 +137,24 @@ pub fn chain_count(u: f64, lum_seed: f64, n: f64, quantum: f64, cap: f64) -> (u6
     }
 }
 
+/// Chooses a strategy by `weights` for `u` uniform in [0, 1), as
+/// [`MutationSet::choose`] does with the host's weights: the first `i` with
+/// `u < Σ_{j ≤ i} wⱼ`, never one of weight 0 (the last of positive weight when rounding leaves
+/// `u` past the last sum).
+pub fn choose(weights: &[f64], u: f64) -> usize {
+    let (mut acc, mut last_positive) = (0.0, 0);
+    for (i, &w) in weights.iter().enumerate() {
+        if w > 0.0 {
+            acc += w;
+            last_positive = i;
+            if u < acc {
+                return i;
+            }
+        }
+    }
+    last_positive
+}
+
 /// Metropolis–Hastings acceptance of the corrected flow (§5.3, with the mixture or the
 /// selected strategy's transition ratio, §5.4):
 ///
@@ -184,6 +204,7 @@ impl<'a> Flow<'a> {
         tracer: &'a Tracer<'a>,
         settings: &'a ErptSettings,
         mutations: &'a MutationSet<'a>,
+        weights: &'a [f64],
         counters: &'a Counters,
     ) -> Self {
         Flow {
@@ -191,6 +212,7 @@ impl<'a> Flow<'a> {
             tracer,
             settings,
             mutations,
+            weights,
             counters,
             total: Tally::default(),
             per_strategy: vec![Tally::default(); mutations.len()],
@@ -209,6 +231,7 @@ impl<'a> Flow<'a> {
     /// each counted, and timed when the step is, under its strategy.
     fn mixture_density(
         mutations: &MutationSet,
+        weights: &[f64],
         costs: &mut [Costs],
         timed: bool,
         from: &Path,
@@ -220,7 +243,7 @@ impl<'a> Flow<'a> {
             let d = mutations.density(i, from, to)?;
             StepTimer::credit(start, &mut c.density_seconds);
             c.density_calls += 1;
-            t += mutations.weight(i) * d;
+            t += weights[i] * d;
         }
         Ok(t)
     }
@@ -304,7 +327,7 @@ impl<'a> Flow<'a> {
                     }
                 }
                 let s = if self.mutations.len() > 1 {
-                    self.mutations.choose(rng.uniform() as f64)
+                    choose(self.weights, rng.uniform() as f64)
                 } else {
                     0
                 };
@@ -345,10 +368,10 @@ impl<'a> Flow<'a> {
                 self.measure_calls += 1;
                 let ratio = match self.settings.mixture {
                     MixtureRatio::Mixture if self.mutations.len() > 1 => {
-                        let (m, costs) = (self.mutations, &mut self.costs);
+                        let (m, w, costs) = (self.mutations, self.weights, &mut self.costs);
                         let (y, z) = (&self.state, &self.proposal);
-                        let forward = Self::mixture_density(m, costs, timed, y, z)?;
-                        let reverse = Self::mixture_density(m, costs, timed, z, y)?;
+                        let forward = Self::mixture_density(m, w, costs, timed, y, z)?;
+                        let reverse = Self::mixture_density(m, w, costs, timed, z, y)?;
                         reverse / forward
                     }
                     _ => transition_ratio as f64,

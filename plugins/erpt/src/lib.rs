@@ -38,6 +38,10 @@
 //! the film in a `film_window`² window around their current position, so their deposits land
 //! around the seed's tile: units use flanged tiles (§5.9).
 //!
+//! Without a mutation list the host hands over every installed strategy and `preset =
+//! "auto"` (`auto.rs`, `pilot.rs`) picks the split, the chain budget and the weights from a
+//! pilot's norms in `prepare`.
+//!
 //! The parameters are declared once, in `settings.rs`; the table generated from the
 //! declarations is in docs/erpt.md ("Parameters"), and `flowlight plugins --markdown` prints it.
 //!
@@ -52,9 +56,11 @@
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
 #![forbid(unsafe_code)]
 
+mod auto;
 mod automaton;
 mod flow;
 mod part;
+mod pilot;
 mod settings;
 mod stats;
 
@@ -89,6 +95,10 @@ pub struct Erpt {
     /// No path of this scene can be in the chains' part ([`scene_letters`]): entangled seeds
     /// are then path tracing, and are traced and deposited as MCPT does.
     chains_part_empty: bool,
+    /// Selection probability per strategy: the host's normalised weights, or `auto`'s.
+    weights: Vec<f64>,
+    /// `preset = "auto"`: its counters, and after `prepare` its choices (`auto.rs`).
+    auto: Option<(auto::Counters, Option<auto::Report>)>,
 }
 
 /// The Heckbert letters (`part::letter_bit_of`) the scene's surfaces can give a vertex: per
@@ -492,6 +502,10 @@ impl Integrator for Erpt {
             })
             .collect();
         let counters = stats::Counters::declare(stats, &names);
+        let auto = settings.auto.map(|_| {
+            let layers = settings.seeds.path_depth as usize + 2;
+            (auto::Counters::declare(stats, &names, layers), None)
+        });
         let chains_part_empty = settings.seed_kind == SeedKind::Entangled
             && settings.part.is_empty_for(scene_letters(&scene));
         let info = IntegratorInfo {
@@ -524,13 +538,21 @@ impl Integrator for Erpt {
                 image_quantum: None,
                 counters,
                 chains_part_empty,
+                weights: (0..mutations.len()).map(|i| mutations.weight(i)).collect(),
+                auto,
             },
             info,
         ))
     }
 
     fn prepare(&mut self, tracer: &Tracer) -> Result<(), String> {
-        if self.settings.quantum != QuantumScope::Image || self.chains_part_empty {
+        if self.auto.is_some() {
+            self.run_auto_pilot(tracer)?;
+        }
+        if self.settings.quantum != QuantumScope::Image
+            || self.chains_part_empty
+            || self.image_quantum.is_some()
+        {
             return Ok(());
         }
         // Algorithm 1 over the whole image: one camera sample per pixel, a row at a time.
@@ -568,6 +590,9 @@ impl Integrator for Erpt {
         film: &mut Film,
         stats: &mut Stats,
     ) -> Result<(), String> {
+        if let Some((counters, Some(report))) = &self.auto {
+            counters.add(stats, report);
+        }
         if self.chains_part_empty {
             self.render_without_chains(unit, tracer, film, stats);
             return Ok(());
@@ -610,7 +635,14 @@ impl Integrator for Erpt {
             (self.scene.camera.width as f64) * (self.scene.camera.height as f64),
         );
         let start = Instant::now();
-        let mut flow = Flow::new(&self.scene, tracer, &self.settings, &self.mutations, c);
+        let mut flow = Flow::new(
+            &self.scene,
+            tracer,
+            &self.settings,
+            &self.mutations,
+            &self.weights,
+            c,
+        );
         // BDPT seeds include paths the target function cannot hold (a Dirac light seen through
         // a Dirac chain): they go to their pixel, as a split's MCPT part does.
         flow.deposit_unmeasured = self.settings.seed_kind == SeedKind::Bdpt;
@@ -654,6 +686,13 @@ impl Integrator for Erpt {
         stats.add(c.flow_seconds, start.elapsed().as_secs_f64());
         flow.report(stats);
         Ok(())
+    }
+
+    fn decided_params(&self) -> Vec<(String, String)> {
+        match &self.auto {
+            Some((_, Some(report))) => report.decided_params(),
+            _ => Vec::new(),
+        }
     }
 }
 

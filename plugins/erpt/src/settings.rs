@@ -8,7 +8,7 @@ use flowlight_pathtrace::settings as path;
 use flowlight_pathtrace::{PathSettings, Variant};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::declare::{
-    mutation_list, BoolParam, ChoiceParam, FloatParam, IntParam, StringParam,
+    mutation_list_or, BoolParam, ChoiceParam, FloatParam, IntParam, StringParam,
 };
 use flowlight_sdk::{
     bool_param, choice_param, float_param, int_param, string_param, ParamRole, Params,
@@ -53,6 +53,8 @@ pub struct ErptSettings {
     pub sampler: SamplerKind,
     /// Lighting layers are written.
     pub layers: bool,
+    /// `preset = "auto"`: the pilot (`auto.rs`) fixes what the config left out.
+    pub auto: Option<crate::auto::Free>,
 }
 
 /// Which sampler draws the seeds.
@@ -165,13 +167,23 @@ pub const CHAINS_FOR: StringParam = string_param!(
     "paths the chains render, the rest by MCPT: \"all\", \"caustics\" (E.*[DG].*S.*L) or a Heckbert pattern over E D G S L with . [] [^] * + ? | ()"
 );
 
+/// `preset`: who fixes the chains' parameters.
+pub const PRESET: ChoiceParam = choice_param!(
+    "preset",
+    "auto",
+    ["auto", "manual"],
+    "\"auto\" (the default when the config lists no mutations): a pilot picks the split, seeds, chain budget and mixture weights among the listed (or all installed) strategies for what the config leaves out; \"manual\" (the default with a list): everything as given"
+);
+
 /// ERPT's parameters: its own, and the seed sampler's from `flowlight_pathtrace::settings`
 /// (with ERPT's [`MAX_RAY_DEPTH`]).
-pub const PARAMS: [ParamSpec; 18] = [
-    mutation_list(
+pub const PARAMS: [ParamSpec; 19] = [
+    mutation_list_or(
         "mutations",
-        "[[integrator.mutations]]: plugin = \"...\", weight = w (default 1; finite, >= 0, normalised to sum to 1), and that plugin's parameters",
+        crate::auto::CANDIDATES,
+        "[[integrator.mutations]]: plugin = \"...\", weight = w (default 1; finite, >= 0, normalised to sum to 1), and that plugin's parameters; without a list every installed strategy is a candidate of preset = \"auto\"",
     ),
+    PRESET.spec(),
     MUTATIONS_PER_SAMPLE.spec(),
     CHAIN_LENGTH.spec(),
     FILM_WINDOW.spec(),
@@ -194,7 +206,16 @@ pub const PARAMS: [ParamSpec; 18] = [
 impl ErptSettings {
     /// Reads ERPT's parameters (all but `mutations`, which the host hands over as strategies).
     pub fn from_params(p: &Params) -> Result<Self, String> {
-        let seed_kind = match SEEDS.get(p)? {
+        let auto = crate::auto::Free::from_params(p)?;
+        // Under `auto` the split and the seeds default to the pilot's candidates; they are
+        // resolved (recorded) by the pilot, which may change the split.
+        let auto_default =
+            |name: &str, value: &'static str| (auto.is_some() && !p.is_set(name)).then_some(value);
+        let seeds_choice = match auto_default(SEEDS.name(), "entangled") {
+            Some(v) => v,
+            None => SEEDS.get(p)?,
+        };
+        let seed_kind = match seeds_choice {
             "untangled" => SeedKind::Untangled,
             "bdpt" => SeedKind::Bdpt,
             _ => SeedKind::Entangled,
@@ -222,8 +243,15 @@ impl ErptSettings {
         // thesis' sampler) keep independent numbers, as MCPT's untangled variant does.
         let sampler =
             SamplerKind::from_params(p, seed_kind == SeedKind::Entangled, "seeds = \"entangled\"")?;
-        let direct_by_mcpt = DIRECT.get(p)? == "mcpt";
-        let part = Part::new(CHAINS_FOR.get(p)?, direct_by_mcpt)?;
+        let direct_by_mcpt = match auto_default(DIRECT.name(), "mcpt") {
+            Some(v) => v,
+            None => DIRECT.get(p)?,
+        } == "mcpt";
+        let chains_for = match auto_default(CHAINS_FOR.name(), "caustics") {
+            Some(v) => v,
+            None => CHAINS_FOR.get(p)?,
+        };
+        let part = Part::new(chains_for, direct_by_mcpt)?;
         let layers = LAYERS.get(p)?;
         Ok(ErptSettings {
             sampler,
@@ -238,6 +266,7 @@ impl ErptSettings {
             max_chains_per_seed: max_chains_per_seed as u32,
             max_consecutive: max_consecutive as u32,
             layers,
+            auto,
         })
     }
 }

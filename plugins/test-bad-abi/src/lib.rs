@@ -1,6 +1,5 @@
-//! Test fixture: declares the previous ABI version, `ABI_VERSION - 1` (5, what a plugin built
-//! against the SDK before parameter declarations, mutation statistics counters and the
-//! `should_stop` query declares). The host must refuse to load
+//! Test fixture: declares the previous ABI version, `ABI_VERSION - 1` (6, what a plugin built
+//! against the SDK before `prepare` reported the values it decided declares). The host must refuse to load
 //! it with an error that names this file and both versions, before calling anything in it.
 
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.

@@ -147,16 +147,34 @@ pub(super) fn build_intersector(
 /// The integrator's mutation list, taken out of its parameters: the name of the parameter
 /// the integrator declares as a mutation list, and its entries, whose weights are checked
 /// here, before any mutation plugin loads.
+///
+/// A config without the list gets the default the integrator's spec declares, if any
+/// ([`PluginLibrary::mutation_list_default`]); the flag says so.
 pub(super) fn mutation_list(
     plugin: &PluginLibrary,
     config: &mut RenderConfig,
-) -> Result<(Option<String>, Vec<MutationEntry>), HostError> {
+) -> Result<(Option<String>, Vec<MutationEntry>, bool), HostError> {
     let list_name = plugin
         .mutation_list_param()
         .map_err(|error| plugin_error(config, None, error))?;
-    let mut mutation_entries = match &list_name {
-        Some(list) => take_mutations(&mut config.integrator_params, list, &config.path)?,
-        None => Vec::new(),
+    let given = |list: &str| config.integrator_params.iter().any(|(k, _)| k == list);
+    let default = match &list_name {
+        Some(list) if !given(list) => plugin.mutation_list_default(),
+        _ => None,
+    };
+    let defaulted = default.is_some();
+    let mut mutation_entries = match (&list_name, default) {
+        (Some(list), Some(text)) => {
+            // The plugin's declared default, read as the config's list would be.
+            let mut params =
+                default_list_params(list, &text).map_err(|msg| HostError::Mutations {
+                    file: config.path.clone(),
+                    msg: format!("the default of plugin '{}': {msg}", plugin.name),
+                })?;
+            take_mutations(&mut params, list, &config.path)?
+        }
+        (Some(list), None) => take_mutations(&mut config.integrator_params, list, &config.path)?,
+        (None, _) => Vec::new(),
     };
     // The one normalisation of the list's weights: each entry's weight becomes its
     // selection probability, which its instance is created with.
@@ -172,7 +190,18 @@ pub(super) fn mutation_list(
     for (entry, probability) in mutation_entries.iter_mut().zip(probabilities) {
         entry.weight = probability;
     }
-    Ok((list_name, mutation_entries))
+    Ok((list_name, mutation_entries, defaulted))
+}
+
+/// The declared default list `text` (a TOML array of inline tables) as the one parameter
+/// `list`, for [`take_mutations`].
+fn default_list_params(list: &str, text: &str) -> Result<Vec<(String, toml::Value)>, String> {
+    let table: toml::Table = format!("{list} = {text}")
+        .parse()
+        .map_err(|e: toml::de::Error| {
+            format!("default mutation list is not TOML: {}", e.message())
+        })?;
+    Ok(table.into_iter().collect())
 }
 
 /// The view of the scene the plugins read: pointers into `scene`, `textures` and
@@ -341,6 +370,25 @@ pub(super) fn take_mutations(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A declared default list reads as the config's would: entries, their parameters and
+    /// the default weight 1; text that is not a TOML array of tables is a one-line error.
+    #[test]
+    fn a_declared_default_list_reads_as_a_config_list() {
+        let text = "[{ plugin = \"drill\", width = \"narrow\" }, { plugin = \"blow\" }]";
+        let mut params = default_list_params("mutations", text).unwrap();
+        let list = take_mutations(&mut params, "mutations", Path::new("c.toml")).unwrap();
+        assert!(params.is_empty());
+        assert_eq!(list.len(), 2);
+        assert_eq!((list[0].plugin.as_str(), list[0].weight), ("drill", 1.0));
+        assert_eq!(list[0].params[0].0, "width");
+        assert_eq!(list[1].plugin, "blow");
+        let e = default_list_params("mutations", "[{ plugin = ").unwrap_err();
+        assert!(
+            e.starts_with("default mutation list is not TOML") && !e.contains('\n'),
+            "{e}"
+        );
+    }
 
     #[test]
     fn embree_variables_set_for_a_render_are_named_with_the_config_key() {

@@ -119,7 +119,7 @@ impl Renderer {
         let textures = scene.texture_views();
         // Hashed with the mutations still among the parameters.
         let config_text = crate::parts::config_text(&config, &camera, &config.integrator_params);
-        let (list_name, mutation_entries) = mutation_list(&plugin, &mut config)?;
+        let (list_name, mutation_entries, defaulted) = mutation_list(&plugin, &mut config)?;
         let environment = match &config.environment {
             Some(e) => load_environment(&config.path, e)?,
             None => EnvironmentData::default(),
@@ -146,7 +146,13 @@ impl Renderer {
         // SAFETY: the view points into `scene` and `textures`, which the renderer owns and
         // drops after the instance (field order); their heap buffers never move.
         let instance = unsafe {
-            IntegratorInstance::create(plugin, &config.integrator_params, mutations, view)
+            IntegratorInstance::create(
+                plugin,
+                &config.integrator_params,
+                mutations,
+                defaulted,
+                view,
+            )
         }
         .map_err(|error| plugin_error(&config, None, error))?;
         crate::render::check_memory(
