@@ -55,11 +55,12 @@
 //! * *Chain length*: N = [`STEPS_PER_SEED_GAP`] / ρ, ρ the class' seeds per camera sample,
 //!   rounded up to a power of two in [16, 64]: the rarer the class' seeds, the further apart
 //!   they land and the further each one's energy must travel.
-//! * *Budget*: M = √c · w_c / w_m, w_m = Σ p_s w_s the mixture's rays per step and c the
-//!   caustic class' share of the census' energy, in [1/16, 16]: the chains' share of the work
-//!   is √c. A class of rare seeds of similar brightness brings a variance proportional to its
-//!   energy (a Poisson count of seeds), and Neyman's allocation gives each part of an
-//!   estimator work in proportion to its standard deviation.
+//! * *Budget*: M = √(c / (1 − c)) · √(w_c / w_m), w_m = Σ p_s w_s the mixture's rays per step
+//!   and c the chained class' share of the census' energy, in [1/16, 16]. A class of rare
+//!   seeds of similar brightness brings a variance proportional to its energy (a Poisson count
+//!   of seeds), σ² ∝ c for the chains and ∝ 1 − c for the path-traced rest; Neyman's
+//!   allocation of a fixed work between two independent parts, work ∝ σ·√(cost), gives the
+//!   chains M·w_m rays per camera sample against the seeds' w_c in that ratio.
 //! * *Quantum*: e_d = lum(Σ X_caustic) / (samples · M) from the pilot's own seeds, once for the
 //!   image (`quantum = "image"` without another pre-pass).
 //!
@@ -336,8 +337,10 @@ pub fn decide(census: &Census, norms: &[Norms], fallback: (&[f64], f64, u32)) ->
     // Caustic seeds per camera sample: the rarer, the further a seed's energy must travel.
     let density = census.seeds[1] as f64 / census.samples.max(1) as f64;
     let chain_length = power_of_two_in(STEPS_PER_SEED_GAP / density, 16, 64);
+    // Neyman: work ∝ σ·√(cost) per part, σ² ∝ energy: M·w_m / w_c = √(c/(1−c)) · √(w_m/w_c).
+    let c = census.caustic_share().min(0.999);
     let m = if step_work > 0.0 {
-        census.caustic_share().sqrt() * census.work_per_sample() / step_work
+        (c / (1.0 - c)).sqrt() * (census.work_per_sample() / step_work).sqrt()
     } else {
         1.0
     };
@@ -597,8 +600,9 @@ mod tests {
         assert!((p.weights[0] - 5.0 / 9.0).abs() < 1e-12, "{:?}", p.weights);
         assert!((p.weights[1] - 4.0 / 9.0).abs() < 1e-12);
         assert_eq!(p.weights[2], 0.0);
-        // w_m = (5/9)·1 + (4/9)·1.25 = 10/9 rays a step; M = √0.25 · 4 / (10/9) = 1.8.
-        assert!((p.mutations_per_sample - 1.8).abs() < 1e-9, "{p:?}");
+        // w_m = (5/9)·1 + (4/9)·1.25 = 10/9 rays a step; M = √(1/3) · √(4 / (10/9)).
+        let m = (1.0f64 / 3.0).sqrt() * 3.6f64.sqrt();
+        assert!((p.mutations_per_sample - m).abs() < 1e-9, "{p:?}");
     }
 
     #[test]
@@ -610,8 +614,8 @@ mod tests {
         assert_eq!(at(200).chain_length, 16);
         assert_eq!(at(100).chain_length, 32);
         assert_eq!(at(10).chain_length, 64);
-        // M = √0.5 · 4 / 1, and within [1/16, 16].
-        assert!((at(100).mutations_per_sample - 0.5f64.sqrt() * 4.0).abs() < 1e-9);
+        // M = √(0.5 / 0.5) · √(4 / 1) = 2, and within [1/16, 16].
+        assert!((at(100).mutations_per_sample - 2.0).abs() < 1e-9);
         let cheap = decide(&census(100, 1.0), &[norms(1000, 900, 0, 1e-3)], fallback);
         assert_eq!(cheap.mutations_per_sample, 16.0);
         let dim = decide(&census(100, 1e-6), &good, fallback);
