@@ -150,6 +150,7 @@ fn erpt_without_a_mutation_list_is_auto_and_writes_its_choices() {
     assert_eq!(get("flowlight.param.preset"), "\"manual\"");
     assert_eq!(get("flowlight.param.chains_for"), "\"caustics\"");
     assert_eq!(get("flowlight.param.mixture"), "\"selected\"");
+    assert_eq!(get("flowlight.param.termination"), "\"expo\"");
     let m: f64 = get("flowlight.param.mutations_per_sample").parse().unwrap();
     assert!((1.0 / 16.0..=16.0).contains(&m), "{m}");
     let n: u32 = get("flowlight.param.chain_length").parse().unwrap();

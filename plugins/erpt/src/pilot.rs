@@ -11,6 +11,7 @@ use crate::settings::{MixtureRatio, QuantumScope};
 use crate::{Erpt, UnitSeeds};
 use flowlight_core::path::Path;
 use flowlight_core::rng::Rng;
+use flowlight_core::termination::{TerminationDistribution, TerminationSchedule};
 use flowlight_mcmc::measurement;
 use flowlight_mcmc::regenerate::within_depth;
 use flowlight_sdk::{Stats, Tracer};
@@ -82,6 +83,12 @@ impl Erpt {
             }
             if free.mixture {
                 self.settings.mixture = MixtureRatio::Selected;
+            }
+            if free.termination {
+                self.settings.seeds.termination = TerminationSchedule::new(
+                    TerminationDistribution::Expo,
+                    self.settings.seeds.path_depth,
+                );
             }
             if free.quantum {
                 // e_d of Algorithm 1 from the pilot's seeds of the chained class.
