@@ -28,8 +28,9 @@ Renderers (`--renderers`, comma separated; the default is the first four):
                             through glass; a diagnostic of the export, not a competitor)
   flowlight-lighttrace, flowlight-bdpt, flowlight-vcm, flowlight-pssmlt, flowlight-mmlt
                             the scene's MCPT config with its [integrator] replaced by `plugin =
-                            "lighttrace" | "bdpt" | "vcm" | "pssmlt" | "mmlt"` and nothing else; refused up front, in
-                            one line, when `flowlight plugins` does not list the plugin.
+                            "lighttrace" | "bdpt" | "vcm" | "pssmlt" | "mmlt"` and its
+                            path_depth; refused up front, in one line, when `flowlight plugins`
+                            does not list the plugin.
 PATHCPU gets path.pathdepth.{total,diffuse,glossy,specular} = --depth; BIDIRCPU, BIDIRVMCPU
 and LIGHTCPU get path.maxdepth = --depth + 1 (the eye subpath may hit the lamp after --depth
 bounces) and light.maxdepth = --depth. LuxCore bounds each subpath, not their sum, and counts
@@ -312,7 +313,8 @@ def lambert_gltf(a, scene_dir, name, out):
 
 def flowlight_config(a, src, gltf, out, plugin=None):
     """`src` (a scene's TOML) on `gltf` at the comparison's size, with no outputs of its own;
-    with `plugin`, its [integrator] tables replaced by `plugin = "<plugin>"` alone."""
+    with `plugin`, its [integrator] tables replaced by `plugin = "<plugin>"` and the scene's
+    `path_depth` (every renderer renders the reference's layers of path space, as the bench)."""
     lines, section = [], None
     for line in open(src):
         s = line.strip()
@@ -322,6 +324,8 @@ def flowlight_config(a, src, gltf, out, plugin=None):
         if section == "[output]" or replaced:
             if replaced and s == "[integrator]":
                 lines.append(f'[integrator]\nplugin = "{plugin}"\n')
+            elif replaced and section == "[integrator]" and s.startswith("path_depth"):
+                lines.append(line)
             continue
         if s.startswith("scene ="):
             line = f"scene = {json.dumps(gltf)}\n"
@@ -444,15 +448,22 @@ def main():
     gltf = lambert_gltf(a, scene_dir, a.scene, a.out)
     tag = f"{a.scene}-" if a.scene != "glass-caustic" else ""
     configs = {
-        "erpt": flowlight_config(a, os.path.join(scene_dir, "erpt.toml"), gltf,
-                                 os.path.join(a.out, f"{tag}erpt.toml")),
         "mcpt": flowlight_config(a, os.path.join(scene_dir, spec["mcpt"]), gltf,
                                  os.path.join(a.out, f"{tag}mcpt.toml")),
     }
+    # The scene's own configs: its ERPT default (not every scene has one) and the reference's.
+    for name in ("erpt.toml", spec["reference"]):
+        if name not in configs and os.path.exists(os.path.join(scene_dir, name)):
+            configs[name] = flowlight_config(a, os.path.join(scene_dir, name), gltf,
+                                             os.path.join(a.out, f"{tag}{name}"))
+    if "erpt.toml" in configs:
+        configs["erpt"] = configs["erpt.toml"]
+    elif "flowlight-erpt" in renderers:
+        die(f"--renderers: scene '{a.scene}' has no erpt.toml for flowlight-erpt")
     for r, plugin in FLOWLIGHT_PLUGIN_ONLY.items():
         configs[r] = flowlight_config(a, os.path.join(scene_dir, spec["mcpt"]), gltf,
                                       os.path.join(a.out, f"{tag}{plugin}.toml"), plugin)
-    ref_cfg = configs["erpt"] if spec["reference"] == "erpt.toml" else configs["mcpt"]
+    ref_cfg = configs.get(spec["reference"], configs["mcpt"])
     ref_name = os.path.basename(gltf)[:-len(".gltf")]
     ref = peers.reference(a, ref_name, ref_cfg, a.out)
     rows = {r: [] for r in renderers}

@@ -110,13 +110,14 @@ class Configs(unittest.TestCase):
     def tearDown(self):
         self.dir.cleanup()
 
-    def test_plugin_only_config_keeps_the_scene_and_drops_every_integrator_table(self):
+    def test_plugin_only_config_keeps_the_scene_and_its_depth_and_drops_the_rest(self):
         src = os.path.join(SCENES, "glass-caustic", "erpt.toml")
         out = luxcore.flowlight_config(self.a, src, "s.gltf", os.path.join(self.dir.name, "v.toml"),
                                        "vcm")
         text = open(out).read()
-        self.assertIn('[integrator]\nplugin = "vcm"\n', text)
+        self.assertIn('[integrator]\nplugin = "vcm"\npath_depth = 10\n', text)
         self.assertEqual(text.count("plugin ="), 1)
+        self.assertNotIn("termination =", text)
         self.assertNotIn("[output]", text)
         self.assertIn("width = 64", text)
         self.assertIn('scene = "s.gltf"', text)
