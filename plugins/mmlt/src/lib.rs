@@ -17,7 +17,7 @@
 //!
 //! * `path_depth` (default 8, 1–32): the deepest depth d, so paths of at most
 //!   `path_depth` + 2 vertices; every interior vertex counts, mirrors and glass included.
-//! * `large_step` (default 0.3, (0, 1]): probability of a large step (a fresh independent
+//! * `large_step` (default 0.3, [0, 1]): probability of a large step (a fresh independent
 //!   state) per mutation.
 //! * `sigma` (default 0.01, (0, 1]): standard deviation of a small step per primary sample.
 //! * `bootstrap` (default 16384, 1–1,000,000): independent samples per depth for b_d and the
@@ -31,13 +31,14 @@ use flowlight_pathtrace::bidir::params::HEURISTIC;
 use flowlight_pathtrace::bidir::sample::{strategy_only_settings, FilmSampler};
 use flowlight_pathtrace::bidir::{BidirSettings, Heuristic};
 use flowlight_pathtrace::pss::mmlt::{render_unit, DepthBootstrap, MmltBuffers, MmltCounts};
+use flowlight_pathtrace::pss::params::{mutation_from_params, LARGE_STEP, SIGMA};
 use flowlight_pathtrace::pss::Mutation;
 use flowlight_sdk::abi::ParamSpec;
-use flowlight_sdk::declare::{FloatParam, IntParam};
+use flowlight_sdk::declare::IntParam;
 use flowlight_sdk::stats::Counter;
 use flowlight_sdk::{
-    export_integrator, float_param, int_param, AccumulationStyle, Film, Integrator, IntegratorInfo,
-    MutationSet, ParamRole, Params, Scene, Stats, StatsBuilder, Tracer, WorkUnit,
+    export_integrator, int_param, AccumulationStyle, Film, Integrator, IntegratorInfo, MutationSet,
+    ParamRole, Params, Scene, Stats, StatsBuilder, Tracer, WorkUnit,
 };
 use std::cell::RefCell;
 use std::sync::{Arc, Mutex, PoisonError};
@@ -50,22 +51,6 @@ const PATH_DEPTH: IntParam = int_param!(
     "deepest depth d of a chain: paths of at most path_depth + 2 vertices, every interior vertex counted (mirrors and glass included)"
 )
 .role(ParamRole::PathDepth);
-
-/// `large_step`: pbrt-v4's default large-step probability.
-const LARGE_STEP: FloatParam = float_param!(
-    "large_step",
-    0.3,
-    0.0 < x <= 1.0,
-    "probability that a mutation is a large step (every primary sample fresh and independent)"
-);
-
-/// `sigma`: pbrt-v4's default small-step size.
-const SIGMA: FloatParam = float_param!(
-    "sigma",
-    0.01,
-    0.0 < x <= 1.0,
-    "standard deviation of a small step's normal offset of each primary sample"
-);
 
 /// `bootstrap`: independent samples per depth.
 const BOOTSTRAP: IntParam = int_param!(
@@ -120,7 +105,7 @@ impl Integrator for Mmlt {
         stats: &mut StatsBuilder,
     ) -> Result<(Self, IntegratorInfo), String> {
         let depth = PATH_DEPTH.get(params)? as u32;
-        let mutation = Mutation::new(LARGE_STEP.get(params)? as f32, SIGMA.get(params)? as f32);
+        let mutation = mutation_from_params(params)?;
         let bootstrap_count = BOOTSTRAP.get(params)? as u32;
         let heuristic = Heuristic::parse(HEURISTIC.get(params)?).expect("declared choice");
         let counters = Counters {

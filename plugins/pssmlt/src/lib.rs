@@ -33,16 +33,17 @@ use flowlight_pathtrace::bidir::params::HEURISTIC;
 use flowlight_pathtrace::bidir::sample::{strategy_only_settings, FilmSampler};
 use flowlight_pathtrace::bidir::{BidirSettings, Heuristic};
 use flowlight_pathtrace::pss::bdpt::BdptTarget;
+use flowlight_pathtrace::pss::params::{mutation_from_params, LARGE_STEP, SIGMA};
 use flowlight_pathtrace::pss::{
     render_unit, Bootstrap, BootstrapCell, ChainBuffers, ChainCounts, McptTarget, Mutation,
     PssTarget,
 };
 use flowlight_pathtrace::{settings, PathSettings, Variant};
 use flowlight_sdk::abi::ParamSpec;
-use flowlight_sdk::declare::{ChoiceParam, FloatParam, IntParam};
+use flowlight_sdk::declare::{ChoiceParam, IntParam};
 use flowlight_sdk::stats::Counter;
 use flowlight_sdk::{
-    choice_param, export_integrator, float_param, int_param, AccumulationStyle, Film, Integrator,
+    choice_param, export_integrator, int_param, AccumulationStyle, Film, Integrator,
     IntegratorInfo, MutationSet, Params, Scene, Stats, StatsBuilder, Tracer, WorkUnit,
 };
 use std::cell::RefCell;
@@ -53,22 +54,6 @@ const SAMPLER: ChoiceParam = choice_param!(
     "mcpt",
     ["mcpt", "bdpt"],
     "the sampler the chains run over: \"mcpt\", one entangled path-tracing camera sample (next-event estimation and BSDF sampling by MIS) whose first pair of numbers is its position on the film; \"bdpt\", one light and one camera subpath (two streams) with every (s, t) strategy weighed by heuristic, each splatted at its own raster position"
-);
-
-/// `large_step`: Kelemen's large-step probability (pbrt-v4's default).
-const LARGE_STEP: FloatParam = float_param!(
-    "large_step",
-    0.3,
-    0.0 <= x <= 1.0,
-    "probability that a mutation is a large step (every primary sample drawn afresh: an independent sample); otherwise a small step"
-);
-
-/// `sigma`: the small step's size (pbrt-v4's default).
-const SIGMA: FloatParam = float_param!(
-    "sigma",
-    0.01,
-    0.0 < x <= 1.0,
-    "standard deviation of a small step: every primary sample moves by a normal offset of this size, wrapped into [0, 1)"
 );
 
 /// `bootstrap`: independent samples of the normalisation (pbrt-v4's default).
@@ -184,7 +169,7 @@ impl Integrator for Pssmlt {
             }
             _ => Sampler::Mcpt,
         };
-        let mutation = Mutation::new(LARGE_STEP.get(params)? as f32, SIGMA.get(params)? as f32);
+        let mutation = mutation_from_params(params)?;
         let bootstrap_count = BOOTSTRAP.get(params)? as u32;
         let info = IntegratorInfo {
             layer_count: if layers { settings.path_depth + 1 } else { 0 },

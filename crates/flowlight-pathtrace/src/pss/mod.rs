@@ -12,6 +12,7 @@
 //! * [`mcpt`]: entangled MCPT as a target.
 //! * [`bdpt`]: BDPT (every strategy of one sample) as a target.
 //! * [`mmlt`]: multiplexed MLT: one BDPT strategy per sample, per-depth chains.
+//! * [`params`]: the mutation parameters the plugins share.
 //!
 //! The `pssmlt` plugin is the user; docs/pssmlt.md is the user documentation.
 
@@ -19,6 +20,7 @@ pub mod bdpt;
 pub mod chain;
 pub mod mcpt;
 pub mod mmlt;
+pub mod params;
 pub mod samples;
 pub mod units;
 
