@@ -111,7 +111,7 @@ impl Method {
         let named = self
             .scenes
             .as_ref()
-            .is_none_or(|s| s.iter().any(|n| *n == scene.name));
+            .is_none_or(|s| s.contains(&scene.name));
         named && self.config_for(scene).is_none_or(|c| c.is_file())
     }
 

@@ -12,20 +12,10 @@
 //!   lamp low on one side: the rod acts as a cylindrical lens and draws a bright line on the
 //!   floor behind it (L S S D E), and a weaker one through internal reflection.
 
-use crate::gltf::{MaterialOptions, SceneBuilder};
+use crate::gltf::SceneBuilder;
 use crate::research::{ceiling_lamp, method_config, room, ResearchScene, Tris};
-use crate::scenes::{finish, generator, lamp, plain};
+use crate::scenes::{clear, finish, generator, lamp, plain, side_lamp};
 use std::f64::consts::TAU;
-
-fn glass() -> MaterialOptions {
-    MaterialOptions {
-        roughness: Some(0.0),
-        transmission: Some(1.0),
-        ior: Some(1.5),
-        thickness: Some(1.0),
-        ..MaterialOptions::default()
-    }
-}
 
 /// A plano-convex lens: a spherical cap of sphere radius `r` over a flat disc of radius `a`
 /// at height `y` centred on the y axis, convex side up; `rings` × `segments` cells, smooth
@@ -134,7 +124,7 @@ pub fn lens_spot() -> ResearchScene {
     let mut b = SceneBuilder::new(&generator("lens-spot"));
     b.material("floor", [0.6, 0.58, 0.55], plain());
     b.material("wall", [0.7, 0.7, 0.72], plain());
-    b.material("glass", [1.0, 1.0, 1.0], glass());
+    b.material("glass", [1.0, 1.0, 1.0], clear(1.5));
     b.material("lamp", [0.0; 3], lamp([1.0, 0.93, 0.8], 400.0));
     room(&mut b, "floor", "wall", [-1.5, 0.0, -1.5], [1.5, 2.4, 1.5]);
     // Sphere radius 0.25 m, aperture radius 0.2 m (sag 10 cm): focal length about
@@ -171,7 +161,7 @@ pub fn glass_rod() -> ResearchScene {
     let mut b = SceneBuilder::new(&generator("glass-rod"));
     b.material("floor", [0.7, 0.7, 0.7], plain());
     b.material("wall", [0.55, 0.6, 0.65], plain());
-    b.material("glass", [1.0, 1.0, 1.0], glass());
+    b.material("glass", [1.0, 1.0, 1.0], clear(1.5));
     b.material("lamp", [0.0; 3], lamp([1.0, 0.95, 0.85], 300.0));
     b.quad(
         "floor",
@@ -195,19 +185,7 @@ pub fn glass_rod() -> ResearchScene {
     );
     cylinder(&mut b, "glass", [0.0, 0.0, 0.0], 0.15, 0.6, 128);
     // A 0.2 m square lamp 2.5 m from the rod on the −x side, 20° above the floor, facing it.
-    let (d, e, half) = (2.5f64, 20f64.to_radians(), 0.1);
-    let (cx, cy) = (-d * e.cos(), d * e.sin());
-    let (hx, hy) = (half * e.sin(), half * e.cos());
-    b.quad(
-        "lamp",
-        [
-            [cx - hx, cy - hy, -half],
-            [cx + hx, cy + hy, -half],
-            [cx + hx, cy + hy, half],
-            [cx - hx, cy - hy, half],
-        ],
-        Some([e.cos(), -e.sin(), 0.0]),
-    );
+    side_lamp(&mut b, "lamp", 2.5, 20.0, 0.1);
     let files = finish(
         "glass-rod",
         &b,

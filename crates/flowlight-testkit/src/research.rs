@@ -20,7 +20,7 @@
 //! Flowlight, so the smoothest plate of `veach-mis` has roughness 0.05.
 
 use crate::gltf::{cross, dot, norm, sub, MaterialOptions, SceneBuilder};
-use crate::scenes::{finish, generator, lamp, plain, SceneFiles};
+use crate::scenes::{clear, finish, generator, lamp, plain, SceneFiles};
 use std::f64::consts::TAU;
 
 /// A research scene: its glTF and MCPT config, and the second config of the method it is
@@ -428,14 +428,7 @@ pub fn water_pool() -> ResearchScene {
     b.material("tile-light", [0.75, 0.75, 0.7], plain());
     b.material("tile-dark", [0.25, 0.35, 0.45], plain());
     b.material("pool-wall", [0.6, 0.62, 0.6], plain());
-    let water_material = MaterialOptions {
-        roughness: Some(0.0),
-        transmission: Some(1.0),
-        ior: Some(1.33),
-        thickness: Some(1.0),
-        ..MaterialOptions::default()
-    };
-    b.material("water", [1.0, 1.0, 1.0], water_material);
+    b.material("water", [1.0, 1.0, 1.0], clear(1.33));
     b.material("lamp", [0.0; 3], lamp([1.0, 0.95, 0.85], 3000.0));
     let half = 0.75;
     pool(&mut b, half, 0.6, 10);

@@ -14,6 +14,42 @@ pub(crate) fn lamp(rgb: [f64; 3], strength: f64) -> MaterialOptions {
     }
 }
 
+/// A smooth clear dielectric of index `ior` (transmission 1, roughness 0, a closed volume:
+/// KHR_materials_volume).
+pub(crate) fn clear(ior: f64) -> MaterialOptions {
+    MaterialOptions {
+        roughness: Some(0.0),
+        transmission: Some(1.0),
+        ior: Some(ior),
+        thickness: Some(1.0),
+        ..MaterialOptions::default()
+    }
+}
+
+/// A square lamp quad of half side `half`, `distance` from the origin on the −x side and
+/// `elevation` degrees above the floor, facing the origin.
+pub(crate) fn side_lamp(
+    b: &mut SceneBuilder,
+    material: &str,
+    distance: f64,
+    elevation: f64,
+    half: f64,
+) {
+    let e = elevation.to_radians();
+    let (cx, cy) = (-distance * e.cos(), distance * e.sin());
+    let (hx, hy) = (half * e.sin(), half * e.cos()); // half extent along the tilted up axis
+    b.quad(
+        material,
+        [
+            [cx - hx, cy - hy, -half],
+            [cx + hx, cy + hy, -half],
+            [cx + hx, cy + hy, half],
+            [cx - hx, cy - hy, half],
+        ],
+        Some([e.cos(), -e.sin(), 0.0]),
+    );
+}
+
 /// The render config written beside a scene: `comment` lines, then the settings.
 pub(crate) fn config(
     name: &str,
@@ -148,14 +184,7 @@ pub fn glass_caustic() -> SceneFiles {
     let mut b = SceneBuilder::new(&generator("glass-caustic"));
     b.material("floor", [0.7, 0.7, 0.7], plain());
     b.material("wall", [0.6, 0.6, 0.65], plain());
-    let glass = MaterialOptions {
-        roughness: Some(0.0),
-        transmission: Some(1.0),
-        ior: Some(1.5),
-        thickness: Some(1.0),
-        ..MaterialOptions::default()
-    };
-    b.material("glass", [1.0, 1.0, 1.0], glass);
+    b.material("glass", [1.0, 1.0, 1.0], clear(1.5));
     b.material("lamp", [0.0; 3], lamp([1.0, 0.95, 0.85], 120.0));
     b.quad(
         "floor",
@@ -342,19 +371,7 @@ pub fn ring_caustic() -> SceneFiles {
     );
     b.tube("ring", [0.0, 0.0, 0.0], 0.5, 0.25, 128);
     // A 0.35 m square lamp 2.75 m away at 22 degrees above the floor, facing the ring.
-    let (d, e, half) = (2.75f64, 22f64.to_radians(), 0.175);
-    let (cx, cy) = (-d * e.cos(), d * e.sin());
-    let (hx, hy) = (half * e.sin(), half * e.cos()); // half extent along the tilted up axis
-    b.quad(
-        "lamp",
-        [
-            [cx - hx, cy - hy, -half],
-            [cx + hx, cy + hy, -half],
-            [cx + hx, cy + hy, half],
-            [cx - hx, cy - hy, half],
-        ],
-        Some([e.cos(), -e.sin(), 0.0]),
-    );
+    side_lamp(&mut b, "lamp", 2.75, 22.0, 0.175);
     finish(
         "ring-caustic",
         &b,
