@@ -64,7 +64,11 @@ fn the_committed_scenes_are_what_make_scenes_writes() {
 fn the_committed_research_scenes_are_what_make_scenes_writes() {
     let dir = flowlight_testkit::scenes_dir();
     let scenes = research::all();
-    assert_eq!(scenes.len(), 4);
+    assert_eq!(
+        scenes.len(),
+        6,
+        "the four research scenes and the two untuned caustic scenes"
+    );
     for ResearchScene {
         files: (name, gltf, toml, _),
         method_config: (file, text),

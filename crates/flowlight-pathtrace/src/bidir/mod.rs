@@ -74,7 +74,7 @@ pub struct BidirSettings {
     pub radius: f32,
     /// α of the radius schedule (module docs); 1 keeps the radius constant.
     pub radius_alpha: f32,
-    /// Make strategy (s, t) alone ([`sample::strategy_sample`]): the camera subpath stops
+    /// Make strategy (s, t) alone ([`sample::FilmSampler::strategy_sample`]): the camera subpath stops
     /// at its t-th vertex and only (s, t)'s contribution is evaluated. `None` for every
     /// strategy the techniques allow.
     pub only_strategy: Option<(u32, u32)>,

@@ -32,7 +32,7 @@
 //!   vertex's light sample), both without roulette, joined once, weighed by (s, t)'s MIS
 //!   weight among the d + 2 strategies of the path and multiplied by d + 2, the inverse of
 //!   the uniform choice. Averaged over u, it is the depth-d part of the image:
-//!   E[value] = Σ_s E[w_{s,t} f / p_{s,t}]. Strategy (1, 1) (a lamp seen through light
+//!   E\[value\] = Σ_s E[w_{s,t} f / p_{s,t}]. Strategy (1, 1) (a lamp seen through light
 //!   tracing) has weight 0 in `bdpt` (the camera sees a lamp by hitting it) and contributes
 //!   nothing. The depth d counts every interior vertex, Dirac ones included, as pbrt-v4
 //!   does; `bdpt`'s lighting layer skips the camera's leading Dirac chain (the two agree on

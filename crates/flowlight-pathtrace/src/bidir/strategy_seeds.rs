@@ -1,7 +1,7 @@
 //! ERPT seeds from bidirectional path tracing: every connection strategy (s, t) of one BDPT
 //! pixel sample — the light subpath and the camera subpath of [`super::light_path`] and
 //! [`super::camera_path`], connections only, no merging — becomes a seed, a complete
-//! eye-to-light [`Path`] with its MIS-weighted estimate, as Mitsuba 0.6's ERPT seeds its
+//! eye-to-light [`Path`](flowlight_core::path::Path) with its MIS-weighted estimate, as Mitsuba 0.6's ERPT seeds its
 //! chains (`src/libbidir/pathsampler.cpp`).
 //!
 //! A path x̄ of n + 1 vertices drawn by strategy (s, t) (s light vertices, t camera vertices,
@@ -71,9 +71,10 @@
 //! sides of n_g its two directions lie on) of the first Dirac component with such a lobe, as
 //! `measure::dirac_component` reads it; a smooth step, and a connection vertex, the type of the
 //! smooth component that scatters most light between its two neighbours
-//! ([`crate::seeds::connection_node`]). Light-side Dirac chains are stored as they are; a path
-//! that does not fit a [`Path`] ([`MAX_PATH_VERTICES`]) is stored without vertices, so that the
-//! flow deposits its estimate at its pixel (the chains' target function gives it no energy).
+//! (`crate::seeds::connection_node`). Light-side Dirac chains are stored as they are; a path
+//! that does not fit a [`Path`](flowlight_core::path::Path) ([`MAX_PATH_VERTICES`]) is stored
+//! without vertices, so that the flow deposits its estimate at its pixel (the chains' target
+//! function gives it no energy).
 
 use super::camera_path::CameraPaths;
 use super::light_path::LightPaths;

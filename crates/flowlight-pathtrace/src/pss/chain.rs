@@ -5,7 +5,7 @@
 //! A [`PssTarget`] turns a primary sample vector u into the splats (raster, layer, value) of
 //! one sample of its estimator: F(u) = Σ splats, each at its raster position. The chain's
 //! scalar target is their luminance sum, f(u) = Σ Y(value) ≥ 0 ([`scalar`]). Over uniform u,
-//! E[F] is the image, up to the sampler's own scale (the MCPT target's image is MCPT's).
+//! E\[F\] is the image, up to the sampler's own scale (the MCPT target's image is MCPT's).
 //!
 //! # Normalisation (bootstrap)
 //! b = ∫ f(u) du, estimated by the mean of f over B independent vectors u_1 … u_B

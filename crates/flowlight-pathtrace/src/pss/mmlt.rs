@@ -9,7 +9,7 @@
 //! the raster position), the light subpath's (stream 1) and the strategy choice u (stream 2,
 //! one number). [`MmltTarget`] evaluates strategy (s, t) = (min(⌊u(d + 2)⌋, d + 1),
 //! d + 2 − s) with [`FilmSampler::strategy_sample`]: F_d(u) = (d + 2) · w_{s,t} f / p_{s,t},
-//! one splat at its raster position, and E[F_d] over uniform u is the depth-d image. A small
+//! one splat at its raster position, and E\[F_d\] over uniform u is the depth-d image. A small
 //! step moves u too, so a chain wanders between the strategies of its depth, and stays
 //! longer where w_{s,t} f / p_{s,t} is large, i.e. where the strategy samples the path well.
 //!
