@@ -108,10 +108,7 @@ impl Method {
     /// Whether the method renders `scene`: named by `scenes` (or no list), and, for a
     /// method with a `config`, that scene has such a file.
     pub fn runs_on(&self, scene: &SuiteScene) -> bool {
-        let named = self
-            .scenes
-            .as_ref()
-            .is_none_or(|s| s.contains(&scene.name));
+        let named = self.scenes.as_ref().is_none_or(|s| s.contains(&scene.name));
         named && self.config_for(scene).is_none_or(|c| c.is_file())
     }
 
