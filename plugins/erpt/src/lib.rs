@@ -405,6 +405,10 @@ impl Erpt {
     ) {
         let start = Instant::now();
         let (mut samples, mut deposits, mut skipped) = (0u64, 0u64, 0u64);
+        // Path tracing as MCPT's default does it, with its branches: seeds never branch (a
+        // branch would split a seed's path before the flow), but no seed here reaches a flow.
+        let mut settings = self.settings.seeds.clone();
+        settings.branches = flowlight_pathtrace::settings::DEFAULT_BRANCHES;
         S::with_mcpt_wave(|(wf, out)| {
             out.resize_with(SEED_WAVE, SampleContributions::default);
             let sample_range = unit.sample_begin..unit.sample_begin + unit.sample_count;
@@ -416,14 +420,7 @@ impl Erpt {
                 SEED_WAVE,
                 |starts, keys| {
                     let out = &mut out[..starts.len()];
-                    entangled::trace_wavefront(
-                        &self.scene,
-                        tracer,
-                        &self.settings.seeds,
-                        starts,
-                        wf,
-                        out,
-                    );
+                    entangled::trace_wavefront(&self.scene, tracer, &settings, starts, wf, out);
                     for (key, c) in keys.iter().zip(out.iter()) {
                         deposit_at_pixel(film, key.x, key.y, c, &mut deposits, &mut skipped);
                     }
