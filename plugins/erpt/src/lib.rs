@@ -380,8 +380,9 @@ impl Erpt {
     /// A unit of a scene whose chains' part is empty: every entangled seed would go to its
     /// pixel, so the unit is path tracing. It is traced as MCPT's wavefront
     /// (`entangled::trace_wavefront`, whose estimate per sample and layer is the sum of the
-    /// sample's seeds, `flowlight_pathtrace::seeds`) from the seeds' own random streams, and
-    /// each valid contribution is deposited at the sample's pixel, as the split deposits seeds.
+    /// sample's seeds, `flowlight_pathtrace::seeds`) with MCPT's default branches, from the
+    /// seeds' own random streams, and each valid contribution is deposited at the sample's
+    /// pixel, as the split deposits seeds.
     fn render_without_chains(
         &self,
         unit: &WorkUnit,
