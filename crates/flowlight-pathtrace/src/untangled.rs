@@ -25,38 +25,12 @@ use flowlight_core::Rgb;
 use flowlight_sdk::{Scene, Tracer};
 use glam::{Vec2, Vec3};
 
-/// The stored vertex of a light sample connected from `p_ref`. Area lights keep their point
-/// and normal; a point or spot light its position (the normal slot holds the direction to
-/// `p_ref`); a distant light a point one unit from `p_ref` towards it, with that direction
-/// as its normal.
-/// The light vertex of a ray that escaped into environment light `env`: a point one unit
-/// along the ray, with the direction as its normal (the vertex at infinity of `measure.rs`).
-pub(crate) fn environment_vertex(ray: &Ray, env: usize) -> PathVertex {
-    PathVertex {
-        p: ray.origin + ray.dir,
-        p_error: Vec3::ZERO,
-        ng: ray.dir,
-        ns: ray.dir,
-        uv: Vec2::ZERO,
-        uv1: Vec2::ZERO,
-        color: [1.0; 4],
-        prim: u32::MAX,
-        material: u32::MAX,
-        emitter: env as i32,
-        node: NodeType::Light,
-        component: 0,
-    }
-}
-
-pub(crate) fn light_vertex(scene: &Scene, ls: &LightSample, p_ref: Vec3) -> PathVertex {
-    let (p, n, prim) = match ls.kind {
-        LightKind::Area => (ls.p, ls.n, scene.lights.emitters[ls.light as usize].prim),
-        LightKind::Positional => (ls.p, (p_ref - ls.p).normalize_or_zero(), u32::MAX),
-        LightKind::Directional | LightKind::Environment => (p_ref + ls.n, ls.n, u32::MAX),
-    };
+/// A stored light vertex: point `p` (with its error bound) and normal `n` (geometric and
+/// shading alike), on primitive `prim` (`u32::MAX` for a light without one) of light `light`.
+pub(crate) fn light_node(p: Vec3, p_error: Vec3, n: Vec3, prim: u32, light: i32) -> PathVertex {
     PathVertex {
         p,
-        p_error: ls.p_error,
+        p_error,
         ng: n,
         ns: n,
         uv: Vec2::ZERO,
@@ -64,10 +38,35 @@ pub(crate) fn light_vertex(scene: &Scene, ls: &LightSample, p_ref: Vec3) -> Path
         color: [1.0; 4],
         prim,
         material: u32::MAX,
-        emitter: ls.light as i32,
+        emitter: light,
         node: NodeType::Light,
         component: 0,
     }
+}
+
+/// The light vertex of a ray that escaped into environment light `env`: a point one unit
+/// along the ray, with the direction as its normal (the vertex at infinity of `measure.rs`).
+pub(crate) fn environment_vertex(ray: &Ray, env: usize) -> PathVertex {
+    light_node(
+        ray.origin + ray.dir,
+        Vec3::ZERO,
+        ray.dir,
+        u32::MAX,
+        env as i32,
+    )
+}
+
+/// The stored vertex of a light sample connected from `p_ref`. Area lights keep their point
+/// and normal; a point or spot light its position (the normal slot holds the direction to
+/// `p_ref`); a distant light a point one unit from `p_ref` towards it, with that direction
+/// as its normal.
+pub(crate) fn light_vertex(scene: &Scene, ls: &LightSample, p_ref: Vec3) -> PathVertex {
+    let (p, n, prim) = match ls.kind {
+        LightKind::Area => (ls.p, ls.n, scene.lights.emitters[ls.light as usize].prim),
+        LightKind::Positional => (ls.p, (p_ref - ls.p).normalize_or_zero(), u32::MAX),
+        LightKind::Directional | LightKind::Environment => (p_ref + ls.n, ls.n, u32::MAX),
+    };
+    light_node(p, ls.p_error, n, prim, ls.light as i32)
 }
 
 /// Probability ζ_e of ending at an emitter that also scatters light (thesis §3.6): the share

@@ -83,6 +83,7 @@ use super::render::{pixel_seed, LIGHT_STREAM};
 use super::vertex::LightVertex;
 use super::BidirSettings;
 use crate::seeds::{connection_node, Seed, SeedStore, Technique};
+use crate::untangled::light_node;
 use crate::walk::Step;
 use crate::SampleContributions;
 use flowlight_core::bsdf::Bsdf;
@@ -292,20 +293,7 @@ fn origin_vertex(scene: &Scene, e: &EmissionSample, p_ref: Vec3) -> PathVertex {
         LightKind::Positional => (e.p, (p_ref - e.p).normalize_or_zero(), u32::MAX),
         LightKind::Directional | LightKind::Environment => (p_ref - e.dir, -e.dir, u32::MAX),
     };
-    PathVertex {
-        p,
-        p_error: e.p_error,
-        ng: n,
-        ns: n,
-        uv: Vec2::ZERO,
-        uv1: Vec2::ZERO,
-        color: [1.0; 4],
-        prim,
-        material: u32::MAX,
-        emitter: e.light as i32,
-        node: NodeType::Light,
-        component: 0,
-    }
+    light_node(p, e.p_error, n, prim, e.light as i32)
 }
 
 /// Seeds of BDPT pixel samples, with the buffers one thread reuses for them.
