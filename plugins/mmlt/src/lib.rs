@@ -32,7 +32,7 @@ use flowlight_pathtrace::bidir::sample::{strategy_only_settings, FilmSampler};
 use flowlight_pathtrace::bidir::{BidirSettings, Heuristic};
 use flowlight_pathtrace::pss::mmlt::{render_unit, DepthBootstrap, MmltBuffers, MmltCounts};
 use flowlight_pathtrace::pss::params::{mutation_from_params, LARGE_STEP, SIGMA};
-use flowlight_pathtrace::pss::Mutation;
+use flowlight_pathtrace::pss::{BootstrapCell, Mutation};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::declare::IntParam;
 use flowlight_sdk::stats::Counter;
@@ -41,7 +41,6 @@ use flowlight_sdk::{
     ParamRole, Params, Scene, Stats, StatsBuilder, Tracer, WorkUnit,
 };
 use std::cell::RefCell;
-use std::sync::{Arc, Mutex, PoisonError};
 
 /// `path_depth`: the deepest chain depth.
 const PATH_DEPTH: IntParam = int_param!(
@@ -83,8 +82,8 @@ pub struct Mmlt {
     mutation: Mutation,
     bootstrap_count: u32,
     /// The per-depth bootstrap of the render seed, run by the first work unit of a render
-    /// with that seed (it needs a tracer; the others wait on the lock).
-    bootstrap: Mutex<Option<(u64, Arc<DepthBootstrap>)>>,
+    /// with that seed (it needs a tracer; the others wait for it).
+    bootstrap: BootstrapCell<DepthBootstrap>,
     counters: Counters,
 }
 
@@ -126,7 +125,7 @@ impl Integrator for Mmlt {
             depth,
             mutation,
             bootstrap_count,
-            bootstrap: Mutex::new(None),
+            bootstrap: BootstrapCell::default(),
             counters,
         };
         Ok((integrator, info))
@@ -140,7 +139,15 @@ impl Integrator for Mmlt {
         stats: &mut Stats,
     ) -> Result<(), String> {
         let sampler = FilmSampler::new(&self.scene, tracer, self.settings.clone(), self.depth);
-        let bootstrap = self.bootstrap_of(&sampler, unit.seed);
+        let (bootstrap, _) = self.bootstrap.get_or_run(unit.seed, || {
+            DepthBootstrap::run(
+                &sampler,
+                self.depth,
+                unit.seed,
+                self.bootstrap_count,
+                self.mutation,
+            )
+        });
         let bootstrap = &*bootstrap;
         let mut counts = MmltCounts::default();
         BUFFERS.with(|buffers| {
@@ -162,31 +169,6 @@ impl Integrator for Mmlt {
         stats.add(self.counters.accepted, accepted as f64);
         stats.add(self.counters.invalid, c.invalid as f64);
         Ok(())
-    }
-}
-
-impl Mmlt {
-    /// The bootstrap of render seed `seed`, run now if none is stored for that seed (a new
-    /// seed needs its own: with a fixed one the mean over renders would be biased).
-    fn bootstrap_of(&self, sampler: &FilmSampler, seed: u64) -> Arc<DepthBootstrap> {
-        let mut guard = self
-            .bootstrap
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner);
-        if let Some((stored, b)) = guard.as_ref() {
-            if *stored == seed {
-                return b.clone();
-            }
-        }
-        let b = Arc::new(DepthBootstrap::run(
-            sampler,
-            self.depth,
-            seed,
-            self.bootstrap_count,
-            self.mutation,
-        ));
-        *guard = Some((seed, b.clone()));
-        b
     }
 }
 

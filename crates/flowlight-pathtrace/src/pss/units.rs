@@ -24,17 +24,26 @@ use flowlight_core::rng::Rng;
 use flowlight_sdk::WorkUnit;
 use std::sync::{Arc, Mutex, PoisonError};
 
-/// The bootstrap of a render seed, computed once by the first work unit that asks for it
-/// (the others wait on the lock), and again only for another seed.
-#[derive(Default)]
-pub struct BootstrapCell {
-    inner: Mutex<Option<(u64, Arc<Bootstrap>)>>,
+/// The bootstrap of a render seed (`pssmlt`'s [`Bootstrap`], or `mmlt`'s per-depth one),
+/// computed once by the first work unit that asks for it (the others wait on the lock), and
+/// again only for another seed: a fixed bootstrap would scale every render alike, biasing the
+/// mean over renders.
+pub struct BootstrapCell<B = Bootstrap> {
+    inner: Mutex<Option<(u64, Arc<B>)>>,
 }
 
-impl BootstrapCell {
+impl<B> Default for BootstrapCell<B> {
+    fn default() -> Self {
+        BootstrapCell {
+            inner: Mutex::new(None),
+        }
+    }
+}
+
+impl<B> BootstrapCell<B> {
     /// The bootstrap of render seed `seed`, from `run` if none is stored for that seed, and
     /// whether this call ran it (so that its cost is reported once).
-    pub fn get_or_run(&self, seed: u64, run: impl FnOnce() -> Bootstrap) -> (Arc<Bootstrap>, bool) {
+    pub fn get_or_run(&self, seed: u64, run: impl FnOnce() -> B) -> (Arc<B>, bool) {
         let mut guard = self.inner.lock().unwrap_or_else(PoisonError::into_inner);
         if let Some((stored, b)) = guard.as_ref() {
             if *stored == seed {
