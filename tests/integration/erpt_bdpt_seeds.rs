@@ -201,25 +201,6 @@ fn check_unbiased(
     last
 }
 
-/// MCPT of `config` at 32², `spp` samples per pixel, at the seeds' depth.
-fn mcpt_reference(config: &str, spp: u32) -> Vec<Rgb> {
-    let mut cfg = flowlight_scene::config::load_config(&common::scene_config(config)).unwrap();
-    cfg.width = 32;
-    cfg.height = 32;
-    cfg.integrator_plugin = "mcpt".into();
-    cfg.integrator_params.retain(|(k, _)| k == "path_depth");
-    let ov = flowlight_host::renderer::Overrides {
-        spp: Some(spp),
-        threads: Some(2),
-        ..Default::default()
-    };
-    let mut s = flowlight_host::renderer::Renderer::from_config(cfg, &ov).unwrap();
-    s.exr_path = None;
-    s.png_path = None;
-    s.options.seed = 77;
-    common::render(&s).frame.image()
-}
-
 fn stat(out: &flowlight_host::render::RenderOutcome, name: &str) -> f64 {
     out.stats
         .integrator
@@ -231,7 +212,7 @@ fn stat(out: &flowlight_host::render::RenderOutcome, name: &str) -> f64 {
 
 #[test]
 fn erpt_with_bdpt_seeds_is_unbiased_on_the_cornell_box() {
-    let reference = mcpt_reference("cornell-box/erpt.toml", 512);
+    let reference = common::mcpt_reference("cornell-box/erpt.toml", 512);
     let mix = mutations(&[
         ("blow", &[("weight", 0.5.into())]),
         ("drill", &[("weight", 0.3.into())]),
@@ -254,7 +235,7 @@ fn erpt_with_bdpt_seeds_is_unbiased_on_the_cornell_box() {
 
 #[test]
 fn erpt_with_bdpt_seeds_is_unbiased_on_the_glass_caustic() {
-    let reference = mcpt_reference("glass-caustic/erpt.toml", 1024);
+    let reference = common::mcpt_reference("glass-caustic/erpt.toml", 1024);
     let mix = mutations(&[
         ("multichain-perturbation", &[("weight", 0.5.into())]),
         ("caustic-perturbation", &[("weight", 0.2.into())]),

@@ -549,26 +549,6 @@ fn check_unbiased(
     last
 }
 
-/// Entangled MCPT of `config` at 32², `spp` samples per pixel.
-fn mcpt_reference(config: &str, spp: u32) -> Vec<Rgb> {
-    let mut cfg = flowlight_scene::config::load_config(&common::scene_config(config)).unwrap();
-    cfg.width = 32;
-    cfg.height = 32;
-    // The seeds' depth: the same path space.
-    cfg.integrator_plugin = "mcpt".into();
-    cfg.integrator_params.retain(|(k, _)| k == "path_depth");
-    let ov = flowlight_host::renderer::Overrides {
-        spp: Some(spp),
-        threads: Some(2),
-        ..Default::default()
-    };
-    let mut s = flowlight_host::renderer::Renderer::from_config(cfg, &ov).unwrap();
-    s.exr_path = None;
-    s.png_path = None;
-    s.options.seed = 77;
-    render(&s).frame.image()
-}
-
 fn stat(out: &flowlight_host::render::RenderOutcome, name: &str) -> f64 {
     out.stats
         .integrator
@@ -613,7 +593,7 @@ fn entangled_seeds_are_unbiased_in_the_white_furnace() {
 
 #[test]
 fn entangled_seeds_are_unbiased_on_the_cornell_box_for_each_strategy_and_a_mixture() {
-    let reference = mcpt_reference("cornell-box/erpt.toml", 2048);
+    let reference = common::mcpt_reference("cornell-box/erpt.toml", 2048);
     for (plugin, extra) in [
         ("hard-reconnection", vec![]),
         ("soft-reconnection", vec![]),
@@ -648,7 +628,7 @@ fn entangled_seeds_are_unbiased_on_the_cornell_box_for_each_strategy_and_a_mixtu
 #[test]
 fn entangled_seeds_are_unbiased_through_the_glass_caustic() {
     let config = "glass-caustic/erpt.toml";
-    let reference = mcpt_reference(config, 4096);
+    let reference = common::mcpt_reference(config, 4096);
     check_unbiased(
         config,
         "glass entangled mixture",
@@ -761,7 +741,11 @@ fn the_mcpt_and_erpt_parts_sum_to_the_image_on_the_cornell_box() {
         "caustics without direct",
         &[("chains_for", "caustics"), ("direct", "mcpt")][..],
     );
-    check_splits(config, &mcpt_reference(config, 2048), &[DIRECT, both]);
+    check_splits(
+        config,
+        &common::mcpt_reference(config, 2048),
+        &[DIRECT, both],
+    );
 }
 
 #[test]
@@ -778,7 +762,7 @@ fn the_mcpt_and_erpt_parts_sum_to_the_image_through_the_glass_caustic() {
     );
     check_splits(
         config,
-        &mcpt_reference(config, 4096),
+        &common::mcpt_reference(config, 4096),
         &[DIRECT, caustics, untangled],
     );
 }

@@ -400,3 +400,24 @@ pub fn run_ok(cmd: &mut std::process::Command) -> String {
     );
     stdout
 }
+
+/// Entangled MCPT of the config `config` (relative to `scenes/`) at 32², `spp` samples per
+/// pixel, seed 77, 2 threads, at the config's `path_depth` and nothing else of its
+/// `[integrator]`: the reference the ERPT seed tests compare with (the same path space).
+pub fn mcpt_reference(config: &str, spp: u32) -> Vec<Rgb> {
+    let mut cfg = flowlight_scene::config::load_config(&scene_config(config)).unwrap();
+    cfg.width = 32;
+    cfg.height = 32;
+    cfg.integrator_plugin = "mcpt".into();
+    cfg.integrator_params.retain(|(k, _)| k == "path_depth");
+    let ov = Overrides {
+        spp: Some(spp),
+        threads: Some(2),
+        ..Default::default()
+    };
+    let mut s = Renderer::from_config(cfg, &ov).unwrap();
+    s.exr_path = None;
+    s.png_path = None;
+    s.options.seed = 77;
+    render(&s).frame.image()
+}
