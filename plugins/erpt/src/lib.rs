@@ -74,7 +74,7 @@ use flowlight_pathtrace::bidir::{BidirSettings, Heuristic, Techniques};
 use flowlight_pathtrace::sampler::{sample_start, PixelSampler, SamplerKind};
 use flowlight_pathtrace::seeds::{self, SeedFilter, SeedStore, SeedWavefront};
 use flowlight_pathtrace::walk::units;
-use flowlight_pathtrace::{entangled, untangled, SampleContributions};
+use flowlight_pathtrace::{entangled, untangled, PathSettings, SampleContributions};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::{
     export_integrator, AccumulationStyle, Film, Integrator, IntegratorInfo, MutationSet, Params,
@@ -95,6 +95,10 @@ pub struct Erpt {
     /// No path of this scene can be in the chains' part ([`scene_letters`]): entangled seeds
     /// are then path tracing, and are traced and deposited as MCPT does.
     chains_part_empty: bool,
+    /// The settings of a unit [`Self::render_without_chains`] path-traces: the seeds' with
+    /// MCPT's default branches (seeds never branch: a branch would split a seed's path before
+    /// the flow, but no seed of such a unit reaches a flow). Set again after the pilot.
+    path_tracing: PathSettings,
     /// Selection probability per strategy: the host's normalised weights, or `auto`'s.
     weights: Vec<f64>,
     /// `preset = "auto"`: its counters, and after `prepare` its choices (`auto.rs`).
@@ -406,10 +410,6 @@ impl Erpt {
     ) {
         let start = Instant::now();
         let (mut samples, mut deposits, mut skipped) = (0u64, 0u64, 0u64);
-        // Path tracing as MCPT's default does it, with its branches: seeds never branch (a
-        // branch would split a seed's path before the flow), but no seed here reaches a flow.
-        let mut settings = self.settings.seeds.clone();
-        settings.branches = flowlight_pathtrace::settings::DEFAULT_BRANCHES;
         S::with_mcpt_wave(|(wf, out)| {
             out.resize_with(SEED_WAVE, SampleContributions::default);
             let sample_range = unit.sample_begin..unit.sample_begin + unit.sample_count;
@@ -421,7 +421,14 @@ impl Erpt {
                 SEED_WAVE,
                 |starts, keys| {
                     let out = &mut out[..starts.len()];
-                    entangled::trace_wavefront(&self.scene, tracer, &settings, starts, wf, out);
+                    entangled::trace_wavefront(
+                        &self.scene,
+                        tracer,
+                        &self.path_tracing,
+                        starts,
+                        wf,
+                        out,
+                    );
                     for (key, c) in keys.iter().zip(out.iter()) {
                         deposit_at_pixel(film, key.x, key.y, c, &mut deposits, &mut skipped);
                     }
@@ -462,6 +469,14 @@ impl Erpt {
             .zip(&seeds.in_part)
             .filter(|(s, &inside)| inside && s.estimate.is_valid_radiance())
             .fold(Rgb::ZERO, |a, (s, _)| a + s.estimate)
+    }
+}
+
+/// The settings a unit without chains path-traces with: `seeds`' with MCPT's default branches.
+fn path_tracing_settings(seeds: &PathSettings) -> PathSettings {
+    PathSettings {
+        branches: flowlight_pathtrace::settings::DEFAULT_BRANCHES,
+        ..seeds.clone()
     }
 }
 
@@ -528,6 +543,7 @@ impl Integrator for Erpt {
                 2 * settings.film_window
             },
         };
+        let path_tracing = path_tracing_settings(&settings.seeds);
         Ok((
             Erpt {
                 scene,
@@ -536,6 +552,7 @@ impl Integrator for Erpt {
                 image_quantum: None,
                 counters,
                 chains_part_empty,
+                path_tracing,
                 weights: (0..mutations.len()).map(|i| mutations.weight(i)).collect(),
                 auto,
             },
@@ -546,6 +563,7 @@ impl Integrator for Erpt {
     fn prepare(&mut self, tracer: &Tracer) -> Result<(), String> {
         if self.auto.is_some() {
             self.run_auto_pilot(tracer)?;
+            self.path_tracing = path_tracing_settings(&self.settings.seeds);
         }
         if self.settings.quantum != QuantumScope::Image
             || self.chains_part_empty
