@@ -16,7 +16,9 @@ mod loaded;
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
 use flowlight_host::intersector::UnitTracer;
-use flowlight_pathtrace::bidir::sample::{strategy_only_settings, FilmSampler, SampleScratch};
+use flowlight_pathtrace::bidir::sample::{
+    strategy_only_settings, FilmPlan, FilmSampler, SampleScratch,
+};
 use flowlight_pathtrace::bidir::Heuristic;
 use flowlight_pathtrace::pss::mmlt::{render_unit, DepthBootstrap, MmltBuffers, MmltCounts};
 use flowlight_pathtrace::pss::Mutation;
@@ -37,12 +39,8 @@ fn with_sampler<R>(f: impl FnOnce(&FilmSampler, Vec2, &Scene, &Tracer) -> R) -> 
     let table = unit_tracer.table();
     let tracer = Tracer::new(&table);
     let film = Vec2::new(scene.camera.width as f32, scene.camera.height as f32);
-    let sampler = FilmSampler::new(
-        &scene,
-        &tracer,
-        strategy_only_settings(Heuristic::Power),
-        DEPTH,
-    );
+    let plan = FilmPlan::new(&scene, strategy_only_settings(Heuristic::Power), DEPTH);
+    let sampler = FilmSampler::new(&scene, &tracer, &plan);
     f(&sampler, film, &scene, &tracer)
 }
 
@@ -106,7 +104,8 @@ fn bdpt_estimates(scene: &Scene, tracer: &Tracer, film: Vec2, n: u64) -> (Vec<f6
     settings.path.path_depth = DEPTH;
     settings.path.max_ray_depth = 64;
     settings.lighting_layers = true;
-    let bdpt = FilmSampler::new(scene, tracer, settings, 0);
+    let plan = FilmPlan::new(scene, settings, 0);
+    let bdpt = FilmSampler::new(scene, tracer, &plan);
     let mut scratch = SampleScratch::default();
     let mut bins = vec![0.0f64; BINS * BINS];
     let mut means = [0.0f64; 2];

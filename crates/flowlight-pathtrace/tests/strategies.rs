@@ -19,7 +19,7 @@ use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
 use flowlight_host::intersector::UnitTracer;
 use flowlight_pathtrace::bidir::params::settings_from_params;
-use flowlight_pathtrace::bidir::sample::{FilmSampler, SampleScratch};
+use flowlight_pathtrace::bidir::sample::{FilmPlan, FilmSampler, SampleScratch};
 use flowlight_pathtrace::bidir::{BidirSettings, Techniques};
 use flowlight_sdk::abi::{ParamValue, StrRef};
 use flowlight_sdk::{ParamKind, Params, Scene, Tracer};
@@ -119,7 +119,8 @@ fn with_sampler<R>(
     let tracer = Tracer::new(&table);
     let settings = settings(heuristic);
     let film = Vec2::new(scene.camera.width as f32, scene.camera.height as f32);
-    let sampler = FilmSampler::new(&scene, &tracer, settings, DEPTH);
+    let plan = FilmPlan::new(&scene, settings, DEPTH);
+    let sampler = FilmSampler::new(&scene, &tracer, &plan);
     f(&sampler, film)
 }
 

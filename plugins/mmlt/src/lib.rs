@@ -28,8 +28,8 @@
 #![forbid(unsafe_code)]
 
 use flowlight_pathtrace::bidir::params::HEURISTIC;
-use flowlight_pathtrace::bidir::sample::{strategy_only_settings, FilmSampler};
-use flowlight_pathtrace::bidir::{BidirSettings, Heuristic};
+use flowlight_pathtrace::bidir::sample::{strategy_only_settings, FilmPlan, FilmSampler};
+use flowlight_pathtrace::bidir::Heuristic;
 use flowlight_pathtrace::pss::mmlt::{render_unit, DepthBootstrap, MmltBuffers, MmltCounts};
 use flowlight_pathtrace::pss::params::{mutation_from_params, LARGE_STEP, SIGMA};
 use flowlight_pathtrace::pss::{BootstrapCell, Mutation};
@@ -77,7 +77,8 @@ struct Counters {
 
 pub struct Mmlt {
     scene: Scene<'static>,
-    settings: BidirSettings,
+    /// The strategies' settings up to `depth`, made once.
+    plan: FilmPlan,
     depth: u32,
     mutation: Mutation,
     bootstrap_count: u32,
@@ -121,7 +122,7 @@ impl Integrator for Mmlt {
         };
         let integrator = Mmlt {
             scene,
-            settings: strategy_only_settings(heuristic),
+            plan: FilmPlan::new(&scene, strategy_only_settings(heuristic), depth),
             depth,
             mutation,
             bootstrap_count,
@@ -138,7 +139,7 @@ impl Integrator for Mmlt {
         film: &mut Film,
         stats: &mut Stats,
     ) -> Result<(), String> {
-        let sampler = FilmSampler::new(&self.scene, tracer, self.settings.clone(), self.depth);
+        let sampler = FilmSampler::new(&self.scene, tracer, &self.plan);
         let (bootstrap, _) = self.bootstrap.get_or_run(unit.seed, || {
             DepthBootstrap::run(
                 &sampler,

@@ -30,8 +30,8 @@
 #![forbid(unsafe_code)]
 
 use flowlight_pathtrace::bidir::params::HEURISTIC;
-use flowlight_pathtrace::bidir::sample::{strategy_only_settings, FilmSampler};
-use flowlight_pathtrace::bidir::{BidirSettings, Heuristic};
+use flowlight_pathtrace::bidir::sample::{strategy_only_settings, FilmPlan, FilmSampler};
+use flowlight_pathtrace::bidir::Heuristic;
 use flowlight_pathtrace::pss::bdpt::BdptTarget;
 use flowlight_pathtrace::pss::params::{mutation_from_params, LARGE_STEP, SIGMA};
 use flowlight_pathtrace::pss::{
@@ -122,8 +122,8 @@ impl Counters {
 /// The sampler the chains run over.
 enum Sampler {
     Mcpt,
-    /// BDPT with these settings (the path settings and layers of the plugin's).
-    Bdpt(BidirSettings),
+    /// BDPT with the plugin's path settings and layers.
+    Bdpt(Box<FilmPlan>),
 }
 
 pub struct Pssmlt {
@@ -165,7 +165,7 @@ impl Integrator for Pssmlt {
                 let mut bidir = strategy_only_settings(heuristic);
                 bidir.path = settings.clone();
                 bidir.lighting_layers = layers;
-                Sampler::Bdpt(bidir)
+                Sampler::Bdpt(Box::new(FilmPlan::new(&scene, bidir, 0)))
             }
             _ => Sampler::Mcpt,
         };
@@ -203,8 +203,8 @@ impl Integrator for Pssmlt {
                 let mut target = McptTarget::new(&self.scene, tracer, &self.settings, self.layers);
                 self.render_target(&mut target, unit, film, stats);
             }
-            Sampler::Bdpt(bidir) => {
-                let sampler = FilmSampler::new(&self.scene, tracer, bidir.clone(), 0);
+            Sampler::Bdpt(plan) => {
+                let sampler = FilmSampler::new(&self.scene, tracer, plan);
                 self.render_target(&mut BdptTarget::new(&sampler), unit, film, stats);
             }
         }

@@ -75,10 +75,11 @@ pub struct StrategySample {
     pub value: Rgb,
 }
 
-/// What every film-wide sample of a scene shares.
-pub struct FilmSampler<'a, 'b> {
-    scene: &'a Scene<'b>,
-    tracer: &'a Tracer<'a>,
+/// What every film-wide sample of a scene shares that needs no tracer: the settings, the MIS
+/// iteration, the scene's sphere, the film and the per-strategy settings. Made once per render
+/// (a plugin's `create`), not per work unit: the strategy table holds two settings per strategy
+/// of every depth.
+pub struct FilmPlan {
     settings: BidirSettings,
     it: Iteration,
     sphere: (Vec3, f32),
@@ -87,15 +88,10 @@ pub struct FilmSampler<'a, 'b> {
     strategies: Vec<StrategySettings>,
 }
 
-impl<'a, 'b> FilmSampler<'a, 'b> {
-    /// A sampler of BDPT with `settings` (its heuristic; its depth caps and roulette for
-    /// [`Self::bdpt_sample`]) whose strategy samples reach depths up to `max_depth`.
-    pub fn new(
-        scene: &'a Scene<'b>,
-        tracer: &'a Tracer<'a>,
-        settings: BidirSettings,
-        max_depth: u32,
-    ) -> Self {
+impl FilmPlan {
+    /// The plan of BDPT with `settings` (its heuristic; its depth caps and roulette for
+    /// [`FilmSampler::bdpt_sample`]) whose strategy samples reach depths up to `max_depth`.
+    pub fn new(scene: &Scene, settings: BidirSettings, max_depth: u32) -> Self {
         let camera = &scene.camera;
         let film_pixels = camera.width as f32 * camera.height as f32;
         let it = Iteration::new(
@@ -113,9 +109,7 @@ impl<'a, 'b> FilmSampler<'a, 'b> {
                 strategies.push(strategy_settings(&settings, s, d + 2 - s));
             }
         }
-        FilmSampler {
-            scene,
-            tracer,
+        FilmPlan {
             settings,
             it,
             sphere: scene_sphere(scene.bounds_min, scene.bounds_max),
@@ -123,13 +117,31 @@ impl<'a, 'b> FilmSampler<'a, 'b> {
             strategies,
         }
     }
+}
+
+/// Film-wide samples of a scene: its [`FilmPlan`] with the scene and a work unit's tracer.
+pub struct FilmSampler<'a, 'b> {
+    scene: &'a Scene<'b>,
+    tracer: &'a Tracer<'a>,
+    plan: &'a FilmPlan,
+}
+
+impl<'a, 'b> FilmSampler<'a, 'b> {
+    /// The sampler of `plan` (made for `scene`) tracing with `tracer`.
+    pub fn new(scene: &'a Scene<'b>, tracer: &'a Tracer<'a>, plan: &'a FilmPlan) -> Self {
+        FilmSampler {
+            scene,
+            tracer,
+            plan,
+        }
+    }
 
     /// The raster position the camera stream's first pair picks: uniform over the film.
     #[inline]
     fn raster(&self, camera: &mut impl SampleStream) -> Vec2 {
-        let r = camera.uniform2() * self.film;
+        let r = camera.uniform2() * self.plan.film;
         // The pair is < 1, but the product may round up to the film's edge.
-        r.min(self.film - self.film * f32::EPSILON)
+        r.min(self.plan.film - self.plan.film * f32::EPSILON)
     }
 
     /// One BDPT sample (module docs): every strategy's weighted contribution splatted to
@@ -143,7 +155,7 @@ impl<'a, 'b> FilmSampler<'a, 'b> {
         scratch: &mut SampleScratch,
         out: &mut impl Splat,
     ) {
-        let settings = &self.settings;
+        let settings = &self.plan.settings;
         let layers = settings.layers();
         let layer = |l: u32| if layers { l } else { 0 };
         let mut camera = camera;
@@ -153,8 +165,8 @@ impl<'a, 'b> FilmSampler<'a, 'b> {
             scene: self.scene,
             tracer: self.tracer,
             settings,
-            it: &self.it,
-            sphere: self.sphere,
+            it: &self.plan.it,
+            sphere: self.plan.sphere,
             recorder: None,
         };
         let mut splat = |r: Vec2, l: u32, v: Rgb| out.splat(r, layer(l), v);
@@ -163,8 +175,8 @@ impl<'a, 'b> FilmSampler<'a, 'b> {
             scene: self.scene,
             tracer: self.tracer,
             settings,
-            it: &self.it,
-            sphere: self.sphere,
+            it: &self.plan.it,
+            sphere: self.plan.sphere,
             recorder: None,
         };
         let contributions = &mut scratch.contributions;
@@ -190,7 +202,7 @@ impl<'a, 'b> FilmSampler<'a, 'b> {
         scratch: &mut SampleScratch,
     ) -> Option<StrategySample> {
         let (s, t) = strategy_of(depth, u_strategy);
-        let strategy = &self.strategies[strategy_layer(s, t) as usize];
+        let strategy = &self.plan.strategies[strategy_layer(s, t) as usize];
         let mut camera = camera;
         let raster = self.raster(&mut camera);
         scratch.vertices.clear();
@@ -200,8 +212,8 @@ impl<'a, 'b> FilmSampler<'a, 'b> {
                 scene: self.scene,
                 tracer: self.tracer,
                 settings: &strategy.light,
-                it: &self.it,
-                sphere: self.sphere,
+                it: &self.plan.it,
+                sphere: self.plan.sphere,
                 recorder: None,
             };
             let mut splat = |r: Vec2, _: u32, v: Rgb| found = Some((r, v));
@@ -217,8 +229,8 @@ impl<'a, 'b> FilmSampler<'a, 'b> {
                 scene: self.scene,
                 tracer: self.tracer,
                 settings: &strategy.camera,
-                it: &self.it,
-                sphere: self.sphere,
+                it: &self.plan.it,
+                sphere: self.plan.sphere,
                 recorder: None,
             };
             let contributions = &mut scratch.contributions;
