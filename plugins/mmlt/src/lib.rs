@@ -32,10 +32,9 @@ use flowlight_pathtrace::bidir::sample::{strategy_only_settings, FilmPlan, FilmS
 use flowlight_pathtrace::bidir::Heuristic;
 use flowlight_pathtrace::pss::mmlt::{render_unit, DepthBootstrap, MmltBuffers, MmltCounts};
 use flowlight_pathtrace::pss::params::{mutation_from_params, LARGE_STEP, SIGMA};
-use flowlight_pathtrace::pss::{BootstrapCell, Mutation};
+use flowlight_pathtrace::pss::{BootstrapCell, ChainCounters, Mutation};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::declare::IntParam;
-use flowlight_sdk::stats::Counter;
 use flowlight_sdk::{
     export_integrator, int_param, AccumulationStyle, Film, Integrator, IntegratorInfo, MutationSet,
     ParamRole, Params, Scene, Stats, StatsBuilder, Tracer, WorkUnit,
@@ -67,14 +66,6 @@ const PARAMS: [ParamSpec; 5] = [
     HEURISTIC.spec(),
 ];
 
-/// The counters the plugin reports.
-struct Counters {
-    chains: Counter,
-    mutations: Counter,
-    accepted: Counter,
-    invalid: Counter,
-}
-
 pub struct Mmlt {
     scene: Scene<'static>,
     /// The strategies' settings up to `depth`, made once.
@@ -85,7 +76,7 @@ pub struct Mmlt {
     /// The per-depth bootstrap of the render seed, run by the first work unit of a render
     /// with that seed (it needs a tracer; the others wait for it).
     bootstrap: BootstrapCell<DepthBootstrap>,
-    counters: Counters,
+    counters: ChainCounters,
 }
 
 thread_local! {
@@ -108,12 +99,7 @@ impl Integrator for Mmlt {
         let mutation = mutation_from_params(params)?;
         let bootstrap_count = BOOTSTRAP.get(params)? as u32;
         let heuristic = Heuristic::parse(HEURISTIC.get(params)?).expect("declared choice");
-        let counters = Counters {
-            chains: stats.sum("chains"),
-            mutations: stats.sum("mutations"),
-            accepted: stats.sum("accepted mutations"),
-            invalid: stats.sum("invalid proposals"),
-        };
+        let counters = ChainCounters::declare(stats);
         let info = IntegratorInfo {
             layer_count: 0,
             accumulation: AccumulationStyle::FlangedTile,
@@ -163,12 +149,7 @@ impl Integrator for Mmlt {
                 &mut |_, _| {},
             );
         });
-        let c = &counts.chains;
-        stats.add(self.counters.chains, c.chains as f64);
-        stats.add(self.counters.mutations, c.mutations as f64);
-        let accepted = c.accepted_large + c.accepted_small;
-        stats.add(self.counters.accepted, accepted as f64);
-        stats.add(self.counters.invalid, c.invalid as f64);
+        self.counters.report(stats, &counts.chains, 0);
         Ok(())
     }
 }

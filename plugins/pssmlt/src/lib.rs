@@ -35,8 +35,8 @@ use flowlight_pathtrace::bidir::Heuristic;
 use flowlight_pathtrace::pss::bdpt::BdptTarget;
 use flowlight_pathtrace::pss::params::{mutation_from_params, LARGE_STEP, SIGMA};
 use flowlight_pathtrace::pss::{
-    render_unit, Bootstrap, BootstrapCell, ChainBuffers, ChainCounts, McptTarget, Mutation,
-    PssTarget,
+    render_unit, Bootstrap, BootstrapCell, ChainBuffers, ChainCounters, ChainCounts, McptTarget,
+    Mutation, PssTarget,
 };
 use flowlight_pathtrace::{settings, PathSettings, Variant};
 use flowlight_sdk::abi::ParamSpec;
@@ -78,44 +78,20 @@ const PARAMS: [ParamSpec; 11] = [
     HEURISTIC.spec(),
 ];
 
-/// The counters the plugin reports.
+/// The counters the plugin reports: the chains', and the bootstrap's.
 struct Counters {
-    chains: Counter,
-    mutations: Counter,
-    large_steps: Counter,
-    accepted_large: Counter,
-    accepted_small: Counter,
-    invalid: Counter,
+    chains: ChainCounters,
     bootstrap_samples: Counter,
     normalisation: Counter,
 }
 
 impl Counters {
     fn declare(stats: &mut StatsBuilder) -> Counters {
-        let mutations = stats.sum("mutations");
-        let large_steps = stats.sum("large steps");
-        let accepted_large = stats.sum("accepted large steps");
-        let accepted_small = stats.sum("accepted small steps");
-        stats.ratio("large-step acceptance", accepted_large, large_steps);
         Counters {
-            chains: stats.sum("chains"),
-            mutations,
-            large_steps,
-            accepted_large,
-            accepted_small,
-            invalid: stats.sum("invalid samples"),
+            chains: ChainCounters::declare(stats),
             bootstrap_samples: stats.sum("bootstrap samples"),
             normalisation: stats.max("bootstrap b"),
         }
-    }
-
-    fn report(&self, stats: &mut Stats, c: &ChainCounts) {
-        stats.add(self.chains, c.chains as f64);
-        stats.add(self.mutations, c.mutations as f64);
-        stats.add(self.large_steps, c.large_steps as f64);
-        stats.add(self.accepted_large, c.accepted_large as f64);
-        stats.add(self.accepted_small, c.accepted_small as f64);
-        stats.add(self.invalid, c.invalid as f64);
     }
 }
 
@@ -224,9 +200,10 @@ impl Pssmlt {
         let (bootstrap, ran) = self.bootstrap.get_or_run(unit.seed, || {
             Bootstrap::run(target, unit.seed, self.bootstrap_count, self.mutation)
         });
+        let mut bootstrap_invalid = 0;
         if ran {
             stats.add(self.counters.bootstrap_samples, bootstrap.len() as f64);
-            stats.add(self.counters.invalid, bootstrap.invalid() as f64);
+            bootstrap_invalid = bootstrap.invalid();
         }
         stats.add(self.counters.normalisation, bootstrap.normalisation());
         let mut counts = ChainCounts::default();
@@ -235,7 +212,9 @@ impl Pssmlt {
                 film.deposit(s.raster.x, s.raster.y, s.layer, s.value)
             })
         });
-        self.counters.report(stats, &counts);
+        self.counters
+            .chains
+            .report(stats, &counts, bootstrap_invalid);
     }
 }
 

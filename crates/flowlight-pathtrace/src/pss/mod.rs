@@ -30,4 +30,4 @@ mod tests;
 pub use chain::{run_chain, scalar, Bootstrap, ChainBuffers, ChainCounts, PssTarget, Splat};
 pub use mcpt::McptTarget;
 pub use samples::{Mutation, PrimarySamples, PssStream};
-pub use units::{chain_seed, render_unit, BootstrapCell};
+pub use units::{chain_seed, render_unit, BootstrapCell, ChainCounters};

@@ -21,6 +21,7 @@
 
 use super::chain::{run_chain, Bootstrap, ChainBuffers, ChainCounts, PssTarget, Splat};
 use flowlight_core::rng::Rng;
+use flowlight_sdk::stats::{Counter, Stats, StatsBuilder};
 use flowlight_sdk::WorkUnit;
 use std::sync::{Arc, Mutex, PoisonError};
 
@@ -91,5 +92,48 @@ pub fn render_unit<T: PssTarget>(
             deposit,
             &mut |_| {},
         );
+    }
+}
+
+/// The chain counters a primary-sample-space plugin reports (`pssmlt`, `mmlt`): chains,
+/// mutations, large steps, accepted large and small steps, the large-step acceptance and
+/// the invalid samples.
+#[derive(Clone, Copy, Debug)]
+pub struct ChainCounters {
+    chains: Counter,
+    mutations: Counter,
+    large_steps: Counter,
+    accepted_large: Counter,
+    accepted_small: Counter,
+    invalid: Counter,
+}
+
+impl ChainCounters {
+    /// Declares the counters.
+    pub fn declare(stats: &mut StatsBuilder) -> ChainCounters {
+        let mutations = stats.sum("mutations");
+        let large_steps = stats.sum("large steps");
+        let accepted_large = stats.sum("accepted large steps");
+        let accepted_small = stats.sum("accepted small steps");
+        stats.ratio("large-step acceptance", accepted_large, large_steps);
+        ChainCounters {
+            chains: stats.sum("chains"),
+            mutations,
+            large_steps,
+            accepted_large,
+            accepted_small,
+            invalid: stats.sum("invalid samples"),
+        }
+    }
+
+    /// Reports a unit's counts (and, as `invalid samples`, `extra_invalid` more: a
+    /// bootstrap's).
+    pub fn report(&self, stats: &mut Stats, c: &ChainCounts, extra_invalid: u64) {
+        stats.add(self.chains, c.chains as f64);
+        stats.add(self.mutations, c.mutations as f64);
+        stats.add(self.large_steps, c.large_steps as f64);
+        stats.add(self.accepted_large, c.accepted_large as f64);
+        stats.add(self.accepted_small, c.accepted_small as f64);
+        stats.add(self.invalid, (c.invalid + extra_invalid) as f64);
     }
 }
