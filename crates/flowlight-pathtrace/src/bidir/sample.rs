@@ -136,6 +136,30 @@ impl<'a, 'b> FilmSampler<'a, 'b> {
         }
     }
 
+    /// The light subpaths of `settings` (no seed recorder).
+    fn light_paths<'s>(&'s self, settings: &'s BidirSettings) -> LightPaths<'s, 'b> {
+        LightPaths {
+            scene: self.scene,
+            tracer: self.tracer,
+            settings,
+            it: &self.plan.it,
+            sphere: self.plan.sphere,
+            recorder: None,
+        }
+    }
+
+    /// The camera subpaths of `settings` (no seed recorder).
+    fn camera_paths<'s>(&'s self, settings: &'s BidirSettings) -> CameraPaths<'s, 'b> {
+        CameraPaths {
+            scene: self.scene,
+            tracer: self.tracer,
+            settings,
+            it: &self.plan.it,
+            sphere: self.plan.sphere,
+            recorder: None,
+        }
+    }
+
     /// The raster position the camera stream's first pair picks: uniform over the film.
     #[inline]
     fn raster(&self, camera: &mut impl SampleStream) -> Vec2 {
@@ -161,24 +185,10 @@ impl<'a, 'b> FilmSampler<'a, 'b> {
         let mut camera = camera;
         let raster = self.raster(&mut camera);
         scratch.vertices.clear();
-        let light_paths = LightPaths {
-            scene: self.scene,
-            tracer: self.tracer,
-            settings,
-            it: &self.plan.it,
-            sphere: self.plan.sphere,
-            recorder: None,
-        };
+        let light_paths = self.light_paths(settings);
         let mut splat = |r: Vec2, l: u32, v: Rgb| out.splat(r, layer(l), v);
         light_paths.trace(light, &mut scratch.vertices, &mut splat);
-        let camera_paths = CameraPaths {
-            scene: self.scene,
-            tracer: self.tracer,
-            settings,
-            it: &self.plan.it,
-            sphere: self.plan.sphere,
-            recorder: None,
-        };
+        let camera_paths = self.camera_paths(settings);
         let contributions = &mut scratch.contributions;
         contributions.clear();
         let mut counts = CameraCounts::default();
@@ -208,14 +218,7 @@ impl<'a, 'b> FilmSampler<'a, 'b> {
         scratch.vertices.clear();
         let mut found: Option<(Vec2, Rgb)> = None;
         if s >= 2 {
-            let light_paths = LightPaths {
-                scene: self.scene,
-                tracer: self.tracer,
-                settings: &strategy.light,
-                it: &self.plan.it,
-                sphere: self.plan.sphere,
-                recorder: None,
-            };
+            let light_paths = self.light_paths(&strategy.light);
             let mut splat = |r: Vec2, _: u32, v: Rgb| found = Some((r, v));
             light_paths.trace(light, &mut scratch.vertices, &mut splat);
             if scratch.vertices.last().is_none_or(|y| y.length != s - 1) {
@@ -225,14 +228,7 @@ impl<'a, 'b> FilmSampler<'a, 'b> {
             }
         }
         if t >= 2 {
-            let camera_paths = CameraPaths {
-                scene: self.scene,
-                tracer: self.tracer,
-                settings: &strategy.camera,
-                it: &self.plan.it,
-                sphere: self.plan.sphere,
-                recorder: None,
-            };
+            let camera_paths = self.camera_paths(&strategy.camera);
             let contributions = &mut scratch.contributions;
             contributions.clear();
             let mut counts = CameraCounts::default();
