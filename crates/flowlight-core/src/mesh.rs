@@ -28,6 +28,7 @@
 
 use crate::geometry::{barycentric_error, gamma, Ray, SurfaceHit, TriangleHit};
 use crate::material::{Material, Texture};
+use crate::specular_normal::valid_specular_normal;
 use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
 
 /// What a batched ray query returns per ray (ABI 4): enough to rebuild the surface data.
@@ -413,6 +414,10 @@ impl<'a> MeshView<'a> {
                         mapped = -mapped;
                     }
                     ns = bend_towards_viewer(lift_above(mapped, ng), ng, -ray.dir);
+                    // The mirror reflection of the viewer kept above the surface.
+                    if let Some(wo) = (-ray.dir).try_normalize() {
+                        ns = valid_specular_normal(ng, wo, ns);
+                    }
                 }
             }
             if ns.dot(ng) < 0.0 {
