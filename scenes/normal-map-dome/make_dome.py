@@ -11,10 +11,9 @@ Layout (glTF is Y-up; the cells lie in the X-Z plane, facing +Y, radius 1):
     z = -1.2 row: roughness 0.15     x = -1.2: normal-mapped square   x = +1.2: dome mesh
     z = +1.2 row: roughness 0.4
 
-The geometric dome is a hemisphere alone (no floor around it), so that a reflection leaving it
-downwards sees the sky, as a reflection about the normal map's normal can only do after it is
-kept above the flat surface. Under a uniform white sky every mirror reflection that escapes
-sees radiance 1, so the two cells differ only by where the normal map's reflections go.
+The geometric dome stands on the rest of its square cell, as in NormalTangentTest: a reflection
+leaving its steep rim downwards meets the gold floor and reflects once more. Under a uniform
+white sky every reflection that escapes sees radiance 1.
 `measure_dome.py` renders it and prints each cell's mean luminance over the dome's disk.
 """
 import base64
@@ -99,7 +98,9 @@ def square(buf):
 
 
 def hemisphere(buf):
-    """The geometric dome: a unit hemisphere over y = 0 with its exact normals."""
+    """The geometric dome: a unit hemisphere over y = 0 with its exact normals, standing on
+    the rest of its 2 × 2 cell (a flat square with the dome's disk cut out), as the
+    geometric cells of NormalTangentTest stand on theirs."""
     pos, nrm, idx = [], [], []
     rings, segs = STEPS // 2, STEPS
     for a in range(rings + 1):
@@ -115,6 +116,18 @@ def hemisphere(buf):
             i1, i2, i3 = i0 + 1, i0 + segs + 1, i0 + segs + 2
             # Counter-clockwise seen from outside.
             idx += [i0, i1, i2, i1, i3, i2]
+    # The floor: each rim segment joined to the square's edge along the same rays.
+    base = len(pos)
+    for b in range(segs + 1):
+        phi = 2.0 * math.pi * b / segs
+        c = (math.cos(phi), 0.0, math.sin(phi))
+        edge = 1.0 / max(abs(c[0]), abs(c[2]))
+        pos += [c, (c[0] * edge, 0.0, c[2] * edge)]
+        nrm += [(0.0, 1.0, 0.0)] * 2
+    for b in range(segs):
+        r0, e0, r1, e1 = base + 2 * b, base + 2 * b + 1, base + 2 * b + 2, base + 2 * b + 3
+        # Counter-clockwise seen from +Y.
+        idx += [r0, r1, e0, r1, e1, e0]
     attrs = {
         "POSITION": buf.add([tuple(p) for p in pos], "<3f", len(pos), "VEC3", 5126, 34962, ([-1, 0, -1], [1, 1, 1])),
         "NORMAL": buf.add([tuple(n) for n in nrm], "<3f", len(nrm), "VEC3", 5126, 34962),

@@ -54,7 +54,7 @@ pub fn valid_specular_normal(ng: Vec3, wo: Vec3, ns: Vec3) -> Vec3 {
     let side = if wo.dot(ng) < 0.0 { -1.0 } else { 1.0 };
     let (z, n) = (ng * side, ns * side);
     let iz = wo.dot(z);
-    if !(iz > 0.0) {
+    if iz.is_nan() || iz <= 0.0 {
         return ns;
     }
     let t = reflection_height(iz);

@@ -192,7 +192,7 @@ impl Bsdf {
             }
             *w *= 1.0 - share;
         }
-        lobe.tint = lobe.tint * (1.0 / share);
+        lobe.tint *= 1.0 / share;
         lobe.albedo = (estimate / share).clamp(0.0, 1.0);
         out.components[out.count] = Some((Component::MultiScatter(lobe), share));
         out.count += 1;

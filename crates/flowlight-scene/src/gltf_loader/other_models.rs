@@ -7,7 +7,7 @@ use super::Loader;
 use crate::error::SceneError;
 use crate::material::RawTextureInfo;
 use crate::spec_gloss;
-use crate::texture::{Sampler, TextureData};
+use crate::texture::TextureData;
 use flowlight_core::material::{Material, TextureRef};
 
 impl Loader<'_> {
@@ -81,7 +81,7 @@ impl Loader<'_> {
         };
         let derived = TextureData {
             image: spec_gloss::roughness_image(&source.image, glossiness),
-            sampler: Sampler { ..source.sampler },
+            sampler: source.sampler,
         };
         self.scene.textures.push(derived);
         TextureRef {
