@@ -24,7 +24,9 @@ from mathutils import Vector
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", ".."))
 MODELS = os.path.join(ROOT, "scenes", "assimp-testmodels", "glTF2")
 
-# name, file, camera position and target (glTF coordinates, +Y up), ortho height, width, height
+# name, file, camera position and target (glTF coordinates, +Y up), ortho height, width,
+# height, and disks (x, y, radius in the image plane's world units, y up) whose means are
+# reported one by one
 ASSETS = [
     (
         "TextureTransformTest",
@@ -34,6 +36,17 @@ ASSETS = [
         2.4,
         360,
         240,
+        [],
+    ),
+    (
+        "spec-gloss-spheres",
+        os.path.join(ROOT, "scenes", "spec-gloss", "spec_gloss.gltf"),
+        (0.0, 0.0, 10.0),
+        (0.0, 0.0, 0.0),
+        2.4,
+        330,
+        120,
+        [(-2.2, 0.0, 0.95), (0.0, 0.0, 0.95), (2.2, 0.0, 0.95)],
     ),
     (
         "BoxTextured-pbrSpecularGlossiness",
@@ -43,6 +56,7 @@ ASSETS = [
         2.4,
         240,
         240,
+        [],
     ),
 ]
 
@@ -129,7 +143,7 @@ def main():
     os.makedirs(args.out, exist_ok=True)
     print("| asset | Flowlight | Cycles | ratio | mean abs. difference / mean |")
     print("|---|---|---|---|---|")
-    for name, path, pos, target, ortho, w, h in ASSETS:
+    for name, path, pos, target, ortho, w, h, disks in ASSETS:
         if args.only and args.only != name:
             continue
         spec = (name, path, pos, target, ortho, w, h, args.spp, args.out)
@@ -138,6 +152,14 @@ def main():
         lf, lc = luminance(fl), luminance(cy)
         diff = np.abs(lf - lc).mean() / lc.mean()
         print(f"| {name} | {lf.mean():.4f} | {lc.mean():.4f} | {lf.mean() / lc.mean():.4f} | {diff:.4f} |")
+        # Disks in the image plane (orthographic: `ortho` world units over `h` pixels).
+        ys, xs = np.mgrid[0:h, 0:w]
+        px = ortho / h
+        wx, wy = (xs + 0.5 - w / 2) * px, (h / 2 - ys - 0.5) * px
+        for k, (cx, cy_, r) in enumerate(disks):
+            m = (wx - cx) ** 2 + (wy - cy_) ** 2 < r * r
+            a, b = lf[m].mean(), lc[m].mean()
+            print(f"| {name}, disk {k} | {a:.4f} | {b:.4f} | {a / b:.4f} | {np.abs(lf - lc)[m].mean() / b:.4f} |")
 
 
 if __name__ == "__main__":
