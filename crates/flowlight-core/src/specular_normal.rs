@@ -29,14 +29,27 @@
 //!
 //! Cycles bends only its glossy closures' normals and keeps the diffuse ones; Flowlight's
 //! BSDF has one shading frame for all its lobes (as for the clearcoat, see
-//! [`crate::material`]), so the bent normal is the frame of every lobe of the hit. The
-//! diffuse lobe moves only where the bend is active (grazing views against a steep tilt),
-//! and by the least angle; one frame keeps every lobe's sampling, density and value
-//! consistent with each other and with the samplers' side test by construction. It is
-//! applied to normal-mapped hits only ([`crate::mesh`]): interpolated vertex normals tilt by
-//! little, and scenes without normal maps render as before, bit for bit.
+//! [`crate::material`]), so a bent normal is the frame of every lobe of the hit. That is
+//! Cycles' behaviour exactly for a metal, which has no diffuse lobe, but not for a dielectric:
+//! bending a normal-mapped diffuse surface's frame changes its shading wherever the bend is
+//! active (a grazing view flattens every ridge tilted away from the viewer), and on the
+//! normal-mapped ground of `scenes/blender-showcase/lit.glb` that doubled the image's mean
+//! luminance. So the bend is applied where the metal dominates the hit: resolved metallic
+//! (factor × texture B) ≥ [`BEND_METALLIC`]. A dielectric keeps its mapped normal and loses
+//! the few reflections of its specular layer (F0 ≈ 0.04) that fall below the surface, as it
+//! did before. Only normal-mapped hits are considered ([`crate::mesh`]): interpolated vertex
+//! normals tilt by little, and scenes without normal maps render as before, bit for bit.
 
 use glam::Vec3;
+
+/// The resolved metallic value from which a normal-mapped hit's normal is bent (module docs).
+pub const BEND_METALLIC: f32 = 0.5;
+
+/// Whether a normal-mapped hit of resolved metallic `metallic` gets the bent normal.
+#[inline]
+pub fn bends_for_metallic(metallic: f32) -> bool {
+    metallic >= BEND_METALLIC
+}
 
 /// Height above the surface, as a cosine with n_g, that the reflection of `wo` about the
 /// bent normal reaches: min(0.9 (ω_o·n_g), 0.01).

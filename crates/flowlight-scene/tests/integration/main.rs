@@ -17,5 +17,6 @@ mod lights;
 mod malformed;
 mod materials;
 mod missing_textures;
+mod normal_bend;
 mod scenes;
 mod textures;
