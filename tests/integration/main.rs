@@ -34,6 +34,7 @@ mod hardening;
 mod instancing;
 mod lights;
 mod mmlt;
+mod multiscatter_furnace;
 mod orthographic;
 mod outsider;
 mod plugins;

@@ -16,6 +16,7 @@ pub mod sampler;
 pub mod sampling;
 pub mod sobol;
 pub mod spectrum;
+pub mod specular_normal;
 pub mod termination;
 
 pub use glam::{Vec2, Vec3};

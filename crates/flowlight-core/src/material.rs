@@ -26,8 +26,12 @@
 //!
 //! A [`TextureRef`] names a texture, the texture-coordinate set it reads (TEXCOORD_0 or _1)
 //! and the `KHR_texture_transform` of the reference, stored as the 2×3 matrix
-//! `M = T(offset) · R(rotation) · S(scale)` of the extension's specification, with
-//! `R = [[cos r, −sin r], [sin r, cos r]]`, so `uv' = M · (u, v, 1)`.
+//! `M = T(offset) · R(rotation) · S(scale)`, so `uv' = M · (u, v, 1)`, with
+//! `R = [[cos r, sin r], [−sin r, cos r]]`: the *transpose* of the matrix the extension's GLSL
+//! listing writes. That listing is a known erratum (KhronosGroup/glTF#1563): with `v` pointing
+//! down the image, its matrix turns the texture the other way from the one the extension's
+//! prose and its sample model (TextureTransformTest, whose arrows must point at the "correct"
+//! marker) mean, and three.js, Babylon.js and Blender's importer all use the transpose.
 //!
 //! # Resolving a material at a point
 //!
@@ -129,13 +133,15 @@ impl TextureRef {
         }
     }
 
-    /// Sets the `KHR_texture_transform` matrix `T(offset) · R(rotation) · S(scale)`.
+    /// Sets the `KHR_texture_transform` matrix `T(offset) · R(rotation) · S(scale)` with
+    /// `R = [[cos r, sin r], [−sin r, cos r]]` (the transpose of the extension's GLSL listing,
+    /// an erratum: see the module docs).
     pub fn with_transform(mut self, offset: [f32; 2], rotation: f32, scale: [f32; 2]) -> Self {
         let (s, c) = rotation.sin_cos();
         self.transform = [
             c * scale[0],
-            s * scale[0],
-            -s * scale[1],
+            -s * scale[0],
+            s * scale[1],
             c * scale[1],
             offset[0],
             offset[1],
@@ -255,6 +261,10 @@ pub struct Material {
     /// KHR_materials_clearcoat clearcoatRoughnessTexture (linear): G multiplies
     /// `clearcoat_roughness`.
     pub clearcoat_roughness_texture: TextureRef,
+    /// 1 when the metal's GGX reflection gets multiple-scattering energy compensation
+    /// (`[render] multiscatter`, [`crate::bsdf::multiscatter`]); 0 (default): single
+    /// scattering, as the glTF specification.
+    pub multiscatter: u32,
 }
 
 impl Default for Material {
@@ -290,6 +300,7 @@ impl Default for Material {
             specular_color_texture: TextureRef::NONE,
             clearcoat_texture: TextureRef::NONE,
             clearcoat_roughness_texture: TextureRef::NONE,
+            multiscatter: 0,
         }
     }
 }
@@ -733,16 +744,26 @@ mod tests {
         // Scale (0.5, 0.5) then offset (0.5, 0.5): uv (0.9, 0.1) → (0.95, 0.55) = texel (3, 2).
         let r = TextureRef::new(0, 0).with_transform([0.5, 0.5], 0.0, [0.5, 0.5]);
         assert_eq!(texel(&r, Vec2::new(0.9, 0.1)), 11);
-        // Rotation by 90°: (u, v) → (−v, u) by the extension's matrix; offset (1, 0) brings
-        // it back: uv (0.1, 0.6) → (0.4, 0.1) = texel (1, 0) = 1.
+        // Rotation by 90°: (u, v) → (v, −u) (the transpose of the extension's GLSL listing,
+        // KhronosGroup/glTF#1563); offset (0, 1) brings it back: uv (0.1, 0.6) → (0.6, 0.9) =
+        // texel (2, 3) = 14. The listing's own matrix, (u, v) → (−v, u), lands on (0.4, 0.1)
+        // (after REPEAT) = texel 1 instead.
         let r = TextureRef::new(0, 0).with_transform(
-            [1.0, 0.0],
+            [0.0, 1.0],
             std::f32::consts::FRAC_PI_2,
             [1.0, 1.0],
         );
         let c = r.coords([Vec2::new(0.1, 0.6), Vec2::ZERO]);
-        assert!((c - Vec2::new(0.4, 0.1)).length() < 1e-6, "{c}");
-        assert_eq!(texel(&r, Vec2::new(0.1, 0.6)), 1);
+        assert!((c - Vec2::new(0.6, 0.9)).length() < 1e-6, "{c}");
+        assert_eq!(texel(&r, Vec2::new(0.1, 0.6)), 14);
+        // Rotation with non-uniform scale, T · R · S: scale (0.5, 0.25) first, then rotate by
+        // 30°: (0.4, 0.8) → (0.2, 0.2) → (0.2 cos + 0.2 sin, −0.2 sin + 0.2 cos) + offset.
+        let r30 = std::f32::consts::FRAC_PI_6;
+        let r = TextureRef::new(0, 0).with_transform([0.1, 0.3], r30, [0.5, 0.25]);
+        let c = r.coords([Vec2::new(0.4, 0.8), Vec2::ZERO]);
+        let (s30, c30) = r30.sin_cos();
+        let want = Vec2::new(0.2 * c30 + 0.2 * s30 + 0.1, -0.2 * s30 + 0.2 * c30 + 0.3);
+        assert!((c - want).length() < 1e-6, "{c} vs {want}");
         // A texCoord override reads the second set.
         let r = TextureRef::new(0, 1);
         assert_eq!(

@@ -28,6 +28,7 @@
 
 use crate::geometry::{barycentric_error, gamma, Ray, SurfaceHit, TriangleHit};
 use crate::material::{Material, Texture};
+use crate::specular_normal::{bends_for_metallic, valid_specular_normal};
 use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
 
 /// What a batched ray query returns per ray (ABI 4): enough to rebuild the surface data.
@@ -413,6 +414,19 @@ impl<'a> MeshView<'a> {
                         mapped = -mapped;
                     }
                     ns = bend_towards_viewer(lift_above(mapped, ng), ng, -ray.dir);
+                    // A metal's mirror reflection of the viewer kept above the surface
+                    // (`specular_normal`'s module docs say why only a metal's).
+                    let metallic = self.materials.get(material as usize).map_or(0.0, |m| {
+                        let t = m
+                            .metallic_roughness_texture
+                            .sample(uv, self.textures, false);
+                        m.metallic * t.map_or(1.0, |t| t.z)
+                    });
+                    if let Some(wo) = (-ray.dir).try_normalize() {
+                        if bends_for_metallic(metallic) {
+                            ns = valid_specular_normal(ng, wo, ns);
+                        }
+                    }
                 }
             }
             if ns.dot(ng) < 0.0 {

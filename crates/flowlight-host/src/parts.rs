@@ -204,7 +204,20 @@ pub fn config_text(
         config.integrator_plugin,
         params.join(" "),
         config.material_overrides,
-    )
+    ) + &load_options_text(config)
+}
+
+/// The loading options that change the image, as lines of [`config_text`]; empty at their
+/// defaults, so the hash of every config without them stays what it was.
+fn load_options_text(config: &RenderConfig) -> String {
+    let mut t = String::new();
+    if config.multiscatter {
+        t += "multiscatter=true\n";
+    }
+    if config.missing_textures != flowlight_scene::MissingTextures::Error {
+        t += &format!("missing_textures={:?}\n", config.missing_textures);
+    }
+    t
 }
 
 /// FNV-1a of [`config_text`] followed by the bytes of the scene file and of the

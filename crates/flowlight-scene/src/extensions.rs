@@ -133,8 +133,8 @@ pub const KNOWN: &[Extension] = &[
     ),
     ext(
         "KHR_materials_unlit",
-        Status::Ignored,
-        "a path tracer lights every surface; unlit materials shade as lit ones",
+        Status::Supported,
+        "the surface emits its base colour (factor × texture) and scatters nothing; it casts light like any emitter (see the materials section)",
     ),
     ext(
         "KHR_materials_variants",
@@ -143,8 +143,8 @@ pub const KNOWN: &[Extension] = &[
     ),
     ext(
         "KHR_materials_pbrSpecularGlossiness",
-        Status::Ignored,
-        "archived extension; the metallic-roughness fallback is used",
+        Status::Supported,
+        "converted as KHR_materials_specular says: diffuse → base colour, specular → specular colour with ior 0 (F0 = specular), roughness 1 − glossiness, metallic 0 (see the materials section)",
     ),
     // Textures.
     ext(
@@ -159,8 +159,8 @@ pub const KNOWN: &[Extension] = &[
     ),
     ext(
         "EXT_texture_webp",
-        Status::Ignored,
-        "WebP images are not decoded; the fallback image is used when there is one",
+        Status::Supported,
+        "WebP images (lossy and lossless, with alpha) decoded with image-webp (pure Rust); the extension's source is used, the fallback image is not read",
     ),
     ext(
         "EXT_texture_avif",
@@ -191,9 +191,28 @@ pub const KNOWN: &[Extension] = &[
     ),
 ];
 
+/// Whether the loader supports extension `name` (a known one with [`Status::Supported`]).
+pub fn is_supported(name: &str) -> bool {
+    lookup(name).is_some_and(|e| e.status == Status::Supported)
+}
+
 /// The entry for `name`, if the loader knows it.
 pub fn lookup(name: &str) -> Option<&'static Extension> {
     KNOWN.iter().find(|e| e.name == name)
+}
+
+/// The refusal of a known extension that the file requires but the loader does not support:
+/// one line naming it. The note of an ignored extension is left out, since it says what
+/// happens when the extension is optional (a fallback used, a feature skipped), which is not
+/// what happens here; a refused extension's note says what to do instead, so it stays.
+fn required_unsupported(name: &str, e: &Extension) -> String {
+    let head = format!(
+        "extensionsRequired: the file requires extension {name}, which this renderer does not support"
+    );
+    match e.status {
+        Status::Refused => format!("{head} ({})", e.note),
+        _ => head,
+    }
 }
 
 /// Checks a file's `extensionsUsed` and `extensionsRequired`. Returns the warning lines to log
@@ -208,12 +227,7 @@ pub fn check(used: &[String], required: &[String]) -> Result<Vec<String>, String
                 ))
             }
             Some(e) if e.status == Status::Supported => {}
-            Some(e) => {
-                return Err(format!(
-                    "extensionsRequired: extension {name} is not supported ({})",
-                    e.note
-                ))
-            }
+            Some(e) => return Err(required_unsupported(name, e)),
         }
     }
     let mut warnings = Vec::new();
@@ -274,6 +288,22 @@ mod tests {
             e.contains("EXT_foo") && e.contains("extensionsRequired"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn an_ignored_required_extension_is_refused_in_one_line_without_its_fallback_note() {
+        for e in KNOWN.iter().filter(|e| e.status == Status::Ignored) {
+            let err = check(&s(&[e.name]), &s(&[e.name])).unwrap_err();
+            assert!(!err.contains('\n'), "{err}");
+            assert!(err.contains(e.name), "{err}");
+            assert!(
+                err.contains("requires") && err.contains("does not support"),
+                "{err}"
+            );
+            // The optional case's note ("the fallback image is used", "ignored") would
+            // contradict the refusal.
+            assert!(!err.contains(e.note), "{err}");
+        }
     }
 
     #[test]

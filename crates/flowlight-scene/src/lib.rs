@@ -10,10 +10,13 @@
 //! - [`compression`]: `EXT_meshopt_compression` buffer views;
 //! - [`extensions`]: the glTF extensions the loader knows, and the check of a file's list;
 //! - [`material`]: glTF materials to [`flowlight_core::material::Material`], overrides;
+//! - [`spec_gloss`], [`unlit`]: `KHR_materials_pbrSpecularGlossiness` and
+//!   `KHR_materials_unlit` converted to the metallic-roughness material;
 //! - [`texture`]: image decoding into compact texel storage, and samplers;
 //! - [`lights`]: punctual lights, the emission integral of emitters, the environment and the
 //!   power CDF over all lights;
 //! - [`config`]: the TOML render configuration;
+//! - [`load_options`]: what the config says about loading (missing textures, multiscatter);
 //! - [`error`]: the error types.
 
 pub mod accessor;
@@ -25,18 +28,22 @@ pub mod files;
 pub mod gltf_loader;
 pub mod instancing;
 pub mod lights;
+pub mod load_options;
 pub mod material;
 pub mod memory;
 pub mod scene;
 pub mod source;
+pub mod spec_gloss;
 pub mod texture;
+pub mod unlit;
 
 pub use config::{
     load_config, parse_config, CameraOverride, EnvironmentConfig, Intersector, RenderConfig,
     SampleBudget,
 };
 pub use error::{ConfigError, SceneError};
-pub use gltf_loader::load_gltf;
+pub use gltf_loader::{load_gltf, load_gltf_with};
+pub use load_options::{LoadOptions, MissingTextures};
 pub use material::{DiffuseChoice, MaterialOverride};
 pub use scene::{CameraDesc, CameraProjection, LoadStats, MeshInstance, MeshRange, Scene};
 pub use texture::{ImageData, Sampler, Texels, TextureData};

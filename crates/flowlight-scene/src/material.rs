@@ -303,7 +303,7 @@ pub fn convert(m: &gltf::Material) -> Result<Material, String> {
         let unknown: Vec<&str> = others
             .keys()
             .map(String::as_str)
-            .filter(|k| *k != "KHR_materials_clearcoat")
+            .filter(|k| !crate::extensions::is_supported(k))
             .collect();
         if !unknown.is_empty() {
             tracing::warn!(

@@ -120,6 +120,9 @@ pub struct LoadStats {
     pub singular_placements: usize,
     /// Images decoded (only those used by loaded materials).
     pub images_decoded: usize,
+    /// Textures dropped because their image file cannot be read (`[textures] missing =
+    /// "warn"`).
+    pub textures_dropped: usize,
     /// Triangles whose material has an emissive factor but whose emission integrates to zero
     /// (a black emissive texture there): not lights.
     pub black_emitters: usize,

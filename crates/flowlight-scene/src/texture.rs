@@ -1,5 +1,5 @@
-//! Image decoding (PNG and JPEG, from files, data URIs or buffer views) into compact texel
-//! storage, and glTF samplers.
+//! Image decoding (PNG, JPEG and WebP — `EXT_texture_webp` — from files, data URIs or buffer
+//! views) into compact texel storage, and glTF samplers.
 //!
 //! Images keep the precision and channel count they were decoded with: an 8-bit RGB image is
 //! 3 bytes per texel, 8-bit RGBA 4, grey 1, 16-bit images 2 bytes per channel, float images
@@ -185,6 +185,30 @@ pub fn decode_image(bytes: &[u8]) -> Result<ImageData, String> {
 
 /// Loads and decodes glTF image `image`.
 pub fn load_image(src: &mut GltfSource, image: &gltf::Image) -> Result<ImageData, SceneError> {
+    match load_image_or_unreadable(src, image)? {
+        Ok(d) => Ok(d),
+        Err(unreadable) => Err(SceneError::Image {
+            file: src.file.clone(),
+            image: image.index(),
+            reason: unreadable.reason,
+        }),
+    }
+}
+
+/// An image whose file could not be read (missing, unreadable): the file and why.
+#[derive(Clone, Debug)]
+pub struct UnreadableImage {
+    pub path: std::path::PathBuf,
+    /// "cannot read PATH: REASON", as [`load_image`]'s error says it.
+    pub reason: String,
+}
+
+/// [`load_image`], telling an image file that cannot be read (`Ok(Err(_))`, which
+/// `[textures] missing = "warn"` drops, [`crate::load_options`]) from every other failure.
+pub fn load_image_or_unreadable(
+    src: &mut GltfSource,
+    image: &gltf::Image,
+) -> Result<Result<ImageData, UnreadableImage>, SceneError> {
     let err = |src: &GltfSource, reason: String| SceneError::Image {
         file: src.file.clone(),
         image: image.index(),
@@ -196,16 +220,21 @@ pub fn load_image(src: &mut GltfSource, image: &gltf::Image) -> Result<ImageData
     if json.buffer_view.is_some() && json.mime_type.is_none() {
         return Err(err(
             src,
-            "it is stored in a bufferView but has no mimeType (the glTF spec requires \"image/png\" or \"image/jpeg\" there)".into(),
+            "it is stored in a bufferView but has no mimeType (the glTF spec requires \"image/png\", \"image/jpeg\" or, with EXT_texture_webp, \"image/webp\" there)".into(),
         ));
     }
     let bytes = match image.source() {
         gltf::image::Source::View { view, .. } => src.view_bytes(&view)?.to_vec(),
-        gltf::image::Source::Uri { uri, .. } => {
-            src.read_uri(uri).map_err(|e| err(src, e.to_string()))?
-        }
+        gltf::image::Source::Uri { uri, .. } => match src.read_uri(uri) {
+            Ok(b) => b,
+            Err(crate::source::UriError::Io(path, e)) => {
+                let reason = format!("cannot read {}: {e}", path.display());
+                return Ok(Err(UnreadableImage { path, reason }));
+            }
+            Err(e) => return Err(err(src, e.to_string())),
+        },
     };
-    decode_image(&bytes).map_err(|e| err(src, e))
+    decode_image(&bytes).map(Ok).map_err(|e| err(src, e))
 }
 
 #[cfg(test)]

@@ -21,6 +21,7 @@ mod dielectric;
 pub mod gltf;
 mod lambert;
 pub mod microfacet;
+pub mod multiscatter;
 mod oren_nayar;
 #[cfg(test)]
 mod testutil;
@@ -31,6 +32,7 @@ pub use dielectric::{fresnel_dielectric, refract, Dielectric, TransportMode};
 pub use gltf::{GltfLobe, GltfLobeKind, GltfParams};
 pub use lambert::Lambert;
 pub use microfacet::Ggx;
+pub use multiscatter::MultiScatter;
 pub use oren_nayar::OrenNayar;
 
 use crate::material::{DiffuseModel, Material};
@@ -44,8 +46,9 @@ use gltf::CoatAttenuation;
 pub const DELTA_ALPHA: f32 = 1e-3;
 /// GGX α below which a glossy lobe counts as narrow (Λα): no explicit light connection.
 pub const NARROW_GLOSSY_ALPHA: f32 = 0.05;
-/// Most components a [`Bsdf`] holds (glTF: coat, specular, diffuse, transmission).
-pub const MAX_COMPONENTS: usize = 4;
+/// Most components a [`Bsdf`] holds (glTF: coat, specular, diffuse, transmission, and the
+/// metal's multiple-scattering compensation).
+pub const MAX_COMPONENTS: usize = 5;
 
 /// One sampled direction.
 #[derive(Clone, Copy, Debug)]
@@ -77,6 +80,8 @@ pub enum Component {
     Dielectric(Dielectric),
     /// A lobe of the glTF material.
     Gltf(GltfLobe),
+    /// The metal's multiple-scattering compensation ([`multiscatter`]).
+    MultiScatter(MultiScatter),
 }
 
 impl Component {
@@ -88,6 +93,7 @@ impl Component {
             Component::Conductor(c) => c.eval(wo, wi),
             Component::Dielectric(c) => c.eval(wo, wi),
             Component::Gltf(c) => c.eval(wo, wi),
+            Component::MultiScatter(c) => c.eval(wo, wi),
         }
     }
     #[inline]
@@ -98,6 +104,7 @@ impl Component {
             Component::Conductor(c) => c.pdf(wo, wi),
             Component::Dielectric(c) => c.pdf(wo, wi),
             Component::Gltf(c) => c.pdf(wo, wi),
+            Component::MultiScatter(c) => c.pdf(wo, wi),
         }
     }
     /// `(eval, pdf)` at once, sharing what the two compute alike (the half vector, D and
@@ -117,6 +124,7 @@ impl Component {
             Component::Conductor(c) => c.eval_pdf(wo, wi),
             Component::Dielectric(c) => c.eval_pdf(wo, wi),
             Component::Gltf(c) => c.eval_pdf_with(wo, wi, coat),
+            Component::MultiScatter(c) => c.eval_pdf(wo, wi),
         }
     }
 
@@ -147,6 +155,7 @@ impl Component {
             Component::Conductor(c) => c.sample(wo, u),
             Component::Dielectric(c) => c.sample(wo, u),
             Component::Gltf(c) => c.sample(wo, u),
+            Component::MultiScatter(c) => c.sample(wo, u),
         }
     }
     /// Samples with an extra uniform `uc` for the discrete reflect/refract choice (only the
@@ -173,13 +182,14 @@ impl Component {
             Component::Conductor(c) => c.albedo(),
             Component::Dielectric(c) => c.albedo(),
             Component::Gltf(c) => c.albedo,
+            Component::MultiScatter(c) => c.albedo,
         }
     }
     /// True for a Dirac lobe (smooth mirror or smooth glass).
     #[inline]
     pub fn is_delta(&self) -> bool {
         match self {
-            Component::Lambert(_) | Component::OrenNayar(_) => false,
+            Component::Lambert(_) | Component::OrenNayar(_) | Component::MultiScatter(_) => false,
             Component::Conductor(c) => c.is_delta(),
             Component::Dielectric(c) => c.is_delta(),
             Component::Gltf(c) => c.is_delta(),
@@ -216,7 +226,10 @@ impl Component {
     #[inline]
     pub fn reflects_only(&self) -> bool {
         match self {
-            Component::Lambert(_) | Component::OrenNayar(_) | Component::Conductor(_) => true,
+            Component::Lambert(_)
+            | Component::OrenNayar(_)
+            | Component::Conductor(_)
+            | Component::MultiScatter(_) => true,
             Component::Dielectric(_) => false,
             Component::Gltf(c) => matches!(
                 c.kind,
@@ -239,6 +252,7 @@ impl Component {
             Component::Lambert(_) | Component::OrenNayar(_) => return NodeClass::Beta,
             Component::Conductor(c) => c.alpha,
             Component::Dielectric(c) => c.alpha,
+            Component::MultiScatter(c) => c.alpha,
             Component::Gltf(c) => match c.class_alpha() {
                 Some(a) => a,
                 None => return NodeClass::Beta,
@@ -354,7 +368,11 @@ impl Bsdf {
             oren_nayar_sigma: if sigma.is_finite() { sigma } else { 0.0 },
         };
         let (lobes, n) = gltf::lobes(&p);
-        Bsdf::from_gltf_lobes(&lobes[..n])
+        let bsdf = Bsdf::from_gltf_lobes(&lobes[..n]);
+        if m.multiscatter != 0 {
+            return bsdf.with_multiscatter(&p);
+        }
+        bsdf
     }
 
     /// A mixture of glTF lobes with their weights (as [`gltf::lobes`] returns them).

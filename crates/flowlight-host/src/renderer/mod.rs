@@ -11,7 +11,7 @@ use flowlight_core::camera::Camera;
 use flowlight_core::material::Texture;
 use flowlight_scene::config::{load_config, RenderConfig};
 use flowlight_scene::lights::{light_power_cdf, light_presence, load_environment, EnvironmentData};
-use flowlight_scene::{load_gltf, Scene};
+use flowlight_scene::{load_gltf_with, Scene};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
@@ -102,7 +102,7 @@ impl Renderer {
         crate::render::check_memory(config.width, config.height, 0, precision, 0)
             .map_err(|msg| memory_error(&config, msg))?;
         let t0 = Instant::now();
-        let scene = load_gltf(&config.scene, &config.material_overrides)?;
+        let scene = load_gltf_with(&config.scene, &config.load_options())?;
         let load_time = t0.elapsed();
         let camera = config.camera(&scene)?;
         tracing::debug!(?camera, "camera");

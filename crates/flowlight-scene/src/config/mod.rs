@@ -21,6 +21,7 @@
 //! precision = "exact"     # frame sums: "exact" (fixed point) | "f32" (a quarter the memory)
 //! accumulation_cache_mib = 16.0   # Caching: all threads' micro-tile caches together
 //! flange = 16         # Blasting: pixels around a unit's tile, or "screen" (default: the integrator's)
+//! multiscatter = false  # GGX multiple-scattering energy compensation (docs/config.md)
 //! [camera]            # optional (see "Cameras" below)
 //! name = "Camera"     # or index = 0: which glTF camera (default: the first camera node)
 //! position = [0.278, 0.273, -0.8]
@@ -40,6 +41,8 @@
 //! color = [0.8, 0.9, 1.0]         # constant radiance, or map = "sky.exr" / "sky.hdr"
 //! strength = 1.0                  # multiplies either
 //! rotation_degrees = 0.0          # turns the map about +Y
+//! [textures]
+//! missing = "error"   # or "warn": drop a texture whose image file cannot be read
 //! [materials.white]
 //! diffuse = "oren-nayar"          # or "lambert"
 //! sigma_degrees = 20.0
@@ -50,6 +53,7 @@
 //! the config and the scene.
 
 use crate::error::ConfigError;
+use crate::load_options::{LoadOptions, MissingTextures};
 use crate::material::MaterialOverride;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -149,6 +153,10 @@ pub struct RenderConfig {
     pub material_overrides: BTreeMap<String, MaterialOverride>,
     /// `[environment]`, when the file has one.
     pub environment: Option<EnvironmentConfig>,
+    /// `[textures] missing`: what a texture whose image file cannot be read does.
+    pub missing_textures: MissingTextures,
+    /// `[render] multiscatter`: GGX multiple-scattering energy compensation (default off).
+    pub multiscatter: bool,
 }
 /// Parses `render.accumulation`.
 pub fn parse_accumulation(s: &str) -> Result<Accumulation, String> {
@@ -230,6 +238,15 @@ impl RenderConfig {
     }
 }
 impl RenderConfig {
+    /// What the config says about loading the scene ([`crate::load_gltf_with`]).
+    pub fn load_options(&self) -> LoadOptions<'_> {
+        LoadOptions {
+            overrides: &self.material_overrides,
+            missing_textures: self.missing_textures,
+            multiscatter: self.multiscatter,
+        }
+    }
+
     /// The integrator parameter `key`, if the config sets it.
     pub fn integrator_param(&self, key: &str) -> Option<&toml::Value> {
         self.integrator_params

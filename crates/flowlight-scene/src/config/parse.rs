@@ -30,6 +30,15 @@ struct RawConfig {
     #[serde(default)]
     materials: BTreeMap<String, MaterialOverride>,
     environment: Option<RawEnvironment>,
+    #[serde(default)]
+    textures: RawTextures,
+}
+
+/// `[textures]`.
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawTextures {
+    missing: Option<String>,
 }
 
 #[derive(Deserialize)]
@@ -99,6 +108,8 @@ struct RawRender {
     #[serde(default = "default_cache_mib")]
     accumulation_cache_mib: f64,
     flange: Option<toml::Value>,
+    #[serde(default)]
+    multiscatter: bool,
 }
 
 impl Default for RawRender {
@@ -118,6 +129,7 @@ impl Default for RawRender {
             precision: default_precision(),
             accumulation_cache_mib: default_cache_mib(),
             flange: None,
+            multiscatter: false,
         }
     }
 }
@@ -284,6 +296,11 @@ pub fn parse_config(path: &Path, text: &str) -> Result<RenderConfig, ConfigError
         .as_ref()
         .map(|e| environment(e, &invalid, &resolve))
         .transpose()?;
+    let missing_textures = match raw.textures.missing.as_deref() {
+        None => crate::load_options::MissingTextures::Error,
+        Some(v) => crate::load_options::MissingTextures::parse(v)
+            .map_err(|e| invalid("textures.missing", e))?,
+    };
     let stem = path
         .file_stem()
         .map_or_else(|| "render".into(), |s| s.to_string_lossy().into_owned());
@@ -317,6 +334,8 @@ pub fn parse_config(path: &Path, text: &str) -> Result<RenderConfig, ConfigError
             .collect(),
         material_overrides: raw.materials,
         environment,
+        missing_textures,
+        multiscatter: r.multiscatter,
         base_dir,
     })
 }

@@ -85,6 +85,8 @@ impl Loader<'_> {
             mat.occlusion_texture = r;
         }
         self.extension_textures(m, &mut mat, &name)?;
+        self.other_shading_models(m, &mut mat, &name)?;
+        mat.multiscatter = self.multiscatter as u32;
         if let Some(o) = self.overrides.get(&name) {
             o.validate()
                 .map_err(|e| merr(self.file(), format!("config override: {e}")))?;

@@ -34,6 +34,7 @@
 //!   order; the render config picks one ([`crate::config`], default: the first).
 
 use crate::error::SceneError;
+use crate::load_options::{LoadOptions, MissingTextures};
 use crate::material::MaterialOverride;
 use crate::scene::Scene;
 use crate::source::GltfSource;
@@ -46,6 +47,7 @@ mod emitters;
 mod limits;
 mod materials;
 mod nodes;
+mod other_models;
 mod primitive;
 mod tangents;
 mod textures;
@@ -56,16 +58,22 @@ pub use limits::{
 };
 
 /// Loads a `.gltf` (with external buffers or data URIs) or `.glb` file. `overrides` maps
-/// material names to diffuse-model overrides (from the render config).
+/// material names to diffuse-model overrides (from the render config); every other
+/// [`LoadOptions`] value is its default.
 ///
 /// Never panics on malformed input: every failure is a [`SceneError`] naming the file.
 pub fn load_gltf(
     path: &Path,
     overrides: &BTreeMap<String, MaterialOverride>,
 ) -> Result<Scene, SceneError> {
+    load_gltf_with(path, &LoadOptions::with_overrides(overrides))
+}
+
+/// [`load_gltf`] with every option of the render config ([`LoadOptions`]).
+pub fn load_gltf_with(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
     // Everything below validates before it indexes; the unwind guard is a last resort so
     // that a bug or an unforeseen input in a dependency still reports instead of aborting.
-    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| load_inner(path, overrides))) {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| load_inner(path, options))) {
         Ok(r) => r,
         Err(payload) => {
             let reason = payload
@@ -87,6 +95,10 @@ pub fn load_gltf(
 struct Loader<'a> {
     src: GltfSource,
     overrides: &'a BTreeMap<String, MaterialOverride>,
+    /// `[textures] missing`: refuse the file, or drop a texture whose image cannot be read.
+    missing_textures: MissingTextures,
+    /// `[render] multiscatter`, set on every material.
+    multiscatter: bool,
     scene: Scene,
     /// glTF material index (None = default material) to scene material index.
     material_map: HashMap<Option<usize>, u32>,
@@ -104,14 +116,13 @@ struct Loader<'a> {
     any_tangent: bool,
 }
 
-fn load_inner(
-    path: &Path,
-    overrides: &BTreeMap<String, MaterialOverride>,
-) -> Result<Scene, SceneError> {
+fn load_inner(path: &Path, options: &LoadOptions) -> Result<Scene, SceneError> {
     let src = GltfSource::open(path)?;
     let mut loader = Loader {
         src,
-        overrides,
+        overrides: options.overrides,
+        missing_textures: options.missing_textures,
+        multiscatter: options.multiscatter,
         scene: Scene::default(),
         material_map: HashMap::new(),
         image_map: HashMap::new(),

@@ -4,7 +4,8 @@
 
 use super::Loader;
 use crate::error::SceneError;
-use crate::texture::{load_image, Sampler, TextureData};
+use crate::load_options::MissingTextures;
+use crate::texture::{load_image_or_unreadable, Sampler, TextureData, UnreadableImage};
 use flowlight_core::material::TextureRef;
 
 /// A `KHR_texture_transform` as read from the file.
@@ -70,13 +71,24 @@ impl Loader<'_> {
         material: &str,
     ) -> Result<TextureRef, SceneError> {
         let index = match self.texture_map.get(&tex.index()) {
+            // A texture dropped because its image file cannot be read (warned already).
+            Some(&t) if t < 0 => return Ok(TextureRef::NONE),
             Some(&t) => t,
             None => {
-                let image = tex.source();
+                let doc = self.src.document.clone();
+                let image = doc
+                    .images()
+                    .nth(self.texture_image(tex, material)?)
+                    .expect("image index checked");
                 let data = match self.image_map.get(&image.index()) {
                     Some(d) => d.clone(),
                     None => {
-                        let d = load_image(&mut self.src, &image)?;
+                        let d = match load_image_or_unreadable(&mut self.src, &image)? {
+                            Ok(d) => d,
+                            Err(unreadable) => {
+                                return self.drop_unreadable(tex, &image, unreadable, material)
+                            }
+                        };
                         self.scene.stats.images_decoded += 1;
                         self.image_map.insert(image.index(), d.clone());
                         d
@@ -113,5 +125,64 @@ impl Loader<'_> {
             r.tex_coord = 1;
         }
         Ok(r)
+    }
+
+    /// A texture whose image file cannot be read: an error naming it (the default), or with
+    /// `[textures] missing = "warn"` no texture and one warning line naming the file
+    /// ([`crate::load_options`]).
+    fn drop_unreadable(
+        &mut self,
+        tex: &gltf::Texture,
+        image: &gltf::Image,
+        unreadable: UnreadableImage,
+        material: &str,
+    ) -> Result<TextureRef, SceneError> {
+        if self.missing_textures == MissingTextures::Error {
+            return Err(SceneError::Image {
+                file: self.file(),
+                image: image.index(),
+                reason: unreadable.reason,
+            });
+        }
+        tracing::warn!(
+            file = %self.src.file.display(),
+            "material '{material}': texture {} dropped: {} ([textures] missing = \"warn\")",
+            tex.index(),
+            unreadable.reason
+        );
+        self.scene.stats.textures_dropped += 1;
+        self.texture_map.insert(tex.index(), -1);
+        Ok(TextureRef::NONE)
+    }
+
+    /// The index of the image texture `tex` shows: the `EXT_texture_webp` source where the texture has one
+    /// (WebP is decoded, and the core `source` is then only a fallback for viewers without the
+    /// extension, or absent), else the core `source`; an error naming the texture when it has
+    /// neither.
+    fn texture_image(&self, tex: &gltf::Texture, material: &str) -> Result<usize, SceneError> {
+        let err = |reason: String| SceneError::Material {
+            file: self.file(),
+            material: material.to_string(),
+            reason: format!("texture {}: {reason}", tex.index()),
+        };
+        if let Some(webp) = tex.extension_value("EXT_texture_webp") {
+            let index = webp
+                .get("source")
+                .and_then(|i| i.as_u64())
+                .and_then(|i| usize::try_from(i).ok())
+                .ok_or_else(|| {
+                    err("EXT_texture_webp.source is missing or not a non-negative integer".into())
+                })?;
+            let count = self.src.document.images().len();
+            if index >= count {
+                return Err(err(format!(
+                    "EXT_texture_webp.source = {index} is out of range ({count} images)"
+                )));
+            }
+            return Ok(index);
+        }
+        tex.source()
+            .map(|i| i.index())
+            .ok_or_else(|| err("has no source image (and no EXT_texture_webp source)".into()))
     }
 }

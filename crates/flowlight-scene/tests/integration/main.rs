@@ -8,6 +8,7 @@ mod common;
 
 mod cameras;
 mod config;
+mod converted_materials;
 mod extensions_doc;
 mod fuzz;
 mod geometry;
@@ -15,5 +16,7 @@ mod instancing;
 mod lights;
 mod malformed;
 mod materials;
+mod missing_textures;
+mod normal_bend;
 mod scenes;
 mod textures;

@@ -113,8 +113,11 @@ fn normal_map_tilts_the_shading_normal_by_the_known_angle() {
     let (q, dx, _) = normal_map_quad(None, 0.0);
     assert!((hit(&load(&q, "scale0"), 0.25, 0.6).ns - Vec3::Z).length() < 1e-6);
     let (q, _, _) = normal_map_quad(None, 2.0);
-    let h = hit(&load(&q, "scale2"), 0.25, 0.6);
     let want = Vec3::new(2.0 * dx.x, 2.0 * dx.y, dx.z).normalize();
+    // Seen along the normal itself: from straight above, the mirror reflection about this
+    // 49° tilt would fall below the surface and the normal would be bent back
+    // (`flowlight_core::specular_normal`).
+    let h = hit_from(&load(&q, "scale2"), 0.25, 0.6, want);
     assert!((h.ns - want).length() < 1e-5, "{} vs {want}", h.ns);
 }
 
@@ -424,10 +427,19 @@ fn a_normal_map_below_the_surface_is_lifted_to_the_horizon_not_mirrored() {
         ..Quad::default()
     };
     let sc = load(&q, "below");
-    // Seen from +X (so the bend towards the viewer leaves it alone), it stays tilted to +X
-    // and just above the horizon.
-    let h = hit_from(&sc, 0.5, 0.3, Vec3::new(1.0, 0.0, 1.0));
-    assert!(h.ns.x > 0.99 && h.ns.z > 0.0 && h.ns.z < 0.01, "{}", h.ns);
+    // Seen from +X (so the bend towards the viewer leaves it alone), it stays tilted to +X,
+    // lifted above the horizon; the mirror reflection of the viewer about a normal at the
+    // horizon would fall below the surface, so it is then turned up just enough to keep that
+    // reflection at the height min(0.9 cos θ_o, 0.01) (`flowlight_core::specular_normal`).
+    let wo = Vec3::new(1.0, 0.0, 1.0).normalize();
+    let h = hit_from(&sc, 0.5, 0.3, wo);
+    assert!(
+        h.ns.x > 0.7 && h.ns.z > 0.0 && h.ns.y.abs() < 0.01,
+        "{}",
+        h.ns
+    );
+    let reflected = h.ns * (2.0 * h.ns.dot(wo)) - wo;
+    assert!((reflected.z - 0.01).abs() < 1e-3, "{reflected}");
 }
 
 /// An emissive texture that is black over the quad's upper-left triangle (u + v < 1) and white
