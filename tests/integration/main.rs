@@ -41,3 +41,4 @@ mod pssmlt;
 mod ray_batches;
 mod sampler;
 mod stability;
+mod thin_lens;

@@ -17,6 +17,7 @@ pub mod sampling;
 pub mod sobol;
 pub mod spectrum;
 pub mod termination;
+pub mod thin_lens;
 
 pub use glam::{Vec2, Vec3};
 pub use spectrum::Rgb;

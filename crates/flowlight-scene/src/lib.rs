@@ -38,5 +38,7 @@ pub use config::{
 pub use error::{ConfigError, SceneError};
 pub use gltf_loader::load_gltf;
 pub use material::{DiffuseChoice, MaterialOverride};
-pub use scene::{CameraDesc, CameraProjection, LoadStats, MeshInstance, MeshRange, Scene};
+pub use scene::{
+    CameraDesc, CameraProjection, LoadStats, MeshInstance, MeshRange, NamedNode, Scene,
+};
 pub use texture::{ImageData, Sampler, Texels, TextureData};

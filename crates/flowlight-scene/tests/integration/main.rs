@@ -12,6 +12,7 @@ mod extensions_doc;
 mod fuzz;
 mod geometry;
 mod instancing;
+mod lens;
 mod lights;
 mod malformed;
 mod materials;
