@@ -33,6 +33,7 @@ mod gltf_material;
 mod hardening;
 mod instancing;
 mod lights;
+mod live_preview;
 mod mmlt;
 mod orthographic;
 mod outsider;
