@@ -7,8 +7,8 @@
 //! - **Pinhole limit.** As the aperture goes to 0 the image converges to the pinhole's: its
 //!   distance to it falls to the noise floor of two pinhole renders; a zero aperture is the
 //!   pinhole bit for bit.
-//! - **Agreement.** BDPT and light tracing (eye connections through a sampled lens point)
-//!   and ERPT with Veach's perturbations (which keep the lens point) match MCPT under a lens on
+//! - **Agreement.** BDPT and light tracing (eye connections through a sampled lens point),
+//!   PSSMLT over MCPT and over BDPT (the lens pair from the camera stream) and ERPT with Veach's perturbations (which keep the lens point) match MCPT under a lens on
 //!   the Cornell box, per 8×8 region and in the image mean; the perturbations keep detailed
 //!   balance and the lens point on the glass caustic.
 //!
@@ -277,6 +277,37 @@ fn bdpt_and_light_tracing_match_mcpt_under_a_thin_lens() {
         });
         let label = format!("lens {plugin}");
         assert_regions_unbiased(&label, &images, reference);
+        assert_image_mean(&label, &images, reference, MeanRule::Z(5.0));
+        let (s, se) = towards_pinhole(&images, reference, &pinhole);
+        assert!(
+            s.abs() < 0.1 && s.abs() < 5.0 * se.max(0.004),
+            "{label}: moved {s:.3} ± {se:.3} of the way to the pinhole image"
+        );
+    }
+}
+
+/// The primary-sample-space samplers draw the lens point from the camera stream's pair after
+/// the raster position: PSSMLT over MCPT and over BDPT, short runs, against MCPT under a lens.
+#[test]
+fn pssmlt_matches_mcpt_under_a_thin_lens() {
+    let reference = cornell_lens_reference();
+    let pinhole = cornell(None, 1024, 78, None);
+    for sampler in ["mcpt", "bdpt"] {
+        let params = [
+            ("path_depth", toml::Value::Integer(8)),
+            ("bootstrap", toml::Value::Integer(256)),
+            ("sampler", toml::Value::String(sampler.into())),
+        ];
+        let (images, _) = independent_runs(sampler, 16, 7000, &|| {
+            lens_renderer(
+                "cornell-box/cornell-box.toml",
+                Some("pssmlt"),
+                8,
+                &params,
+                Some(LENS),
+            )
+        });
+        let label = format!("lens pssmlt/{sampler}");
         assert_image_mean(&label, &images, reference, MeanRule::Z(5.0));
         let (s, se) = towards_pinhole(&images, reference, &pinhole);
         assert!(
