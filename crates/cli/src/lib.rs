@@ -18,6 +18,7 @@ mod bench;
 mod compare;
 mod conformance;
 mod cpu_time;
+mod live;
 mod merge;
 mod new_plugin;
 mod part_args;
@@ -76,6 +77,14 @@ enum Command {
         /// Render samples A..B (B exclusive) of every pixel, for `flowlight merge`.
         #[arg(long, value_name = "A..B", conflicts_with = "time")]
         samples: Option<String>,
+        /// Stream the film to a running tev while rendering (default address
+        /// 127.0.0.1:14158; put the flag after the config, or write --tev=HOST:PORT).
+        #[arg(long, value_name = "HOST:PORT", num_args = 0..=1,
+              default_missing_value = flowlight_host::output::tev::DEFAULT_ADDRESS)]
+        tev: Option<String>,
+        /// Rewrite the PNG preview every SECONDS while rendering (atomically).
+        #[arg(long, value_name = "SECONDS")]
+        preview_every: Option<f64>,
     },
     /// Merge the parts of a distributed render (`render --part` / `--samples`) into one EXR.
     Merge {
@@ -267,6 +276,8 @@ pub fn main() {
             quiet,
             part,
             samples,
+            tev,
+            preview_every,
         } => match parse_sets(&set) {
             Ok(params) => {
                 let ov = flowlight_host::renderer::Overrides {
@@ -281,7 +292,11 @@ pub fn main() {
                     part: part.as_deref(),
                     samples: samples.as_deref(),
                 };
-                render::run(&config, &ov, quiet, part)
+                let live = render::LiveFlags {
+                    tev: tev.as_deref(),
+                    preview_every,
+                };
+                render::run(&config, &ov, quiet, part, live)
             }
             Err(e) => Err(e),
         },

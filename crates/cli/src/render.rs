@@ -15,7 +15,20 @@ pub struct PartFlags<'a> {
     pub samples: Option<&'a str>,
 }
 
-pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlags) -> Result<()> {
+/// `--tev [HOST:PORT]` / `--preview-every SECONDS` (`flowlight_host::output::live`).
+#[derive(Clone, Copy, Default)]
+pub struct LiveFlags<'a> {
+    pub tev: Option<&'a str>,
+    pub preview_every: Option<f64>,
+}
+
+pub fn run(
+    config: &std::path::Path,
+    ov: &Overrides,
+    quiet: bool,
+    part: PartFlags,
+    live: LiveFlags,
+) -> Result<()> {
     if let Some(t) = ov.time {
         if !(t > 0.0 && t.is_finite()) {
             return Err(anyhow!(
@@ -25,6 +38,13 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
     }
     if ov.spp == Some(0) {
         return Err(anyhow!("--spp must be at least 1"));
+    }
+    if let Some(s) = live.preview_every {
+        if !(s > 0.0 && s.is_finite()) {
+            return Err(anyhow!(
+                "--preview-every must be a positive number of seconds, got {s}"
+            ));
+        }
     }
     let mut renderer = Renderer::prepare(config, ov).map_err(|e| anyhow!(e))?;
     crate::part_args::apply(&mut renderer, part.part, part.samples, ov.out.is_some())?;
@@ -106,6 +126,14 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
             bar.set_position(p.pixel_samples);
         }
     };
+    let preview = crate::live::start(&renderer, live)?;
+    let progress = |p: &flowlight_host::render::Progress| {
+        progress(p);
+        // A unit that finds another thread refreshing the preview goes on.
+        if let Some(Ok(mut preview)) = preview.as_ref().map(|m| m.try_lock()) {
+            preview.update(p);
+        }
+    };
     let cpu0 = crate::cpu_time::process_cpu_time();
     let outcome = renderer.render(&stop, &progress).map_err(|e| anyhow!(e))?;
     let cpu = crate::cpu_time::process_cpu_time()
@@ -117,6 +145,10 @@ pub fn run(config: &std::path::Path, ov: &Overrides, quiet: bool, part: PartFlag
         return Err(anyhow!("{e}; nothing was written"));
     }
 
+    if let Some(preview) = preview {
+        let mut preview = preview.into_inner().unwrap_or_else(|e| e.into_inner());
+        preview.finish(&outcome.frame.image());
+    }
     let s = &outcome.stats;
     let secs = s.wall.as_secs_f64().max(1e-9);
     let peak_render = crate::cpu_time::peak_resident_bytes();

@@ -25,7 +25,9 @@
 //! every raster position of a pinhole, a point on the film plane for an orthographic camera.
 //! In the film (raster-area) measure both projections have the constant importance
 //! 1 / (pixel area), so path estimates and Markov-chain target functions need no camera
-//! factor (Veach 1997, §8.2; pbrt-v4 §5.1–5.2 for the two projections).
+//! factor (Veach 1997, §8.2; pbrt-v4 §5.1–5.2 for the two projections). A perspective
+//! camera with a lens (`lens_radius > 0`) starts its rays at a point on the lens instead of
+//! the pinhole: [`crate::thin_lens`], where everything below holds with the eye at that point.
 //!
 //! ## Importance: connecting light paths to the eye
 //!
@@ -128,6 +130,12 @@ pub struct Camera {
     pub projection: u32,
     pub width: u32,
     pub height: u32,
+    /// Radius of a perspective camera's thin lens in world units; 0 (and anything not
+    /// positive) is the pinhole ([`crate::thin_lens`]). Orthographic cameras ignore it.
+    pub lens_radius: f32,
+    /// Distance along `forward` from the lens to the plane in focus (world units); used only
+    /// with a lens.
+    pub focus_distance: f32,
 }
 
 /// Right-handed orthonormal frame (forward, right, up) from a forward and an approximate up.
@@ -159,6 +167,8 @@ impl Camera {
             projection: Projection::Perspective.code(),
             width,
             height,
+            lens_radius: 0.0,
+            focus_distance: 0.0,
         }
     }
 
@@ -184,6 +194,8 @@ impl Camera {
             projection: Projection::Orthographic.code(),
             width,
             height,
+            lens_radius: 0.0,
+            focus_distance: 0.0,
         }
     }
 
@@ -203,7 +215,7 @@ impl Camera {
 
     /// Normalised device coordinates (u, v) ∈ [−1, 1]² of a raster position (module docs).
     #[inline]
-    fn ndc(&self, raster: Vec2) -> Vec2 {
+    pub(crate) fn ndc(&self, raster: Vec2) -> Vec2 {
         Vec2::new(
             2.0 * raster.x / self.width as f32 - 1.0,
             1.0 - 2.0 * raster.y / self.height as f32,
@@ -212,7 +224,7 @@ impl Camera {
 
     /// Raster position of normalised device coordinates; `None` off the film.
     #[inline]
-    fn raster_of(&self, ndc: Vec2) -> Option<Vec2> {
+    pub(crate) fn raster_of(&self, ndc: Vec2) -> Option<Vec2> {
         let raster = Vec2::new(
             (ndc.x + 1.0) * 0.5 * self.width as f32,
             (1.0 - ndc.y) * 0.5 * self.height as f32,
@@ -227,7 +239,7 @@ impl Camera {
     /// Half extents of the view: tan of the half angles (perspective) or world units
     /// (orthographic), horizontal then vertical.
     #[inline]
-    fn half_extent(&self) -> Vec2 {
+    pub(crate) fn half_extent(&self) -> Vec2 {
         let h = match self.kind() {
             Projection::Perspective => self.tan_half_fov_y,
             Projection::Orthographic => self.ortho_half_height,

@@ -18,6 +18,7 @@ pub mod sobol;
 pub mod spectrum;
 pub mod specular_normal;
 pub mod termination;
+pub mod thin_lens;
 
 pub use glam::{Vec2, Vec3};
 pub use spectrum::Rgb;

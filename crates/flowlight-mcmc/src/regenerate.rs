@@ -477,8 +477,9 @@ pub fn propose_with(
     y.raster = raster;
     y.film_window = x.film_window;
     y.contribution = x.contribution;
-    // The eye vertex moves with the raster position on an orthographic film.
-    let eye_ray = scene.camera.generate_ray(y.raster);
+    // The eye vertex moves with the raster position on an orthographic film; a lens point is
+    // kept (`flowlight_core::thin_lens`, "Markov chains").
+    let eye_ray = scene.camera.ray_from_eye(y.raster, xv[0].p);
     y.vertices[0] = PathVertex::eye(eye_ray.origin, scene.camera.forward);
     let Some((mut jx, mut jy)) =
         trace_chain(scene, tracer, chains, eye_ray, eye_ray.origin, xv, 1, y, 1)
@@ -802,6 +803,10 @@ pub fn density_with(
     // A move and its reverse follow one rule (module docs).
     let chains = Chains::of(scene, policy, xv);
     if Chains::of(scene, policy, yv) != chains {
+        return 0.0;
+    }
+    // Proposals keep the lens point (`flowlight_core::thin_lens`, "Markov chains").
+    if scene.camera.has_lens() && xv[0].p != yv[0].p {
         return 0.0;
     }
     if chains == Chains::Fixed

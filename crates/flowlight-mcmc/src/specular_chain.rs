@@ -276,11 +276,12 @@ fn trace_chain(
     }
     let yd = y.vertices[d];
     if d == 1 {
-        let raster = scene.camera.project(yd.p)?;
+        // Seen from x's eye vertex: a lens point is kept (`flowlight_core::thin_lens`).
+        let raster = scene.camera.project_from_eye(xv[0].p, yd.p)?;
         if !in_window(raster, x.raster, x.film_window) {
             return None;
         }
-        let eye_ray = scene.camera.generate_ray(raster);
+        let eye_ray = scene.camera.ray_from_eye(raster, xv[0].p);
         let eye = PathVertex::eye(eye_ray.origin, scene.camera.forward);
         let shadow = yd.surface().spawn_ray_to(eye.p, Vec3::ZERO, eye.ng);
         if tracer.occluded(&shadow) {
@@ -320,6 +321,10 @@ pub fn density(scene: &Scene, cone: &ExpCone, x: &Path, y: &Path) -> f64 {
         return 0.0;
     }
     if xv[1..d].iter().zip(&yv[1..d]).any(|(a, b)| a.p != b.p) {
+        return 0.0;
+    }
+    // A lens point is kept (`flowlight_core::thin_lens`, "Markov chains").
+    if scene.camera.has_lens() && xv[0].p != yv[0].p {
         return 0.0;
     }
     if d == 1 {

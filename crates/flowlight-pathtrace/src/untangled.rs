@@ -135,8 +135,9 @@ pub fn trace<S: SampleStream>(
         value: Rgb::ZERO,
         layer: 0,
     };
-    let mut ray = camera.generate_ray(raster);
-    // The ray's origin: the pinhole, or this raster position's point on an orthographic film.
+    let mut ray = camera.sample_ray(raster, rng);
+    // The ray's origin: the pinhole, the lens point, or this raster position's point on an
+    // orthographic film.
     let eye = PathVertex::eye(ray.origin, camera.forward);
     rec.push(eye);
 

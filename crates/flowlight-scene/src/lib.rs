@@ -45,5 +45,7 @@ pub use error::{ConfigError, SceneError};
 pub use gltf_loader::{load_gltf, load_gltf_with};
 pub use load_options::{LoadOptions, MissingTextures};
 pub use material::{DiffuseChoice, MaterialOverride};
-pub use scene::{CameraDesc, CameraProjection, LoadStats, MeshInstance, MeshRange, Scene};
+pub use scene::{
+    CameraDesc, CameraProjection, LoadStats, MeshInstance, MeshRange, NamedNode, Scene,
+};
 pub use texture::{ImageData, Sampler, Texels, TextureData};

@@ -41,6 +41,16 @@ pub enum CameraProjection {
     Orthographic { half_height: f32 },
 }
 
+/// A named node of the default scene and where its world transform puts its origin: what
+/// `[camera] focus_on` looks up.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NamedNode {
+    pub name: String,
+    /// Index into the file's `nodes`.
+    pub node: usize,
+    pub position: Vec3,
+}
+
 /// A camera node found in the glTF file: a node that references one of its `cameras`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CameraDesc {
@@ -158,6 +168,8 @@ pub struct Scene {
     pub textures: Vec<TextureData>,
     /// Every camera node of the scene, in traversal order (the first is the default camera).
     pub cameras: Vec<CameraDesc>,
+    /// Every named node of the default scene, in traversal order.
+    pub named_nodes: Vec<NamedNode>,
     /// Views of `textures` (see [`Scene::sync_texture_views`]).
     pub texture_table: Vec<Texture>,
     pub emitters: Vec<Emitter>,

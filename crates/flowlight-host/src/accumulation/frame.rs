@@ -342,7 +342,7 @@ pub(crate) fn add_deposit_to_plane(plane: &mut Plane, large: &mut LargeSums, f: 
 
 /// The factor pixel `i`'s sums are multiplied by: 1 / the uniform sample count when one is
 /// set (0 for none), else 1 / the pixel's own count (0, a black pixel, where none finished).
-fn pixel_scale(uniform_spp: Option<f64>, samples: &[u32]) -> impl Fn(usize) -> f64 + '_ {
+pub(crate) fn pixel_scale(uniform_spp: Option<f64>, samples: &[u32]) -> impl Fn(usize) -> f64 + '_ {
     let uniform = uniform_spp.map(|spp| if spp > 0.0 { 1.0 / spp } else { 0.0 });
     move |i| match (uniform, samples[i]) {
         (Some(k), _) => k,

@@ -129,6 +129,33 @@ impl SharedFrame {
         }
     }
 
+    /// The main image as the frame holds it now, for a live preview: each pixel's sum over
+    /// its finished samples, or over `uniform_spp` when given (flanged integrators). Deposits
+    /// still in the threads' private buffers are not in it yet. Takes the main framebuffer's
+    /// lock (and the sample counts') for the copy.
+    pub fn snapshot_image(&self, uniform_spp: Option<f64>) -> Vec<flowlight_core::Rgb> {
+        let samples = self
+            .samples
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone();
+        let guard = self.lock_plane(0);
+        let (plane, large) = &*guard;
+        let scale = super::frame::pixel_scale(uniform_spp, &samples);
+        (0..samples.len())
+            .map(|i| {
+                let s = plane.get(i);
+                let l = large.get(&i).copied().unwrap_or([0.0; 3]);
+                let f = scale(i);
+                flowlight_core::Rgb::new(
+                    ((s[0] + l[0]) * f) as f32,
+                    ((s[1] + l[1]) * f) as f32,
+                    ((s[2] + l[2]) * f) as f32,
+                )
+            })
+            .collect()
+    }
+
     /// The finished frame.
     pub fn into_frame(self) -> Frame {
         let mut planes = Vec::with_capacity(self.planes.len());

@@ -5,6 +5,7 @@
 //!   identical images give identical files; [`exr_read`]: reading those files back.
 //! - [`png`](mod@self::png): the 8-bit sRGB PNG encoder (previews and false-colour maps).
 //! - [`atomic`]: temporary file, fsync, rename; stale temporary files; writability probes.
+//! - [`live`]: the preview while rendering (tev over [`tev`]'s protocol, the PNG rewritten).
 //!
 //! # Safety of existing files
 //!
@@ -21,7 +22,9 @@ use flowlight_core::spectrum::Rgb;
 pub mod atomic;
 pub mod exr;
 pub mod exr_read;
+pub mod live;
 pub mod png;
+pub mod tev;
 
 pub use self::atomic::{check_writable, clean_stale_temps, write_atomically};
 pub use self::exr::{

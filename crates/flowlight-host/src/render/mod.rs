@@ -210,13 +210,43 @@ impl RenderStats {
 }
 
 /// Progress reported after each finished unit.
-#[derive(Clone, Copy, Debug)]
-pub struct Progress {
+#[derive(Clone, Copy)]
+pub struct Progress<'a> {
     pub pixel_samples: u64,
     /// Total planned pixel samples, or 0 for a time budget.
     pub planned: u64,
     pub elapsed: Duration,
     pub budget: Option<Duration>,
+    /// The frame being rendered and whether its integrator's deposits stay in their tiles
+    /// (read by [`Progress::image`]); `None` where there is no frame to show.
+    pub(crate) frame: Option<(&'a crate::accumulation::SharedFrame, bool)>,
+}
+
+impl std::fmt::Debug for Progress<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Progress")
+            .field("pixel_samples", &self.pixel_samples)
+            .field("planned", &self.planned)
+            .field("elapsed", &self.elapsed)
+            .field("budget", &self.budget)
+            .finish()
+    }
+}
+
+impl Progress<'_> {
+    /// The image as it stands, for a live preview (tev, `--preview-every`): a tile-local
+    /// integrator's pixels over their own finished samples, a flanged one's (Markov chains
+    /// deposit anywhere) over the mean samples per pixel so far. Deposits still in private
+    /// buffers (Buffering, Caching) show when they are flushed. Copies the frame under its
+    /// lock: call it at a limited rate. `None` without a frame.
+    pub fn image(&self) -> Option<Vec<flowlight_core::Rgb>> {
+        let (shared, tiled) = self.frame?;
+        let uniform = (!tiled).then(|| {
+            let pixels = (shared.width as u64 * shared.height as u64).max(1);
+            self.pixel_samples as f64 / pixels as f64
+        });
+        Some(shared.snapshot_image(uniform))
+    }
 }
 
 /// What a render produced; `error` is set when a plugin failed, in which case `frame` still

@@ -470,6 +470,7 @@ impl Run<'_, '_> {
                 planned: self.planned,
                 elapsed: self.start.elapsed(),
                 budget: self.opts.time,
+                frame: Some((self.shared, self.tiled)),
             });
         });
         let whole = !skipped.load(Ordering::Relaxed);

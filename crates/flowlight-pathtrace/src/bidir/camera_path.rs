@@ -85,7 +85,12 @@ impl CameraPaths<'_, '_> {
         counts: &mut CameraCounts,
     ) {
         let (scene, it, settings) = (self.scene, self.it, self.settings);
-        let mut state = WalkState::start(rng, scene.camera.generate_ray(raster));
+        let mut rng = rng;
+        let ray = scene.camera.sample_ray(raster, &mut rng);
+        if let Some(r) = self.recorder {
+            r.borrow_mut().camera_start(ray.origin);
+        }
+        let mut state = WalkState::start(rng, ray);
         let mut partial = Partial::default();
         let mut t = 1u32;
         let mut all_dirac = true;

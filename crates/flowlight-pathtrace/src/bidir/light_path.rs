@@ -18,6 +18,9 @@
 //! estimate. `w` weighs it against the camera-side strategies (`mis::eye_connection`; 1 for
 //! light tracing alone).
 //!
+//! With a thin lens the eye is a lens point drawn with the camera's own density, and
+//! `hit_density` is taken from it (`flowlight_core::thin_lens`, "Importance and densities").
+//!
 //! The vertex on the light itself (s = 1, t = 1) is connected to the eye only by light
 //! tracing alone (for area lights), where it is the only way to see a lamp; with camera
 //! subpaths the lamp is seen by hitting it.
@@ -112,7 +115,7 @@ impl LightPaths<'_, '_> {
             r.borrow_mut().light_start(&e);
         }
         if self.it.techniques == mis::Techniques::LIGHT_TRACE && e.kind == LightKind::Area {
-            self.connect_light_to_eye(&e, out);
+            self.connect_light_to_eye(&e, &mut rng, out);
         }
         let origin = if e.kind == LightKind::Area {
             offset_ray_origin(e.p, e.p_error, e.n, e.dir)
@@ -148,7 +151,7 @@ impl LightPaths<'_, '_> {
                     length,
                 };
                 if self.it.techniques.light_trace && self.settings.wants(v.length + 1, 1) {
-                    self.connect_to_eye(&v, &bsdf, out);
+                    self.connect_to_eye(&v, &bsdf, &mut state.rng, out);
                 }
                 if keep {
                     vertices.push(v);
@@ -192,15 +195,18 @@ impl LightPaths<'_, '_> {
         }
     }
 
-    /// The eye connection of light vertex `v` (t = 1), splatted where visible.
-    fn connect_to_eye(
+    /// The eye connection of light vertex `v` (t = 1), splatted where visible. With a thin
+    /// lens the eye is a lens point drawn from the next pair of `rng` with the camera's own
+    /// density (`flowlight_core::thin_lens`, "Importance and densities").
+    fn connect_to_eye<S: SampleStream>(
         &self,
         v: &LightVertex,
         bsdf: &flowlight_core::bsdf::Bsdf,
+        rng: &mut S,
         out: &mut impl Splat,
     ) {
         let camera = &self.scene.camera;
-        let Some(eye) = camera.connect_eye(v.hit.p) else {
+        let Some(eye) = camera.sample_eye_connection(v.hit.p, rng) else {
             return;
         };
         let frame = Frame::from_z(v.hit.ns);
@@ -251,9 +257,14 @@ impl LightPaths<'_, '_> {
 
     /// Light tracing's view of the light itself (s = 1, t = 1): the emitted radiance
     /// towards the eye over the position's density.
-    fn connect_light_to_eye(&self, e: &EmissionSample, out: &mut impl Splat) {
+    fn connect_light_to_eye<S: SampleStream>(
+        &self,
+        e: &EmissionSample,
+        rng: &mut S,
+        out: &mut impl Splat,
+    ) {
         let camera = &self.scene.camera;
-        let Some(eye) = camera.connect_eye(e.p) else {
+        let Some(eye) = camera.sample_eye_connection(e.p, rng) else {
             return;
         };
         let cos = e.n.dot(eye.to_eye).abs();

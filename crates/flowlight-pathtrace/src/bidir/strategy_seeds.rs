@@ -158,6 +158,8 @@ pub struct StrategyRecorder {
     light_survival: f64,
     /// x₁ … (the eye x₀ has density 1).
     camera: Vec<Recorded>,
+    /// The camera subpath's eye vertex (its lens point with a thin lens).
+    camera_eye: Option<Vec3>,
     camera_survival: f64,
     pub events: Vec<StrategyEvent>,
 }
@@ -174,6 +176,7 @@ impl StrategyRecorder {
         self.emission = None;
         self.light.clear();
         self.camera.clear();
+        self.camera_eye = None;
         self.events.clear();
         self.light_survival = 1.0;
         self.camera_survival = 1.0;
@@ -217,6 +220,11 @@ impl StrategyRecorder {
     /// The light subpath scatters on with survival probability `survival`.
     pub(super) fn light_scatter(&mut self, survival: f32) {
         self.light_survival = survival as f64;
+    }
+
+    /// The camera subpath starts at eye vertex `eye` (the pinhole or a lens point).
+    pub(super) fn camera_start(&mut self, eye: Vec3) {
+        self.camera_eye = Some(eye);
     }
 
     /// The camera subpath reaches `hit` by `step` from `from`.
@@ -464,7 +472,11 @@ impl<'a, 'b> StrategySeeds<'a, 'b> {
         }
         let (eye, raster) = match event.end {
             StrategyEnd::Eye { raster, eye, .. } => (eye, raster),
-            _ => (scene.camera.eye_point(raster), raster),
+            _ => (
+                rec.camera_eye
+                    .unwrap_or_else(|| scene.camera.eye_point(raster)),
+                raster,
+            ),
         };
         self.path.push(PathVertex::eye(eye, forward));
         for v in &rec.camera[..camera_count] {

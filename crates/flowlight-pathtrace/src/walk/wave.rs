@@ -85,9 +85,11 @@ pub fn run_wave<S, W>(
     wave.paths.clear();
     wave.active.clear();
     for (i, (rng, raster)) in starts.iter().enumerate() {
-        let ray = scene.camera.generate_ray(*raster);
+        // A lens point takes the pair after the raster position's (a pinhole draws none).
+        let mut rng = rng.clone();
+        let ray = scene.camera.sample_ray(*raster, &mut rng);
         let mut path = Walker {
-            state: WalkState::start(rng.clone(), ray),
+            state: WalkState::start(rng, ray),
             trail: trail(*raster),
         };
         sinks.sink(i).begin(&mut path.trail, scene, &ray);
@@ -174,7 +176,8 @@ pub fn run_single<S: BranchStream, K: PathSink>(
     sink: &mut K,
     shadows: &mut (Vec<Ray>, Vec<(u32, K::Pending)>),
 ) -> S {
-    let ray = scene.camera.generate_ray(raster);
+    let mut rng = rng;
+    let ray = scene.camera.sample_ray(raster, &mut rng);
     let mut path = Walker {
         state: WalkState::start(rng, ray),
         trail,

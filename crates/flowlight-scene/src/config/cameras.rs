@@ -24,6 +24,9 @@
 //!    smaller half angle); an orthographic camera at c + 2r·d with half height
 //!    r / min(1, W/H). One info line says where it was put.
 //!
+//! Any of them takes the thin lens of `aperture_radius` or `f_number` and `focus_distance`
+//! or `focus_on` ([`super::lens`]).
+//!
 //! The image size is always the config's (`[render] width`, `height`): `yfov` and `ymag` are
 //! kept and the horizontal extent follows W/H, as glTF viewers do in a window of another
 //! shape; a glTF `aspectRatio` (or `xmag/ymag`) that differs gets a warning.
@@ -51,6 +54,8 @@ pub struct CameraOverride {
     pub projection: Option<Projection>,
     /// Full height of the view in world units (orthographic).
     pub ortho_height: Option<f32>,
+    /// The thin lens's keys (aperture and focus), checked one by one.
+    pub lens: super::lens::LensKeys,
 }
 
 /// Vertical field of view of a camera that does not give one (the automatic camera, or a
@@ -84,7 +89,8 @@ impl RenderConfig {
         let g = self.select_camera(scene, &o)?;
         let places = o.position.is_some() || o.look_at.is_some() || o.forward.is_some();
         if g.is_none() && !places {
-            return Ok(self.auto_camera(scene, &o));
+            let cam = self.auto_camera(scene, &o);
+            return self.with_lens(cam, scene, &o.lens);
         }
         let missing = |key: &str| {
             invalid(
@@ -129,7 +135,8 @@ impl RenderConfig {
                 tracing::warn!(file = %self.path.display(), "the glTF camera's aspect ratio {a} differs from the image's {ours}; the image's is used (the vertical extent is kept)");
             }
         }
-        self.projected_camera(&o, from_file, position, f, up)
+        let cam = self.projected_camera(&o, from_file, position, f, up)?;
+        self.with_lens(cam, scene, &o.lens)
     }
 
     /// The camera at `position` looking along unit `f` with the projection of `[camera]`,

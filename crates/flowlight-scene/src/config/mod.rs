@@ -59,6 +59,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 pub mod cameras;
+pub mod lens;
 pub mod parse;
 
 pub use cameras::{

@@ -146,6 +146,11 @@ struct RawCamera {
     forward: Option<[f32; 3]>,
     up: Option<[f32; 3]>,
     fov_y: Option<f32>,
+    aperture_radius: Option<f32>,
+    f_number: Option<f32>,
+    sensor_height_mm: Option<f32>,
+    focus_distance: Option<f32>,
+    focus_on: Option<String>,
 }
 
 #[derive(Deserialize, Default)]
@@ -504,7 +509,19 @@ fn camera_override(
         }
         _ => {}
     }
+    let lens = super::lens::lens_keys(
+        super::lens::RawLens {
+            aperture_radius: c.aperture_radius,
+            f_number: c.f_number,
+            sensor_height_mm: c.sensor_height_mm,
+            focus_distance: c.focus_distance,
+            focus_on: c.focus_on.clone(),
+        },
+        projection,
+        invalid,
+    )?;
     Ok(CameraOverride {
+        lens,
         name: c.name.clone(),
         index: c.index,
         projection,

@@ -8,7 +8,7 @@ use super::Loader;
 use crate::error::SceneError;
 use crate::instancing::instance_transforms;
 use crate::lights::punctual_light;
-use crate::scene::{MeshInstance, MeshRange};
+use crate::scene::{MeshInstance, MeshRange, NamedNode};
 use glam::Mat4;
 use std::collections::HashMap;
 
@@ -72,6 +72,13 @@ impl Loader<'_> {
                     file: self.file(),
                     node: idx,
                     reason: "its world transform is not finite".into(),
+                });
+            }
+            if let Some(name) = node.name() {
+                self.scene.named_nodes.push(NamedNode {
+                    name: name.to_string(),
+                    node: idx,
+                    position: world.transform_point3(glam::Vec3::ZERO),
                 });
             }
             if let Some(cam) = node.camera() {

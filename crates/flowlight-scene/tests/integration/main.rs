@@ -13,6 +13,7 @@ mod extensions_doc;
 mod fuzz;
 mod geometry;
 mod instancing;
+mod lens;
 mod lights;
 mod malformed;
 mod materials;

@@ -184,7 +184,7 @@ impl Integrator for AmbientOcclusion {
                     let key = [unit.seed, x as u64, y as u64, s as u64];
                     let mut rng = Rng::new(Rng::hash(&key), 0);
                     let raster = Vec2::new(x as f32, y as f32) + rng.uniform2();
-                    let ray = self.scene.camera.generate_ray(raster);
+                    let ray = self.scene.camera.sample_ray(raster, &mut rng);
                     let Some(hit) = tracer.intersect(&ray) else {
                         continue; // nothing there: 0 in every layer
                     };

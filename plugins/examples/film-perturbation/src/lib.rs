@@ -216,7 +216,8 @@ impl Mutation for FilmPerturbation {
         };
         *y = *x;
         y.raster = raster;
-        let mut ray = camera.generate_ray(raster);
+        // A thin lens's point is kept: the move is on the film alone.
+        let mut ray = camera.ray_from_eye(raster, xv[0].p);
         y.vertices[0] = PathVertex::eye(ray.origin, camera.forward);
         for k in 1..=j {
             let Some(hit) = tracer.intersect(&ray) else {
@@ -263,6 +264,9 @@ impl Mutation for FilmPerturbation {
             return 0.0; // this strategy never moves the vertices after x_j
         }
         let camera = &self.scene.camera;
+        if camera.has_lens() && a[0].p != b[0].p {
+            return 0.0; // nor a thin lens's point
+        }
         disk_density(
             from.raster,
             to.raster,
