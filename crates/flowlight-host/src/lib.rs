@@ -7,6 +7,7 @@
 //! [`renderer::Renderer`] fails with a [`HostError`] ([`error`]).
 
 pub mod accumulation;
+pub mod aov;
 pub mod error;
 pub mod intersector;
 pub mod metrics;
