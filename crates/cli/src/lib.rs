@@ -18,6 +18,7 @@ mod bench;
 mod compare;
 mod conformance;
 mod cpu_time;
+mod extras;
 mod merge;
 mod new_plugin;
 mod part_args;
@@ -76,6 +77,11 @@ enum Command {
         /// Render samples A..B (B exclusive) of every pixel, for `flowlight merge`.
         #[arg(long, value_name = "A..B", conflicts_with = "time")]
         samples: Option<String>,
+        /// Denoise with Intel Open Image Denoise: writes a `denoised` EXR layer (the beauty
+        /// stays the unbiased estimate) and the PNG preview from it, guided by the albedo and
+        /// normal AOVs, which it turns on (docs/denoising.md).
+        #[arg(long, conflicts_with_all = ["part", "samples"])]
+        denoise: bool,
     },
     /// Merge the parts of a distributed render (`render --part` / `--samples`) into one EXR.
     Merge {
@@ -267,6 +273,7 @@ pub fn main() {
             quiet,
             part,
             samples,
+            denoise,
         } => match parse_sets(&set) {
             Ok(params) => {
                 let ov = flowlight_host::renderer::Overrides {
@@ -281,7 +288,7 @@ pub fn main() {
                     part: part.as_deref(),
                     samples: samples.as_deref(),
                 };
-                render::run(&config, &ov, quiet, part)
+                render::run(&config, &ov, quiet, part, denoise)
             }
             Err(e) => Err(e),
         },

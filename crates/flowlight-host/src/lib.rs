@@ -8,6 +8,7 @@
 
 pub mod accumulation;
 pub mod aov;
+pub mod denoise;
 pub mod error;
 pub mod intersector;
 pub mod metrics;
