@@ -118,6 +118,9 @@ enum Command {
         /// The ε of relMSE = mean (a−b)²/(b²+ε).
         #[arg(long, default_value_t = flowlight_host::metrics::REL_EPS)]
         epsilon: f64,
+        /// Compare this layer of the image (e.g. `denoised`) instead of its main image.
+        #[arg(long)]
+        layer: Option<String>,
     },
     /// Tile-edge artefacts (thesis §5.9): mean luminance gradient across tile borders over
     /// the mean inside tiles; 1.0 means no visible seams, larger means seams.
@@ -298,7 +301,13 @@ pub fn main() {
             allow_missing,
         } => merge::run(&out, &parts, allow_missing),
         Command::Plugins { path, markdown } => plugins::run(&path, markdown),
-        Command::Compare { a, b, out, epsilon } => compare::run(&a, &b, out.as_deref(), epsilon),
+        Command::Compare {
+            a,
+            b,
+            out,
+            epsilon,
+            layer,
+        } => compare::run(&a, &b, out.as_deref(), epsilon, layer.as_deref()),
         Command::Seams { image, tile, layer } => seams::run(&image, tile, layer.as_deref()),
         Command::Reference {
             config,

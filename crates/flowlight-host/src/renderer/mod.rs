@@ -367,6 +367,16 @@ impl Renderer {
                 if let Some(aovs) = extra.aovs {
                     meta.entries
                         .push(("flowlight.aov_spp".into(), aovs.spp.to_string()));
+                    // What `material_id` indexes, as a TOML array of the materials' names.
+                    let names = toml::Value::Array(
+                        self.scene
+                            .material_names
+                            .iter()
+                            .map(|n| n.as_str().into())
+                            .collect(),
+                    );
+                    meta.entries
+                        .push(("flowlight.aov_materials".into(), names.to_string()));
                     layers.extend(aovs.into_planar());
                 }
                 if let Some(denoiser) = extra.denoiser {
