@@ -77,12 +77,33 @@ fn the_beauty_is_identical_with_and_without_aovs_and_denoising() {
             aov.name()
         );
     }
+    let meta = flowlight_host::output::read_exr_metadata(&dir.join("all.exr")).unwrap();
+    assert_eq!(meta.get("flowlight.aov_spp"), Some("16"));
+    let materials = meta.get("flowlight.aov_materials").unwrap();
+    assert!(
+        materials.starts_with('[') && materials.contains('"'),
+        "{materials}"
+    );
     // The Cornell box's walls are diffuse with specular 0: the back wall's albedo at the
     // centre is its base colour, and every albedo is within [0, 1].
     let albedo = layer(&b, "albedo").unwrap();
     assert!(albedo
         .iter()
         .all(|c| c.to_array().iter().all(|&v| (0.0..=1.0).contains(&v))));
+    let centre = 16 * 32 + 16;
+    let id = layer(&b, "material_id").unwrap()[centre].r;
+    let scene = flowlight_scene::load_gltf(
+        &common::scene_config("cornell-box/cornell-box.gltf"),
+        &Default::default(),
+    )
+    .unwrap();
+    let wall = &scene.materials[id as usize];
+    assert_eq!(wall.specular, 0.0, "the back wall is plain diffuse");
+    let (got, want) = (albedo[centre].to_array(), wall.base_color.to_array());
+    assert!(
+        (0..3).all(|k| (got[k] - want[k]).abs() < 1e-5),
+        "albedo {got:?} vs base colour {want:?}"
+    );
     match Denoiser::open() {
         Err(e) => println!("skipped the --denoise run: Open Image Denoise is not available: {e}"),
         Ok(_) => {

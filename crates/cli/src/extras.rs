@@ -29,10 +29,16 @@ pub fn compute(
     let Some(req) = renderer.aov_request(denoiser.is_some()) else {
         return Ok(out);
     };
+    let cpu0 = crate::cpu_time::process_cpu_time();
     let aovs = renderer.render_aovs(&req, stop).map_err(|e| anyhow!(e))?;
+    let cpu = crate::cpu_time::process_cpu_time()
+        .zip(cpu0)
+        .map_or(String::new(), |(b, a)| {
+            format!(", cpu {:.3} s", b.saturating_sub(a).as_secs_f64())
+        });
     let names: Vec<&str> = req.aovs.iter().map(|a| a.name()).collect();
     out.summary.push(format!(
-        "aovs            {} at {} spp in {:.3} s{}",
+        "aovs            {} at {} spp in {:.3} s{cpu}{}",
         names.join(", "),
         req.spp,
         aovs.wall.as_secs_f64(),

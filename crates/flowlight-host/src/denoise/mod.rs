@@ -142,7 +142,7 @@ impl Denoiser {
             version / 10000,
             version / 100 % 100,
             version % 100,
-            path.display()
+            path.canonicalize().as_deref().unwrap_or(path).display()
         );
         Ok(d)
     }
