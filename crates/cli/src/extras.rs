@@ -5,7 +5,7 @@ use anyhow::{anyhow, Result};
 use flowlight_host::accumulation::Frame;
 use flowlight_host::denoise::{denoise_image, Denoiser};
 use flowlight_host::renderer::{ExtraLayers, Renderer};
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// The extra layers and what the summary says of them.
@@ -28,6 +28,14 @@ pub fn compute(
     };
     let Some(req) = renderer.aov_request(denoiser.is_some()) else {
         return Ok(out);
+    };
+    // A render stopped by Ctrl-C still gets whole AOVs (the pass is a few percent of a
+    // render); a Ctrl-C during the pass stops it.
+    let not_yet = AtomicBool::new(false);
+    let stop = if stop.load(Ordering::Relaxed) {
+        &not_yet
+    } else {
+        stop
     };
     let cpu0 = crate::cpu_time::process_cpu_time();
     let aovs = renderer.render_aovs(&req, stop).map_err(|e| anyhow!(e))?;
