@@ -194,3 +194,21 @@ fn denoising_lowers_the_error_of_a_noisy_cornell_box() {
     println!("Cornell box 128², 4 spp: relMSE {noisy:.4e}, denoised {denoised:.4e}");
     assert!(denoised * 3.0 < noisy, "relMSE {noisy} -> {denoised}");
 }
+
+/// A part of a distributed render writes no AOVs (the merge joins exact beauty sums only):
+/// a config asking for them is refused there in one line naming the key.
+#[test]
+fn a_part_refuses_aovs_in_one_line() {
+    let dir = common::scratch("aov-part");
+    let cfg = cornell_config(&dir, 16, 2, "\"depth\"");
+    let o = flowlight()
+        .arg("render")
+        .arg(&cfg)
+        .args(["-q", "--part", "0/2"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(err.contains("output.aovs") && err.contains("part"), "{err}");
+}
