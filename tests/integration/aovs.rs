@@ -168,6 +168,25 @@ fn denoise_without_the_library_is_one_clear_line() {
         "{err}"
     );
     assert!(!dir.join("out.exr").exists());
+    // No OIDN_DIR and nothing fetched: the line says how to provide OIDN and what was tried
+    // (unless the system has the library).
+    let o = flowlight()
+        .arg("render")
+        .arg(&cfg)
+        .args(["-q", "--denoise"])
+        .env_remove("OIDN_DIR")
+        .env("FLOWLIGHT_OIDN_FETCH_DIR", dir.join("nothing-fetched"))
+        .output()
+        .unwrap();
+    if o.status.success() {
+        println!("skipped the no-library case: a system Open Image Denoise is installed");
+        return;
+    }
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    for part in ["OIDN_DIR", "fetch.py", "nothing-fetched", "No such file"] {
+        assert!(err.contains(part), "{err} lacks {part}");
+    }
 }
 
 /// Denoised 4-spp MCPT of the Cornell box is closer to the committed reference (relMSE)

@@ -106,7 +106,12 @@ impl Denoiser {
             // state. The path is an OIDN library by name.
             match unsafe { Library::new(&path) } {
                 Ok(lib) => return Denoiser::with_library(lib, &how, &path),
-                Err(e) => tried.push(format!("{how} {} ({e})", path.display())),
+                Err(e) => {
+                    // libloading's message is "dlopen failed"; the loader's reason is its source.
+                    let why =
+                        std::error::Error::source(&e).map_or(e.to_string(), |s| s.to_string());
+                    tried.push(format!("{how} {}: {why}", path.display()));
+                }
             }
         }
         Err(format!(

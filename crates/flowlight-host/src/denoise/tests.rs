@@ -30,7 +30,10 @@ fn the_search_tries_the_system_then_the_fetched_wheel() {
 #[test]
 fn a_missing_library_says_how_to_get_one() {
     let fetch = std::env::temp_dir().join("flowlight-no-oidn-here");
-    // Only meaningful where no system library exists; where one does, it opens instead.
+    // Only meaningful where no system library exists; where one does, it opens instead, and
+    // so does the fetched one once another test of this process has loaded it (the loader
+    // then finds its SONAME loaded): tests/integration/aovs.rs checks this in a process of
+    // its own.
     match Denoiser::open_from(None, Some(fetch.clone().into())) {
         Ok(d) => println!(
             "skipped: a system Open Image Denoise is installed ({})",
