@@ -13,6 +13,7 @@ mod common;
 
 mod accumulation;
 mod alpha;
+mod aovs;
 mod bench;
 mod bidir;
 mod cli;

@@ -7,13 +7,23 @@ pub fn run(
     b: &std::path::Path,
     out: Option<&std::path::Path>,
     eps: f64,
+    layer: Option<&str>,
 ) -> Result<()> {
     use flowlight_bench as bench;
     use flowlight_host::metrics;
     if let Some(out) = out {
         crate::refuse_input_as_output(out, &[("the image", a), ("the reference", b)])?;
     }
-    let ra = bench::read_reference(a).map_err(|e| anyhow!(e))?;
+    let mut ra = bench::read_reference(a).map_err(|e| anyhow!(e))?;
+    if let Some(name) = layer {
+        // Another layer of the image (e.g. `denoised`) against the reference's main image.
+        let (_, _, layers) = flowlight_host::output::read_exr_rgb(a).map_err(|e| anyhow!(e))?;
+        ra.image = layers
+            .into_iter()
+            .find(|(n, _)| n == name)
+            .ok_or_else(|| anyhow!("{} has no layer \"{name}\"", a.display()))?
+            .1;
+    }
     let rb = bench::read_reference(b).map_err(|e| anyhow!(e))?;
     if (ra.width, ra.height) != (rb.width, rb.height) {
         return Err(anyhow!(
@@ -28,7 +38,14 @@ pub fn run(
     }
     let e = metrics::compare_with(&ra.image, &rb.image, rb.variance.as_deref(), eps)
         .map_err(|e| anyhow!("{} vs {}: {e}", a.display(), b.display()))?;
-    println!("compare {} against {}", a.display(), b.display());
+    match layer {
+        Some(name) => println!(
+            "compare {} (layer {name}) against {}",
+            a.display(),
+            b.display()
+        ),
+        None => println!("compare {} against {}", a.display(), b.display()),
+    }
     println!(
         "  pixels          {} ({}x{})",
         e.pixels, ra.width, ra.height

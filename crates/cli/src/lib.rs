@@ -18,6 +18,7 @@ mod bench;
 mod compare;
 mod conformance;
 mod cpu_time;
+mod extras;
 mod live;
 mod merge;
 mod new_plugin;
@@ -85,6 +86,11 @@ enum Command {
         /// Rewrite the PNG preview every SECONDS while rendering (atomically).
         #[arg(long, value_name = "SECONDS")]
         preview_every: Option<f64>,
+        /// Denoise with Intel Open Image Denoise: writes a `denoised` EXR layer (the beauty
+        /// stays the unbiased estimate) and the PNG preview from it, guided by the albedo and
+        /// normal AOVs, which it turns on (docs/denoising.md).
+        #[arg(long, conflicts_with_all = ["part", "samples"])]
+        denoise: bool,
     },
     /// Merge the parts of a distributed render (`render --part` / `--samples`) into one EXR.
     Merge {
@@ -121,6 +127,9 @@ enum Command {
         /// The ε of relMSE = mean (a−b)²/(b²+ε).
         #[arg(long, default_value_t = flowlight_host::metrics::REL_EPS)]
         epsilon: f64,
+        /// Compare this layer of the image (e.g. `denoised`) instead of its main image.
+        #[arg(long)]
+        layer: Option<String>,
     },
     /// Tile-edge artefacts (thesis §5.9): mean luminance gradient across tile borders over
     /// the mean inside tiles; 1.0 means no visible seams, larger means seams.
@@ -278,6 +287,7 @@ pub fn main() {
             samples,
             tev,
             preview_every,
+            denoise,
         } => match parse_sets(&set) {
             Ok(params) => {
                 let ov = flowlight_host::renderer::Overrides {
@@ -296,7 +306,7 @@ pub fn main() {
                     tev: tev.as_deref(),
                     preview_every,
                 };
-                render::run(&config, &ov, quiet, part, live)
+                render::run(&config, &ov, quiet, part, live, denoise)
             }
             Err(e) => Err(e),
         },
@@ -306,7 +316,13 @@ pub fn main() {
             allow_missing,
         } => merge::run(&out, &parts, allow_missing),
         Command::Plugins { path, markdown } => plugins::run(&path, markdown),
-        Command::Compare { a, b, out, epsilon } => compare::run(&a, &b, out.as_deref(), epsilon),
+        Command::Compare {
+            a,
+            b,
+            out,
+            epsilon,
+            layer,
+        } => compare::run(&a, &b, out.as_deref(), epsilon, layer.as_deref()),
         Command::Seams { image, tile, layer } => seams::run(&image, tile, layer.as_deref()),
         Command::Reference {
             config,

@@ -28,6 +28,7 @@ pub fn run(
     quiet: bool,
     part: PartFlags,
     live: LiveFlags,
+    denoise: bool,
 ) -> Result<()> {
     if let Some(t) = ov.time {
         if !(t > 0.0 && t.is_finite()) {
@@ -48,8 +49,20 @@ pub fn run(
     }
     let mut renderer = Renderer::prepare(config, ov).map_err(|e| anyhow!(e))?;
     crate::part_args::apply(&mut renderer, part.part, part.samples, ov.out.is_some())?;
-    // Before any work: the outputs must be writable and must not overwrite an input.
+    // Before any work: the outputs must be writable and must not overwrite an input, and a
+    // denoiser asked for must be there.
     renderer.check_outputs().map_err(|e| anyhow!(e))?;
+    let mut denoiser = if denoise {
+        Some(flowlight_host::denoise::Denoiser::open().map_err(|e| anyhow!(e))?)
+    } else {
+        None
+    };
+    if !renderer.config.aovs.is_empty() && renderer.part.is_some() {
+        return Err(anyhow!(
+            "{}: output.aovs: a part of a distributed render writes no AOVs (flowlight merge joins the beauty only); render them in a whole render",
+            renderer.config.path.display()
+        ));
+    }
     let stop = Arc::new(AtomicBool::new(false));
     {
         let stop = stop.clone();
@@ -152,8 +165,9 @@ pub fn run(
     let s = &outcome.stats;
     let secs = s.wall.as_secs_f64().max(1e-9);
     let peak_render = crate::cpu_time::peak_resident_bytes();
+    let extra = crate::extras::compute(&renderer, &outcome.frame, denoiser.as_mut(), &stop)?;
     let written = renderer
-        .write_outputs(outcome.frame, s)
+        .write_outputs_with(outcome.frame, s, extra.layers)
         .map_err(|e| anyhow!(e))?;
     let peak_written = crate::cpu_time::peak_resident_bytes();
     println!("render summary");
@@ -216,6 +230,9 @@ pub fn run(
                 mib(w)
             );
         }
+    }
+    for line in &extra.summary {
+        println!("  {line}");
     }
     println!("  NaN/Inf samples {} discarded", s.invalid_deposits);
     if s.stray_deposits > 0 {

@@ -185,6 +185,11 @@ pub struct Scene {
     /// The placements, sorted by `first_virtual`. Empty (in a scene built by hand) means one
     /// identity instance of all triangles.
     pub instances: Vec<MeshInstance>,
+    /// The first virtual triangle of each object, ascending: an object is one placement of a
+    /// glTF mesh (a node, or one `EXT_mesh_gpu_instancing` instance), the meshes placed once
+    /// first in node traversal order, then each placement of an instanced mesh. Empty in a
+    /// scene built by hand (one object). [`Scene::object_of`] reads it.
+    pub object_first_virtual: Vec<u32>,
     /// `KHR_lights_punctual` lights of the default scene, placed by their nodes.
     pub punctual_lights: Vec<PunctualLight>,
     pub stats: LoadStats,
@@ -208,6 +213,15 @@ impl Scene {
             .iter()
             .map(|t| t.map(|i| self.positions[i as usize]))
             .collect()
+    }
+
+    /// The object (index into [`Scene::object_first_virtual`]) that virtual triangle `prim`
+    /// belongs to: the last object starting at or before it; 0 without the table.
+    pub fn object_of(&self, prim: u32) -> u32 {
+        (self
+            .object_first_virtual
+            .partition_point(|&first| first <= prim) as u32)
+            .saturating_sub(1)
     }
 
     /// Number of virtual triangles (every instance's, counted per instance); the number of

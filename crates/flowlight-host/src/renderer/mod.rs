@@ -17,7 +17,10 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+mod extras;
 mod load;
+
+pub use extras::ExtraLayers;
 
 /// Public for code that runs a plugin library's functions in-process over a loaded scene
 /// (the bidirectional library's allocation test) without loading a plugin.
@@ -313,8 +316,20 @@ impl Renderer {
     /// needs one framebuffer's channels beyond the frame, not a second image.
     pub fn write_outputs(
         &self,
+        frame: Frame,
+        outcome_stats: &crate::RenderStats,
+    ) -> Result<Vec<PathBuf>, HostError> {
+        self.write_outputs_with(frame, outcome_stats, ExtraLayers::default())
+    }
+
+    /// [`Renderer::write_outputs`] with the AOV and denoised layers of `extra` after the
+    /// beauty's (a part's EXR, which `flowlight merge` joins by its exact sums, takes none);
+    /// the PNG preview is made from the denoised layer when there is one.
+    pub fn write_outputs_with(
+        &self,
         mut frame: Frame,
         outcome_stats: &crate::RenderStats,
+        extra: ExtraLayers,
     ) -> Result<Vec<PathBuf>, HostError> {
         let mut written = Vec::new();
         let (w, h) = (frame.width as usize, frame.height as usize);
@@ -339,7 +354,7 @@ impl Renderer {
                 }
                 crate::parts::write_part_exr(path, &frame, &meta).map_err(HostError::PartFile)?;
             } else {
-                let layers: Vec<_> = (0..=frame.layer_count as usize)
+                let mut layers: Vec<_> = (0..=frame.layer_count as usize)
                     .map(|k| crate::output::PlanarLayer {
                         name: if k == 0 {
                             String::new()
@@ -349,14 +364,36 @@ impl Renderer {
                         channels: frame.take_channels(k),
                     })
                     .collect();
+                if let Some(aovs) = extra.aovs {
+                    meta.entries
+                        .push(("flowlight.aov_spp".into(), aovs.spp.to_string()));
+                    // What `material_id` indexes, as a TOML array of the materials' names.
+                    let names = toml::Value::Array(
+                        self.scene
+                            .material_names
+                            .iter()
+                            .map(|n| n.as_str().into())
+                            .collect(),
+                    );
+                    meta.entries
+                        .push(("flowlight.aov_materials".into(), names.to_string()));
+                    layers.extend(aovs.into_planar());
+                }
+                if let Some(denoiser) = extra.denoiser {
+                    meta.entries.push(("flowlight.denoiser".into(), denoiser));
+                }
+                if let Some(denoised) = extra.denoised {
+                    layers.push(crate::output::PlanarLayer {
+                        name: crate::denoise::LAYER.into(),
+                        channels: denoised,
+                    });
+                }
                 if let Some(png) = &self.png_path {
-                    preview = Some(PngPreview::from_planar(
-                        png,
-                        w,
-                        h,
-                        &layers[0].channels,
-                        0.0,
-                    )?);
+                    let shown = layers
+                        .iter()
+                        .find(|l| l.name == crate::denoise::LAYER)
+                        .unwrap_or(&layers[0]);
+                    preview = Some(PngPreview::from_planar(png, w, h, &shown.channels, 0.0)?);
                 }
                 crate::output::write_exr_planar(path, w, h, layers, &[], &meta)?;
             }

@@ -35,6 +35,8 @@
 //! [output]
 //! exr = "cornell-box.exr"         # default: <config file stem>.exr
 //! png = "cornell-box.png"         # optional sRGB preview
+//! aovs = ["albedo", "normal"]     # extra EXR layers (docs/config.md, "AOVs")
+//! aov_spp = 16                    # camera samples per pixel of the AOV pass
 //! [plugins]
 //! search_paths = ["../my-plugins"]
 //! [environment]       # optional light from infinitely far away (docs/config.md)
@@ -58,9 +60,12 @@ use crate::material::MaterialOverride;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
+pub mod aovs;
 pub mod cameras;
 pub mod lens;
 pub mod parse;
+
+pub use aovs::{Aov, DEFAULT_AOV_SPP};
 
 pub use cameras::{
     auto_camera_direction, CameraOverride, AUTO_AZIMUTH_DEGREES, AUTO_ELEVATION_DEGREES,
@@ -150,6 +155,10 @@ pub struct RenderConfig {
     pub integrator_params: Vec<(String, toml::Value)>,
     pub output_exr: PathBuf,
     pub output_png: Option<PathBuf>,
+    /// `[output] aovs`: the AOV layers to write, each once, in [`Aov::ALL`] order.
+    pub aovs: Vec<Aov>,
+    /// `[output] aov_spp`: camera samples per pixel of the AOV pass.
+    pub aov_spp: u32,
     pub plugin_search_paths: Vec<PathBuf>,
     pub material_overrides: BTreeMap<String, MaterialOverride>,
     /// `[environment]`, when the file has one.

@@ -158,6 +158,9 @@ struct RawCamera {
 struct RawOutput {
     exr: Option<String>,
     png: Option<String>,
+    #[serde(default)]
+    aovs: Vec<String>,
+    aov_spp: Option<u32>,
 }
 
 #[derive(Deserialize, Default)]
@@ -309,6 +312,11 @@ pub fn parse_config(path: &Path, text: &str) -> Result<RenderConfig, ConfigError
     let stem = path
         .file_stem()
         .map_or_else(|| "render".into(), |s| s.to_string_lossy().into_owned());
+    let aovs = super::aovs::parse_aovs(&raw.output.aovs).map_err(|e| invalid("output.aovs", e))?;
+    let aov_spp = raw.output.aov_spp.unwrap_or(super::DEFAULT_AOV_SPP);
+    if aov_spp == 0 {
+        return Err(invalid("output.aov_spp", "must be at least 1".into()));
+    }
     let output_exr = resolve(raw.output.exr.as_deref().unwrap_or(&format!("{stem}.exr")));
     Ok(RenderConfig {
         path: abs.clone(),
@@ -331,6 +339,8 @@ pub fn parse_config(path: &Path, text: &str) -> Result<RenderConfig, ConfigError
         integrator_params: raw.integrator.params,
         output_exr,
         output_png: raw.output.png.as_deref().map(resolve),
+        aovs,
+        aov_spp,
         plugin_search_paths: raw
             .plugins
             .search_paths

@@ -129,6 +129,9 @@ impl Loader<'_> {
                 continue;
             }
             let Some(mesh) = mesh_of(*m) else { continue };
+            // One object per placement (the AOVs' object id): its first virtual triangle.
+            let first = self.scene.triangles.len() as u32 - flat_start;
+            self.scene.object_first_virtual.push(first);
             for prim in mesh.primitives() {
                 self.primitive(&mesh, &prim, ts[0])?;
             }
@@ -175,6 +178,7 @@ impl Loader<'_> {
                 match MeshInstance::placed(index, range, t, virtual_count, 0) {
                     Some(inst) => {
                         self.scene.instances.push(inst);
+                        self.scene.object_first_virtual.push(virtual_count);
                         self.scene.stats.instanced_placements += 1;
                         // Bounded by check_instancing_limits.
                         virtual_count += range.triangle_count;

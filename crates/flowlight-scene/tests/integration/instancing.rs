@@ -250,3 +250,23 @@ fn instanced_triangles_beyond_32_bit_ids_are_refused_naming_the_file_and_counts(
     assert!(e.contains(&(u32::MAX as u64 - 1).to_string()), "{e}");
     assert_eq!(e.lines().count(), 1, "{e}");
 }
+
+/// Every mesh placement is one object (the AOVs' `object_id`), whether the mesh is stored
+/// once per node (flattened) or once for all of them (instanced): triangle v of n octahedra
+/// of 8 triangles is on object v / 8 in both.
+#[test]
+fn each_placement_is_one_object_flattened_or_instanced() {
+    let n = 5;
+    let (shared, flat) = pair(n, "{}");
+    for scene in [&shared, &flat] {
+        assert_eq!(scene.object_first_virtual.len(), n);
+        for v in 0..(8 * n) as u32 {
+            assert_eq!(scene.object_of(v), v / 8, "triangle {v}");
+        }
+    }
+    assert_eq!(
+        Scene::default().object_of(3),
+        0,
+        "a scene built by hand is one object"
+    );
+}
