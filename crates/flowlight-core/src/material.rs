@@ -70,6 +70,7 @@
 //! normal texture is *not* normal-mapped; Flowlight's coat follows the base normal map
 //! instead. The loader warns when a file has a coat normal texture.
 
+use crate::material_layers::MaterialLayers;
 use crate::Rgb;
 use glam::{Vec2, Vec4};
 use std::sync::LazyLock;
@@ -255,6 +256,8 @@ pub struct Material {
     /// KHR_materials_clearcoat clearcoatRoughnessTexture (linear): G multiplies
     /// `clearcoat_roughness`.
     pub clearcoat_roughness_texture: TextureRef,
+    /// Sheen, diffuse transmission and iridescence ([`crate::material_layers`]).
+    pub layers: MaterialLayers,
 }
 
 impl Default for Material {
@@ -290,6 +293,7 @@ impl Default for Material {
             specular_color_texture: TextureRef::NONE,
             clearcoat_texture: TextureRef::NONE,
             clearcoat_roughness_texture: TextureRef::NONE,
+            layers: MaterialLayers::default(),
         }
     }
 }
@@ -384,6 +388,7 @@ impl Material {
         if let Some(t) = linear(&self.clearcoat_roughness_texture) {
             m.clearcoat_roughness = self.clearcoat_roughness * t.y;
         }
+        m.layers = self.layers.resolve(uv, textures);
         ResolvedMaterial {
             material: m,
             base,

@@ -26,6 +26,7 @@ pub mod gltf_loader;
 pub mod instancing;
 pub mod lights;
 pub mod material;
+pub mod material_layers;
 pub mod memory;
 pub mod scene;
 pub mod source;

@@ -304,6 +304,7 @@ pub fn convert(m: &gltf::Material) -> Result<Material, String> {
             .keys()
             .map(String::as_str)
             .filter(|k| *k != "KHR_materials_clearcoat")
+            .filter(|k| !crate::material_layers::LAYER_EXTENSIONS.contains(k))
             .collect();
         if !unknown.is_empty() {
             tracing::warn!(
@@ -328,6 +329,7 @@ pub fn convert(m: &gltf::Material) -> Result<Material, String> {
         attenuation_distance,
         clearcoat,
         clearcoat_roughness,
+        layers: crate::material_layers::convert_layers(m)?,
         ..Material::default()
     };
     if let Some(o) = extras_override(m.extras())? {

@@ -86,7 +86,8 @@ pub fn constant_bsdfs(materials: &[Material], textures: &[Texture]) -> Box<[Opti
                 &m.clearcoat_texture,
                 &m.clearcoat_roughness_texture,
             ]
-            .iter()
+            .into_iter()
+            .chain(m.layers.textures())
             .any(|t| t.texture(textures).is_some());
             (!textured).then(|| {
                 let r = m.resolve([Vec2::ZERO; 2], [1.0; 4], textures);

@@ -44,8 +44,8 @@ use gltf::CoatAttenuation;
 pub const DELTA_ALPHA: f32 = 1e-3;
 /// GGX α below which a glossy lobe counts as narrow (Λα): no explicit light connection.
 pub const NARROW_GLOSSY_ALPHA: f32 = 0.05;
-/// Most components a [`Bsdf`] holds (glTF: coat, specular, diffuse, transmission).
-pub const MAX_COMPONENTS: usize = 4;
+/// Most components a [`Bsdf`] holds (glTF: coat, sheen, specular, diffuse, transmission).
+pub const MAX_COMPONENTS: usize = gltf::MAX_LOBES;
 
 /// One sampled direction.
 #[derive(Clone, Copy, Debug)]
@@ -205,7 +205,10 @@ impl Component {
     pub fn is_diffuse(&self) -> bool {
         match self {
             Component::Lambert(_) | Component::OrenNayar(_) => true,
-            Component::Gltf(c) => c.kind == GltfLobeKind::Diffuse,
+            Component::Gltf(c) => matches!(
+                c.kind,
+                GltfLobeKind::Diffuse | GltfLobeKind::TranslucentDiffuse
+            ),
             _ => false,
         }
     }
@@ -220,7 +223,10 @@ impl Component {
             Component::Dielectric(_) => false,
             Component::Gltf(c) => matches!(
                 c.kind,
-                GltfLobeKind::Coat | GltfLobeKind::Specular | GltfLobeKind::Diffuse
+                GltfLobeKind::Coat
+                    | GltfLobeKind::Specular
+                    | GltfLobeKind::Diffuse
+                    | GltfLobeKind::Sheen
             ),
         }
     }
@@ -352,6 +358,7 @@ impl Bsdf {
             clearcoat: m.clearcoat,
             clearcoat_roughness: m.clearcoat_roughness,
             oren_nayar_sigma: if sigma.is_finite() { sigma } else { 0.0 },
+            layers: m.layers,
         };
         let (lobes, n) = gltf::lobes(&p);
         Bsdf::from_gltf_lobes(&lobes[..n])
