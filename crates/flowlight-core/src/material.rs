@@ -256,7 +256,7 @@ pub struct Material {
     /// KHR_materials_clearcoat clearcoatRoughnessTexture (linear): G multiplies
     /// `clearcoat_roughness`.
     pub clearcoat_roughness_texture: TextureRef,
-    /// Sheen, diffuse transmission and iridescence ([`crate::material_layers`]).
+    /// Sheen, diffuse transmission, iridescence and anisotropy ([`crate::material_layers`]).
     pub layers: MaterialLayers,
 }
 

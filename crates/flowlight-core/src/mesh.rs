@@ -30,6 +30,8 @@ use crate::geometry::{barycentric_error, gamma, Ray, SurfaceHit, TriangleHit};
 use crate::material::{Material, Texture};
 use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
 
+mod tangent;
+
 /// What a batched ray query returns per ray (ABI 4): enough to rebuild the surface data.
 /// `prim == u32::MAX` (and `t = ∞`) when the ray escaped.
 #[repr(C)]

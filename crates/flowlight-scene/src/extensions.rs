@@ -118,8 +118,8 @@ pub const KNOWN: &[Extension] = &[
     ),
     ext(
         "KHR_materials_anisotropy",
-        Status::Ignored,
-        "anisotropic GGX not modelled",
+        Status::Supported,
+        "anisotropic GGX specular layer along the direction in the tangent frame; anisotropyTexture (RG direction, B strength) applied (see the materials section)",
     ),
     ext(
         "KHR_materials_dispersion",

@@ -1,5 +1,5 @@
-//! `KHR_materials_sheen`, `KHR_materials_diffuse_transmission` and
-//! `KHR_materials_iridescence` of a glTF material to
+//! `KHR_materials_sheen`, `KHR_materials_diffuse_transmission`, `KHR_materials_iridescence`
+//! and `KHR_materials_anisotropy` of a glTF material to
 //! [`flowlight_core::material_layers::MaterialLayers`], read from the raw extension JSON (the
 //! `gltf` crate has no types for them). Every value is checked; a bad one is an error naming
 //! the extension and field. The texture references are returned by [`layer_textures`] for
@@ -11,10 +11,11 @@ use flowlight_core::Rgb;
 use gltf::json::Value;
 
 /// The extensions this module reads.
-pub const LAYER_EXTENSIONS: [&str; 3] = [
+pub const LAYER_EXTENSIONS: [&str; 4] = [
     "KHR_materials_sheen",
     "KHR_materials_diffuse_transmission",
     "KHR_materials_iridescence",
+    "KHR_materials_anisotropy",
 ];
 
 /// Which texture of [`MaterialLayers`] a reference is.
@@ -26,10 +27,11 @@ pub enum LayerTexture {
     DiffuseTransmissionColor,
     Iridescence,
     IridescenceThickness,
+    Anisotropy,
 }
 
 /// Every layer texture: the extension, its key and the slot.
-const TEXTURES: [(&str, &str, LayerTexture); 6] = [
+const TEXTURES: [(&str, &str, LayerTexture); 7] = [
     (
         LAYER_EXTENSIONS[0],
         "sheenColorTexture",
@@ -59,6 +61,11 @@ const TEXTURES: [(&str, &str, LayerTexture); 6] = [
         LAYER_EXTENSIONS[2],
         "iridescenceThicknessTexture",
         LayerTexture::IridescenceThickness,
+    ),
+    (
+        LAYER_EXTENSIONS[3],
+        "anisotropyTexture",
+        LayerTexture::Anisotropy,
     ),
 ];
 
@@ -95,6 +102,7 @@ fn number(
 const UNIT: (fn(f32) -> bool, &str) = (|x| (0.0..=1.0).contains(&x), "is outside [0, 1]");
 const NON_NEGATIVE: (fn(f32) -> bool, &str) = (|x| x >= 0.0, "must be >= 0");
 const IOR: (fn(f32) -> bool, &str) = (|x| x >= 1.0, "must be >= 1");
+const ANY: (fn(f32) -> bool, &str) = (|_| true, "must be finite");
 
 /// A colour field of three numbers in [0, 1]; `default` when absent.
 fn colour(obj: &Value, ext: &str, key: &str, default: Rgb) -> Result<Rgb, String> {
@@ -118,7 +126,7 @@ fn colour(obj: &Value, ext: &str, key: &str, default: Rgb) -> Result<Rgb, String
     Ok(Rgb::from_array(c))
 }
 
-/// The factors of the three layer extensions (textures not assigned: [`layer_textures`]).
+/// The factors of the four layer extensions (textures not assigned: [`layer_textures`]).
 pub fn convert_layers(m: &gltf::Material) -> Result<MaterialLayers, String> {
     let mut l = MaterialLayers::default();
     if let Some(o) = object(m, LAYER_EXTENSIONS[0])? {
@@ -139,6 +147,11 @@ pub fn convert_layers(m: &gltf::Material) -> Result<MaterialLayers, String> {
             number(o, e, "iridescenceThicknessMinimum", 100.0, NON_NEGATIVE)?;
         l.iridescence_thickness_max =
             number(o, e, "iridescenceThicknessMaximum", 400.0, NON_NEGATIVE)?;
+    }
+    if let Some(o) = object(m, LAYER_EXTENSIONS[3])? {
+        let e = LAYER_EXTENSIONS[3];
+        l.anisotropy_strength = number(o, e, "anisotropyStrength", 0.0, UNIT)?;
+        l.anisotropy_rotation = number(o, e, "anisotropyRotation", 0.0, ANY)?;
     }
     Ok(l)
 }
@@ -207,6 +220,7 @@ pub fn assign(
         LayerTexture::DiffuseTransmissionColor => layers.diffuse_transmission_color_texture = r,
         LayerTexture::Iridescence => layers.iridescence_texture = r,
         LayerTexture::IridescenceThickness => layers.iridescence_thickness_texture = r,
+        LayerTexture::Anisotropy => layers.anisotropy_texture = r,
     }
 }
 
@@ -235,7 +249,9 @@ mod tests {
                 "KHR_materials_iridescence": {"iridescenceFactor": 0.8, "iridescenceIor": 1.45,
                    "iridescenceThicknessMinimum": 120, "iridescenceThicknessMaximum": 560,
                    "iridescenceThicknessTexture": {"index": 0,
-                      "extensions": {"KHR_texture_transform": {"scale": [2, 2]}}}}}"#,
+                      "extensions": {"KHR_texture_transform": {"scale": [2, 2]}}}},
+                "KHR_materials_anisotropy": {"anisotropyStrength": 0.6, "anisotropyRotation": -0.5,
+                   "anisotropyTexture": {"index": 0}}}"#,
         );
         let m = d.materials().next().unwrap();
         let l = convert_layers(&m).unwrap();
@@ -247,6 +263,7 @@ mod tests {
         assert_eq!(l.iridescence_ior, 1.45);
         assert_eq!(l.iridescence_thickness_min, 120.0);
         assert_eq!(l.iridescence_thickness_max, 560.0);
+        assert_eq!((l.anisotropy_strength, l.anisotropy_rotation), (0.6, -0.5));
         let t = layer_textures(&m, 1).unwrap();
         let slots: Vec<_> = t.iter().map(|(s, r)| (*s, r.index, r.tex_coord)).collect();
         assert_eq!(
@@ -255,6 +272,7 @@ mod tests {
                 (LayerTexture::SheenColor, 0, 1),
                 (LayerTexture::DiffuseTransmission, 0, 0),
                 (LayerTexture::IridescenceThickness, 0, 0),
+                (LayerTexture::Anisotropy, 0, 0),
             ]
         );
         assert!(t[2].1.transform.is_some());
@@ -264,7 +282,7 @@ mod tests {
     fn absent_fields_take_the_extensions_defaults() {
         let d = doc(
             r#"{"KHR_materials_sheen": {}, "KHR_materials_diffuse_transmission": {},
-                "KHR_materials_iridescence": {}}"#,
+                "KHR_materials_iridescence": {}, "KHR_materials_anisotropy": {}}"#,
         );
         let l = convert_layers(&d.materials().next().unwrap()).unwrap();
         assert_eq!(l, MaterialLayers::default());
@@ -280,6 +298,10 @@ mod tests {
             (
                 r#"{"KHR_materials_sheen": {"sheenColorFactor": [1, 2]}}"#,
                 "KHR_materials_sheen.sheenColorFactor is not an array of three numbers",
+            ),
+            (
+                r#"{"KHR_materials_anisotropy": {"anisotropyStrength": -0.1}}"#,
+                "KHR_materials_anisotropy.anisotropyStrength = -0.1 is outside [0, 1]",
             ),
             (
                 r#"{"KHR_materials_iridescence": {"iridescenceIor": 0.5}}"#,

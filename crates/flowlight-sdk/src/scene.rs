@@ -3,9 +3,10 @@
 use crate::abi::{MeshTables, SceneView};
 use flowlight_core::bsdf::Bsdf;
 use flowlight_core::camera::Camera;
-use flowlight_core::geometry::{Ray, SurfaceHit};
+use flowlight_core::geometry::{Frame, Ray, SurfaceHit};
 use flowlight_core::light::{Emitter, Lights, PunctualLight};
 use flowlight_core::material::{Material, ResolvedMaterial, Texture};
+use flowlight_core::material_layers::MaterialLayers;
 use flowlight_core::mesh::{CompactHit, MeshView};
 use glam::{Vec2, Vec3};
 use std::borrow::Cow;
@@ -88,7 +89,9 @@ pub fn constant_bsdfs(materials: &[Material], textures: &[Texture]) -> Box<[Opti
             ]
             .into_iter()
             .chain(m.layers.textures())
-            .any(|t| t.texture(textures).is_some());
+            .any(|t| t.texture(textures).is_some())
+                // An anisotropic lobe is oriented by the hit's tangent.
+                || m.layers.anisotropy_strength > 0.0;
             (!textured).then(|| {
                 let r = m.resolve([Vec2::ZERO; 2], [1.0; 4], textures);
                 Bsdf::from_material(&r.material, r.base)
@@ -301,8 +304,30 @@ impl<'a> Scene<'a> {
         if let Some(b) = self.constant_bsdf(hit.material, hit.color) {
             return Cow::Borrowed(b);
         }
-        let r = self.resolve(hit);
+        let mut r = self.resolve(hit);
+        self.orient_layers(&mut r.material.layers, hit.prim, hit.p, hit.ns);
         Cow::Owned(Bsdf::from_material(&r.material, r.base))
+    }
+
+    /// Projects an anisotropic material's direction from the tangent frame at point `p` of
+    /// triangle `prim` (shading normal `ns`) onto the BSDF's local frame `Frame::from_z(ns)`,
+    /// as [`Bsdf::from_material`] reads it (`flowlight_core::material_layers`). Where the
+    /// mesh gives no tangent frame, the local frame's own axes stand for it. Nothing changes
+    /// for an isotropic material.
+    #[inline]
+    pub fn orient_layers(&self, layers: &mut MaterialLayers, prim: u32, p: Vec3, ns: Vec3) {
+        if !(layers.anisotropy_strength > 0.0) {
+            return;
+        }
+        let frame = Frame::from_z(ns);
+        let [dx, dy] = layers.anisotropy_direction;
+        let set = layers.anisotropy_texture.tex_coord as usize;
+        let d = match self.mesh.tangent_frame(prim, p, ns, set) {
+            Some((t, b)) => t * dx + b * dy,
+            None => frame.x * dx + frame.y * dy,
+        };
+        let l = frame.to_local(d);
+        layers.anisotropy_direction = [l.x, l.y];
     }
 
     /// Radius of the scene's bounding sphere.

@@ -16,6 +16,7 @@
 //! volumetric materials in [`volume`].
 
 pub mod albedo;
+pub mod anisotropic_ggx;
 mod conductor;
 mod dielectric;
 pub mod gltf;
@@ -225,6 +226,7 @@ impl Component {
                 c.kind,
                 GltfLobeKind::Coat
                     | GltfLobeKind::Specular
+                    | GltfLobeKind::AnisotropicSpecular
                     | GltfLobeKind::Diffuse
                     | GltfLobeKind::Sheen
             ),

@@ -89,6 +89,7 @@ use crate::sampling::{cosine_hemisphere_pdf, two_sided_cosine, two_sided_cosine_
 use crate::Rgb;
 use glam::{Vec2, Vec3};
 
+mod anisotropy;
 mod diffuse_transmission;
 mod iridescence;
 mod pair;
@@ -99,6 +100,7 @@ mod tests;
 #[cfg(test)]
 mod tests_layers;
 
+pub use anisotropy::Anisotropy;
 pub use iridescence::{iridescence_fresnel, ThinFilm};
 pub(crate) use pair::{OpaquePair, PairOutgoing};
 pub(crate) use shared::CoatAttenuation;
@@ -124,6 +126,9 @@ pub enum GltfLobeKind {
     Refraction,
     /// The Charlie sheen layer (`KHR_materials_sheen`, [`sheen`]).
     Sheen,
+    /// The specular layer with an anisotropic GGX distribution (`KHR_materials_anisotropy`,
+    /// [`anisotropy`]).
+    AnisotropicSpecular,
     /// The diffuse base with a Lambertian transmission part
     /// (`KHR_materials_diffuse_transmission`, [`diffuse_transmission`]).
     TranslucentDiffuse,
@@ -152,6 +157,8 @@ pub struct GltfLobe {
     pub sheen: SheenScaling,
     /// Specular: the thin film of `KHR_materials_iridescence` (none by default).
     pub film: ThinFilm,
+    /// Anisotropic specular: the roughnesses and direction.
+    pub aniso: Anisotropy,
 }
 
 impl GltfLobe {
@@ -169,13 +176,17 @@ impl GltfLobe {
             albedo: 1.0,
             sheen: SheenScaling::default(),
             film: ThinFilm::default(),
+            aniso: Anisotropy::default(),
         }
     }
 
     #[inline]
     pub fn is_delta(&self) -> bool {
         match self.kind {
-            GltfLobeKind::Diffuse | GltfLobeKind::Sheen | GltfLobeKind::TranslucentDiffuse => false,
+            GltfLobeKind::Diffuse
+            | GltfLobeKind::Sheen
+            | GltfLobeKind::TranslucentDiffuse
+            | GltfLobeKind::AnisotropicSpecular => false,
             GltfLobeKind::Refraction => self.dielectric.is_delta(),
             _ => self.alpha < DELTA_ALPHA,
         }
@@ -207,6 +218,7 @@ impl GltfLobe {
     pub fn class_alpha(&self) -> Option<f32> {
         match self.kind {
             GltfLobeKind::Diffuse | GltfLobeKind::Sheen | GltfLobeKind::TranslucentDiffuse => None,
+            GltfLobeKind::AnisotropicSpecular => Some(self.aniso.class_alpha()),
             GltfLobeKind::Refraction => Some(self.dielectric.alpha),
             _ => Some(self.alpha),
         }
@@ -335,6 +347,7 @@ impl GltfLobe {
             GltfLobeKind::Diffuse => self.raw_diffuse(wo, wi),
             GltfLobeKind::Sheen => self.f0 * sheen::sheen_value(self.alpha, wo, wi),
             GltfLobeKind::TranslucentDiffuse => self.translucent_eval_pdf(wo, wi).0,
+            GltfLobeKind::AnisotropicSpecular => self.anisotropic_eval_pdf(wo, wi).0,
             GltfLobeKind::ThinTransmission => {
                 if self.is_delta() || wo.z * wi.z >= 0.0 {
                     return Rgb::ZERO;
@@ -392,6 +405,7 @@ impl GltfLobe {
                 two_sided_cosine_pdf(wo, wi),
             ),
             GltfLobeKind::TranslucentDiffuse => self.translucent_eval_pdf(wo, wi),
+            GltfLobeKind::AnisotropicSpecular => self.anisotropic_eval_pdf(wo, wi),
             GltfLobeKind::Diffuse => {
                 // two_sided_cosine_pdf's own side test, which raw_diffuse repeats.
                 if wo.z * wi.z <= 0.0 {
@@ -483,6 +497,7 @@ impl GltfLobe {
             }
             GltfLobeKind::Diffuse | GltfLobeKind::Sheen => two_sided_cosine_pdf(wo, wi),
             GltfLobeKind::TranslucentDiffuse => self.translucent_eval_pdf(wo, wi).1,
+            GltfLobeKind::AnisotropicSpecular => self.anisotropic_eval_pdf(wo, wi).1,
             GltfLobeKind::ThinTransmission => {
                 if self.is_delta() || wo.z * wi.z >= 0.0 {
                     return 0.0;
@@ -527,6 +542,7 @@ impl GltfLobe {
                 }
             }
             GltfLobeKind::TranslucentDiffuse => self.sample_translucent(wo, u)?,
+            GltfLobeKind::AnisotropicSpecular => self.sample_anisotropic(wo, u)?,
             GltfLobeKind::Refraction => {
                 let mut s = self.dielectric.sample_with(wo, uc, u)?;
                 s.f *= self.f0;
@@ -615,7 +631,7 @@ pub struct GltfParams {
     pub clearcoat_roughness: f32,
     /// Oren–Nayar σ in radians (0: Lambert).
     pub oren_nayar_sigma: f32,
-    /// Sheen, diffuse transmission and iridescence, resolved at the point (all off by
+    /// Sheen, diffuse transmission, iridescence and anisotropy, resolved at the point (all off by
     /// default).
     pub layers: MaterialLayers,
 }
@@ -750,6 +766,12 @@ pub fn lobes(p: &GltfParams) -> ([(GltfLobe, f32); MAX_LOBES], usize) {
         l.f0 = f0_d * k + base * m;
         l.f90 = Rgb::splat(s * k + m);
         l.film = film;
+        let s_a = p.layers.anisotropy_strength;
+        if s_a.is_finite() && s_a > 0.0 {
+            let [dx, dy] = p.layers.anisotropy_direction;
+            l.kind = GltfLobeKind::AnisotropicSpecular;
+            l.aniso = Anisotropy::new(s_a, Vec2::new(dx, dy), alpha);
+        }
         let e = l.f0 * (a1 - a5) + l.f90 * a5;
         push(l, att * e.max_component());
     }
