@@ -41,6 +41,47 @@ fn barycentrics(t: [Vec3; 3], p: Vec3) -> Option<[f32; 3]> {
 mod tests {
     use super::*;
 
+    /// The frame follows the vertex tangents (and their handedness) where the mesh has them,
+    /// else ∂p/∂u of the texture coordinates.
+    #[test]
+    fn tangent_frame_follows_vertex_tangents_else_the_uv_gradient() {
+        let positions = [Vec3::ZERO, Vec3::X, Vec3::Y];
+        let normals = [Vec3::Z; 3];
+        let uvs = [
+            glam::Vec2::ZERO,
+            glam::Vec2::new(0.0, 1.0),
+            glam::Vec2::new(1.0, 0.0),
+        ];
+        let tangents = [[0.0, 1.0, 0.0, -1.0]; 3];
+        let view = |tangents: &'static [[f32; 4]], uvs: &'static [glam::Vec2]| MeshView {
+            positions: Box::leak(Box::new(positions)),
+            normals: Box::leak(Box::new(normals)),
+            uvs,
+            uvs1: &[],
+            colors: &[],
+            tangents,
+            triangles: &[[0, 1, 2]],
+            triangle_material: &[0],
+            triangle_emitter: &[-1],
+            instances: &[],
+            materials: &[],
+            textures: &[],
+            stored_ids: false,
+        };
+        let p = Vec3::new(0.25, 0.25, 0.0);
+        let tangents: &'static [[f32; 4]] = Box::leak(Box::new(tangents));
+        let uvs: &'static [glam::Vec2] = Box::leak(Box::new(uvs));
+        let (t, b) = view(tangents, uvs).tangent_frame(0, p, Vec3::Z, 0).unwrap();
+        assert!(
+            (t - Vec3::Y).length() < 1e-6 && (b - Vec3::X).length() < 1e-6,
+            "{t} {b}"
+        );
+        // Without tangents: u grows along +y here, so T = +y.
+        let (t, _) = view(&[], uvs).tangent_frame(0, p, Vec3::Z, 0).unwrap();
+        assert!((t - Vec3::Y).length() < 1e-6, "{t}");
+        assert!(view(&[], &[]).tangent_frame(0, p, Vec3::Z, 0).is_none());
+    }
+
     #[test]
     fn barycentrics_recover_the_point() {
         let t = [
