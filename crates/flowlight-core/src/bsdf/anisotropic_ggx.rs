@@ -39,7 +39,7 @@ impl AnisoGgx {
         let wm = wm / wm.length();
         let (x, y) = (wm.x / self.ax, wm.y / self.ay);
         let k = x * x + y * y + wm.z * wm.z;
-        if !(k > 0.0) {
+        if k.is_nan() || k <= 0.0 {
             return 0.0;
         }
         1.0 / (PI * self.ax * self.ay * k * k)

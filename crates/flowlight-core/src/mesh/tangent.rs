@@ -29,7 +29,7 @@ fn barycentrics(t: [Vec3; 3], p: Vec3) -> Option<[f32; 3]> {
     let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
     let (d1p, d2p) = (e1.dot(d), e2.dot(d));
     let det = d11 * d22 - d12 * d12;
-    if !(det.abs() > 0.0) {
+    if det.is_nan() || det == 0.0 {
         return None;
     }
     let b1 = (d22 * d1p - d12 * d2p) / det;

@@ -70,7 +70,7 @@ impl Anisotropy {
 
     /// `w` in the frame whose x axis is the direction.
     #[inline]
-    fn to_aligned(&self, w: Vec3) -> Vec3 {
+    fn aligned(&self, w: Vec3) -> Vec3 {
         Vec3::new(
             self.cos * w.x + self.sin * w.y,
             -self.sin * w.x + self.cos * w.y,
@@ -78,9 +78,9 @@ impl Anisotropy {
         )
     }
 
-    /// The inverse of [`Anisotropy::to_aligned`].
+    /// The inverse of [`Anisotropy::aligned`].
     #[inline]
-    fn from_aligned(&self, w: Vec3) -> Vec3 {
+    fn unaligned(&self, w: Vec3) -> Vec3 {
         Vec3::new(
             self.cos * w.x - self.sin * w.y,
             self.sin * w.x + self.cos * w.y,
@@ -100,7 +100,7 @@ impl GltfLobe {
     pub(super) fn anisotropic_eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Rgb, f32) {
         let a = &self.aniso;
         let (wo, wi) = to_upper(wo, wi);
-        let (wo, wi) = (a.to_aligned(wo), a.to_aligned(wi));
+        let (wo, wi) = (a.aligned(wo), a.aligned(wi));
         let ggx = a.ggx();
         match ggx.reflection(wo, wi) {
             Some((s, c)) => (self.fresnel(c) * s, ggx.reflection_pdf(wo, wi)),
@@ -112,9 +112,9 @@ impl GltfLobe {
     pub(super) fn sample_anisotropic(&self, wo: Vec3, u: Vec2) -> Option<BsdfSample> {
         let a = &self.aniso;
         let below = wo.z < 0.0;
-        let up = a.to_aligned(if below { flip(wo) } else { wo });
+        let up = a.aligned(if below { flip(wo) } else { wo });
         let (wr, _, _, pdf) = a.ggx().sample_reflection(up, u)?;
-        let wi = a.from_aligned(wr);
+        let wi = a.unaligned(wr);
         let wi = if below { flip(wi) } else { wi };
         let f = self.anisotropic_eval_pdf(wo, wi).0;
         Some(BsdfSample {

@@ -129,7 +129,7 @@ fn sensitivity(opd: f32, shift: [f32; 3]) -> [f32; 3] {
 pub fn iridescence_fresnel(eta2: f32, d: f32, base_f0: Rgb, c1: f32) -> Rgb {
     let outside = 1.0f32;
     let c1 = c1.abs().min(1.0);
-    if !(d > 0.0) {
+    if d.is_nan() || d <= 0.0 {
         // No film: the bare base (the Airy sum's Schlick terms do not vanish at d = 0).
         return Rgb::from_array(base_f0.to_array().map(|f| schlick(f.clamp(0.0, 1.0), c1)));
     }
