@@ -9,6 +9,7 @@ pub mod denormals;
 pub mod geometry;
 pub mod light;
 pub mod material;
+pub mod material_layers;
 pub mod mesh;
 pub mod path;
 pub mod rng;

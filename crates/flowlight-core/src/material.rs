@@ -74,6 +74,7 @@
 //! normal texture is *not* normal-mapped; Flowlight's coat follows the base normal map
 //! instead. The loader warns when a file has a coat normal texture.
 
+use crate::material_layers::MaterialLayers;
 use crate::Rgb;
 use glam::{Vec2, Vec4};
 use std::sync::LazyLock;
@@ -265,6 +266,8 @@ pub struct Material {
     /// (`[render] multiscatter`, [`crate::bsdf::multiscatter`]); 0 (default): single
     /// scattering, as the glTF specification.
     pub multiscatter: u32,
+    /// Sheen, diffuse transmission, iridescence and anisotropy ([`crate::material_layers`]).
+    pub layers: MaterialLayers,
 }
 
 impl Default for Material {
@@ -301,6 +304,7 @@ impl Default for Material {
             clearcoat_texture: TextureRef::NONE,
             clearcoat_roughness_texture: TextureRef::NONE,
             multiscatter: 0,
+            layers: MaterialLayers::default(),
         }
     }
 }
@@ -395,6 +399,7 @@ impl Material {
         if let Some(t) = linear(&self.clearcoat_roughness_texture) {
             m.clearcoat_roughness = self.clearcoat_roughness * t.y;
         }
+        m.layers = self.layers.resolve(uv, textures);
         ResolvedMaterial {
             material: m,
             base,

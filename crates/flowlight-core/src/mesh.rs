@@ -31,6 +31,8 @@ use crate::material::{Material, Texture};
 use crate::specular_normal::{bends_for_metallic, valid_specular_normal};
 use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
 
+mod tangent;
+
 /// What a batched ray query returns per ray (ABI 4): enough to rebuild the surface data.
 /// `prim == u32::MAX` (and `t = ∞`) when the ray escaped.
 #[repr(C)]

@@ -118,7 +118,8 @@ pub fn vertex_bsdf<'a>(scene: &Scene<'a>, v: &PathVertex) -> Option<Cow<'a, Bsdf
         return Some(Cow::Borrowed(b));
     }
     let m = scene.materials.get(v.material as usize)?;
-    let r = m.resolve(v.uvs(), v.color, scene.textures);
+    let mut r = m.resolve(v.uvs(), v.color, scene.textures);
+    scene.orient_layers(&mut r.material.layers, v.prim, v.p, v.ns);
     Some(Cow::Owned(Bsdf::from_material(&r.material, r.base)))
 }
 

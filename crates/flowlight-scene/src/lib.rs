@@ -30,6 +30,7 @@ pub mod instancing;
 pub mod lights;
 pub mod load_options;
 pub mod material;
+pub mod material_layers;
 pub mod memory;
 pub mod scene;
 pub mod source;

@@ -328,6 +328,7 @@ pub fn convert(m: &gltf::Material) -> Result<Material, String> {
         attenuation_distance,
         clearcoat,
         clearcoat_roughness,
+        layers: crate::material_layers::convert_layers(m)?,
         ..Material::default()
     };
     if let Some(o) = extras_override(m.extras())? {

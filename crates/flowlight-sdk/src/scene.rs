@@ -3,9 +3,10 @@
 use crate::abi::{MeshTables, SceneView};
 use flowlight_core::bsdf::Bsdf;
 use flowlight_core::camera::Camera;
-use flowlight_core::geometry::{Ray, SurfaceHit};
+use flowlight_core::geometry::{Frame, Ray, SurfaceHit};
 use flowlight_core::light::{Emitter, Lights, PunctualLight};
 use flowlight_core::material::{Material, ResolvedMaterial, Texture};
+use flowlight_core::material_layers::MaterialLayers;
 use flowlight_core::mesh::{CompactHit, MeshView};
 use glam::{Vec2, Vec3};
 use std::borrow::Cow;
@@ -86,8 +87,11 @@ pub fn constant_bsdfs(materials: &[Material], textures: &[Texture]) -> Box<[Opti
                 &m.clearcoat_texture,
                 &m.clearcoat_roughness_texture,
             ]
-            .iter()
-            .any(|t| t.texture(textures).is_some());
+            .into_iter()
+            .chain(m.layers.textures())
+            .any(|t| t.texture(textures).is_some())
+                // An anisotropic lobe is oriented by the hit's tangent.
+                || m.layers.anisotropy_strength > 0.0;
             (!textured).then(|| {
                 let r = m.resolve([Vec2::ZERO; 2], [1.0; 4], textures);
                 Bsdf::from_material(&r.material, r.base)
@@ -293,15 +297,37 @@ impl<'a> Scene<'a> {
     /// The BSDF at a hit (textures and vertex colour applied; the hit's shading normal is
     /// already normal-mapped by the host): borrowed from the scene's table where the
     /// material's BSDF is the same at every point, built otherwise. Borrowing saves a copy of
-    /// the 456-byte `Bsdf` per vertex, which was 2.4% of a Cornell box render (`memmove`
-    /// under the tracer's vertex, perf).
+    /// the `Bsdf` per vertex (936 bytes since it holds five glTF lobes; at 456 bytes the copy
+    /// was 2.4% of a Cornell box render: `memmove` under the tracer's vertex, perf).
     #[inline]
     pub fn bsdf(&self, hit: &SurfaceHit) -> Cow<'a, Bsdf> {
         if let Some(b) = self.constant_bsdf(hit.material, hit.color) {
             return Cow::Borrowed(b);
         }
-        let r = self.resolve(hit);
+        let mut r = self.resolve(hit);
+        self.orient_layers(&mut r.material.layers, hit.prim, hit.p, hit.ns);
         Cow::Owned(Bsdf::from_material(&r.material, r.base))
+    }
+
+    /// Projects an anisotropic material's direction from the tangent frame at point `p` of
+    /// triangle `prim` (shading normal `ns`) onto the BSDF's local frame `Frame::from_z(ns)`,
+    /// as [`Bsdf::from_material`] reads it (`flowlight_core::material_layers`). Where the
+    /// mesh gives no tangent frame, the local frame's own axes stand for it. Nothing changes
+    /// for an isotropic material.
+    #[inline]
+    pub fn orient_layers(&self, layers: &mut MaterialLayers, prim: u32, p: Vec3, ns: Vec3) {
+        if layers.anisotropy_strength.is_nan() || layers.anisotropy_strength <= 0.0 {
+            return;
+        }
+        let frame = Frame::from_z(ns);
+        let [dx, dy] = layers.anisotropy_direction;
+        let set = layers.anisotropy_texture.tex_coord as usize;
+        let d = match self.mesh.tangent_frame(prim, p, ns, set) {
+            Some((t, b)) => t * dx + b * dy,
+            None => frame.x * dx + frame.y * dy,
+        };
+        let l = frame.to_local(d);
+        layers.anisotropy_direction = [l.x, l.y];
     }
 
     /// Radius of the scene's bounding sphere.
@@ -510,5 +536,51 @@ mod tests {
             }
             assert_eq!(cached.albedo().to_bits(), built.albedo().to_bits());
         }
+    }
+
+    /// An anisotropic material's direction, given in the tangent frame, comes out in the
+    /// BSDF's local frame `Frame::from_z(n_s)`: along the vertex tangent for (1, 0), along the
+    /// bitangent for (0, 1); an isotropic material's layers are left as they are.
+    #[test]
+    fn orient_layers_projects_the_tangent_direction_onto_the_shading_frame() {
+        let positions = [Vec3::ZERO, Vec3::X, Vec3::Y];
+        let normals = [Vec3::Z; 3];
+        let tangents = [[0.6, 0.8, 0.0, 1.0]; 3];
+        let scene = Scene {
+            camera: Camera::look_along(Vec3::Z, -Vec3::Z, Vec3::Y, 60.0, 4, 4),
+            materials: &[],
+            textures: &[],
+            lights: Lights::area_only(&[], &[]),
+            bounds_min: Vec3::ZERO,
+            bounds_max: Vec3::ONE,
+            mesh: MeshView {
+                positions: &positions,
+                normals: &normals,
+                tangents: &tangents,
+                triangles: &[[0, 1, 2]],
+                triangle_material: &[0],
+                triangle_emitter: &[-1],
+                ..MeshView::default()
+            },
+            material_bsdfs: &[],
+            light_bound: None,
+        };
+        let p = Vec3::new(0.2, 0.3, 0.0);
+        let frame = Frame::from_z(Vec3::Z);
+        let t = Vec3::new(0.6, 0.8, 0.0);
+        for (dir, want) in [([1.0, 0.0], t), ([0.0, 1.0], Vec3::Z.cross(t))] {
+            let mut l = MaterialLayers {
+                anisotropy_strength: 0.5,
+                anisotropy_direction: dir,
+                ..MaterialLayers::default()
+            };
+            scene.orient_layers(&mut l, 0, p, Vec3::Z);
+            let [x, y] = l.anisotropy_direction;
+            let got = frame.to_world(Vec3::new(x, y, 0.0));
+            assert!((got - want).length() < 1e-5, "{dir:?}: {got} vs {want}");
+        }
+        let mut iso = MaterialLayers::default();
+        scene.orient_layers(&mut iso, 0, p, Vec3::Z);
+        assert_eq!(iso, MaterialLayers::default());
     }
 }

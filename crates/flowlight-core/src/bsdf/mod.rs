@@ -16,6 +16,7 @@
 //! volumetric materials in [`volume`].
 
 pub mod albedo;
+pub mod anisotropic_ggx;
 mod conductor;
 mod dielectric;
 pub mod gltf;
@@ -46,9 +47,9 @@ use gltf::CoatAttenuation;
 pub const DELTA_ALPHA: f32 = 1e-3;
 /// GGX α below which a glossy lobe counts as narrow (Λα): no explicit light connection.
 pub const NARROW_GLOSSY_ALPHA: f32 = 0.05;
-/// Most components a [`Bsdf`] holds (glTF: coat, specular, diffuse, transmission, and the
-/// metal's multiple-scattering compensation).
-pub const MAX_COMPONENTS: usize = 5;
+/// Most components a [`Bsdf`] holds: the glTF lobes (coat, sheen, specular, diffuse,
+/// transmission) and the metal's multiple-scattering compensation.
+pub const MAX_COMPONENTS: usize = gltf::MAX_LOBES + 1;
 
 /// One sampled direction.
 #[derive(Clone, Copy, Debug)]
@@ -215,7 +216,10 @@ impl Component {
     pub fn is_diffuse(&self) -> bool {
         match self {
             Component::Lambert(_) | Component::OrenNayar(_) => true,
-            Component::Gltf(c) => c.kind == GltfLobeKind::Diffuse,
+            Component::Gltf(c) => matches!(
+                c.kind,
+                GltfLobeKind::Diffuse | GltfLobeKind::TranslucentDiffuse
+            ),
             _ => false,
         }
     }
@@ -233,7 +237,11 @@ impl Component {
             Component::Dielectric(_) => false,
             Component::Gltf(c) => matches!(
                 c.kind,
-                GltfLobeKind::Coat | GltfLobeKind::Specular | GltfLobeKind::Diffuse
+                GltfLobeKind::Coat
+                    | GltfLobeKind::Specular
+                    | GltfLobeKind::AnisotropicSpecular
+                    | GltfLobeKind::Diffuse
+                    | GltfLobeKind::Sheen
             ),
         }
     }
@@ -366,6 +374,7 @@ impl Bsdf {
             clearcoat: m.clearcoat,
             clearcoat_roughness: m.clearcoat_roughness,
             oren_nayar_sigma: if sigma.is_finite() { sigma } else { 0.0 },
+            layers: m.layers,
         };
         let (lobes, n) = gltf::lobes(&p);
         let bsdf = Bsdf::from_gltf_lobes(&lobes[..n]);

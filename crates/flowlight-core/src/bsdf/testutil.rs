@@ -22,6 +22,7 @@ pub fn gltf_params() -> GltfParams {
         clearcoat: 0.0,
         clearcoat_roughness: 0.0,
         oren_nayar_sigma: 0.0,
+        layers: crate::material_layers::MaterialLayers::default(),
     }
 }
 

@@ -151,6 +151,16 @@ impl Loader<'_> {
                 mat.clearcoat_roughness_texture = r;
             }
         }
+        let layers =
+            crate::material_layers::layer_textures(m, count).map_err(|e| merr(self.file(), e))?;
+        for (slot, raw) in layers {
+            let t = transform_from_json(raw.transform.as_ref())
+                .map_err(|e| merr(self.file(), format!("{slot:?} texture: {e}")))?;
+            let doc = self.src.document.clone();
+            let tex = doc.textures().nth(raw.index).expect("index checked");
+            let r = self.texture_ref(&tex, raw.tex_coord, t, name)?;
+            crate::material_layers::assign(&mut mat.layers, slot, r);
+        }
         Ok(())
     }
 }

@@ -99,3 +99,32 @@ fn bad_extension_values_name_the_field() {
         assert!(!e.contains('\n'), "one line: {e}");
     }
 }
+
+/// The layer extensions reach `Material::layers` through the loader, and a file that
+/// requires them loads.
+#[test]
+fn layer_extensions_reach_the_material() {
+    let mat = r#"{"name": "velvet", "extensions": {
+            "KHR_materials_sheen": {"sheenColorFactor": [0.5, 0.25, 1], "sheenRoughnessFactor": 0.4},
+            "KHR_materials_diffuse_transmission": {"diffuseTransmissionFactor": 0.3},
+            "KHR_materials_iridescence": {"iridescenceFactor": 1, "iridescenceThicknessMaximum": 250},
+            "KHR_materials_anisotropy": {"anisotropyStrength": 0.7, "anisotropyRotation": 1.0}
+        }}"#;
+    let s = load("layers", mat).unwrap();
+    let l = &s.materials[0].layers;
+    assert_eq!(l.sheen_color.to_array(), [0.5, 0.25, 1.0]);
+    assert_eq!(l.sheen_roughness, 0.4);
+    assert_eq!(l.diffuse_transmission, 0.3);
+    assert_eq!(l.diffuse_transmission_color.to_array(), [1.0; 3]);
+    assert_eq!((l.iridescence, l.iridescence_thickness_max), (1.0, 250.0));
+    assert_eq!((l.anisotropy_strength, l.anisotropy_rotation), (0.7, 1.0));
+    let e = load(
+        "badlayer",
+        r#"{"name": "v", "extensions": {"KHR_materials_sheen": {"sheenRoughnessFactor": 2}}}"#,
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("KHR_materials_sheen.sheenRoughnessFactor = 2 is outside [0, 1]"),
+        "{e}"
+    );
+}

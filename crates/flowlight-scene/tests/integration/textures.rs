@@ -829,3 +829,56 @@ fn d10_an_image_in_a_buffer_view_without_mime_type_is_a_clear_error() {
         "{e}"
     );
 }
+
+/// The layer extensions' textures reach their factors: a 2×1 RGBA image (left texel
+/// (0, 255, 0, 0), right (255, 0, 255, 255)) as sheen colour (sRGB RGB) and roughness (A),
+/// diffuse transmission (A), iridescence (R) and thickness (G), anisotropy (RG direction,
+/// B strength).
+#[test]
+fn layer_textures_scale_their_factors() {
+    let q = Quad {
+        images: vec![png8(2, 1, 4, &[0, 255, 0, 0, 255, 0, 255, 255])],
+        textures: r#"{"source": 0, "sampler": 0}"#.into(),
+        samplers: NEAREST.into(),
+        material: r#"{"pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1]},
+            "extensions": {
+            "KHR_materials_sheen": {"sheenColorFactor": [1, 1, 1], "sheenRoughnessFactor": 0.5,
+                "sheenColorTexture": {"index": 0}, "sheenRoughnessTexture": {"index": 0}},
+            "KHR_materials_diffuse_transmission": {"diffuseTransmissionFactor": 0.8,
+                "diffuseTransmissionTexture": {"index": 0}},
+            "KHR_materials_iridescence": {"iridescenceFactor": 1,
+                "iridescenceThicknessMinimum": 100, "iridescenceThicknessMaximum": 500,
+                "iridescenceTexture": {"index": 0}, "iridescenceThicknessTexture": {"index": 0}},
+            "KHR_materials_anisotropy": {"anisotropyStrength": 0.5,
+                "anisotropyTexture": {"index": 0}}}}"#
+            .into(),
+        extensions_used: r#""KHR_materials_sheen", "KHR_materials_diffuse_transmission",
+            "KHR_materials_iridescence", "KHR_materials_anisotropy""#
+            .into(),
+        ..Quad::default()
+    };
+    let s = load(&q, "ext-layers");
+    let (l, r) = left_right(&s);
+    let (l, r) = (l.material.layers, r.material.layers);
+    assert_eq!(l.sheen_color.to_array(), [0.0, 1.0, 0.0]);
+    assert_eq!(r.sheen_color.to_array(), [1.0, 0.0, 1.0]);
+    assert_eq!((l.sheen_roughness, r.sheen_roughness), (0.0, 0.5));
+    assert_eq!((l.diffuse_transmission, r.diffuse_transmission), (0.0, 0.8));
+    assert_eq!((l.iridescence, r.iridescence), (0.0, 1.0));
+    assert_eq!(
+        (l.iridescence_thickness_max, r.iridescence_thickness_max),
+        (500.0, 100.0)
+    );
+    // Left: direction (−1, 1)/√2, strength 0; right: (1, −1)/√2, strength 0.5.
+    assert_eq!((l.anisotropy_strength, r.anisotropy_strength), (0.0, 0.5));
+    let h = std::f32::consts::FRAC_1_SQRT_2;
+    for (got, want) in [
+        (l.anisotropy_direction, [-h, h]),
+        (r.anisotropy_direction, [h, -h]),
+    ] {
+        assert!(
+            near(got[0], want[0], 1e-6) && near(got[1], want[1], 1e-6),
+            "{got:?}"
+        );
+    }
+}

@@ -61,6 +61,13 @@
 //!
 //! which is reciprocal and conserves energy (c E_c(μ_o) + A(μ_o) · 1 ≤ 1).
 //!
+//! **Layers** (each in its own file, with its formulas): `KHR_materials_sheen` adds a
+//! Charlie sheen lobe between the coat and the rest and scales every lobe beneath by its
+//! albedo scaling S(μ_o, μ_i) ([`sheen`]); `KHR_materials_diffuse_transmission` turns the
+//! diffuse base into a translucent one that also transmits to the back side
+//! ([`diffuse_transmission`]); `KHR_materials_iridescence` mixes a thin film's Fresnel into the
+//! specular layer's ([`iridescence`]). Without them the lobes are the ones above, bit for bit.
+//!
 //! **Mixture.** Every lobe is a [`GltfLobe`] in the material's mixture; lobe i is chosen with
 //! probability wᵢ (proportional to an estimate of its hemispherical albedo, floored at a tenth
 //! of the largest) and its value carries 1/wᵢ (`scale`), so Σ wᵢ fᵢ is exactly the material's
@@ -76,20 +83,30 @@
 use super::albedo::{average, schlick_average};
 use super::microfacet::Ggx;
 use super::{BsdfSample, Dielectric, Lambert, OrenNayar, DELTA_ALPHA};
+use crate::material_layers::MaterialLayers;
 use crate::path::NodeType;
 use crate::sampling::{cosine_hemisphere_pdf, two_sided_cosine, two_sided_cosine_pdf};
 use crate::Rgb;
 use glam::{Vec2, Vec3};
 
+mod anisotropy;
+mod diffuse_transmission;
+mod iridescence;
 mod pair;
 mod shared;
+mod sheen;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_layers;
 
+pub use anisotropy::Anisotropy;
+pub use iridescence::{iridescence_fresnel, ThinFilm};
 pub(crate) use pair::{OpaquePair, PairOutgoing};
 pub(crate) use shared::CoatAttenuation;
 use shared::{flip, to_upper};
 pub use shared::{schlick_f0_f90, GltfShared};
+pub use sheen::{sheen_albedo, sheen_alpha, SheenScaling};
 
 /// Clearcoat normal-incidence reflectance (ior 1.5).
 pub const COAT_F0: f32 = 0.04;
@@ -107,6 +124,14 @@ pub enum GltfLobeKind {
     ThinTransmission,
     /// A refracting dielectric interface (volumetric transmission).
     Refraction,
+    /// The Charlie sheen layer (`KHR_materials_sheen`, [`sheen`]).
+    Sheen,
+    /// The specular layer with an anisotropic GGX distribution (`KHR_materials_anisotropy`,
+    /// [`anisotropy`]).
+    AnisotropicSpecular,
+    /// The diffuse base with a Lambertian transmission part
+    /// (`KHR_materials_diffuse_transmission`, [`diffuse_transmission`]).
+    TranslucentDiffuse,
 }
 /// One lobe of the glTF material (see the module docs for the formulas).
 #[derive(Clone, Copy, Debug)]
@@ -128,6 +153,12 @@ pub struct GltfLobe {
     pub shared: GltfShared,
     /// Albedo estimate in [0, 1] for termination (of this lobe's value, scale included).
     pub albedo: f32,
+    /// The albedo scaling of a sheen layer above this lobe (none by default).
+    pub sheen: SheenScaling,
+    /// Specular: the thin film of `KHR_materials_iridescence` (none by default).
+    pub film: ThinFilm,
+    /// Anisotropic specular: the roughnesses and direction.
+    pub aniso: Anisotropy,
 }
 
 impl GltfLobe {
@@ -143,13 +174,19 @@ impl GltfLobe {
             dielectric: Dielectric::new(Rgb::ONE, 1.5, shared.alpha),
             shared,
             albedo: 1.0,
+            sheen: SheenScaling::default(),
+            film: ThinFilm::default(),
+            aniso: Anisotropy::default(),
         }
     }
 
     #[inline]
     pub fn is_delta(&self) -> bool {
         match self.kind {
-            GltfLobeKind::Diffuse => false,
+            GltfLobeKind::Diffuse
+            | GltfLobeKind::Sheen
+            | GltfLobeKind::TranslucentDiffuse
+            | GltfLobeKind::AnisotropicSpecular => false,
             GltfLobeKind::Refraction => self.dielectric.is_delta(),
             _ => self.alpha < DELTA_ALPHA,
         }
@@ -180,7 +217,8 @@ impl GltfLobe {
     #[inline]
     pub fn class_alpha(&self) -> Option<f32> {
         match self.kind {
-            GltfLobeKind::Diffuse => None,
+            GltfLobeKind::Diffuse | GltfLobeKind::Sheen | GltfLobeKind::TranslucentDiffuse => None,
+            GltfLobeKind::AnisotropicSpecular => Some(self.aniso.class_alpha()),
             GltfLobeKind::Refraction => Some(self.dielectric.alpha),
             _ => Some(self.alpha),
         }
@@ -190,18 +228,37 @@ impl GltfLobe {
     #[inline]
     fn attenuation(&self, wo: Vec3, wi: Vec3) -> f32 {
         if self.kind == GltfLobeKind::Coat || self.shared.coat <= 0.0 {
-            return 1.0;
+            return self.with_sheen(1.0, wo, wi);
         }
-        self.shared.coat_attenuation_pair(wo.z, wi.z)
+        self.with_sheen(self.shared.coat_attenuation_pair(wo.z, wi.z), wo, wi)
+    }
+
+    /// `a` times the albedo scaling of a sheen layer above this lobe; `a` itself without one.
+    #[inline]
+    fn with_sheen(&self, a: f32, wo: Vec3, wi: Vec3) -> f32 {
+        if !self.sheen.is_some() {
+            return a;
+        }
+        a * self.sheen.factor(wo.z, wi.z)
+    }
+
+    /// The specular lobe's Fresnel at ω_o·h = `c`: Schlick's, or mixed with the thin film's.
+    #[inline]
+    fn fresnel(&self, c: f32) -> Rgb {
+        let f = schlick_f0_f90(self.f0, self.f90, c);
+        if !self.film.is_some() {
+            return f;
+        }
+        self.film.fresnel(f, c)
     }
 
     /// [`GltfLobe::attenuation`] through a mixture pass's [`CoatAttenuation`].
     #[inline]
     fn attenuation_with(&self, wo: Vec3, wi: Vec3, coat: &mut CoatAttenuation) -> f32 {
         if self.kind == GltfLobeKind::Coat || self.shared.coat <= 0.0 {
-            return 1.0;
+            return self.with_sheen(1.0, wo, wi);
         }
-        coat.get(&self.shared, wo, wi)
+        self.with_sheen(coat.get(&self.shared, wo, wi), wo, wi)
     }
 
     /// The lobe's value from its raw value: times `scale` and the coat attenuation, black
@@ -283,11 +340,14 @@ impl GltfLobe {
                 }
                 let (wo, wi) = to_upper(wo, wi);
                 match self.ggx_reflection(wo, wi) {
-                    Some((s, c)) => schlick_f0_f90(self.f0, self.f90, c) * s,
+                    Some((s, c)) => self.fresnel(c) * s,
                     None => Rgb::ZERO,
                 }
             }
             GltfLobeKind::Diffuse => self.raw_diffuse(wo, wi),
+            GltfLobeKind::Sheen => self.f0 * sheen::sheen_value(self.alpha, wo, wi),
+            GltfLobeKind::TranslucentDiffuse => self.translucent_eval_pdf(wo, wi).0,
+            GltfLobeKind::AnisotropicSpecular => self.anisotropic_eval_pdf(wo, wi).0,
             GltfLobeKind::ThinTransmission => {
                 if self.is_delta() || wo.z * wi.z >= 0.0 {
                     return Rgb::ZERO;
@@ -336,10 +396,16 @@ impl GltfLobe {
                 }
                 let (wo, wi) = to_upper(wo, wi);
                 match self.ggx_reflection_pdf(wo, wi) {
-                    Some((s, c, pdf)) => (schlick_f0_f90(self.f0, self.f90, c) * s, pdf),
+                    Some((s, c, pdf)) => (self.fresnel(c) * s, pdf),
                     None => NONE,
                 }
             }
+            GltfLobeKind::Sheen => (
+                self.f0 * sheen::sheen_value(self.alpha, wo, wi),
+                two_sided_cosine_pdf(wo, wi),
+            ),
+            GltfLobeKind::TranslucentDiffuse => self.translucent_eval_pdf(wo, wi),
+            GltfLobeKind::AnisotropicSpecular => self.anisotropic_eval_pdf(wo, wi),
             GltfLobeKind::Diffuse => {
                 // two_sided_cosine_pdf's own side test, which raw_diffuse repeats.
                 if wo.z * wi.z <= 0.0 {
@@ -429,7 +495,9 @@ impl GltfLobe {
                 let (wo, wi) = to_upper(wo, wi);
                 self.ggx_pdf(wo, wi)
             }
-            GltfLobeKind::Diffuse => two_sided_cosine_pdf(wo, wi),
+            GltfLobeKind::Diffuse | GltfLobeKind::Sheen => two_sided_cosine_pdf(wo, wi),
+            GltfLobeKind::TranslucentDiffuse => self.translucent_eval_pdf(wo, wi).1,
+            GltfLobeKind::AnisotropicSpecular => self.anisotropic_eval_pdf(wo, wi).1,
             GltfLobeKind::ThinTransmission => {
                 if self.is_delta() || wo.z * wi.z >= 0.0 {
                     return 0.0;
@@ -462,6 +530,19 @@ impl GltfLobe {
                     eta: 1.0,
                 }
             }
+            GltfLobeKind::Sheen => {
+                let (wi, pdf) = two_sided_cosine(wo, u)?;
+                BsdfSample {
+                    wi,
+                    f: self.raw_eval(wo, wi),
+                    pdf,
+                    node: NodeType::GlossyReflection,
+                    delta: false,
+                    eta: 1.0,
+                }
+            }
+            GltfLobeKind::TranslucentDiffuse => self.sample_translucent(wo, u)?,
+            GltfLobeKind::AnisotropicSpecular => self.sample_anisotropic(wo, u)?,
             GltfLobeKind::Refraction => {
                 let mut s = self.dielectric.sample_with(wo, uc, u)?;
                 s.f *= self.f0;
@@ -492,7 +573,7 @@ impl GltfLobe {
             let fr = if thin {
                 self.f0 * (1.0 - self.shared.diel_fresnel(c)).max(0.0)
             } else {
-                schlick_f0_f90(self.f0, self.f90, c)
+                self.fresnel(c)
             };
             // ω_o's cosine in the upper frame, as `sample_ggx_direction` flips it.
             let up_z = if wo.z < 0.0 { -wo.z } else { wo.z };
@@ -550,6 +631,9 @@ pub struct GltfParams {
     pub clearcoat_roughness: f32,
     /// Oren–Nayar σ in radians (0: Lambert).
     pub oren_nayar_sigma: f32,
+    /// Sheen, diffuse transmission, iridescence and anisotropy, resolved at the point (all off by
+    /// default).
+    pub layers: MaterialLayers,
 }
 
 /// Normal-incidence reflectance ((η − 1)/(η + 1))² of ior η (η = 0 gives 1, as
@@ -564,9 +648,12 @@ pub fn f0_from_ior(ior: f32) -> f32 {
     }
 }
 
+/// Most lobes of one glTF material: coat, sheen, specular, diffuse base, transmission.
+pub const MAX_LOBES: usize = 5;
+
 /// The lobes (each with its selection weight, summing to one) of a glTF material; at most
-/// four. An empty list means the material scatters nothing.
-pub fn lobes(p: &GltfParams) -> ([(GltfLobe, f32); 4], usize) {
+/// [`MAX_LOBES`]. An empty list means the material scatters nothing.
+pub fn lobes(p: &GltfParams) -> ([(GltfLobe, f32); MAX_LOBES], usize) {
     let unit = |x: f32| {
         if x.is_finite() {
             x.clamp(0.0, 1.0)
@@ -600,8 +687,14 @@ pub fn lobes(p: &GltfParams) -> ([(GltfLobe, f32); 4], usize) {
         let x = spec_color * f0_ior;
         Rgb::new(x.r.min(1.0), x.g.min(1.0), x.b.min(1.0)) * s
     };
-    let diel_f0 = f0_d.max_component();
-    let diel_f90 = s;
+    let film = thin_film(&p.layers, (1.0 - m) * (1.0 - t_v), f0_d, m, base);
+    let (diel_f0, diel_f90) = if film.is_some() {
+        // The base receives what the film leaves (iridescence.rs, `coupling_f0`).
+        let f = film.factor;
+        (film.coupling_f0(f0_d.max_component()), s + (1.0 - s) * f)
+    } else {
+        (f0_d.max_component(), s)
+    };
     let e_d = schlick_average(diel_f0, diel_f90, alpha);
     let shared = GltfShared {
         coat: c,
@@ -623,7 +716,25 @@ pub fn lobes(p: &GltfParams) -> ([(GltfLobe, f32); 4], usize) {
     };
     let att = (1.0 - coat_avg).powi(2);
 
-    let mut out: [(GltfLobe, f32); 4] = [(GltfLobe::new(GltfLobeKind::Diffuse, shared), 0.0); 4];
+    let sheen_color = clamp_rgb(p.layers.sheen_color);
+    let sheen = if sheen_color.max_component() > 0.0 {
+        SheenScaling {
+            strength: sheen_color.max_component(),
+            alpha: sheen_alpha(p.layers.sheen_roughness),
+        }
+    } else {
+        SheenScaling::default()
+    };
+    // What the sheen leaves to the layers beneath, on average (for the selection weights).
+    let att = if sheen.is_some() {
+        att * (1.0 - sheen.strength * sheen::sheen_average(sheen.alpha))
+    } else {
+        att
+    };
+    let t_d = unit(p.layers.diffuse_transmission);
+
+    let mut out: [(GltfLobe, f32); MAX_LOBES] =
+        [(GltfLobe::new(GltfLobeKind::Diffuse, shared), 0.0); MAX_LOBES];
     let mut n = 0;
     let mut push = |lobe: GltfLobe, estimate: f32| {
         if estimate > 0.0 && estimate.is_finite() {
@@ -639,15 +750,42 @@ pub fn lobes(p: &GltfParams) -> ([(GltfLobe, f32); 4], usize) {
         l.f90 = Rgb::splat(c);
         push(l, coat_avg);
     }
+    if sheen.is_some() {
+        let mut l = GltfLobe::new(GltfLobeKind::Sheen, shared);
+        l.f0 = sheen_color;
+        l.alpha = sheen.alpha;
+        let coat_att = (1.0 - coat_avg).powi(2);
+        push(
+            l,
+            coat_att * sheen.strength * sheen::sheen_average(sheen.alpha),
+        );
+    }
     {
         let k = (1.0 - m) * (1.0 - t_v);
         let mut l = GltfLobe::new(GltfLobeKind::Specular, shared);
         l.f0 = f0_d * k + base * m;
-        l.f90 = Rgb::splat(diel_f90 * k + m);
+        l.f90 = Rgb::splat(s * k + m);
+        l.film = film;
+        let s_a = p.layers.anisotropy_strength;
+        if s_a.is_finite() && s_a > 0.0 {
+            let [dx, dy] = p.layers.anisotropy_direction;
+            l.kind = GltfLobeKind::AnisotropicSpecular;
+            l.aniso = Anisotropy::new(s_a, Vec2::new(dx, dy), alpha);
+        }
         let e = l.f0 * (a1 - a5) + l.f90 * a5;
         push(l, att * e.max_component());
     }
-    {
+    if t_d > 0.0 {
+        let w = (1.0 - m) * (1.0 - t);
+        let mut l = GltfLobe::new(GltfLobeKind::TranslucentDiffuse, shared);
+        l.f0 = base * (w * (1.0 - t_d));
+        l.f90 = clamp_rgb(p.layers.diffuse_transmission_color) * (w * t_d);
+        l.diffuse = OrenNayar::new(Rgb::ONE, p.oren_nayar_sigma.max(0.0));
+        if shared.diffuse_norm > 0.0 {
+            let e = l.f0.max_component() + l.f90.max_component();
+            push(l, att * e * (1.0 - e_d));
+        }
+    } else {
         let tint = base * ((1.0 - m) * (1.0 - t));
         let mut l = GltfLobe::new(GltfLobeKind::Diffuse, shared);
         l.f0 = tint;
@@ -670,6 +808,13 @@ pub fn lobes(p: &GltfParams) -> ([(GltfLobe, f32); 4], usize) {
         }
     }
 
+    if sheen.is_some() {
+        for (l, _) in out[..n].iter_mut() {
+            if !matches!(l.kind, GltfLobeKind::Coat | GltfLobeKind::Sheen) {
+                l.sheen = sheen;
+            }
+        }
+    }
     let largest = out[..n].iter().map(|&(_, e)| e).fold(0.0f32, f32::max);
     let floor = 0.1 * largest;
     let total: f32 = out[..n].iter().map(|&(_, e)| e.max(floor)).sum();
@@ -680,4 +825,24 @@ pub fn lobes(p: &GltfParams) -> ([(GltfLobe, f32); 4], usize) {
         *e = w;
     }
     (out, n)
+}
+
+/// The thin film of `KHR_materials_iridescence` over the specular lobe whose dielectric part
+/// has weight `k` and F0 `f0_d`, its metal part weight `m` and F0 `base` (none where the
+/// factor is 0).
+fn thin_film(layers: &MaterialLayers, k: f32, f0_d: Rgb, m: f32, base: Rgb) -> ThinFilm {
+    let factor = layers.iridescence;
+    if !(factor.is_finite() && factor > 0.0) {
+        return ThinFilm::default();
+    }
+    let finite = |x: f32, d: f32| if x.is_finite() { x } else { d };
+    ThinFilm {
+        factor: factor.min(1.0),
+        ior: finite(layers.iridescence_ior, 1.3).max(1.0),
+        thickness: finite(layers.iridescence_thickness_max, 400.0).max(0.0),
+        diel_weight: k,
+        diel_f0: f0_d,
+        metal_weight: m,
+        metal_f0: base,
+    }
 }

@@ -29,11 +29,13 @@ pub(crate) struct OpaquePair<'a> {
 }
 
 impl<'a> OpaquePair<'a> {
-    /// Whether the two lobes are one: a specular lobe with α ≥ [`DELTA_ALPHA`] and then the
-    /// diffuse base, neither under a coat (`coat <= 0`, so a NaN coat keeps the walk).
+    /// Whether the two lobes are one: a specular lobe with α ≥ [`DELTA_ALPHA`] and no thin
+    /// film and then the diffuse base, neither under a coat (`coat <= 0`, so a NaN coat keeps
+    /// the walk).
     pub fn holds(&self) -> bool {
         self.spec.kind == GltfLobeKind::Specular
             && !self.spec.is_delta()
+            && !self.spec.film.is_some()
             && self.spec.shared.coat <= 0.0
             && self.diffuse.kind == GltfLobeKind::Diffuse
             && self.diffuse.shared.coat <= 0.0
