@@ -154,11 +154,7 @@ fn lens_sample(camera: &Camera, seed: u64, pixel: u32, i: u32) -> Vec2 {
     if !camera.has_lens() {
         return Vec2::ZERO;
     }
-    Rng::new(
-        Rng::hash(&[seed, pixel as u64, i as u64, 0x6c65_6e73]),
-        0,
-    )
-    .uniform2()
+    Rng::new(Rng::hash(&[seed, pixel as u64, i as u64, 0x6c65_6e73]), 0).uniform2()
 }
 
 /// Runs the AOV pass over the whole image (module docs), on its own thread pool.
