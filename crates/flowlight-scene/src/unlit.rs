@@ -26,8 +26,15 @@
 //! its colours adds that light to the scene once more; to render such a scan as a lit
 //! surface instead, remove the extension from the file.
 //!
-//! `COLOR_0` is not applied to the emission (the emissive path reads factor × texture);
-//! unlit meshes with vertex colours show the colour without them.
+//! `COLOR_0` is not applied to the emission: unlit meshes with vertex colours show
+//! `baseColorFactor × baseColorTexture` without them. Every emitted radiance (a camera ray's
+//! hit, next-event estimation, a light subpath's start) is read through
+//! `flowlight_core::light::Emitter::emission_at`, from the material and texture tables and
+//! the three texture coordinates each emitter stores; the vertex colours are in neither.
+//! Applying them means storing three colours in `Emitter`, a `#[repr(C)]` table of the
+//! plugin ABI's scene view (a layout change), filling and averaging them into each emitter's
+//! power in the loader, and multiplying them in on both the hit and the light side, which
+//! must agree for MIS and for the light-side samplers; it is left for a change of the ABI.
 
 use flowlight_core::material::Material;
 use flowlight_core::Rgb;

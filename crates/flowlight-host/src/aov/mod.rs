@@ -154,11 +154,7 @@ fn lens_sample(camera: &Camera, seed: u64, pixel: u32, i: u32) -> Vec2 {
     if !camera.has_lens() {
         return Vec2::ZERO;
     }
-    Rng::new(
-        Rng::hash(&[seed, pixel as u64, i as u64, 0x006c_656e_73]),
-        0,
-    )
-    .uniform2()
+    Rng::new(Rng::hash(&[seed, pixel as u64, i as u64, 0x6c65_6e73]), 0).uniform2()
 }
 
 /// Runs the AOV pass over the whole image (module docs), on its own thread pool.
@@ -288,7 +284,7 @@ fn follow(
         }
         let surface = mesh.surface_hit(&ray, &hit);
         depth += surface.t * ray.dir.length();
-        let r = scene.materials[surface.material as usize].resolve(
+        let mut r = scene.materials[surface.material as usize].resolve(
             surface.uvs(),
             surface.color,
             &scene.texture_table,
@@ -300,10 +296,17 @@ fn follow(
         };
         let frame = Frame::from_z(surface.ns);
         let wo = frame.to_local(-ray.dir.normalize());
+        albedo::orient_anisotropy(
+            &mut r.material.layers,
+            &mesh,
+            surface.prim,
+            surface.p,
+            surface.ns,
+        );
         let bsdf = Bsdf::from_material(&r.material, r.base);
         if !bsdf.is_delta() || bounce == MAX_DIRAC_BOUNCES {
             return SampleAov {
-                albedo: throughput * albedo::reflectance(&r.material, r.base, wo.z),
+                albedo: throughput * albedo::reflectance(&r.material, r.base, wo),
                 normal: surface.ns * arriving,
                 depth,
                 position: surface.p,

@@ -829,8 +829,8 @@ pub fn lobes(p: &GltfParams) -> ([(GltfLobe, f32); MAX_LOBES], usize) {
 
 /// The thin film of `KHR_materials_iridescence` over the specular lobe whose dielectric part
 /// has weight `k` and F0 `f0_d`, its metal part weight `m` and F0 `base` (none where the
-/// factor is 0).
-fn thin_film(layers: &MaterialLayers, k: f32, f0_d: Rgb, m: f32, base: Rgb) -> ThinFilm {
+/// factor is 0). The albedo AOV builds the same film (`flowlight-host`'s `aov::albedo`).
+pub fn thin_film(layers: &MaterialLayers, k: f32, f0_d: Rgb, m: f32, base: Rgb) -> ThinFilm {
     let factor = layers.iridescence;
     if !(factor.is_finite() && factor > 0.0) {
         return ThinFilm::default();
