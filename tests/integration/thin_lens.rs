@@ -311,9 +311,11 @@ fn pssmlt_matches_mcpt_under_a_thin_lens() {
         });
         let label = format!("lens pssmlt/{sampler}");
         assert_image_mean(&label, &images, reference, MeanRule::Z(5.0));
+        // 16 runs at 8 spp leave a standard error near 0.09 here, so 0.1 would sit one error
+        // from failing; a renderer that ignored the lens moves about 0.84 (as MMLT's test shows).
         let (s, se) = towards_pinhole(&images, reference, &pinhole);
         assert!(
-            s.abs() < 0.1 && s.abs() < 5.0 * se.max(0.004),
+            s.abs() < 0.3 && s.abs() < 5.0 * se.max(0.004),
             "{label}: moved {s:.3} ± {se:.3} of the way to the pinhole image"
         );
     }
