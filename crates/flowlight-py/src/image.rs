@@ -38,8 +38,8 @@ fn interleaved<'py>(
     ch: &[Vec<f32>; 3],
 ) -> PyResult<Bound<'py, PyArray3<f32>>> {
     let mut v = Vec::with_capacity(w * h * 3);
-    for i in 0..w * h {
-        v.extend([ch[0][i], ch[1][i], ch[2][i]]);
+    for ((r, g), b) in ch[0].iter().zip(&ch[1]).zip(&ch[2]).take(w * h) {
+        v.extend([*r, *g, *b]);
     }
     PyArray1::from_vec(py, v).reshape([h, w, 3])
 }

@@ -47,7 +47,7 @@ pub fn render(
     let outcome = std::thread::scope(|s| {
         let worker = s.spawn(|| {
             let report = |p: &Progress| {
-                shared.lock().unwrap().latest = Some(p.clone());
+                shared.lock().unwrap().latest = Some(*p);
             };
             let outcome = renderer.render(&stop, &report);
             shared.lock().unwrap().done = true;
@@ -59,7 +59,7 @@ pub fn render(
             let (done, latest) = py.detach(|| {
                 let guard = shared.lock().unwrap();
                 let (guard, _) = wake.wait_timeout_while(guard, POLL, |g| !g.done).unwrap();
-                (guard.done, guard.latest.clone())
+                (guard.done, guard.latest)
             });
             if done {
                 break;

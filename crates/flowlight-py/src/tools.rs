@@ -18,6 +18,9 @@ use pyo3::types::{PyDict, PyList};
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
+/// An H×W×3 image as numpy.
+type Image3<'py> = Bound<'py, PyArray3<f32>>;
+
 static PACKAGE_DIR: OnceLock<PathBuf> = OnceLock::new();
 
 /// Names the package's folder (the one holding `plugins/`); the first call wins.
@@ -151,7 +154,7 @@ pub fn combine_halves<'py>(
     na: f64,
     b: PyReadonlyArray3<'py, f32>,
     nb: f64,
-) -> PyResult<(Bound<'py, PyArray3<f32>>, Bound<'py, PyArray3<f32>>)> {
+) -> PyResult<(Image3<'py>, Image3<'py>)> {
     if a.shape() != b.shape() {
         return Err(errors::config("the two halves differ in size"));
     }
