@@ -153,3 +153,31 @@ def test_compare_plugins_and_bad_budgets(tmp_path):
         scene.render(spp=0)
     with pytest.raises(flowlight.ConfigError, match="--time must be a positive"):
         scene.render(time=-1.0)
+
+
+def test_the_gil_is_released_while_rendering():
+    scene = flowlight.load(CORNELL)
+    ticks = []
+    done = threading.Event()
+
+    def count():
+        while not done.is_set():
+            ticks.append(1)
+            done.wait(0.01)
+
+    t = threading.Thread(target=count)
+    t.start()
+    try:
+        img = scene.render(spp=8, threads=1, progress=False)
+    finally:
+        done.set()
+        t.join()
+    # A Python thread ran all along the render (about 100 ticks a second).
+    assert len(ticks) > 10 * img.stats["wall_seconds"], (len(ticks), img.stats["wall_seconds"])
+
+
+def test_bench_reads_its_suite_and_refuses_a_missing_one(tmp_path):
+    with pytest.raises(flowlight.ConfigError, match="no-such-suite.toml: cannot read"):
+        flowlight.bench(tmp_path / "no-such-suite.toml")
+    with pytest.raises(flowlight.ConfigError, match="--budgets must be positive seconds"):
+        flowlight.bench(tmp_path / "no-such-suite.toml", budgets=[0.0])
