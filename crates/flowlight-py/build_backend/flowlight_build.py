@@ -21,12 +21,20 @@ import json
 import os
 import shutil
 import subprocess
+import sysconfig
 from pathlib import Path
 from typing import Any, Mapping, Optional
 
 import maturin
 
 ROOT = Path(__file__).resolve().parents[3]
+
+# maturin's hooks run the `maturin` executable by name: without build isolation (the tests'
+# `pip wheel --no-build-isolation` from a venv that is not activated) it is in this
+# interpreter's scripts folder, which need not be on PATH.
+_SCRIPTS = sysconfig.get_path("scripts")
+if _SCRIPTS and _SCRIPTS not in os.environ.get("PATH", "").split(os.pathsep):
+    os.environ["PATH"] = _SCRIPTS + os.pathsep + os.environ.get("PATH", "")
 PACKAGE = ROOT / "crates" / "flowlight-py" / "python" / "flowlight"
 
 
