@@ -1,9 +1,9 @@
 //! `flowlight._native`: the host's API for Python (the `flowlight` package wraps it; its
 //! documentation is docs/python.md). A scene is loaded and its intersector built once
-//! ([`scene::Scene`], over the host's [`LoadedScene`](flowlight_host::renderer::LoadedScene));
+//! (`scene::Scene`, over the host's [`LoadedScene`](flowlight_host::renderer::LoadedScene));
 //! each render creates only the integrator, with the GIL released while it runs, and hands
-//! back an [`image::Image`] of numpy arrays. Errors are `flowlight.Error` subclasses carrying
-//! the command line's one-line messages ([`errors`]).
+//! back an `image::Image` of numpy arrays. Errors are `flowlight.Error` subclasses carrying
+//! the command line's one-line messages (module `errors`).
 
 use pyo3::prelude::*;
 
