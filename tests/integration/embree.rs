@@ -369,7 +369,7 @@ fn packet_and_single_ray_renders_are_the_same_image() {
             EmbreeIntersector::Flat(f) => assert_eq!(f.uses_packets(), packets == Packets::Always),
             EmbreeIntersector::Instanced { .. } => panic!("the Cornell box is flat"),
         }
-        s.intersector = Box::new(e);
+        s.intersector = std::sync::Arc::new(e);
         s.exr_path = None;
         s.png_path = None;
         render(&s).frame.image()

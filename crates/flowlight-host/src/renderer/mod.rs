@@ -8,17 +8,16 @@ use crate::output::{ExrMetadata, PngPreview};
 use crate::plugin::{find_plugin, search_dirs, IntegratorInstance, PluginLibrary};
 use crate::render::{render, Progress, RenderOptions, RenderOutcome};
 use flowlight_core::camera::Camera;
-use flowlight_core::material::Texture;
 use flowlight_scene::config::{load_config, RenderConfig};
-use flowlight_scene::lights::{light_power_cdf, light_presence, load_environment, EnvironmentData};
-use flowlight_scene::{load_gltf_with, Scene};
+use flowlight_scene::Scene;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 mod extras;
 mod load;
+mod loaded;
 
 pub use extras::ExtraLayers;
 
@@ -26,9 +25,10 @@ pub use extras::ExtraLayers;
 /// (the bidirectional library's allocation test) without loading a plugin.
 pub use load::scene_view;
 use load::{
-    apply_set_overrides, build_intersector, create_mutations, frame_precision, memory_error,
-    mutation_list, plugin_error, relative_to, render_options,
+    apply_set_overrides, create_mutations, frame_precision, memory_error, mutation_list,
+    plugin_error, relative_to, render_options,
 };
+pub use loaded::{loads_so_far, LoadedScene};
 
 /// Command-line settings that take precedence over the config file.
 #[derive(Clone, Debug, Default)]
@@ -46,7 +46,8 @@ pub struct Overrides {
 /// before the scene data its view points into.
 pub struct Renderer {
     pub instance: IntegratorInstance,
-    pub intersector: Box<dyn Intersector>,
+    /// Shared with the [`LoadedScene`] the renderer was made from.
+    pub intersector: Arc<dyn Intersector>,
     pub build_time: Duration,
     pub load_time: Duration,
     pub config: RenderConfig,
@@ -54,12 +55,9 @@ pub struct Renderer {
     pub exr_path: Option<PathBuf>,
     pub png_path: Option<PathBuf>,
     pub camera: Camera,
-    _textures: Vec<Texture>,
-    /// The environment map and its sampling tables the view points into.
-    _environment: EnvironmentData,
-    /// The power CDF over all lights the view points into.
-    _light_cdf: Vec<f32>,
-    pub scene: Scene,
+    /// The textures, environment map and light CDF the view points into.
+    _data: Arc<loaded::ViewData>,
+    pub scene: Arc<Scene>,
     /// The plugin libraries loaded (integrator first), for the output checks.
     plugin_files: Vec<PathBuf>,
     /// The resolved config as hashed for a part ([`crate::parts::config_text`]).
@@ -98,19 +96,26 @@ impl Renderer {
     /// intersector built, the integrator (and its mutations) created over the scene's view.
     pub fn from_config(mut config: RenderConfig, ov: &Overrides) -> Result<Renderer, HostError> {
         apply_set_overrides(&mut config, &ov.params)?;
-        let (exr_path, png_path) = output_paths(&config, ov.out.as_deref())?;
+        output_paths(&config, ov.out.as_deref())?;
         // Refuse an image that cannot fit before anything big is loaded (layers are known
         // once the integrator exists; checked again then).
+        crate::render::check_memory(config.width, config.height, 0, frame_precision(&config), 0)
+            .map_err(|msg| memory_error(&config, msg))?;
+        let loaded = LoadedScene::load(config)?;
+        Renderer::from_loaded(&loaded, ov)
+    }
+
+    /// A renderer over a scene already loaded and built: `ov` applied to a copy of its
+    /// config, the integrator (and its mutations) loaded and created over the scene's view.
+    /// The scene, intersector and view data are shared with `loaded`, not copied.
+    pub fn from_loaded(loaded: &LoadedScene, ov: &Overrides) -> Result<Renderer, HostError> {
+        let mut config = loaded.config.clone();
+        apply_set_overrides(&mut config, &ov.params)?;
+        let (exr_path, png_path) = output_paths(&config, ov.out.as_deref())?;
         let precision = frame_precision(&config);
         crate::render::check_memory(config.width, config.height, 0, precision, 0)
             .map_err(|msg| memory_error(&config, msg))?;
-        let t0 = Instant::now();
-        let scene = load_gltf_with(&config.scene, &config.load_options())?;
-        let load_time = t0.elapsed();
-        let camera = config.camera(&scene)?;
-        tracing::debug!(?camera, "camera");
-        let (intersector, build_time) = build_intersector(&config, &scene)?;
-
+        let camera = loaded.camera;
         let dirs = search_dirs(&config.plugin_search_paths);
         let plugin_path = find_plugin(
             &relative_to(&config.integrator_plugin, &config.base_dir),
@@ -119,24 +124,18 @@ impl Renderer {
         .map_err(|error| plugin_error(&config, Some("integrator.plugin".into()), error))?;
         let plugin = Arc::new(PluginLibrary::load(&plugin_path)?);
 
-        let textures = scene.texture_views();
         // Hashed with the mutations still among the parameters.
         let config_text = crate::parts::config_text(&config, &camera, &config.integrator_params);
         let (list_name, mutation_entries, defaulted) = mutation_list(&plugin, &mut config)?;
-        let environment = match &config.environment {
-            Some(e) => load_environment(&config.path, e)?,
-            None => EnvironmentData::default(),
-        };
-        let env_view = environment.view();
-        let presence = light_presence(&scene, &env_view).map_err(|msg| HostError::Lights {
-            file: config.path.clone(),
-            msg,
-        })?;
-        if let Some(why) = presence.warning() {
-            tracing::warn!("{}: {why}", config.path.display());
-        }
-        let light_cdf = light_power_cdf(&scene, &env_view);
-        let view = scene_view(&scene, camera, &textures, env_view, &light_cdf);
+        let data = loaded.data.clone();
+        let env_view = data.environment.view();
+        let view = scene_view(
+            &loaded.scene,
+            camera,
+            &data.textures,
+            env_view,
+            &data.light_cdf,
+        );
         let mut plugin_files = vec![plugin_path.clone()];
         let mutations = create_mutations(
             &config,
@@ -146,8 +145,9 @@ impl Renderer {
             &view,
             &mut plugin_files,
         )?;
-        // SAFETY: the view points into `scene` and `textures`, which the renderer owns and
-        // drops after the instance (field order); their heap buffers never move.
+        // SAFETY: the view points into the loaded scene and its view data, which the
+        // renderer holds (reference-counted) and drops after the instance (field order);
+        // their heap buffers never move.
         let instance = unsafe {
             IntegratorInstance::create(
                 plugin,
@@ -169,17 +169,15 @@ impl Renderer {
         let options = render_options(&config, &camera, ov);
         let renderer = Renderer {
             instance,
-            intersector,
-            build_time,
-            load_time,
+            intersector: loaded.intersector.clone(),
+            build_time: loaded.build_time,
+            load_time: loaded.load_time,
             options,
             exr_path,
             png_path,
             camera,
-            _textures: textures,
-            _environment: environment,
-            _light_cdf: light_cdf,
-            scene,
+            _data: data,
+            scene: loaded.scene.clone(),
             config,
             plugin_files,
             config_text,
@@ -435,7 +433,9 @@ impl Renderer {
         Some(crate::parts::stats_json_with_kinds(&json, &kinds))
     }
 
-    fn metadata(&self, stats: &crate::RenderStats) -> ExrMetadata {
+    /// The EXR header entries of a render with `stats` (integrator, parameters, spp, seed,
+    /// inputs, interruption).
+    pub fn metadata(&self, stats: &crate::RenderStats) -> ExrMetadata {
         let params: Vec<String> = self
             .config
             .integrator_params
