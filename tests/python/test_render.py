@@ -61,6 +61,29 @@ def test_a_dict_with_the_files_keys_renders_as_the_file():
     assert np.array_equal(from_dict.rgb, from_file.rgb)
 
 
+def test_the_configs_aovs_come_back_as_layers(cli, tmp_path):
+    table = tomllib.loads(CORNELL.read_text())
+    table.setdefault("output", {})["aovs"] = ["albedo", "depth", "object_id"]
+    img = flowlight.load(table, base_dir=CORNELL.parent).render(spp=2, progress=False)
+    h, w, _ = img.rgb.shape
+    for name in ("albedo", "depth", "object_id"):
+        assert img.layers[name].shape == (h, w, 3), name
+    # Every camera ray of the closed box hits a wall: positive depth, an albedo in [0, 1].
+    assert (img.layers["depth"] > 0).all()
+    albedo = img.layers["albedo"]
+    assert (albedo >= 0).all() and (albedo <= 1).all() and albedo.mean() > 0.1
+    # The same pass as the command line's, layer for layer.
+    cfg = tmp_path / "aovs.toml"
+    cfg.write_text(CORNELL.read_text().replace("[output]\n", '[output]\naovs = ["albedo", "depth", "object_id"]\n', 1)
+                   .replace('scene = "cornell-box.gltf"', f'scene = "{CORNELL.parent / "cornell-box.gltf"}"'))
+    out = tmp_path / "cli.exr"
+    proc = run_cli(cli, "render", str(cfg), "--spp", "2", "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    exr = flowlight.read_exr(out)
+    for name in ("albedo", "depth"):
+        assert np.array_equal(exr["layers"][name], img.layers[name]), name
+
+
 def test_a_bad_key_raises_the_clis_message(cli, tmp_path):
     # An integrator parameter MCPT does not have, through set= and --set.
     scene = flowlight.load(CORNELL)

@@ -14,7 +14,7 @@ use numpy::{PyArray1, PyArray3, PyArrayMethods, PyReadonlyArray3, PyUntypedArray
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
 /// A rendered image.
@@ -77,6 +77,16 @@ impl Image {
         for k in 1..=frame.layer_count as usize {
             let a = interleaved(py, w, h, &frame.take_channels(k))?.unbind();
             layers.push((format!("layer{}", k - 1), a));
+        }
+        // The AOVs the config asks for (`[output] aovs`), as the command line writes them:
+        // the host's pass after the beauty, one layer each under its name.
+        if let Some(req) = renderer.aov_request(false) {
+            let aovs = py
+                .detach(|| renderer.render_aovs(&req, &AtomicBool::new(false)))
+                .map_err(errors::host_error)?;
+            for l in aovs.into_planar() {
+                layers.push((l.name, interleaved(py, w, h, &l.channels)?.unbind()));
+            }
         }
         let metadata = renderer.metadata(&stats).entries;
         let name = renderer.instance.plugin().name.clone();
