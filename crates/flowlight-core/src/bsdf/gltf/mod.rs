@@ -63,10 +63,10 @@
 //!
 //! **Layers** (each in its own file, with its formulas): `KHR_materials_sheen` adds a
 //! Charlie sheen lobe between the coat and the rest and scales every lobe beneath by its
-//! albedo scaling S(μ_o, μ_i) ([`sheen`]); `KHR_materials_diffuse_transmission` turns the
+//! albedo scaling S(μ_o, μ_i) (`sheen.rs`); `KHR_materials_diffuse_transmission` turns the
 //! diffuse base into a translucent one that also transmits to the back side
-//! ([`diffuse_transmission`]); `KHR_materials_iridescence` mixes a thin film's Fresnel into the
-//! specular layer's ([`iridescence`]). Without them the lobes are the ones above, bit for bit.
+//! (`diffuse_transmission.rs`); `KHR_materials_iridescence` mixes a thin film's Fresnel into the
+//! specular layer's (`iridescence.rs`). Without them the lobes are the ones above, bit for bit.
 //!
 //! **Mixture.** Every lobe is a [`GltfLobe`] in the material's mixture; lobe i is chosen with
 //! probability wᵢ (proportional to an estimate of its hemispherical albedo, floored at a tenth
@@ -124,13 +124,13 @@ pub enum GltfLobeKind {
     ThinTransmission,
     /// A refracting dielectric interface (volumetric transmission).
     Refraction,
-    /// The Charlie sheen layer (`KHR_materials_sheen`, [`sheen`]).
+    /// The Charlie sheen layer (`KHR_materials_sheen`, `sheen.rs`).
     Sheen,
     /// The specular layer with an anisotropic GGX distribution (`KHR_materials_anisotropy`,
-    /// [`anisotropy`]).
+    /// `anisotropy.rs`).
     AnisotropicSpecular,
     /// The diffuse base with a Lambertian transmission part
-    /// (`KHR_materials_diffuse_transmission`, [`diffuse_transmission`]).
+    /// (`KHR_materials_diffuse_transmission`, `diffuse_transmission.rs`).
     TranslucentDiffuse,
 }
 /// One lobe of the glTF material (see the module docs for the formulas).
