@@ -170,6 +170,45 @@ pub struct RawTextureInfo {
     pub transform: Option<gltf::json::Value>,
 }
 
+/// A `textureInfo` object at `what` (the field, for errors): its index, checked against the
+/// document's `texture_count`, its texCoord and its `KHR_texture_transform`. Every texture
+/// reference of an extension the `gltf` crate does not parse goes through here.
+pub(crate) fn parse_texture_info(
+    v: &gltf::json::Value,
+    what: &str,
+    texture_count: usize,
+) -> Result<RawTextureInfo, String> {
+    let v = v
+        .as_object()
+        .ok_or_else(|| format!("{what} is not a JSON object"))?;
+    let index = v
+        .get("index")
+        .and_then(|i| i.as_u64())
+        .ok_or_else(|| format!("{what}.index is missing or not a non-negative integer"))?;
+    let index = usize::try_from(index)
+        .ok()
+        .filter(|&i| i < texture_count)
+        .ok_or_else(|| {
+            format!("{what}.index = {index} is out of range ({texture_count} textures)")
+        })?;
+    let tex_coord = match v.get("texCoord") {
+        None => 0,
+        Some(c) => c
+            .as_u64()
+            .and_then(|c| u32::try_from(c).ok())
+            .ok_or_else(|| format!("{what}.texCoord is not a non-negative integer"))?,
+    };
+    let transform = v
+        .get("extensions")
+        .and_then(|e| e.get("KHR_texture_transform"))
+        .cloned();
+    Ok(RawTextureInfo {
+        index,
+        tex_coord,
+        transform,
+    })
+}
+
 /// The `clearcoatTexture` and `clearcoatRoughnessTexture` of `m` (`None` where absent),
 /// checked against the document's `texture_count`.
 pub fn clearcoat_textures(
@@ -183,39 +222,11 @@ pub fn clearcoat_textures(
         return Ok([None, None]);
     };
     let info = |key: &str| -> Result<Option<RawTextureInfo>, String> {
-        let Some(v) = obj.get(key) else {
-            return Ok(None);
-        };
-        let what = format!("KHR_materials_clearcoat.{key}");
-        let v = v
-            .as_object()
-            .ok_or_else(|| format!("{what} is not a JSON object"))?;
-        let index = v
-            .get("index")
-            .and_then(|i| i.as_u64())
-            .ok_or_else(|| format!("{what}.index is missing or not a non-negative integer"))?;
-        let index = usize::try_from(index)
-            .ok()
-            .filter(|&i| i < texture_count)
-            .ok_or_else(|| {
-                format!("{what}.index = {index} is out of range ({texture_count} textures)")
-            })?;
-        let tex_coord = match v.get("texCoord") {
-            None => 0,
-            Some(c) => c
-                .as_u64()
-                .and_then(|c| u32::try_from(c).ok())
-                .ok_or_else(|| format!("{what}.texCoord is not a non-negative integer"))?,
-        };
-        let transform = v
-            .get("extensions")
-            .and_then(|e| e.get("KHR_texture_transform"))
-            .cloned();
-        Ok(Some(RawTextureInfo {
-            index,
-            tex_coord,
-            transform,
-        }))
+        obj.get(key)
+            .map(|v| {
+                parse_texture_info(v, &format!("KHR_materials_clearcoat.{key}"), texture_count)
+            })
+            .transpose()
     };
     Ok([
         info("clearcoatTexture")?,

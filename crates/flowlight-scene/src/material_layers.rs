@@ -168,43 +168,10 @@ pub fn layer_textures(
         let Some(v) = o.get(key) else { continue };
         out.push((
             slot,
-            raw_texture_info(v, &format!("{ext}.{key}"), texture_count)?,
+            crate::material::parse_texture_info(v, &format!("{ext}.{key}"), texture_count)?,
         ));
     }
     Ok(out)
-}
-
-/// A `textureInfo` object: index (checked), texCoord and `KHR_texture_transform`.
-fn raw_texture_info(v: &Value, what: &str, texture_count: usize) -> Result<RawTextureInfo, String> {
-    let v = v
-        .as_object()
-        .ok_or_else(|| format!("{what} is not a JSON object"))?;
-    let index = v
-        .get("index")
-        .and_then(|i| i.as_u64())
-        .ok_or_else(|| format!("{what}.index is missing or not a non-negative integer"))?;
-    let index = usize::try_from(index)
-        .ok()
-        .filter(|&i| i < texture_count)
-        .ok_or_else(|| {
-            format!("{what}.index = {index} is out of range ({texture_count} textures)")
-        })?;
-    let tex_coord = match v.get("texCoord") {
-        None => 0,
-        Some(c) => c
-            .as_u64()
-            .and_then(|c| u32::try_from(c).ok())
-            .ok_or_else(|| format!("{what}.texCoord is not a non-negative integer"))?,
-    };
-    let transform = v
-        .get("extensions")
-        .and_then(|e| e.get("KHR_texture_transform"))
-        .cloned();
-    Ok(RawTextureInfo {
-        index,
-        tex_coord,
-        transform,
-    })
 }
 
 /// Sets the texture reference of `slot` in `layers`.

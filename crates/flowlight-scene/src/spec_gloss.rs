@@ -106,39 +106,9 @@ fn raw_texture_info(
     key: &str,
     texture_count: usize,
 ) -> Result<Option<RawTextureInfo>, String> {
-    let Some(v) = obj.get(key) else {
-        return Ok(None);
-    };
-    let what = format!("{NAME}.{key}");
-    let v = v
-        .as_object()
-        .ok_or_else(|| format!("{what} is not a JSON object"))?;
-    let index = v
-        .get("index")
-        .and_then(|i| i.as_u64())
-        .and_then(|i| usize::try_from(i).ok())
-        .ok_or_else(|| format!("{what}.index is missing or not a non-negative integer"))?;
-    if index >= texture_count {
-        return Err(format!(
-            "{what}.index = {index} is out of range ({texture_count} textures)"
-        ));
-    }
-    let tex_coord = match v.get("texCoord") {
-        None => 0,
-        Some(c) => c
-            .as_u64()
-            .and_then(|c| u32::try_from(c).ok())
-            .ok_or_else(|| format!("{what}.texCoord is not a non-negative integer"))?,
-    };
-    let transform = v
-        .get("extensions")
-        .and_then(|e| e.get("KHR_texture_transform"))
-        .cloned();
-    Ok(Some(RawTextureInfo {
-        index,
-        tex_coord,
-        transform,
-    }))
+    obj.get(key)
+        .map(|v| crate::material::parse_texture_info(v, &format!("{NAME}.{key}"), texture_count))
+        .transpose()
 }
 
 impl SpecGloss {
