@@ -28,12 +28,14 @@
 //! The anisotropy direction is (1, 0) or the texture's, rotated by `anisotropyRotation`
 //! (counter-clockwise from the tangent), in the tangent frame (T, B) of the hit. The BSDF is
 //! built in the frame `Frame::from_z(n_s)`, not in (T, B), so the host projects the direction
-//! onto it before it builds the BSDF (`flowlight_sdk::scene::Scene::orient_layers`, which
-//! takes T and B from [`crate::mesh::MeshView::tangent_frame`]).
+//! onto it before it builds the BSDF ([`MaterialLayers::orient_anisotropy`], which takes T and
+//! B from [`crate::mesh::MeshView::tangent_frame`]).
 
+use crate::geometry::Frame;
 use crate::material::{Texture, TextureRef};
+use crate::mesh::MeshView;
 use crate::Rgb;
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 
 /// The layer extensions' factors and textures (module docs).
 #[repr(C)]
@@ -100,6 +102,27 @@ impl Default for MaterialLayers {
 }
 
 impl MaterialLayers {
+    /// Projects an anisotropic material's direction from the tangent frame at point `p` of
+    /// triangle `prim` of `mesh` (shading normal `ns`) onto the BSDF's local frame
+    /// `Frame::from_z(ns)`, as [`crate::bsdf::Bsdf::from_material`] reads it (module docs).
+    /// Where the mesh gives no tangent frame, the local frame's own axes stand for it. Nothing
+    /// changes for an isotropic material.
+    #[inline]
+    pub fn orient_anisotropy(&mut self, mesh: &MeshView, prim: u32, p: Vec3, ns: Vec3) {
+        if self.anisotropy_strength.is_nan() || self.anisotropy_strength <= 0.0 {
+            return;
+        }
+        let frame = Frame::from_z(ns);
+        let [dx, dy] = self.anisotropy_direction;
+        let set = self.anisotropy_texture.tex_coord as usize;
+        let d = match mesh.tangent_frame(prim, p, ns, set) {
+            Some((t, b)) => t * dx + b * dy,
+            None => frame.x * dx + frame.y * dy,
+        };
+        let l = frame.to_local(d);
+        self.anisotropy_direction = [l.x, l.y];
+    }
+
     /// The texture references, for the test whether a material's BSDF is the same at every
     /// point.
     pub fn textures(&self) -> [&TextureRef; 7] {

@@ -3,7 +3,7 @@
 use crate::abi::{MeshTables, SceneView};
 use flowlight_core::bsdf::Bsdf;
 use flowlight_core::camera::Camera;
-use flowlight_core::geometry::{Frame, Ray, SurfaceHit};
+use flowlight_core::geometry::{Ray, SurfaceHit};
 use flowlight_core::light::{Emitter, Lights, PunctualLight};
 use flowlight_core::material::{Material, ResolvedMaterial, Texture};
 use flowlight_core::material_layers::MaterialLayers;
@@ -309,25 +309,11 @@ impl<'a> Scene<'a> {
         Cow::Owned(Bsdf::from_material(&r.material, r.base))
     }
 
-    /// Projects an anisotropic material's direction from the tangent frame at point `p` of
-    /// triangle `prim` (shading normal `ns`) onto the BSDF's local frame `Frame::from_z(ns)`,
-    /// as [`Bsdf::from_material`] reads it (`flowlight_core::material_layers`). Where the
-    /// mesh gives no tangent frame, the local frame's own axes stand for it. Nothing changes
-    /// for an isotropic material.
+    /// [`MaterialLayers::orient_anisotropy`] over this scene's mesh: the anisotropy direction
+    /// from the tangent frame at `p` of triangle `prim` onto the BSDF's local frame.
     #[inline]
     pub fn orient_layers(&self, layers: &mut MaterialLayers, prim: u32, p: Vec3, ns: Vec3) {
-        if layers.anisotropy_strength.is_nan() || layers.anisotropy_strength <= 0.0 {
-            return;
-        }
-        let frame = Frame::from_z(ns);
-        let [dx, dy] = layers.anisotropy_direction;
-        let set = layers.anisotropy_texture.tex_coord as usize;
-        let d = match self.mesh.tangent_frame(prim, p, ns, set) {
-            Some((t, b)) => t * dx + b * dy,
-            None => frame.x * dx + frame.y * dy,
-        };
-        let l = frame.to_local(d);
-        layers.anisotropy_direction = [l.x, l.y];
+        layers.orient_anisotropy(&self.mesh, prim, p, ns);
     }
 
     /// Radius of the scene's bounding sphere.
@@ -363,6 +349,7 @@ pub fn mesh_tables(m: &MeshView) -> MeshTables {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use flowlight_core::geometry::Frame;
     use flowlight_core::light::Environment;
     use flowlight_core::material::{TexelFormat, TextureRef, Wrap};
     use flowlight_core::rng::Rng;

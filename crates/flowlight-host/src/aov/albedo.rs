@@ -56,10 +56,7 @@ use flowlight_core::bsdf::gltf::{
 };
 use flowlight_core::bsdf::multiscatter::fresnel_ms;
 use flowlight_core::bsdf::{Ggx, DELTA_ALPHA};
-use flowlight_core::geometry::Frame;
 use flowlight_core::material::Material;
-use flowlight_core::material_layers::MaterialLayers;
-use flowlight_core::mesh::MeshView;
 use flowlight_core::Rgb;
 use glam::{Vec2, Vec3};
 
@@ -80,7 +77,7 @@ fn unit_rgb(c: Rgb) -> Rgb {
 
 /// The reflectance of a material whose textures are resolved (`base` the textured base
 /// colour) and whose anisotropy direction is in the local shading frame
-/// ([`orient_anisotropy`]), seen from `wo` in that frame (`wo.z` = cos θ_o).
+/// ([`flowlight_core::material_layers::MaterialLayers::orient_anisotropy`]), seen from `wo` in that frame (`wo.z` = cos θ_o).
 pub fn reflectance(m: &Material, base: Rgb, wo: Vec3) -> Rgb {
     let mu = wo.z;
     let layers = &m.layers;
@@ -242,32 +239,6 @@ fn visible_normal_sum<const N: usize>(
     sum * (1.0 / (g1 * (N * N) as f32))
 }
 
-/// Projects an anisotropic material's direction from the tangent frame at point `p` of
-/// triangle `prim` (shading normal `ns`) onto the local frame `Frame::from_z(ns)`, the same
-/// projection as `flowlight_sdk::scene::Scene::orient_layers` (which needs the plugins' scene
-/// view); nothing changes for an isotropic material.
-#[inline]
-pub fn orient_anisotropy(
-    layers: &mut MaterialLayers,
-    mesh: &MeshView,
-    prim: u32,
-    p: Vec3,
-    ns: Vec3,
-) {
-    if layers.anisotropy_strength.is_nan() || layers.anisotropy_strength <= 0.0 {
-        return;
-    }
-    let frame = Frame::from_z(ns);
-    let [dx, dy] = layers.anisotropy_direction;
-    let set = layers.anisotropy_texture.tex_coord as usize;
-    let d = match mesh.tangent_frame(prim, p, ns, set) {
-        Some((t, b)) => t * dx + b * dy,
-        None => frame.x * dx + frame.y * dy,
-    };
-    let l = frame.to_local(d);
-    layers.anisotropy_direction = [l.x, l.y];
-}
-
 /// The sheen layer over the specular-like part `mirror` and the diffuse part `diffuse` (module
 /// docs); their sum without a sheen.
 #[inline]
@@ -307,6 +278,7 @@ fn multiscatter(m: &Material, rho: Rgb, metal: f32, alpha: f32, e1: f32) -> Rgb 
 mod tests {
     use super::*;
     use flowlight_core::bsdf::Bsdf;
+    use flowlight_core::material_layers::MaterialLayers;
     use flowlight_core::rng::Rng;
     use glam::Vec3;
 

@@ -296,13 +296,9 @@ fn follow(
         };
         let frame = Frame::from_z(surface.ns);
         let wo = frame.to_local(-ray.dir.normalize());
-        albedo::orient_anisotropy(
-            &mut r.material.layers,
-            &mesh,
-            surface.prim,
-            surface.p,
-            surface.ns,
-        );
+        r.material
+            .layers
+            .orient_anisotropy(&mesh, surface.prim, surface.p, surface.ns);
         let bsdf = Bsdf::from_material(&r.material, r.base);
         if !bsdf.is_delta() || bounce == MAX_DIRAC_BOUNCES {
             return SampleAov {
