@@ -310,6 +310,25 @@ pub struct EyeConnection {
     pub distance: f32,
 }
 
+impl EyeConnection {
+    /// The connection of world point `p`, landing at `raster`, to eye vertex `eye`; `None`
+    /// where the two coincide or the distance is not finite.
+    #[inline]
+    pub fn between(raster: Vec2, eye: Vec3, p: Vec3) -> Option<EyeConnection> {
+        let d = eye - p;
+        let distance = d.length();
+        if !(distance > 0.0 && distance.is_finite()) {
+            return None;
+        }
+        Some(EyeConnection {
+            raster,
+            eye,
+            to_eye: d / distance,
+            distance,
+        })
+    }
+}
+
 impl Camera {
     /// Area of the film in world units (module docs): perspective — the image plane at
     /// distance 1, 4·a·tan²θ; orthographic — the film plane, (2·a·h)(2·h).
@@ -331,17 +350,7 @@ impl Camera {
                 p - self.forward * (p - self.position).dot(self.forward)
             }
         };
-        let d = eye - p;
-        let distance = d.length();
-        if !(distance > 0.0 && distance.is_finite()) {
-            return None;
-        }
-        Some(EyeConnection {
-            raster,
-            eye,
-            to_eye: d / distance,
-            distance,
-        })
+        EyeConnection::between(raster, eye, p)
     }
 
     /// Density, in area measure at a surface point, with which a camera ray through a

@@ -150,17 +150,7 @@ impl Camera {
         }
         let eye = self.lens_point(u);
         let raster = self.project_from_eye(eye, p)?;
-        let d = eye - p;
-        let distance = d.length();
-        if !(distance > 0.0 && distance.is_finite()) {
-            return None;
-        }
-        Some(EyeConnection {
-            raster,
-            eye,
-            to_eye: d / distance,
-            distance,
-        })
+        EyeConnection::between(raster, eye, p)
     }
 
     /// [`Camera::connect_eye_through_lens`] with the lens point drawn from the next pair of
