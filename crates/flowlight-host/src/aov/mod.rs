@@ -157,7 +157,7 @@ fn lens_sample(camera: &Camera, seed: u64, pixel: u32, i: u32) -> Vec2 {
     Rng::new(Rng::hash(&[seed, pixel as u64, i as u64, 0x6c65_6e73]), 0).uniform2()
 }
 
-/// Runs the AOV pass over the whole image (module docs), on its own thread pool.
+/// Runs the AOV pass over the whole image (module docs), on the host's worker pool.
 pub fn render_aovs(
     scene: &Scene,
     intersector: &dyn Intersector,
@@ -167,11 +167,7 @@ pub fn render_aovs(
 ) -> Result<AovImages, String> {
     let start = Instant::now();
     let (w, h) = (camera.width, camera.height);
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(crate::render::effective_threads(req.threads))
-        .thread_name(|i| format!("flowlight-aov-{i}"))
-        .build()
-        .map_err(|e| format!("cannot start the thread pool of the AOV pass: {e}"))?;
+    let pool = crate::render::worker_pool(req.threads)?;
     let spp = req.spp.max(1);
     let rows: Vec<Option<Vec<SampleAov>>> = pool.install(|| {
         (0..h)

@@ -72,6 +72,7 @@ use flowlight_sdk::AccumulationStyle;
 use std::time::Duration;
 
 mod memory;
+mod pool;
 mod schedule;
 #[cfg(test)]
 mod tests;
@@ -79,6 +80,7 @@ mod tests;
 pub use memory::{
     available_memory, check_frame_memory, check_memory, frame_bytes, frame_bytes_with,
 };
+pub use pool::worker_pool;
 pub use schedule::render;
 
 /// How much to render.

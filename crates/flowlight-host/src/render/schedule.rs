@@ -5,9 +5,9 @@
 
 use super::check_memory;
 use super::{
-    choose_style, effective_threads, round_passes, tile_order, tiles, AccumulationReport,
-    PartialPass, Progress, RenderOptions, RenderOutcome, RenderStats, FLANGED_TIME_TILE,
-    PASSES_PER_ROUND, TIMED_PASSES_PER_ROUND,
+    choose_style, round_passes, tile_order, tiles, AccumulationReport, PartialPass, Progress,
+    RenderOptions, RenderOutcome, RenderStats, FLANGED_TIME_TILE, PASSES_PER_ROUND,
+    TIMED_PASSES_PER_ROUND,
 };
 use crate::accumulation::{
     DepositCounts, Frame, MicroTileCache, Precision, SharedFrame, Style, ThreadBuffer,
@@ -231,12 +231,8 @@ fn accumulation_plan(
     style: Style,
     opts: &RenderOptions,
     layer_count: u32,
-) -> Result<(rayon::ThreadPool, SharedFrame, usize), String> {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(effective_threads(opts.threads))
-        .thread_name(|i| format!("flowlight-worker-{i}"))
-        .build()
-        .map_err(|e| format!("cannot start the thread pool: {e}"))?;
+) -> Result<(std::sync::Arc<rayon::ThreadPool>, SharedFrame, usize), String> {
+    let pool = super::worker_pool(opts.threads)?;
     let threads = pool.current_num_threads();
     let (width, height, precision) = (opts.width, opts.height, opts.precision);
     let private = private_plan(style, opts, layer_count, threads);

@@ -136,12 +136,14 @@ pub(super) fn build_intersector(
         packets: flowlight_embree::Packets::from_env().map_err(HostError::Variable)?,
         ..Default::default()
     };
-    build_intersector_with(config.intersector, scene, options).map_err(|msg| {
-        HostError::Intersector {
-            file: config.path.clone(),
-            msg,
-        }
-    })
+    let intersector_error = |msg| HostError::Intersector {
+        file: config.path.clone(),
+        msg,
+    };
+    // The pure-Rust BVH builds on the host's worker pool, not on rayon's global one.
+    let pool = crate::render::worker_pool(config.threads).map_err(intersector_error)?;
+    pool.install(|| build_intersector_with(config.intersector, scene, options))
+        .map_err(intersector_error)
 }
 
 /// The integrator's mutation list, taken out of its parameters: the name of the parameter
