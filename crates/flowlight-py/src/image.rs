@@ -7,6 +7,7 @@
 //! interleaved here once into the array numpy owns (no further copy).
 
 use crate::errors;
+use flowlight_host::denoise::{denoise_image, Denoiser, LAYER};
 use flowlight_host::output::{write_exr_planar, ExrMetadata, PlanarLayer, PngPreview};
 use flowlight_host::render::RenderOutcome;
 use flowlight_host::renderer::{stats_json, LoadedScene, Renderer};
@@ -60,6 +61,9 @@ fn planar(a: &PyReadonlyArray3<'_, f32>) -> PyResult<[Vec<f32>; 3]> {
 }
 
 impl Image {
+    /// The Python image of a render's outcome: the beauty, its lighting layers, the AOVs
+    /// and (with a denoiser) the denoised beauty.
+    #[allow(clippy::too_many_arguments)]
     pub fn from_outcome(
         py: Python<'_>,
         renderer: &Renderer,
@@ -67,28 +71,50 @@ impl Image {
         outcome: RenderOutcome,
         prepare: Duration,
         index: u64,
+        denoiser: Option<&mut Denoiser>,
     ) -> PyResult<Image> {
         let RenderOutcome {
             mut frame, stats, ..
         } = outcome;
         let (w, h) = (frame.width as usize, frame.height as usize);
+        // The AOVs the config asks for (`[output] aovs`, and albedo and normal when
+        // denoising), as the command line writes them: the host's pass after the beauty,
+        // one layer each under its name, then the denoised beauty.
+        let mut extra = Vec::new();
+        let mut denoised_by = None;
+        if let Some(req) = renderer.aov_request(denoiser.is_some()) {
+            let aovs = py
+                .detach(|| renderer.render_aovs(&req, &AtomicBool::new(false)))
+                .map_err(errors::host_error)?;
+            let denoised = match denoiser {
+                Some(d) => {
+                    let image = frame.image();
+                    let out = py
+                        .detach(|| denoise_image(d, &image, &aovs))
+                        .map_err(errors::RenderError::new_err)?;
+                    denoised_by = Some(d.source.clone());
+                    Some(out)
+                }
+                None => None,
+            };
+            for l in aovs.into_planar() {
+                extra.push((l.name, interleaved(py, w, h, &l.channels)?.unbind()));
+            }
+            if let Some(d) = denoised {
+                extra.push((LAYER.to_owned(), interleaved(py, w, h, &d)?.unbind()));
+            }
+        }
         let rgb = interleaved(py, w, h, &frame.take_channels(0))?.unbind();
         let mut layers = Vec::new();
         for k in 1..=frame.layer_count as usize {
             let a = interleaved(py, w, h, &frame.take_channels(k))?.unbind();
             layers.push((format!("layer{}", k - 1), a));
         }
-        // The AOVs the config asks for (`[output] aovs`), as the command line writes them:
-        // the host's pass after the beauty, one layer each under its name.
-        if let Some(req) = renderer.aov_request(false) {
-            let aovs = py
-                .detach(|| renderer.render_aovs(&req, &AtomicBool::new(false)))
-                .map_err(errors::host_error)?;
-            for l in aovs.into_planar() {
-                layers.push((l.name, interleaved(py, w, h, &l.channels)?.unbind()));
-            }
+        layers.extend(extra);
+        let mut metadata = renderer.metadata(&stats).entries;
+        if let Some(source) = denoised_by {
+            metadata.push(("flowlight.denoiser".into(), source));
         }
-        let metadata = renderer.metadata(&stats).entries;
         let name = renderer.instance.plugin().name.clone();
         let s = PyDict::new(py);
         s.set_item("integrator", &name)?;

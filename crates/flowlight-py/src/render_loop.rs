@@ -54,7 +54,17 @@ pub fn render(
     ov: &Overrides,
     callback: Option<Py<PyAny>>,
     index: u64,
+    denoise: bool,
 ) -> PyResult<Image> {
+    // The denoiser asked for must be there before any time is spent rendering.
+    let mut denoiser = if denoise {
+        Some(
+            py.detach(flowlight_host::denoise::Denoiser::open)
+                .map_err(errors::RenderError::new_err)?,
+        )
+    } else {
+        None
+    };
     let t0 = Instant::now();
     let renderer = py
         .detach(|| Renderer::from_loaded(loaded, ov))
@@ -110,7 +120,15 @@ pub fn render(
             "{e}; no image was returned"
         )));
     }
-    Image::from_outcome(py, &renderer, loaded, outcome, prepare, index)
+    Image::from_outcome(
+        py,
+        &renderer,
+        loaded,
+        outcome,
+        prepare,
+        index,
+        denoiser.as_mut(),
+    )
 }
 
 /// Stops the render for exception `e`: a KeyboardInterrupt keeps the partial image, any

@@ -60,8 +60,9 @@ pub fn load_table(py: Python<'_>, table: &Bound<'_, PyDict>, base_dir: PathBuf) 
 impl Scene {
     /// Renders the loaded scene; `progress` is called on this thread with a dict about every
     /// tenth of a second (its exceptions stop the render; KeyboardInterrupt keeps the partial
-    /// image).
-    #[pyo3(signature = (*, spp=None, time=None, threads=None, seed=None, set=None, progress=None))]
+    /// image). `denoise` adds the layers `albedo`, `normal` and `denoised` (Open Image
+    /// Denoise, as the command line's `--denoise`).
+    #[pyo3(signature = (*, spp=None, time=None, threads=None, seed=None, set=None, progress=None, denoise=false))]
     #[allow(clippy::too_many_arguments)]
     fn render(
         &self,
@@ -72,6 +73,7 @@ impl Scene {
         seed: Option<u64>,
         set: Option<&Bound<'_, PyDict>>,
         progress: Option<Py<PyAny>>,
+        denoise: bool,
     ) -> PyResult<crate::image::Image> {
         if let Some(t) = time {
             if !(t > 0.0 && t.is_finite()) {
@@ -92,7 +94,7 @@ impl Scene {
             params: convert::sets(set)?,
         };
         let index = self.renders.fetch_add(1, Ordering::Relaxed) + 1;
-        render_loop::render(py, &self.loaded, &ov, progress, index)
+        render_loop::render(py, &self.loaded, &ov, progress, index, denoise)
     }
 
     /// The config file (or `base_dir/<dict>`).

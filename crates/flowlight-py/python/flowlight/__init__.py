@@ -75,12 +75,15 @@ class Scene:
         seed: Optional[int] = None,
         set: Optional[Mapping[str, Any]] = None,
         progress: Union[None, bool, Callable[[dict], Any]] = None,
+        denoise: bool = False,
     ) -> Image:
         """Renders with the config's budget, or `spp` samples per pixel, or `time` seconds.
 
         `set` holds integrator parameters (and the settable `render.*` keys) as the command
         line's `--set KEY=VALUE` does. `progress`: None shows a bar (tqdm when installed, else
-        a plain line), False is silent, a callable receives a dict per update.
+        a plain line), False is silent, a callable receives a dict per update. `denoise`
+        adds the layers `albedo`, `normal` and `denoised` (Open Image Denoise, found as the
+        command line's `--denoise` finds it; the beauty stays the unbiased estimate).
         """
         callback, close = make_progress(progress, self._native, spp=spp, time=time)
         try:
@@ -91,6 +94,7 @@ class Scene:
                 seed=seed,
                 set=dict(set) if set is not None else None,
                 progress=callback,
+                denoise=denoise,
             )
         finally:
             close()

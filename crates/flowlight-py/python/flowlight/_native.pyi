@@ -48,6 +48,7 @@ class Scene:
         seed: Optional[int] = None,
         set: Optional[dict[str, Any]] = None,
         progress: Optional[Callable[[dict[str, Any]], Any]] = None,
+        denoise: bool = False,
     ) -> Image: ...
     @property
     def config_path(self) -> Path: ...
