@@ -62,6 +62,13 @@ pub struct Emitter {
     pub uv0: [Vec2; 3],
     /// … and set 1 (TEXCOORD_1).
     pub uv1: [Vec2; 3],
+    /// Linear RGB of `COLOR_0` at the three vertices, multiplied into the emission when
+    /// `vertex_colored` is 1. Only an unlit material's emission takes them (its colour is
+    /// base colour × `COLOR_0`, `KHR_materials_unlit`); glTF's `emissiveFactor` and
+    /// `emissiveTexture` are not multiplied by vertex colours, so other emitters hold 1s and 0.
+    pub color: [Rgb; 3],
+    /// 1 when the emission is multiplied by `color`.
+    pub vertex_colored: u32,
 }
 
 impl Emitter {
@@ -103,9 +110,9 @@ impl Emitter {
     }
 
     /// [`Emitter::emission_at`] with the barycentrics computed only where they matter: a
-    /// material without an emissive texture emits its factor everywhere (what
-    /// [`Material::emission_at`] returns for it), so neither the point's barycentrics nor
-    /// its texture coordinates are computed for it.
+    /// material without an emissive texture or vertex colours emits its factor everywhere
+    /// (what [`Material::emission_at`] returns for it), so neither the point's barycentrics
+    /// nor its texture coordinates are computed for it.
     #[inline]
     pub fn emission_at_with(
         &self,
@@ -113,11 +120,32 @@ impl Emitter {
         materials: &[Material],
         textures: &[Texture],
     ) -> Rgb {
-        match materials.get(self.material as usize) {
-            Some(m) if m.emissive_texture.is_some() => m.emission_at(self.uv_at(b()), textures),
-            Some(m) => m.emission,
-            None => self.radiance,
+        let Some(m) = materials.get(self.material as usize) else {
+            return self.radiance;
+        };
+        if !m.emissive_texture.is_some() && self.vertex_colored == 0 {
+            return m.emission;
         }
+        let b = b();
+        let emission = if m.emissive_texture.is_some() {
+            m.emission_at(self.uv_at(b), textures)
+        } else {
+            m.emission
+        };
+        if self.vertex_colored != 0 {
+            emission * self.color_at(b)
+        } else {
+            emission
+        }
+    }
+
+    /// The vertex colour at barycentrics `b` (1s for an emitter without vertex colours).
+    #[inline]
+    pub fn color_at(&self, b: [f32; 3]) -> Rgb {
+        if self.vertex_colored == 0 {
+            return Rgb::ONE;
+        }
+        self.color[0] * b[0] + self.color[1] * b[1] + self.color[2] * b[2]
     }
 
     /// Power Φ = π · area · mean luminance · faces. Lights are chosen in proportion.
@@ -531,6 +559,8 @@ mod tests {
             material: u32::MAX,
             uv0: [Vec2::ZERO, Vec2::X, Vec2::Y],
             uv1: [Vec2::ZERO; 3],
+            color: [Rgb::ONE; 3],
+            vertex_colored: 0,
         }
     }
 

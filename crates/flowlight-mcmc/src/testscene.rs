@@ -60,6 +60,8 @@ pub fn scene() -> Scene<'static> {
         material: u32::MAX,
         uv0: [Vec2::ZERO; 3],
         uv1: [Vec2::ZERO; 3],
+        color: [Rgb::ONE; 3],
+        vertex_colored: 0,
     }]));
     let punctual: &'static [PunctualLight] = Box::leak(Box::new([PunctualLight::directional(
         sun_travel(),

@@ -28,18 +28,14 @@ use std::path::{Path, PathBuf};
 /// Strata per side for the emission integral of one triangle (16 points).
 pub const EMISSION_STRATA: usize = 4;
 
-/// Mean of `emission(uv)` over emitter `e`'s triangle, from stratified points.
-pub fn mean_emission(
-    e: &Emitter,
-    strata: usize,
-    mut emission: impl FnMut([Vec2; 2]) -> Rgb,
-) -> Rgb {
+/// Mean of `emission(b)` over a triangle, from stratified points (`b` their barycentrics).
+pub fn mean_emission(strata: usize, mut emission: impl FnMut([f32; 3]) -> Rgb) -> Rgb {
     let n = strata.max(1);
     let mut sum = Rgb::ZERO;
     for i in 0..n {
         for j in 0..n {
             let u = Vec2::new((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32);
-            sum += emission(e.uv_at(uniform_triangle(u)));
+            sum += emission(uniform_triangle(u));
         }
     }
     sum / (n * n) as f32
@@ -325,11 +321,13 @@ mod tests {
             material: 0,
             uv0: [Vec2::ZERO, Vec2::X, Vec2::Y],
             uv1: [Vec2::ZERO; 3],
+            color: [Rgb::ONE; 3],
+            vertex_colored: 0,
         };
         // Emits 2 where u < 0.5: the mean over the triangle is the emitting area's share
         // (3/4 of the triangle has u < 1/2) times 2, up to the strata's resolution.
-        let m = mean_emission(&e, EMISSION_STRATA, |uv| {
-            if uv[0].x < 0.5 {
+        let m = mean_emission(EMISSION_STRATA, |b| {
+            if e.uv_at(b)[0].x < 0.5 {
                 Rgb::splat(2.0)
             } else {
                 Rgb::ZERO
@@ -343,8 +341,8 @@ mod tests {
             Vec2::new(0.9, 0.0),
             Vec2::new(0.6, 0.3),
         ];
-        let m = mean_emission(&black, EMISSION_STRATA, |uv| {
-            if uv[0].x < 0.5 {
+        let m = mean_emission(EMISSION_STRATA, |b| {
+            if black.uv_at(b)[0].x < 0.5 {
                 Rgb::splat(2.0)
             } else {
                 Rgb::ZERO

@@ -165,6 +165,10 @@ pub struct Scene {
     pub triangle_material: Vec<u32>,
     pub materials: Vec<Material>,
     pub material_names: Vec<String>,
+    /// Per material: whether it is unlit (`KHR_materials_unlit`), whose emission takes the
+    /// vertex colours (`crate::unlit`). Shorter than `materials` (a scene built by hand):
+    /// the rest are not.
+    pub unlit_materials: Vec<bool>,
     pub textures: Vec<TextureData>,
     /// Every camera node of the scene, in traversal order (the first is the default camera).
     pub cameras: Vec<CameraDesc>,

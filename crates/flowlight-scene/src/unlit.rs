@@ -5,7 +5,7 @@
 //! the viewer and scatters nothing. So an unlit material becomes:
 //!
 //! * emission = `baseColorFactor` (RGB), emissive texture = `baseColorTexture` (both sRGB
-//!   colour textures, read at the same `texCoord` and transform), emissive strength 1;
+//!   colour textures, read at the same `texCoord` and transform), emissive strength 1, and the vertex colours (below);
 //! * a BSDF that scatters nothing: base colour factor 0 (the base colour *texture* stays,
 //!   so that `alphaMode` MASK/BLEND still read its alpha), metallic 0, specular 0,
 //!   transmission and clearcoat 0;
@@ -26,15 +26,13 @@
 //! its colours adds that light to the scene once more; to render such a scan as a lit
 //! surface instead, remove the extension from the file.
 //!
-//! `COLOR_0` is not applied to the emission: unlit meshes with vertex colours show
-//! `baseColorFactor × baseColorTexture` without them. Every emitted radiance (a camera ray's
-//! hit, next-event estimation, a light subpath's start) is read through
-//! `flowlight_core::light::Emitter::emission_at`, from the material and texture tables and
-//! the three texture coordinates each emitter stores; the vertex colours are in neither.
-//! Applying them means storing three colours in `Emitter`, a `#[repr(C)]` table of the
-//! plugin ABI's scene view (a layout change), filling and averaging them into each emitter's
-//! power in the loader, and multiplying them in on both the hit and the light side, which
-//! must agree for MIS and for the light-side samplers; it is left for a change of the ABI.
+//! `COLOR_0` multiplies the emission, as it multiplies the extension's colour: the emitter
+//! table stores each emissive triangle's vertex colours, filled for unlit materials only
+//! (`Scene::unlit_materials`; glTF's `emissiveFactor` and `emissiveTexture` are not multiplied
+//! by vertex colours), and every emitted radiance (a camera ray's hit, next-event
+//! estimation, a light subpath's start) is read through
+//! `flowlight_core::light::Emitter::emission_at`, which multiplies them in, so the hit side
+//! and the light side agree for MIS and for the light-side samplers.
 
 use flowlight_core::material::Material;
 use flowlight_core::Rgb;

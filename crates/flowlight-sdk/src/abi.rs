@@ -20,7 +20,7 @@ use std::ffi::c_void;
 
 /// Bumped whenever any type or function table in this module changes incompatibly; every
 /// version and what changed is listed in the repository's `CHANGELOG.md`.
-pub const ABI_VERSION: u32 = 8;
+pub const ABI_VERSION: u32 = 9;
 /// Version of the SDK crate compiled into this binary.
 pub const SDK_VERSION: &str = env!("CARGO_PKG_VERSION");
 /// `rustc --version` of the compiler that built this binary.

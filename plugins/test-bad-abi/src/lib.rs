@@ -1,5 +1,5 @@
-//! Test fixture: declares the previous ABI version, `ABI_VERSION - 1` (7, what a plugin built
-//! against the SDK before `Material` held the layer extensions declares). The host must refuse to load
+//! Test fixture: declares the previous ABI version, `ABI_VERSION - 1` (8, what a plugin built
+//! against the SDK before `Emitter` held vertex colours declares). The host must refuse to load
 //! it with an error that names this file and both versions, before calling anything in it.
 
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.

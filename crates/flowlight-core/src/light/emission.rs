@@ -319,6 +319,8 @@ mod tests {
             material: u32::MAX,
             uv0: [Vec2::ZERO; 3],
             uv1: [Vec2::ZERO; 3],
+            color: [Rgb::ONE; 3],
+            vertex_colored: 0,
         }
     }
 

@@ -49,6 +49,8 @@ fn scene() -> Scene<'static> {
         material: u32::MAX,
         uv0: [Vec2::ZERO; 3],
         uv1: [Vec2::ZERO; 3],
+        color: [Rgb::ONE; 3],
+        vertex_colored: 0,
     }]));
     let environment = Environment::constant(Rgb::splat(SKY));
     let cdf = build_cdf(&light_powers(emitters, &[], &environment, 3.0)).unwrap();

@@ -9,6 +9,7 @@ use crate::lights::{emission_strata, mean_emission};
 use crate::scene::{triangle_area, triangle_normal, Scene};
 use flowlight_core::light::Emitter;
 use flowlight_core::sampling::build_cdf;
+use flowlight_core::Rgb;
 use glam::{Vec2, Vec3};
 
 impl Loader<'_> {
@@ -95,9 +96,20 @@ fn place_emitters(scene: &mut Scene) {
                 material,
                 uv0: uv,
                 uv1,
+                color: [Rgb::ONE; 3],
+                vertex_colored: 0,
             };
+            // An unlit material's colour is base colour × COLOR_0 (`crate::unlit`).
+            let unlit = scene.unlit_materials.get(material as usize) == Some(&true);
+            if unlit && !scene.colors.is_empty() {
+                e.color = tri.map(|i| {
+                    let [r, g, b, _] = scene.colors[i as usize];
+                    Rgb::new(r, g, b)
+                });
+                e.vertex_colored = 1;
+            }
             let strata = emission_strata(&e, &m.emissive_texture, &views);
-            e.radiance = mean_emission(&e, strata, |uv| m.emission_at(uv, &views));
+            e.radiance = mean_emission(strata, |b| e.emission_at(b, &scene.materials, &views));
             if e.radiance.is_black() || e.power() <= 0.0 {
                 scene.stats.black_emitters += 1;
                 continue;
@@ -121,6 +133,7 @@ fn place_emitters(scene: &mut Scene) {
                     p.swap(1, 2);
                     uv0.swap(1, 2);
                     uv1.swap(1, 2);
+                    e.color.swap(1, 2);
                 }
                 let [p0, p1, p2] = p.map(|q| m.transform_point3(q));
                 e.p0 = p0;

@@ -94,6 +94,7 @@ impl Loader<'_> {
         }
         self.scene.materials.push(mat);
         self.scene.material_names.push(name);
+        self.scene.unlit_materials.push(crate::unlit::is_unlit(m));
         let i = (self.scene.materials.len() - 1) as u32;
         self.material_map.insert(m.index(), i);
         Ok(i)

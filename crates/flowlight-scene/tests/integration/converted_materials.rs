@@ -5,7 +5,7 @@
 use flowlight_scene::gltf_loader::load_gltf;
 use flowlight_scene::texture::srgb_to_linear;
 use flowlight_scene::Scene;
-use flowlight_testkit::gltf::{png8, temp_dir, Quad};
+use flowlight_testkit::gltf::{png8, temp_dir, Attribute, Quad};
 use glam::Vec2;
 use std::collections::BTreeMap;
 
@@ -83,6 +83,74 @@ fn an_unlit_material_emits_its_base_colour_and_is_a_light() {
     assert_eq!(m.two_sided_emission, 1);
     assert_eq!(m.base_color, flowlight_core::Rgb::ZERO);
     assert_eq!(s.emitters.len(), 2, "both triangles are lights");
+}
+
+/// Red vertex colours at x = 0, blue at x = 1 (the quad's vertices 1 and 2).
+const RED_TO_BLUE: [[f32; 3]; 4] = [
+    [1.0, 0.0, 0.0],
+    [0.0, 0.0, 1.0],
+    [0.0, 0.0, 1.0],
+    [1.0, 0.0, 0.0],
+];
+
+#[test]
+fn an_unlit_materials_emission_takes_the_vertex_colours() {
+    use flowlight_core::Rgb;
+    let q = Quad {
+        extra: vec![Attribute::floats("COLOR_0", RED_TO_BLUE)],
+        material: r#"{"pbrMetallicRoughness": {"baseColorFactor": [0.5, 1, 1, 1]},
+            "extensions": {"KHR_materials_unlit": {}}}"#
+            .into(),
+        ..Quad::default()
+    };
+    let s = load_requiring(&q, &["KHR_materials_unlit"], "unlit-colors");
+    assert_eq!(s.emitters.len(), 2);
+    // The spec's unlit colour, base colour × COLOR_0, at every corner, on the hit side and
+    // the light side alike (both read `Emitter::emission_at`).
+    let corner = |x: f32| {
+        if x < 0.5 {
+            Rgb::new(0.5, 0.0, 0.0)
+        } else {
+            Rgb::new(0.0, 0.0, 1.0)
+        }
+    };
+    for e in &s.emitters {
+        assert_eq!(e.vertex_colored, 1);
+        for (k, p) in [e.p0, e.p1, e.p2].into_iter().enumerate() {
+            let mut b = [0.0; 3];
+            b[k] = 1.0;
+            assert_eq!(
+                e.emission_at(b, &s.materials, &s.texture_table),
+                corner(p.x)
+            );
+        }
+        // The power is from the mean over the triangle: the corners' mean, as the colour is
+        // linear across it, up to the loader's 16 stratified points (the power only chooses
+        // lights; the emission itself is exact).
+        let mean = (corner(e.p0.x) + corner(e.p1.x) + corner(e.p2.x)) / 3.0;
+        for (got, want) in e.radiance.to_array().into_iter().zip(mean.to_array()) {
+            assert!(
+                (got - want).abs() < 0.02 * want.max(0.1),
+                "{:?} against {mean:?}",
+                e.radiance
+            );
+        }
+    }
+    // An emissive material that is not unlit ignores the vertex colours (glTF multiplies
+    // only the base colour by COLOR_0).
+    let lit = Quad {
+        extra: vec![Attribute::floats("COLOR_0", RED_TO_BLUE)],
+        material: r#"{"emissiveFactor": [0.5, 1, 1]}"#.into(),
+        ..Quad::default()
+    };
+    let s = load_requiring(&lit, &[], "emissive-colors");
+    for e in &s.emitters {
+        assert_eq!(e.vertex_colored, 0);
+        assert_eq!(
+            e.emission_at([1.0, 0.0, 0.0], &s.materials, &s.texture_table),
+            Rgb::new(0.5, 1.0, 1.0)
+        );
+    }
 }
 
 #[test]
