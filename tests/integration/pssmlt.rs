@@ -9,7 +9,7 @@
 //!   test at z = 8.3 in region 0.
 //! - **Stationarity.** On the box lit by one bounce (`path_depth = 1`), the chain states'
 //!   raster positions, histogrammed over 8×8-pixel regions, follow the MCPT image's
-//!   luminance shares.
+//!   luminance shares; with small steps made asymmetric on purpose (a drift) they do not.
 //! - **Thread count.** The image is the same with 1 and 2 threads.
 //! - **Layers** sum to the image.
 //! - **Bad values** get the host's one-line refusal naming the parameter.
@@ -159,15 +159,13 @@ fn the_image_does_not_depend_on_the_thread_count() {
     assert_eq!(one, two);
 }
 
-/// Chain states over the one-bounce box: per 8×8-pixel region, the share of states there
-/// against the share of the MCPT image's luminance (from independent MCPT renders), with
-/// independent chains as batches.
-#[test]
-fn chain_states_follow_the_image_on_a_one_bounce_scene() {
+/// Chain states over the one-bounce box, with small and large steps of `mutation`: per
+/// chain, the share of its states in each 8×8-pixel region.
+fn one_bounce_chain_shares(mutation: Mutation) -> Vec<[f64; REGIONS]> {
     const CHAINS: u64 = 200;
     const LENGTH: u64 = 200;
     let s = cornell("mcpt", 1, &[int("path_depth", 1)]);
-    let per_chain: Vec<[f64; REGIONS]> = with_seed_sampler(&s, |scene, tracer, mut settings| {
+    with_seed_sampler(&s, |scene, tracer, mut settings| {
         settings.variant = Variant::Entangled;
         settings.path_depth = 1;
         settings.termination = TerminationSchedule::new(settings.termination.kind(), 1)
@@ -176,7 +174,6 @@ fn chain_states_follow_the_image_on_a_one_bounce_scene() {
                 settings.termination.max_survival(),
             );
         let mut target = McptTarget::new(scene, tracer, &settings, false);
-        let mutation = Mutation::new(0.3, 0.01);
         let bootstrap = Bootstrap::run(&mut target, 3, 4096, mutation);
         let mut buffers = ChainBuffers::default();
         let mut counts = ChainCounts::default();
@@ -202,8 +199,13 @@ fn chain_states_follow_the_image_on_a_one_bounce_scene() {
             .collect();
         assert!(counts.accepted_small > 0 && counts.accepted_large > 0);
         out
-    });
-    // MCPT's shares, from independent renders (the ratio's variance by the delta method).
+    })
+}
+
+/// Per 8×8-pixel region, the z-score of the chains' share of states against the share of
+/// the MCPT image's luminance (from independent MCPT renders; the ratio's variance by the
+/// delta method), with independent chains as batches.
+fn one_bounce_z_scores(per_chain: &[[f64; REGIONS]]) -> Vec<f64> {
     let mcpt: Vec<[f64; REGIONS]> = (0..8)
         .map(|r| {
             regions(&image(
@@ -214,19 +216,39 @@ fn chain_states_follow_the_image_on_a_one_bounce_scene() {
             ))
         })
         .collect();
-    for k in 0..REGIONS {
-        let share = |r: &[f64; REGIONS]| r[k] / r.iter().sum::<f64>();
-        let (expected, expected_var) = mean_and_var(mcpt.iter().map(share));
-        let (m, var) = mean_and_var(per_chain.iter().map(|h| h[k]));
-        let z = (m - expected) / (var + expected_var).sqrt().max(1e-12);
-        if debug() {
-            eprintln!("region {k}: states {m:.4} vs MCPT {expected:.4}, z = {z:.2}");
-        }
-        assert!(
-            z.abs() < 5.0,
-            "region {k}: states {m:.4} vs MCPT {expected:.4}: z = {z:.2}"
-        );
+    (0..REGIONS)
+        .map(|k| {
+            let share = |r: &[f64; REGIONS]| r[k] / r.iter().sum::<f64>();
+            let (expected, expected_var) = mean_and_var(mcpt.iter().map(share));
+            let (m, var) = mean_and_var(per_chain.iter().map(|h| h[k]));
+            let z = (m - expected) / (var + expected_var).sqrt().max(1e-12);
+            if debug() {
+                eprintln!("region {k}: states {m:.4} vs MCPT {expected:.4}, z = {z:.2}");
+            }
+            z
+        })
+        .collect()
+}
+
+#[test]
+fn chain_states_follow_the_image_on_a_one_bounce_scene() {
+    let z = one_bounce_z_scores(&one_bounce_chain_shares(Mutation::new(0.3, 0.01)));
+    for (k, z) in z.iter().enumerate() {
+        assert!(z.abs() < 5.0, "region {k}: z = {z:.2}");
     }
+}
+
+/// The same check with small steps that drift by 2σ towards +1 each (an asymmetric
+/// proposal: f(y)/f(x) is then not the Metropolis–Hastings ratio) must fail.
+#[test]
+fn drifting_small_steps_fail_the_one_bounce_check() {
+    let drifting = Mutation::new(0.3, 0.01).with_drift(2.0);
+    let z = one_bounce_z_scores(&one_bounce_chain_shares(drifting));
+    let worst = z.iter().fold(0.0f64, |a, z| a.max(z.abs()));
+    assert!(
+        worst > 2.0 * 5.0,
+        "an asymmetric proposal passed: worst |z| = {worst:.2}"
+    );
 }
 
 #[test]

@@ -5,7 +5,9 @@
 //!   fall into 4×4 film regions with the shares of the depth-1 image's luminance there (the
 //!   target f_1 marginalised over everything but the raster position), estimated by
 //!   independent full BDPT samples' lighting layer 1. The same histogram is far from the uniform
-//!   shares (the check has the power to see a wrong target).
+//!   shares (the check has the power to see a wrong target). Chains whose small steps drift
+//!   (an asymmetric proposal, for which f(y)/f(x) is not the Metropolis–Hastings ratio) fail
+//!   the same check.
 //! - **Stationarity over depths.** The share of mutations of each depth is b̂_d / Σ b̂
 //!   within the binomial noise of the chains' depth draws.
 //! - **Deposits.** A whole film's worth of work units deposits Σ_d b̂_d per pixel on
@@ -29,6 +31,8 @@ use loaded::load;
 const CORNELL: &str = "scenes/cornell-box/cornell-box.toml";
 const DEPTH: u32 = 1;
 const BINS: usize = 4;
+/// How far a bin's share of the chain states may be from the target's.
+const SHARE_TOLERANCE: f64 = 0.02;
 
 /// Runs `f` with a strategy sampler of the Cornell box, its scene and tracer.
 fn with_sampler<R>(f: impl FnOnce(&FilmSampler, Vec2, &Scene, &Tracer) -> R) -> R {
@@ -130,6 +134,41 @@ fn bdpt_estimates(scene: &Scene, tracer: &Tracer, film: Vec2, n: u64) -> (Vec<f6
     (bins, means)
 }
 
+/// The largest difference between a bin's share of `reference` and of the chain states'
+/// `histogram`, and the largest difference of the states' shares from uniform shares.
+fn share_errors(reference: &[f64], histogram: &[f64]) -> (f64, f64) {
+    let total_ref: f64 = reference.iter().sum();
+    let total_hist: f64 = histogram.iter().sum();
+    let mut worst = 0.0f64;
+    let mut from_uniform = 0.0f64;
+    for k in 0..BINS * BINS {
+        let (p, q) = (reference[k] / total_ref, histogram[k] / total_hist);
+        println!("bin {k}: target share {p:.4}, chain states {q:.4}");
+        worst = worst.max((p - q).abs());
+        from_uniform = from_uniform.max((q - 1.0 / (BINS * BINS) as f64).abs());
+    }
+    (worst, from_uniform)
+}
+
+#[test]
+fn drifting_small_steps_fail_the_raster_space_check() {
+    with_sampler(|sampler, film, scene, tracer| {
+        // Two σ of drift per small step (the chains take their mutation from the bootstrap;
+        // its own samples are independent). Half a σ, which the chain driver's χ² test on
+        // the toy integrand catches, moves a bin here by only 0.0195: chains of one tile's
+        // 256 mutations, 30% of them large steps, stay close to where they started.
+        let drifting = Mutation::new(0.3, 0.01).with_drift(2.0);
+        let bootstrap = DepthBootstrap::run(sampler, DEPTH, 3, 20_000, drifting);
+        let (_, histogram, _) = run_chains(sampler, film, &bootstrap, 4);
+        let (reference, _) = bdpt_estimates(scene, tracer, film, 200_000);
+        let (worst, _) = share_errors(&reference, &histogram);
+        assert!(
+            worst > 1.5 * SHARE_TOLERANCE,
+            "an asymmetric proposal passed the check: worst bin off by only {worst:.4}"
+        );
+    });
+}
+
 #[test]
 fn mmlt_chains_are_stationary_in_raster_space_and_over_depths() {
     with_sampler(|sampler, film, scene, tracer| {
@@ -150,17 +189,11 @@ fn mmlt_chains_are_stationary_in_raster_space_and_over_depths() {
             (deposited / total - 1.0).abs() < 1e-3,
             "the chains' mean pixel {deposited:.5e} against Σ b̂ = {total:.5e}"
         );
-        let total_ref: f64 = reference.iter().sum();
-        let total_hist: f64 = histogram.iter().sum();
-        let mut worst = 0.0f64;
-        let mut from_uniform = 0.0f64;
-        for k in 0..BINS * BINS {
-            let (p, q) = (reference[k] / total_ref, histogram[k] / total_hist);
-            println!("bin {k}: target share {p:.4}, chain states {q:.4}");
-            worst = worst.max((p - q).abs());
-            from_uniform = from_uniform.max((q - 1.0 / (BINS * BINS) as f64).abs());
-        }
-        assert!(worst < 0.02, "a bin's share of states is off by {worst:.4}");
+        let (worst, from_uniform) = share_errors(&reference, &histogram);
+        assert!(
+            worst < SHARE_TOLERANCE,
+            "a bin's share of states is off by {worst:.4}"
+        );
         assert!(
             from_uniform > 5.0 * worst,
             "the target is too close to uniform for the check to see a wrong one ({from_uniform:.4})"

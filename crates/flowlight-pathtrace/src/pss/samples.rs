@@ -58,6 +58,12 @@ impl Mutation {
             drift: 0.0,
         }
     }
+
+    /// This mutation with every small step drifted by `drift` σ towards +1: an asymmetric
+    /// proposal for the stationarity tests, which must fail with it. Never used to render.
+    pub fn with_drift(self, drift: f32) -> Mutation {
+        Mutation { drift, ..self }
+    }
 }
 
 /// One coordinate: its value, the iteration it was last brought up to date, and both as they
