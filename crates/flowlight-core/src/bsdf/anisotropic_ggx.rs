@@ -13,7 +13,7 @@
 //! With α_x = α_y = α every formula is the isotropic one. Directions below the surface are
 //! negated first, as in the isotropic distribution.
 
-use super::microfacet::reflect;
+use super::microfacet::{reflect, sample_visible_normal};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
@@ -81,23 +81,7 @@ impl AnisoGgx {
     /// A visible normal (z ≥ 0) for `wo`, from `u` (Heitz 2018, listing 1, per-axis stretch).
     #[inline]
     pub fn sample_wm(&self, wo: Vec3, u: Vec2) -> Vec3 {
-        let w = if wo.z < 0.0 { -wo } else { wo };
-        let vh = Vec3::new(self.ax * w.x, self.ay * w.y, w.z).normalize();
-        let lensq = vh.x * vh.x + vh.y * vh.y;
-        let t1 = if lensq > 0.0 {
-            Vec3::new(-vh.y, vh.x, 0.0) / lensq.sqrt()
-        } else {
-            Vec3::X
-        };
-        let t2 = vh.cross(t1);
-        let r = u.x.sqrt();
-        let phi = 2.0 * PI * u.y;
-        let (sin_phi, cos_phi) = phi.sin_cos();
-        let p1 = r * cos_phi;
-        let s = 0.5 * (1.0 + vh.z);
-        let p2 = (1.0 - s) * (1.0 - p1 * p1).max(0.0).sqrt() + s * r * sin_phi;
-        let nh = p1 * t1 + p2 * t2 + (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt() * vh;
-        Vec3::new(self.ax * nh.x, self.ay * nh.y, nh.z.max(1e-7)).normalize()
+        sample_visible_normal(self.ax, self.ay, wo, u)
     }
 
     /// A reflection of upper-hemisphere `wo` through a sampled visible normal: (ω_i, ω_m,

@@ -126,30 +126,38 @@ impl Ggx {
     /// Samples a visible normal (always z ≥ 0) for `wo` (Heitz 2018, listing 1).
     #[inline]
     pub fn sample_wm(&self, wo: Vec3, u: Vec2) -> Vec3 {
-        let w = if wo.z < 0.0 { -wo } else { wo };
-        // Section 3.2: transform the view direction to the hemisphere configuration.
-        let vh = Vec3::new(self.alpha * w.x, self.alpha * w.y, w.z).normalize();
-        // Section 4.1: orthonormal basis (with special case if cross product is zero).
-        let lensq = vh.x * vh.x + vh.y * vh.y;
-        let t1 = if lensq > 0.0 {
-            Vec3::new(-vh.y, vh.x, 0.0) / lensq.sqrt()
-        } else {
-            Vec3::X
-        };
-        let t2 = vh.cross(t1);
-        // Section 4.2: parameterisation of the projected area.
-        let r = u.x.sqrt();
-        let phi = 2.0 * PI * u.y;
-        let (sin_phi, cos_phi) = phi.sin_cos();
-        let p1 = r * cos_phi;
-        let mut p2 = r * sin_phi;
-        let s = 0.5 * (1.0 + vh.z);
-        p2 = (1.0 - s) * (1.0 - p1 * p1).max(0.0).sqrt() + s * p2;
-        // Section 4.3: reprojection onto the hemisphere.
-        let nh = p1 * t1 + p2 * t2 + (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt() * vh;
-        // Section 3.4: transform the normal back to the ellipsoid configuration.
-        Vec3::new(self.alpha * nh.x, self.alpha * nh.y, nh.z.max(1e-7)).normalize()
+        sample_visible_normal(self.alpha, self.alpha, wo, u)
     }
+}
+
+/// A visible normal (always z ≥ 0) of the GGX distribution with roughnesses `ax`, `ay`
+/// along x and y, for `wo` (negated when below the surface), from `u` (Heitz 2018,
+/// listing 1): the isotropic [`Ggx`] with `ax` = `ay` = α, and the anisotropic lobe.
+#[inline]
+pub fn sample_visible_normal(ax: f32, ay: f32, wo: Vec3, u: Vec2) -> Vec3 {
+    let w = if wo.z < 0.0 { -wo } else { wo };
+    // Section 3.2: transform the view direction to the hemisphere configuration.
+    let vh = Vec3::new(ax * w.x, ay * w.y, w.z).normalize();
+    // Section 4.1: orthonormal basis (with special case if cross product is zero).
+    let lensq = vh.x * vh.x + vh.y * vh.y;
+    let t1 = if lensq > 0.0 {
+        Vec3::new(-vh.y, vh.x, 0.0) / lensq.sqrt()
+    } else {
+        Vec3::X
+    };
+    let t2 = vh.cross(t1);
+    // Section 4.2: parameterisation of the projected area.
+    let r = u.x.sqrt();
+    let phi = 2.0 * PI * u.y;
+    let (sin_phi, cos_phi) = phi.sin_cos();
+    let p1 = r * cos_phi;
+    let mut p2 = r * sin_phi;
+    let s = 0.5 * (1.0 + vh.z);
+    p2 = (1.0 - s) * (1.0 - p1 * p1).max(0.0).sqrt() + s * p2;
+    // Section 4.3: reprojection onto the hemisphere.
+    let nh = p1 * t1 + p2 * t2 + (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt() * vh;
+    // Section 3.4: transform the normal back to the ellipsoid configuration.
+    Vec3::new(ax * nh.x, ay * nh.y, nh.z.max(1e-7)).normalize()
 }
 
 /// Mirror reflection of `wo` about `n`.
