@@ -84,6 +84,7 @@
 //! freeze, …), the host logs them as a TOML snippet, and the stats JSON has them with the
 //! pilot's norms (`auto.*`).
 
+use crate::gain::{self, Inputs, Moments, Prediction};
 use crate::settings::MixtureRatio;
 use flowlight_sdk::stats::{Counter, Stats, StatsBuilder};
 use flowlight_sdk::{Params, StatDisplay};
@@ -178,6 +179,10 @@ pub struct Census {
     pub indirect_seeds: u64,
     pub indirect_energy: f64,
     pub indirect_sample_squares: f64,
+    /// Per-camera-sample moments of the rest and of the class (`gain.rs`).
+    pub moments: [Moments; 2],
+    /// The same for the split of every path above direct light: layers ≤ 1 and ≥ 2.
+    pub layer_moments: [Moments; 2],
 }
 
 impl Census {
@@ -220,6 +225,7 @@ impl Census {
         self.seeds[1] += self.indirect_seeds;
         self.energy[0] = (self.energy[0] - self.indirect_energy).max(0.0);
         self.energy[1] += self.indirect_energy;
+        self.moments = self.layer_moments;
     }
 
     /// w_s: rays per camera sample.
@@ -241,6 +247,9 @@ pub struct Norms {
     /// costs (the choice, the target function) and one per vertex it moved (a miss: every
     /// vertex after the eye, as if it traced the whole path).
     pub work: f64,
+    /// Pilot chains run, and the sum of their effective deposits K (`gain.rs`).
+    pub chains: u64,
+    pub spread_sum: f64,
 }
 
 impl Norms {
@@ -280,10 +289,28 @@ impl Norms {
             self.work / self.proposals as f64
         }
     }
-    /// Accepted moves per ray of the strategy's steps.
+    /// Accepted moves per ray of the strategy's steps (reported).
     pub fn accepted_per_work(&self) -> f64 {
         if self.work > 0.0 {
             self.accepted as f64 / self.work
+        } else {
+            0.0
+        }
+    }
+    /// K: a pilot chain's effective deposits (pixels its deposits spread over).
+    pub fn spread(&self) -> f64 {
+        if self.chains == 0 {
+            0.0
+        } else {
+            self.spread_sum / self.chains as f64
+        }
+    }
+    /// Pixels a pilot chain's deposits spread over beyond its seed's, per ray of its steps,
+    /// Σ (K − 1) / Σ rays: what the rule weights by (a strategy that never leaves the seed's
+    /// pixel gets 0).
+    pub fn spread_per_work(&self) -> f64 {
+        if self.work > 0.0 {
+            (self.spread_sum - self.chains as f64).max(0.0) / self.work
         } else {
             0.0
         }
@@ -299,6 +326,8 @@ pub struct Plan {
     pub weights: Vec<f64>,
     pub mutations_per_sample: f64,
     pub chain_length: u32,
+    /// The pilot's prediction for chains (default when too few seeds were found).
+    pub prediction: Prediction,
 }
 
 /// The smallest power of two ≥ x, in [lo, hi].
@@ -313,21 +342,22 @@ fn power_of_two_in(x: f64, lo: u32, hi: u32) -> u32 {
 /// The rule of the module docs: from the census and each candidate's norms, the split, the
 /// weights, N and M. `fallback` holds the weights, M and N a plan without chains keeps.
 pub fn decide(census: &Census, norms: &[Norms], fallback: (&[f64], f64, u32)) -> Plan {
-    let no_chains = || Plan {
+    let no_chains = |prediction: Prediction| Plan {
         chains: false,
         weights: fallback.0.to_vec(),
         mutations_per_sample: fallback.1,
         chain_length: fallback.2,
+        prediction,
     };
     if census.seeds[1] < MIN_CAUSTIC_SEEDS || census.energy[1] <= 0.0 {
         // Too few caustic seeds to measure: path tracing.
-        return no_chains();
+        return no_chains(Prediction::default());
     }
-    let rates: Vec<f64> = norms.iter().map(Norms::accepted_per_work).collect();
+    let rates: Vec<f64> = norms.iter().map(Norms::spread_per_work).collect();
     let best = rates.iter().cloned().fold(0.0, f64::max);
     if best <= 0.0 {
         // No strategy moves a caustic chain: path tracing.
-        return no_chains();
+        return no_chains(Prediction::default());
     }
     let kept: Vec<f64> = rates
         .iter()
@@ -335,26 +365,31 @@ pub fn decide(census: &Census, norms: &[Norms], fallback: (&[f64], f64, u32)) ->
         .collect();
     let sum: f64 = kept.iter().sum();
     let weights: Vec<f64> = kept.iter().map(|r| r / sum).collect();
-    let step_work: f64 = weights
-        .iter()
-        .zip(norms)
-        .map(|(w, n)| w * n.work_per_proposal())
-        .sum();
+    let mix =
+        |f: fn(&Norms) -> f64| -> f64 { weights.iter().zip(norms).map(|(w, n)| w * f(n)).sum() };
+    let step_work = mix(Norms::work_per_proposal);
     // Caustic seeds per camera sample: the rarer, the further a seed's energy must travel.
     let density = census.seeds[1] as f64 / census.samples.max(1) as f64;
     let chain_length = power_of_two_in(STEPS_PER_SEED_GAP / density, 16, 64);
-    // Neyman: work ∝ σ·√(cost) per part, σ² ∝ energy: M·w_m / w_c = √(c/(1−c)) · √(w_m/w_c).
-    let c = census.caustic_share().min(0.999);
-    let m = if step_work > 0.0 {
-        (c / (1.0 - c)).sqrt() * (census.work_per_sample() / step_work).sqrt()
-    } else {
-        1.0
-    };
+    let prediction = gain::predict(&Inputs {
+        class_variance: census.moments[1].variance(),
+        rest_variance: census.moments[0].variance(),
+        seeds_per_sample: density,
+        chain_length,
+        spread: gain::spread_at(mix(Norms::spread), PILOT_STEPS, chain_length),
+        sample_work: census.work_per_sample(),
+        step_work,
+    });
+    if prediction.gain < gain::MIN_GAIN {
+        // Chains would cost more rays than the variance they take away: path tracing.
+        return no_chains(prediction);
+    }
     Plan {
         chains: true,
         weights,
-        mutations_per_sample: m.clamp(1.0 / 16.0, 16.0),
+        mutations_per_sample: prediction.mutations_per_sample,
         chain_length,
+        prediction,
     }
 }
 
@@ -446,12 +481,17 @@ pub struct Counters {
     caustic_seeds: Counter,
     caustic_share: Counter,
     indirect_r: Counter,
+    /// The prediction: G(M*), V_c, V_r and the mixture's K_N.
+    predicted_gain: Counter,
+    class_variance: Counter,
+    rest_variance: Counter,
+    spread: Counter,
     /// Per lighting layer: Σ lum X per camera sample outside and inside the census' class
     /// (the caustic class, or the config's `chains_for`).
     per_layer: Vec<[Counter; 2]>,
     /// Per candidate: weight, acceptance, domain miss, seconds and rays per proposal,
-    /// accepted moves per second and per ray.
-    per_strategy: Vec<[Counter; 7]>,
+    /// accepted moves per second and per ray, effective deposits of a pilot chain.
+    per_strategy: Vec<[Counter; 8]>,
 }
 
 impl Counters {
@@ -471,6 +511,10 @@ impl Counters {
             caustic_seeds: hidden(b, "auto.pilot.chained_seeds".into()),
             caustic_share: n(b, "auto.pilot.chained_energy_share".into()),
             indirect_r: n(b, "auto.pilot.indirect_relative_second_moment".into()),
+            predicted_gain: n(b, "auto.pilot.predicted_gain".into()),
+            class_variance: hidden(b, "auto.pilot.class_variance".into()),
+            rest_variance: hidden(b, "auto.pilot.rest_variance".into()),
+            spread: hidden(b, "auto.pilot.effective_deposits".into()),
             per_layer: (0..layers)
                 .map(|k| {
                     [
@@ -490,6 +534,7 @@ impl Counters {
                         hidden(b, format!("auto.pilot.{s}.rays_per_proposal")),
                         hidden(b, format!("auto.pilot.{s}.accepted_per_second")),
                         hidden(b, format!("auto.pilot.{s}.accepted_per_ray")),
+                        hidden(b, format!("auto.pilot.{s}.effective_deposits")),
                     ]
                 })
                 .collect(),
@@ -515,6 +560,10 @@ impl Counters {
         stats.add(self.caustic_seeds, r.census.seeds[1] as f64);
         stats.add(self.caustic_share, r.census.caustic_share());
         stats.add(self.indirect_r, r.census.indirect_relative_second_moment());
+        stats.add(self.predicted_gain, p.prediction.gain);
+        stats.add(self.class_variance, p.prediction.class_variance);
+        stats.add(self.rest_variance, p.prediction.rest_variance);
+        stats.add(self.spread, p.prediction.spread);
         let samples = r.census.samples.max(1) as f64;
         for (c, e) in self.per_layer.iter().zip(&r.census.layer_energy) {
             stats.add(c[0], e[0] / samples);
@@ -530,6 +579,7 @@ impl Counters {
                 n.work_per_proposal(),
                 n.accepted_per_second(),
                 n.accepted_per_work(),
+                n.spread(),
             ];
             for (&counter, v) in c.iter().zip(values) {
                 stats.add(counter, v);
@@ -542,6 +592,19 @@ impl Counters {
 mod tests {
     use super::*;
 
+    /// Moments of 1000 camera samples whose per-pixel variance is `v`.
+    fn moments(v: f64) -> Moments {
+        Moments {
+            samples: 1000,
+            sum: 0.0,
+            squares: 1000.0 * v,
+            neighbour_products: 0.0,
+            pairs: 900,
+        }
+    }
+
+    /// 1000 camera samples of 4 rays; the class' share of the energy `share`, its variance
+    /// 10× the rest's (the glass caustic's kind).
     fn census(caustic_seeds: u64, share: f64) -> Census {
         Census {
             samples: 1000,
@@ -549,6 +612,7 @@ mod tests {
             work: 4000.0,
             seeds: [5000, caustic_seeds],
             energy: [1.0 - share, share],
+            moments: [moments(1.0), moments(10.0)],
             ..Census::default()
         }
     }
@@ -561,6 +625,7 @@ mod tests {
         c.indirect_seeds = 1000;
         c.indirect_energy = 0.5;
         c.indirect_sample_squares = 1000.0 * 0.0005f64.powi(2);
+        c.layer_moments = [moments(2.0), moments(3.0)];
         assert!((c.indirect_relative_second_moment() - 1.0).abs() < 1e-9);
         assert!(!c.indirect_is_hard());
         c.indirect_sample_squares = 0.25;
@@ -568,72 +633,116 @@ mod tests {
         assert!(c.indirect_is_hard());
         c.chain_indirect();
         assert_eq!((c.seeds, c.energy), ([4000, 1000], [0.5, 0.5]));
+        // The class is now every path above direct light, with its variance.
+        assert_eq!(c.moments, c.layer_moments);
     }
 
-    /// Norms with `work` rays in all (and as many microseconds).
-    fn norms(proposals: u64, accepted: u64, misses: u64, work: f64) -> Norms {
+    /// Norms of 100 pilot chains with `work` rays in all (and as many microseconds), each
+    /// spreading its deposits over `spread` pixels.
+    fn norms(proposals: u64, accepted: u64, misses: u64, work: f64, spread: f64) -> Norms {
         Norms {
             proposals,
             accepted,
             misses,
             seconds: work * 1e-6,
             work,
+            chains: 100,
+            spread_sum: 100.0 * spread,
         }
     }
 
     #[test]
     fn without_caustic_seeds_or_moves_the_render_is_path_tracing() {
         let fallback = (&[0.5, 0.5][..], 8.0, 16);
-        let good = [norms(1000, 500, 0, 1000.0), norms(1000, 100, 0, 1000.0)];
+        let good = [
+            norms(1000, 500, 0, 1000.0, 11.0),
+            norms(1000, 100, 0, 1000.0, 3.0),
+        ];
         let p = decide(&census(2, 0.2), &good, fallback);
         assert!(!p.chains && p.weights == [0.5, 0.5] && p.chain_length == 16);
-        let stuck = [norms(1000, 0, 1000, 1000.0), norms(1000, 0, 10, 1000.0)];
+        // Chains that never leave their seed's pixel (K = 1) spread nothing.
+        let stuck = [
+            norms(1000, 0, 1000, 1000.0, 1.0),
+            norms(1000, 0, 10, 1000.0, 1.0),
+        ];
         assert!(!decide(&census(100, 0.2), &stuck, fallback).chains);
         assert!(decide(&census(100, 0.2), &good, fallback).chains);
     }
 
     #[test]
-    fn weights_follow_accepted_moves_per_ray_above_the_floor() {
+    fn a_low_predicted_gain_chooses_path_tracing() {
+        let fallback = (&[1.0][..], 8.0, 16);
+        let good = [norms(1000, 500, 0, 1000.0, 11.0)];
+        // The same seeds and strategies: chains where the class carries the noise (10× the
+        // rest's), path tracing where it is quiet beside the rest (veach-mis' indirect light
+        // beside its glossy highlights), however bright or many its seeds.
+        let noisy = decide(&census(100, 0.2), &good, fallback);
+        assert!(
+            noisy.chains && noisy.prediction.gain >= gain::MIN_GAIN,
+            "{noisy:?}"
+        );
+        let mut quiet = census(100, 0.2);
+        quiet.moments = [moments(1.0), moments(0.05)];
+        let p = decide(&quiet, &good, fallback);
+        assert!(!p.chains && p.prediction.gain < gain::MIN_GAIN, "{p:?}");
+        assert_eq!((p.mutations_per_sample, p.chain_length), (8.0, 16));
+    }
+
+    #[test]
+    fn weights_follow_spread_per_ray_above_the_floor() {
         let fallback = (&[1.0 / 3.0; 3][..], 8.0, 16);
-        // 0.5, 0.4 (as many moves at 1.25 rays a step) and 0.3 (under the floor of 1/3)
-        // moves per ray.
+        // 100 chains of K − 1 = 10, 12.5 and 6 extra pixels for 1000, 1250 and 1000 rays: 1,
+        // 1 and 0.6 (under the floor of 2/3) per ray; the second's high acceptance is no gain.
         let n = [
-            norms(1000, 500, 0, 1000.0),
-            norms(1000, 500, 100, 1250.0),
-            norms(1000, 300, 600, 1000.0),
+            norms(1000, 500, 0, 1000.0, 11.0),
+            norms(1000, 900, 100, 1250.0, 13.5),
+            norms(1000, 300, 600, 1000.0, 7.0),
         ];
         let p = decide(&census(100, 0.25), &n, fallback);
         assert!(p.chains);
-        assert!((p.weights[0] - 5.0 / 9.0).abs() < 1e-12, "{:?}", p.weights);
-        assert!((p.weights[1] - 4.0 / 9.0).abs() < 1e-12);
+        assert!((p.weights[0] - 0.5).abs() < 1e-12, "{:?}", p.weights);
+        assert!((p.weights[1] - 0.5).abs() < 1e-12);
         assert_eq!(p.weights[2], 0.0);
-        // w_m = (5/9)·1 + (4/9)·1.25 = 10/9 rays a step; M = √(1/3) · √(4 / (10/9)).
-        let m = (1.0f64 / 3.0).sqrt() * 3.6f64.sqrt();
-        assert!((p.mutations_per_sample - m).abs() < 1e-9, "{p:?}");
+        // The mixture: w_m = 1.125 rays a step, K = 12.25 at 32 steps, N = 2 / 0.1 → 32.
+        assert_eq!(p.chain_length, 32);
+        let expect = gain::predict(&Inputs {
+            class_variance: 10.0,
+            rest_variance: 1.0,
+            seeds_per_sample: 0.1,
+            chain_length: 32,
+            spread: 12.25,
+            sample_work: 4.0,
+            step_work: 1.125,
+        });
+        assert_eq!(p.prediction, expect);
+        assert_eq!(p.mutations_per_sample, expect.mutations_per_sample);
     }
 
     #[test]
     fn rare_seeds_get_long_chains_and_the_budget_stays_within_bounds() {
         let fallback = (&[1.0][..], 8.0, 16);
-        let good = [norms(1000, 500, 0, 1000.0)];
+        let good = [norms(1000, 500, 0, 1000.0, 11.0)];
         let at = |seeds: u64| decide(&census(seeds, 0.5), &good, fallback);
         // 2 / (seeds per camera sample), as a power of two in [16, 64].
         assert_eq!(at(200).chain_length, 16);
         assert_eq!(at(100).chain_length, 32);
         assert_eq!(at(10).chain_length, 64);
-        // M = √(0.5 / 0.5) · √(4 / 1) = 2, and within [1/16, 16].
-        assert!((at(100).mutations_per_sample - 2.0).abs() < 1e-9);
-        let cheap = decide(&census(100, 1.0), &[norms(1000, 900, 0, 1e-3)], fallback);
-        assert_eq!(cheap.mutations_per_sample, 16.0);
-        let dim = decide(&census(100, 1e-6), &good, fallback);
-        assert_eq!(dim.mutations_per_sample, 1.0 / 16.0);
+        // No noise left in the rest: as many steps as the bounds allow.
+        let mut quiet_rest = census(100, 1.0);
+        quiet_rest.moments[0] = moments(0.0);
+        let p = decide(&quiet_rest, &good, fallback);
+        assert!(p.chains);
+        assert_eq!(p.mutations_per_sample, gain::M_RANGE.1);
     }
 
     #[test]
     fn the_report_freezes_into_a_manual_config() {
         let plan = decide(
             &census(100, 0.5),
-            &[norms(1000, 500, 0, 1000.0), norms(1000, 0, 1000, 1000.0)],
+            &[
+                norms(1000, 500, 0, 1000.0, 11.0),
+                norms(1000, 0, 1000, 1000.0, 1.0),
+            ],
             (&[0.5, 0.5], 8.0, 16),
         );
         let r = Report {

@@ -59,6 +59,7 @@
 mod auto;
 mod automaton;
 mod flow;
+mod gain;
 mod part;
 mod pilot;
 mod settings;

@@ -6,6 +6,7 @@
 
 use crate::auto::{self, Census, Norms, PILOT_CHAIN_SEEDS, PILOT_SAMPLES, PILOT_STEPS};
 use crate::flow::acceptance;
+use crate::gain::effective_deposits;
 use crate::part::Part;
 use crate::settings::{MixtureRatio, QuantumScope};
 use crate::{Erpt, UnitSeeds};
@@ -161,9 +162,13 @@ impl Erpt {
             census.samples += seeds.store.samples;
             census.work += (seeds.store.vertices.len() + seeds.store.seeds.len()) as f64;
             let count = seeds.store.seeds.len();
+            // The previous camera sample's pixel and its light per part: the rest and the
+            // class, layers ≤ 1 and ≥ 2 (its left neighbour on the grid's row, if any).
+            let mut left: Option<((u32, u32), [f64; 4])> = None;
             for (k, key) in seeds.keys.iter().enumerate() {
                 let end = seeds.keys.get(k + 1).map_or(count, |n| n.first);
                 let mut indirect = 0.0;
+                let mut parts = [0.0; 4];
                 for i in key.first..end {
                     let estimate = seeds.store.seeds[i].estimate;
                     let lum = estimate.luminance() as f64;
@@ -177,6 +182,8 @@ impl Erpt {
                     let layer = (path.layer as usize).min(depth + 1);
                     census.layer_energy[layer][c] += lum;
                     let deep = layer >= 2;
+                    parts[c] += lum;
+                    parts[2 + deep as usize] += lum;
                     if c == 0 && deep {
                         census.indirect_seeds += 1;
                         census.indirect_energy += lum;
@@ -190,6 +197,14 @@ impl Erpt {
                     }
                 }
                 census.indirect_sample_squares += indirect * indirect;
+                let neighbour = left.filter(|((x, y), _)| *y == key.y && *x < key.x);
+                for (i, m) in census.moments.iter_mut().enumerate() {
+                    m.add(parts[i], neighbour.map(|(_, l)| l[i]));
+                }
+                for (i, m) in census.layer_moments.iter_mut().enumerate() {
+                    m.add(parts[2 + i], neighbour.map(|(_, l)| l[2 + i]));
+                }
+                left = Some(((key.x, key.y), parts));
             }
         }
         self.settings.part = saved;
@@ -215,6 +230,7 @@ impl Erpt {
             let mut rng = Rng::new(Rng::hash(&[auto::PILOT_SEED, m as u64]), 2);
             let mut n = Norms::default();
             let start = Instant::now();
+            let mut pixels = Vec::with_capacity(PILOT_STEPS as usize);
             for &k in &starts {
                 *state = *caustic[k].0;
                 state.film_window = self.settings.film_window;
@@ -222,6 +238,7 @@ impl Erpt {
                 if !(f_y.is_valid_radiance() && f_y.luminance() > 0.0) {
                     continue;
                 }
+                pixels.clear();
                 for _ in 0..PILOT_STEPS {
                     let p = self.mutations.propose(
                         m,
@@ -239,18 +256,24 @@ impl Erpt {
                         s.path_depth,
                         s.max_ray_depth,
                     ) && class.contains(&proposal);
-                    let Some(ratio) = p.transition_ratio().filter(|_| inside) else {
+                    let ratio = p.transition_ratio().filter(|_| inside);
+                    if ratio.is_none() {
                         n.misses += 1;
-                        continue;
-                    };
-                    let f_z = measurement(&self.scene, &proposal);
-                    let a = acceptance(f_y, f_z, ratio as f64).unwrap_or(0.0);
-                    if (rng.uniform() as f64) < a {
-                        n.accepted += 1;
-                        std::mem::swap(&mut state, &mut proposal);
-                        f_y = f_z;
                     }
+                    if let Some(ratio) = ratio {
+                        let f_z = measurement(&self.scene, &proposal);
+                        let a = acceptance(f_y, f_z, ratio as f64).unwrap_or(0.0);
+                        if (rng.uniform() as f64) < a {
+                            n.accepted += 1;
+                            std::mem::swap(&mut state, &mut proposal);
+                            f_y = f_z;
+                        }
+                    }
+                    // The flow deposits once a step, into the pixel of the state.
+                    pixels.push((state.raster.x.floor() as i64, state.raster.y.floor() as i64));
                 }
+                n.chains += 1;
+                n.spread_sum += effective_deposits(&mut pixels);
             }
             n.seconds = start.elapsed().as_secs_f64();
             all.push(n);
