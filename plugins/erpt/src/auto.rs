@@ -84,7 +84,7 @@
 //! freeze, …), the host logs them as a TOML snippet, and the stats JSON has them with the
 //! pilot's norms (`auto.*`).
 
-use crate::gain::{self, Inputs, Moments, Prediction};
+use crate::gain::{self, Moments};
 use crate::settings::MixtureRatio;
 use flowlight_sdk::stats::{Counter, Stats, StatsBuilder};
 use flowlight_sdk::{Params, StatDisplay};
@@ -183,6 +183,8 @@ pub struct Census {
     pub moments: [Moments; 2],
     /// The same for the split of every path above direct light: layers ≤ 1 and ≥ 2.
     pub layer_moments: [Moments; 2],
+    /// Whether the class is every path above direct light ([`Census::chain_indirect`]).
+    pub indirect: bool,
 }
 
 impl Census {
@@ -226,6 +228,12 @@ impl Census {
         self.energy[0] = (self.energy[0] - self.indirect_energy).max(0.0);
         self.energy[1] += self.indirect_energy;
         self.moments = self.layer_moments;
+        self.indirect = true;
+    }
+
+    /// G_max of `gain.rs`: the most chains on the class can gain over path tracing.
+    pub fn noise_bound(&self) -> f64 {
+        gain::amdahl_bound(self.moments[1].variance(), self.moments[0].variance())
     }
 
     /// w_s: rays per camera sample.
@@ -326,8 +334,8 @@ pub struct Plan {
     pub weights: Vec<f64>,
     pub mutations_per_sample: f64,
     pub chain_length: u32,
-    /// The pilot's prediction for chains (default when too few seeds were found).
-    pub prediction: Prediction,
+    /// Amdahl's bound G_max from the census (`gain.rs`; 0 when the class has no seeds).
+    pub noise_bound: f64,
 }
 
 /// The smallest power of two ≥ x, in [lo, hi].
@@ -342,54 +350,68 @@ fn power_of_two_in(x: f64, lo: u32, hi: u32) -> u32 {
 /// The rule of the module docs: from the census and each candidate's norms, the split, the
 /// weights, N and M. `fallback` holds the weights, M and N a plan without chains keeps.
 pub fn decide(census: &Census, norms: &[Norms], fallback: (&[f64], f64, u32)) -> Plan {
-    let no_chains = |prediction: Prediction| Plan {
+    let noise_bound = if census.seeds[1] > 0 {
+        census.noise_bound()
+    } else {
+        0.0
+    };
+    let no_chains = || Plan {
         chains: false,
         weights: fallback.0.to_vec(),
         mutations_per_sample: fallback.1,
         chain_length: fallback.2,
-        prediction,
+        noise_bound,
     };
     if census.seeds[1] < MIN_CAUSTIC_SEEDS || census.energy[1] <= 0.0 {
         // Too few caustic seeds to measure: path tracing.
-        return no_chains(Prediction::default());
+        return no_chains();
     }
-    let rates: Vec<f64> = norms.iter().map(Norms::spread_per_work).collect();
+    if census.indirect && noise_bound < gain::MIN_GAIN {
+        // Indirect light is a small share of path tracing's noise: chains on it cannot pay.
+        return no_chains();
+    }
+    // Selected: the strategies within the floor of the best accepted moves per ray; weighted
+    // by the pixels their chains spread over per ray.
+    let rates: Vec<f64> = norms.iter().map(Norms::accepted_per_work).collect();
     let best = rates.iter().cloned().fold(0.0, f64::max);
-    if best <= 0.0 {
-        // No strategy moves a caustic chain: path tracing.
-        return no_chains(Prediction::default());
-    }
     let kept: Vec<f64> = rates
         .iter()
-        .map(|&r| if r >= WEIGHT_FLOOR * best { r } else { 0.0 })
+        .zip(norms)
+        .map(|(&r, n)| {
+            if best > 0.0 && r >= WEIGHT_FLOOR * best {
+                n.spread_per_work()
+            } else {
+                0.0
+            }
+        })
         .collect();
     let sum: f64 = kept.iter().sum();
+    if sum <= 0.0 {
+        // No strategy moves a chain out of its seed's pixel: path tracing.
+        return no_chains();
+    }
     let weights: Vec<f64> = kept.iter().map(|r| r / sum).collect();
-    let mix =
-        |f: fn(&Norms) -> f64| -> f64 { weights.iter().zip(norms).map(|(w, n)| w * f(n)).sum() };
-    let step_work = mix(Norms::work_per_proposal);
+    let step_work: f64 = weights
+        .iter()
+        .zip(norms)
+        .map(|(w, n)| w * n.work_per_proposal())
+        .sum();
     // Caustic seeds per camera sample: the rarer, the further a seed's energy must travel.
     let density = census.seeds[1] as f64 / census.samples.max(1) as f64;
     let chain_length = power_of_two_in(STEPS_PER_SEED_GAP / density, 16, 64);
-    let prediction = gain::predict(&Inputs {
-        class_variance: census.moments[1].variance(),
-        rest_variance: census.moments[0].variance(),
-        seeds_per_sample: density,
-        chain_length,
-        spread: gain::spread_at(mix(Norms::spread), PILOT_STEPS, chain_length),
-        sample_work: census.work_per_sample(),
-        step_work,
-    });
-    if prediction.gain < gain::MIN_GAIN {
-        // Chains would cost more rays than the variance they take away: path tracing.
-        return no_chains(prediction);
-    }
+    // Neyman: work ∝ σ·√(cost) per part, σ² ∝ energy: M·w_m / w_c = √(c/(1−c)) · √(w_m/w_c).
+    let c = census.caustic_share().min(0.999);
+    let m = if step_work > 0.0 {
+        (c / (1.0 - c)).sqrt() * (census.work_per_sample() / step_work).sqrt()
+    } else {
+        1.0
+    };
     Plan {
         chains: true,
         weights,
-        mutations_per_sample: prediction.mutations_per_sample,
+        mutations_per_sample: m.clamp(1.0 / 16.0, 16.0),
         chain_length,
-        prediction,
+        noise_bound,
     }
 }
 
@@ -481,11 +503,11 @@ pub struct Counters {
     caustic_seeds: Counter,
     caustic_share: Counter,
     indirect_r: Counter,
-    /// The prediction: G(M*), V_c, V_r and the mixture's K_N.
-    predicted_gain: Counter,
+    /// The census' relative variance per camera sample of the class and of the rest, and
+    /// Amdahl's bound G_max from them (`gain.rs`).
     class_variance: Counter,
     rest_variance: Counter,
-    spread: Counter,
+    noise_bound: Counter,
     /// Per lighting layer: Σ lum X per camera sample outside and inside the census' class
     /// (the caustic class, or the config's `chains_for`).
     per_layer: Vec<[Counter; 2]>,
@@ -511,10 +533,9 @@ impl Counters {
             caustic_seeds: hidden(b, "auto.pilot.chained_seeds".into()),
             caustic_share: n(b, "auto.pilot.chained_energy_share".into()),
             indirect_r: n(b, "auto.pilot.indirect_relative_second_moment".into()),
-            predicted_gain: n(b, "auto.pilot.predicted_gain".into()),
             class_variance: hidden(b, "auto.pilot.class_variance".into()),
             rest_variance: hidden(b, "auto.pilot.rest_variance".into()),
-            spread: hidden(b, "auto.pilot.effective_deposits".into()),
+            noise_bound: n(b, "auto.pilot.noise_bound".into()),
             per_layer: (0..layers)
                 .map(|k| {
                     [
@@ -560,10 +581,10 @@ impl Counters {
         stats.add(self.caustic_seeds, r.census.seeds[1] as f64);
         stats.add(self.caustic_share, r.census.caustic_share());
         stats.add(self.indirect_r, r.census.indirect_relative_second_moment());
-        stats.add(self.predicted_gain, p.prediction.gain);
-        stats.add(self.class_variance, p.prediction.class_variance);
-        stats.add(self.rest_variance, p.prediction.rest_variance);
-        stats.add(self.spread, p.prediction.spread);
+        stats.add(self.class_variance, r.census.moments[1].variance());
+        stats.add(self.rest_variance, r.census.moments[0].variance());
+        // A maximum over units: infinity (no noise left outside the class) as a large number.
+        stats.add(self.noise_bound, p.noise_bound.min(1e12));
         let samples = r.census.samples.max(1) as f64;
         for (c, e) in self.per_layer.iter().zip(&r.census.layer_energy) {
             stats.add(c[0], e[0] / samples);
@@ -596,7 +617,6 @@ mod tests {
     fn moments(v: f64) -> Moments {
         Moments {
             samples: 1000,
-            sum: 0.0,
             squares: 1000.0 * v,
             neighbour_products: 0.0,
             pairs: 900,
@@ -670,52 +690,47 @@ mod tests {
     }
 
     #[test]
-    fn a_low_predicted_gain_chooses_path_tracing() {
+    fn indirect_light_with_a_small_share_of_the_noise_is_path_traced() {
         let fallback = (&[1.0][..], 8.0, 16);
         let good = [norms(1000, 500, 0, 1000.0, 11.0)];
-        // The same seeds and strategies: chains where the class carries the noise (10× the
-        // rest's), path tracing where it is quiet beside the rest (veach-mis' indirect light
-        // beside its glossy highlights), however bright or many its seeds.
-        let noisy = decide(&census(100, 0.2), &good, fallback);
-        assert!(
-            noisy.chains && noisy.prediction.gain >= gain::MIN_GAIN,
-            "{noisy:?}"
-        );
-        let mut quiet = census(100, 0.2);
-        quiet.moments = [moments(1.0), moments(0.05)];
+        // Indirect light chained (the census' R was high) that carries most of the noise:
+        // chains (the indirect room's kind).
+        let mut noisy = census(100, 0.2);
+        noisy.indirect = true;
+        let p = decide(&noisy, &good, fallback);
+        assert!(p.chains && (p.noise_bound - 11.0).abs() < 1e-9, "{p:?}");
+        // veach-mis' kind: its indirect light is 0.003 of relative variance beside 2,652 of
+        // glossy highlights. Path tracing, whatever the seeds and strategies.
+        let mut quiet = noisy.clone();
+        quiet.moments = [moments(2652.0), moments(0.003)];
         let p = decide(&quiet, &good, fallback);
-        assert!(!p.chains && p.prediction.gain < gain::MIN_GAIN, "{p:?}");
+        assert!(!p.chains && p.noise_bound < gain::MIN_GAIN, "{p:?}");
         assert_eq!((p.mutations_per_sample, p.chain_length), (8.0, 16));
+        // The caustic class is not gated: the census does not see its tail of rare seeds.
+        quiet.indirect = false;
+        assert!(decide(&quiet, &good, fallback).chains);
     }
 
     #[test]
-    fn weights_follow_spread_per_ray_above_the_floor() {
-        let fallback = (&[1.0 / 3.0; 3][..], 8.0, 16);
-        // 100 chains of K − 1 = 10, 12.5 and 6 extra pixels for 1000, 1250 and 1000 rays: 1,
-        // 1 and 0.6 (under the floor of 2/3) per ray; the second's high acceptance is no gain.
+    fn acceptance_per_ray_selects_and_spread_per_ray_weights() {
+        let fallback = (&[0.25; 4][..], 8.0, 16);
+        // Accepted moves per ray 0.5, 0.4, 0.3 (under the floor of 2/3 · 0.5) and 0.5; pixels
+        // spread beyond the seed's per ray (100 chains): 1.0, 0.4, 1.9 and 0 (the fourth's
+        // moves never leave the pixel).
         let n = [
             norms(1000, 500, 0, 1000.0, 11.0),
-            norms(1000, 900, 100, 1250.0, 13.5),
-            norms(1000, 300, 600, 1000.0, 7.0),
+            norms(1000, 500, 100, 1250.0, 6.0),
+            norms(1000, 300, 600, 1000.0, 20.0),
+            norms(1000, 500, 0, 1000.0, 1.0),
         ];
         let p = decide(&census(100, 0.25), &n, fallback);
         assert!(p.chains);
-        assert!((p.weights[0] - 0.5).abs() < 1e-12, "{:?}", p.weights);
-        assert!((p.weights[1] - 0.5).abs() < 1e-12);
-        assert_eq!(p.weights[2], 0.0);
-        // The mixture: w_m = 1.125 rays a step, K = 12.25 at 32 steps, N = 2 / 0.1 → 32.
-        assert_eq!(p.chain_length, 32);
-        let expect = gain::predict(&Inputs {
-            class_variance: 10.0,
-            rest_variance: 1.0,
-            seeds_per_sample: 0.1,
-            chain_length: 32,
-            spread: 12.25,
-            sample_work: 4.0,
-            step_work: 1.125,
-        });
-        assert_eq!(p.prediction, expect);
-        assert_eq!(p.mutations_per_sample, expect.mutations_per_sample);
+        assert!((p.weights[0] - 1.0 / 1.4).abs() < 1e-12, "{:?}", p.weights);
+        assert!((p.weights[1] - 0.4 / 1.4).abs() < 1e-12);
+        assert_eq!((p.weights[2], p.weights[3]), (0.0, 0.0));
+        // w_m = (1·1 + 0.4·1.25) / 1.4 rays a step; M = √(1/3) · √(4 / w_m).
+        let m = (1.0f64 / 3.0).sqrt() * (4.0 * 1.4 / 1.5f64).sqrt();
+        assert!((p.mutations_per_sample - m).abs() < 1e-9, "{p:?}");
     }
 
     #[test]
@@ -727,12 +742,16 @@ mod tests {
         assert_eq!(at(200).chain_length, 16);
         assert_eq!(at(100).chain_length, 32);
         assert_eq!(at(10).chain_length, 64);
-        // No noise left in the rest: as many steps as the bounds allow.
-        let mut quiet_rest = census(100, 1.0);
-        quiet_rest.moments[0] = moments(0.0);
-        let p = decide(&quiet_rest, &good, fallback);
-        assert!(p.chains);
-        assert_eq!(p.mutations_per_sample, gain::M_RANGE.1);
+        // M = √(0.5 / 0.5) · √(4 / 1) = 2, and within [1/16, 16].
+        assert!((at(100).mutations_per_sample - 2.0).abs() < 1e-9);
+        let cheap = decide(
+            &census(100, 1.0),
+            &[norms(1000, 900, 0, 1e-3, 11.0)],
+            fallback,
+        );
+        assert_eq!(cheap.mutations_per_sample, 16.0);
+        let dim = decide(&census(100, 1e-6), &good, fallback);
+        assert_eq!(dim.mutations_per_sample, 1.0 / 16.0);
     }
 
     #[test]

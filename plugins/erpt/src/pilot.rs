@@ -6,7 +6,7 @@
 
 use crate::auto::{self, Census, Norms, PILOT_CHAIN_SEEDS, PILOT_SAMPLES, PILOT_STEPS};
 use crate::flow::acceptance;
-use crate::gain::effective_deposits;
+use crate::gain::{self, effective_deposits};
 use crate::part::Part;
 use crate::settings::{MixtureRatio, QuantumScope};
 use crate::{Erpt, UnitSeeds};
@@ -21,13 +21,19 @@ use std::time::Instant;
 /// A seed path of the census with its energy lum X.
 pub type WeightedSeed = (Box<Path>, f64);
 
-/// Pixels of the census grid: every `stride`-th pixel of every `stride`-th row, the stride
-/// the smallest with at most [`PILOT_SAMPLES`] pixels.
-fn grid(width: u32, height: u32) -> impl Iterator<Item = (u32, u32)> {
+/// The census grid's stride: the smallest with at most [`PILOT_SAMPLES`] pixels.
+fn grid_stride(width: u32, height: u32) -> u32 {
     let mut stride = 1;
     while width.div_ceil(stride) * height.div_ceil(stride) > PILOT_SAMPLES {
         stride += 1;
     }
+    stride
+}
+
+/// Pixels of the census grid: every `stride`-th pixel of every `stride`-th row, the stride
+/// the smallest with at most [`PILOT_SAMPLES`] pixels.
+fn grid(width: u32, height: u32) -> impl Iterator<Item = (u32, u32)> {
+    let stride = grid_stride(width, height);
     (0..height)
         .step_by(stride as usize)
         .flat_map(move |y| (0..width).step_by(stride as usize).map(move |x| (x, y)))
@@ -162,9 +168,11 @@ impl Erpt {
             census.samples += seeds.store.samples;
             census.work += (seeds.store.vertices.len() + seeds.store.seeds.len()) as f64;
             let count = seeds.store.seeds.len();
-            // The previous camera sample's pixel and its light per part: the rest and the
-            // class, layers ≤ 1 and ≥ 2 (its left neighbour on the grid's row, if any).
-            let mut left: Option<((u32, u32), [f64; 4])> = None;
+            // Per grid pixel its camera sample's light per part: the rest and the class,
+            // layers ≤ 1 and ≥ 2 (for the variance per part, `gain.rs`).
+            let stride = grid_stride(w, h);
+            let cols = w.div_ceil(stride) as usize;
+            let mut cells = vec![[0.0; 4]; cols * h.div_ceil(stride) as usize];
             for (k, key) in seeds.keys.iter().enumerate() {
                 let end = seeds.keys.get(k + 1).map_or(count, |n| n.first);
                 let mut indirect = 0.0;
@@ -197,15 +205,17 @@ impl Erpt {
                     }
                 }
                 census.indirect_sample_squares += indirect * indirect;
-                let neighbour = left.filter(|((x, y), _)| *y == key.y && *x < key.x);
-                for (i, m) in census.moments.iter_mut().enumerate() {
-                    m.add(parts[i], neighbour.map(|(_, l)| l[i]));
+                let cell = (key.y / stride) as usize * cols + (key.x / stride) as usize;
+                if let Some(c) = cells.get_mut(cell) {
+                    *c = parts;
                 }
-                for (i, m) in census.layer_moments.iter_mut().enumerate() {
-                    m.add(parts[2 + i], neighbour.map(|(_, l)| l[2 + i]));
-                }
-                left = Some(((key.x, key.y), parts));
             }
+            let [a, b] = census.moments;
+            let [c, d] = census.layer_moments;
+            let mut moments = [a, b, c, d];
+            gain::add_pass(&mut moments, cols, &cells);
+            census.moments = [moments[0], moments[1]];
+            census.layer_moments = [moments[2], moments[3]];
         }
         self.settings.part = saved;
         (census, class_seeds, deep_seeds)
