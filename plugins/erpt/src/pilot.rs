@@ -98,11 +98,12 @@ impl Erpt {
                 );
             }
             if free.quantum {
-                // e_d of Algorithm 1 from the pilot's seeds of the chained class.
+                // e_d of Algorithm 1 once for the image, from `prepare`'s pre-pass of one
+                // camera sample per pixel with the render's termination: the census' 4,096
+                // samples (with the config's termination) estimate the class' energy too
+                // coarsely for it (glass caustic: 60 spp in 4 s with the census' e_d, 99
+                // with the pre-pass', at the same choices).
                 self.settings.quantum = QuantumScope::Image;
-                self.image_quantum = Some(
-                    census.energy[1] / (census.samples as f64 * self.settings.mutations_per_sample),
-                );
             }
         } else {
             self.chains_part_empty = true;
@@ -114,7 +115,8 @@ impl Erpt {
             plan,
             census,
             norms,
-            quantum: self.image_quantum.filter(|_| !self.chains_part_empty),
+            // Set by `prepare`'s pre-pass (`Erpt::prepare`).
+            quantum: None,
             mixture: self.settings.mixture,
             plugins: (0..n).map(|i| self.mutations.name(i).to_string()).collect(),
             chains_for: if indirect { "all" } else { "caustics" },
