@@ -37,17 +37,24 @@
 //!   for every path above direct light (`chains_for = "all"`) when path tracing is far from its
 //!   mean on indirect light, R = E[X²]/E[X]² of a camera sample's indirect light ≥
 //!   [`HARD_INDIRECT`] (1 for a constant; 3.6–6.6 measured on the Cornell box, the narrow gap
-//!   and the glass caustic's non-caustic light, 80 on the indirect room, lit through a gap);
-//!   else none (path tracing), and none when no candidate moves a chain. Direct light is
-//!   always path traced, where next-event estimation is efficient.
+//!   and the glass caustic's non-caustic light, 80 on the indirect room, lit through a gap)
+//!   and Amdahl's bound G_max = (V_c + V_r) / V_r from the census' relative variance per part
+//!   is at least [`gain::MIN_GAIN`] (chains change only the class: veach-mis' indirect light
+//!   has R = 24 but G_max = 1.000001 beside its glossy highlights; `gain.rs` says why the
+//!   caustic class is not gated by it); else none (path tracing), and none when no candidate
+//!   moves a chain out of its seed's pixel. Direct light is always path traced, where
+//!   next-event estimation is efficient.
 //! * *Seeds*: entangled (each light connection, emitter hit and escape a MIS-weighted seed),
 //!   which find caustic seeds by BSDF sampling as path tracing does; with chains, terminated
 //!   by the `"expo"` distribution (thesis §3.8: layer shares double with depth), which gives
 //!   the chained layers (≥ 2) more of the camera paths (glass caustic, 2 s: 6.35× MCPT with
 //!   it, 4.42× with `"throughput"`; every tuned caustic and indirect config uses it but the
 //!   ring's, where the two tie).
-//! * *Weights*: p_s ∝ r_s = accepted moves per ray of s (a_s / w_s, the useful moves its
-//!   work buys) for the strategies within [`WEIGHT_FLOOR`] of the best rate, 0 for the others
+//! * *Weights*: the strategies within [`WEIGHT_FLOOR`] of the best accepted moves per ray
+//!   (a_s / w_s, the useful moves its work buys) are selected and weighted by the pixels their
+//!   pilot chains spread a seed's energy over beyond its own, per ray: p_s ∝ (K_s − 1) / w_s
+//!   (`gain.rs`; glass caustic: the multi-chain and caustic perturbations tie on accepted
+//!   moves per ray, K 10.1 and 4.6, weights 0.70/0.30 as the tuned config's); 0 for the others
 //!   and for every strategy that only misses the domain. A mixture's moves per ray,
 //!   Σ p a / Σ p w, never exceed its best strategy's, so a clearly worse one only dilutes it;
 //!   near-ties are kept, as strategies that move different vertices explore differently. The
@@ -65,8 +72,9 @@
 //!   of seeds), σ² ∝ c for the chains and ∝ 1 − c for the path-traced rest; Neyman's
 //!   allocation of a fixed work between two independent parts, work ∝ σ·√(cost), gives the
 //!   chains M·w_m rays per camera sample against the seeds' w_c in that ratio.
-//! * *Quantum*: e_d = lum(Σ X_caustic) / (samples · M) from the pilot's own seeds, once for the
-//!   image (`quantum = "image"` without another pre-pass).
+//! * *Quantum*: `quantum = "image"`: e_d = lum(Σ X_class) / (samples · M) once for the image,
+//!   from `prepare`'s pre-pass of one camera sample per pixel with the render's termination
+//!   (the census' estimate was too small: 60 spp in 4 s on the glass caustic against 99).
 //!
 //! Parameters the config sets are kept: the pilot fixes only the rest ([`Free`]).
 //!

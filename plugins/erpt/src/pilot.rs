@@ -119,7 +119,12 @@ impl Erpt {
             quantum: None,
             mixture: self.settings.mixture,
             plugins: (0..n).map(|i| self.mutations.name(i).to_string()).collect(),
-            chains_for: if indirect { "all" } else { "caustics" },
+            // Indirect light the rule then left to path tracing is not frozen as chained.
+            chains_for: if indirect && !self.chains_part_empty {
+                "all"
+            } else {
+                "caustics"
+            },
             by_letters,
             free,
         };
