@@ -142,7 +142,13 @@ fn auto_path_traces_indirect_light_that_carries_little_of_the_noise() {
         ("path_depth", toml::Value::Integer(10)),
         ("max_ray_depth", toml::Value::Integer(32)),
     ];
-    let s = renderer_with("veach-mis/veach-mis.toml", Some("erpt"), (32, 32), 1, &params);
+    let s = renderer_with(
+        "veach-mis/veach-mis.toml",
+        Some("erpt"),
+        (32, 32),
+        1,
+        &params,
+    );
     let out = render(&s);
     assert!(stat(&out, "auto.pilot.indirect_relative_second_moment") >= 20.0);
     assert!(stat(&out, "auto.pilot.chained_seeds") >= 8.0);
@@ -153,7 +159,10 @@ fn auto_path_traces_indirect_light_that_carries_little_of_the_noise() {
     // The frozen config path-traces too: no split that chains indirect light (veach-mis has
     // no caustic path by its materials' letters, so `"caustics"` chains nothing).
     let meta = s.instance.resolved_params();
-    let split = meta.iter().find(|(n, _)| n == "chains_for").map(|(_, v)| v.as_str());
+    let split = meta
+        .iter()
+        .find(|(n, _)| n == "chains_for")
+        .map(|(_, v)| v.as_str());
     assert!(
         matches!(split, Some("\"caustics\"") | Some("\"E\"")),
         "{meta:?}"
