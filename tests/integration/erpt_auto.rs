@@ -188,6 +188,15 @@ fn erpt_without_a_mutation_list_is_auto_and_writes_its_choices() {
     assert_eq!(get("flowlight.param.chains_for"), "\"caustics\"");
     assert_eq!(get("flowlight.param.mixture"), "\"selected\"");
     assert_eq!(get("flowlight.param.termination"), "\"expo\"");
+    // e_d once for the image, from the pre-pass `quantum = "image"` runs after the pilot.
+    assert_eq!(get("flowlight.param.quantum"), "\"image\"");
+    let quantum = out
+        .stats
+        .integrator
+        .iter()
+        .find(|(n, _)| n == "auto.quantum")
+        .map(|(_, v)| *v);
+    assert!(quantum.is_some_and(|q| q > 0.0), "{quantum:?}");
     let m: f64 = get("flowlight.param.mutations_per_sample").parse().unwrap();
     assert!((1.0 / 16.0..=16.0).contains(&m), "{m}");
     let n: u32 = get("flowlight.param.chain_length").parse().unwrap();
