@@ -122,6 +122,7 @@ fn auto_chains_indirect_light_through_a_gap_and_stays_unbiased() {
     let (images, last) = independent_runs("auto room", 6, 4000, &|| auto_erpt(config, 32, 8));
     assert_eq!(stat(&last, "auto.chains"), 2.0);
     assert!(stat(&last, "auto.pilot.indirect_relative_second_moment") >= 20.0);
+    assert!(stat(&last, "auto.pilot.noise_bound") >= 1.5);
     assert!(stat(&last, "chains") > 0.0);
     assert_regions_unbiased("auto room", &images, &reference);
     assert_image_mean(
@@ -129,6 +130,42 @@ fn auto_chains_indirect_light_through_a_gap_and_stays_unbiased() {
         &images,
         &reference,
         MeanRule::WithinOrZ(0.03, 4.0),
+    );
+}
+
+/// veach-mis' indirect light is far from its mean (R ≥ 20, which alone would chain it) but a
+/// small share of path tracing's noise beside the glossy highlights of its direct light:
+/// Amdahl's bound G_max is under 1.5, and `auto` path-traces the scene.
+#[test]
+fn auto_path_traces_indirect_light_that_carries_little_of_the_noise() {
+    let params = vec![
+        ("path_depth", toml::Value::Integer(10)),
+        ("max_ray_depth", toml::Value::Integer(32)),
+    ];
+    let s = renderer_with(
+        "veach-mis/veach-mis.toml",
+        Some("erpt"),
+        (32, 32),
+        1,
+        &params,
+    );
+    let out = render(&s);
+    assert!(stat(&out, "auto.pilot.indirect_relative_second_moment") >= 20.0);
+    assert!(stat(&out, "auto.pilot.chained_seeds") >= 8.0);
+    assert!(stat(&out, "auto.pilot.noise_bound") < 1.5);
+    assert!(stat(&out, "auto.pilot.rest_variance") > stat(&out, "auto.pilot.class_variance"));
+    assert_eq!(stat(&out, "auto.chains"), 0.0);
+    assert_eq!(stat(&out, "chains"), 0.0);
+    // The frozen config path-traces too: no split that chains indirect light (veach-mis has
+    // no caustic path by its materials' letters, so `"caustics"` chains nothing).
+    let meta = s.instance.resolved_params();
+    let split = meta
+        .iter()
+        .find(|(n, _)| n == "chains_for")
+        .map(|(_, v)| v.as_str());
+    assert!(
+        matches!(split, Some("\"caustics\"") | Some("\"E\"")),
+        "{meta:?}"
     );
 }
 
@@ -151,6 +188,15 @@ fn erpt_without_a_mutation_list_is_auto_and_writes_its_choices() {
     assert_eq!(get("flowlight.param.chains_for"), "\"caustics\"");
     assert_eq!(get("flowlight.param.mixture"), "\"selected\"");
     assert_eq!(get("flowlight.param.termination"), "\"expo\"");
+    // e_d once for the image, from the pre-pass `quantum = "image"` runs after the pilot.
+    assert_eq!(get("flowlight.param.quantum"), "\"image\"");
+    let quantum = out
+        .stats
+        .integrator
+        .iter()
+        .find(|(n, _)| n == "auto.quantum")
+        .map(|(_, v)| *v);
+    assert!(quantum.is_some_and(|q| q > 0.0), "{quantum:?}");
     let m: f64 = get("flowlight.param.mutations_per_sample").parse().unwrap();
     assert!((1.0 / 16.0..=16.0).contains(&m), "{m}");
     let n: u32 = get("flowlight.param.chain_length").parse().unwrap();

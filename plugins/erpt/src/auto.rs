@@ -37,17 +37,24 @@
 //!   for every path above direct light (`chains_for = "all"`) when path tracing is far from its
 //!   mean on indirect light, R = E[X²]/E[X]² of a camera sample's indirect light ≥
 //!   [`HARD_INDIRECT`] (1 for a constant; 3.6–6.6 measured on the Cornell box, the narrow gap
-//!   and the glass caustic's non-caustic light, 80 on the indirect room, lit through a gap);
-//!   else none (path tracing), and none when no candidate moves a chain. Direct light is
-//!   always path traced, where next-event estimation is efficient.
+//!   and the glass caustic's non-caustic light, 80 on the indirect room, lit through a gap)
+//!   and Amdahl's bound G_max = (V_c + V_r) / V_r from the census' relative variance per part
+//!   is at least [`gain::MIN_GAIN`] (chains change only the class: veach-mis' indirect light
+//!   has R = 24 but G_max = 1.000001 beside its glossy highlights; `gain.rs` says why the
+//!   caustic class is not gated by it); else none (path tracing), and none when no candidate
+//!   moves a chain out of its seed's pixel. Direct light is always path traced, where
+//!   next-event estimation is efficient.
 //! * *Seeds*: entangled (each light connection, emitter hit and escape a MIS-weighted seed),
 //!   which find caustic seeds by BSDF sampling as path tracing does; with chains, terminated
 //!   by the `"expo"` distribution (thesis §3.8: layer shares double with depth), which gives
 //!   the chained layers (≥ 2) more of the camera paths (glass caustic, 2 s: 6.35× MCPT with
 //!   it, 4.42× with `"throughput"`; every tuned caustic and indirect config uses it but the
 //!   ring's, where the two tie).
-//! * *Weights*: p_s ∝ r_s = accepted moves per ray of s (a_s / w_s, the useful moves its
-//!   work buys) for the strategies within [`WEIGHT_FLOOR`] of the best rate, 0 for the others
+//! * *Weights*: the strategies within [`WEIGHT_FLOOR`] of the best accepted moves per ray
+//!   (a_s / w_s, the useful moves its work buys) are selected and weighted by the pixels their
+//!   pilot chains spread a seed's energy over beyond its own, per ray: p_s ∝ (K_s − 1) / w_s
+//!   (`gain.rs`; glass caustic: the multi-chain and caustic perturbations tie on accepted
+//!   moves per ray, K 10.1 and 4.6, weights 0.70/0.30 as the tuned config's); 0 for the others
 //!   and for every strategy that only misses the domain. A mixture's moves per ray,
 //!   Σ p a / Σ p w, never exceed its best strategy's, so a clearly worse one only dilutes it;
 //!   near-ties are kept, as strategies that move different vertices explore differently. The
@@ -65,8 +72,9 @@
 //!   of seeds), σ² ∝ c for the chains and ∝ 1 − c for the path-traced rest; Neyman's
 //!   allocation of a fixed work between two independent parts, work ∝ σ·√(cost), gives the
 //!   chains M·w_m rays per camera sample against the seeds' w_c in that ratio.
-//! * *Quantum*: e_d = lum(Σ X_caustic) / (samples · M) from the pilot's own seeds, once for the
-//!   image (`quantum = "image"` without another pre-pass).
+//! * *Quantum*: `quantum = "image"`: e_d = lum(Σ X_class) / (samples · M) once for the image,
+//!   from `prepare`'s pre-pass of one camera sample per pixel with the render's termination
+//!   (the census' estimate was too small: 60 spp in 4 s on the glass caustic against 99).
 //!
 //! Parameters the config sets are kept: the pilot fixes only the rest ([`Free`]).
 //!
@@ -84,6 +92,7 @@
 //! freeze, …), the host logs them as a TOML snippet, and the stats JSON has them with the
 //! pilot's norms (`auto.*`).
 
+use crate::gain::{self, Moments};
 use crate::settings::MixtureRatio;
 use flowlight_sdk::stats::{Counter, Stats, StatsBuilder};
 use flowlight_sdk::{Params, StatDisplay};
@@ -178,6 +187,12 @@ pub struct Census {
     pub indirect_seeds: u64,
     pub indirect_energy: f64,
     pub indirect_sample_squares: f64,
+    /// Per-camera-sample moments of the rest and of the class (`gain.rs`).
+    pub moments: [Moments; 2],
+    /// The same for the split of every path above direct light: layers ≤ 1 and ≥ 2.
+    pub layer_moments: [Moments; 2],
+    /// Whether the class is every path above direct light ([`Census::chain_indirect`]).
+    pub indirect: bool,
 }
 
 impl Census {
@@ -220,6 +235,13 @@ impl Census {
         self.seeds[1] += self.indirect_seeds;
         self.energy[0] = (self.energy[0] - self.indirect_energy).max(0.0);
         self.energy[1] += self.indirect_energy;
+        self.moments = self.layer_moments;
+        self.indirect = true;
+    }
+
+    /// G_max of `gain.rs`: the most chains on the class can gain over path tracing.
+    pub fn noise_bound(&self) -> f64 {
+        gain::amdahl_bound(self.moments[1].variance(), self.moments[0].variance())
     }
 
     /// w_s: rays per camera sample.
@@ -241,6 +263,9 @@ pub struct Norms {
     /// costs (the choice, the target function) and one per vertex it moved (a miss: every
     /// vertex after the eye, as if it traced the whole path).
     pub work: f64,
+    /// Pilot chains run, and the sum of their effective deposits K (`gain.rs`).
+    pub chains: u64,
+    pub spread_sum: f64,
 }
 
 impl Norms {
@@ -280,10 +305,28 @@ impl Norms {
             self.work / self.proposals as f64
         }
     }
-    /// Accepted moves per ray of the strategy's steps.
+    /// Accepted moves per ray of the strategy's steps (reported).
     pub fn accepted_per_work(&self) -> f64 {
         if self.work > 0.0 {
             self.accepted as f64 / self.work
+        } else {
+            0.0
+        }
+    }
+    /// K: a pilot chain's effective deposits (pixels its deposits spread over).
+    pub fn spread(&self) -> f64 {
+        if self.chains == 0 {
+            0.0
+        } else {
+            self.spread_sum / self.chains as f64
+        }
+    }
+    /// Pixels a pilot chain's deposits spread over beyond its seed's, per ray of its steps,
+    /// Σ (K − 1) / Σ rays: what the rule weights by (a strategy that never leaves the seed's
+    /// pixel gets 0).
+    pub fn spread_per_work(&self) -> f64 {
+        if self.work > 0.0 {
+            (self.spread_sum - self.chains as f64).max(0.0) / self.work
         } else {
             0.0
         }
@@ -299,6 +342,8 @@ pub struct Plan {
     pub weights: Vec<f64>,
     pub mutations_per_sample: f64,
     pub chain_length: u32,
+    /// Amdahl's bound G_max from the census (`gain.rs`; 0 when the class has no seeds).
+    pub noise_bound: f64,
 }
 
 /// The smallest power of two ≥ x, in [lo, hi].
@@ -313,27 +358,46 @@ fn power_of_two_in(x: f64, lo: u32, hi: u32) -> u32 {
 /// The rule of the module docs: from the census and each candidate's norms, the split, the
 /// weights, N and M. `fallback` holds the weights, M and N a plan without chains keeps.
 pub fn decide(census: &Census, norms: &[Norms], fallback: (&[f64], f64, u32)) -> Plan {
+    let noise_bound = if census.seeds[1] > 0 {
+        census.noise_bound()
+    } else {
+        0.0
+    };
     let no_chains = || Plan {
         chains: false,
         weights: fallback.0.to_vec(),
         mutations_per_sample: fallback.1,
         chain_length: fallback.2,
+        noise_bound,
     };
     if census.seeds[1] < MIN_CAUSTIC_SEEDS || census.energy[1] <= 0.0 {
         // Too few caustic seeds to measure: path tracing.
         return no_chains();
     }
-    let rates: Vec<f64> = norms.iter().map(Norms::accepted_per_work).collect();
-    let best = rates.iter().cloned().fold(0.0, f64::max);
-    if best <= 0.0 {
-        // No strategy moves a caustic chain: path tracing.
+    if census.indirect && noise_bound < gain::MIN_GAIN {
+        // Indirect light is a small share of path tracing's noise: chains on it cannot pay.
         return no_chains();
     }
+    // Selected: the strategies within the floor of the best accepted moves per ray; weighted
+    // by the pixels their chains spread over per ray.
+    let rates: Vec<f64> = norms.iter().map(Norms::accepted_per_work).collect();
+    let best = rates.iter().cloned().fold(0.0, f64::max);
     let kept: Vec<f64> = rates
         .iter()
-        .map(|&r| if r >= WEIGHT_FLOOR * best { r } else { 0.0 })
+        .zip(norms)
+        .map(|(&r, n)| {
+            if best > 0.0 && r >= WEIGHT_FLOOR * best {
+                n.spread_per_work()
+            } else {
+                0.0
+            }
+        })
         .collect();
     let sum: f64 = kept.iter().sum();
+    if sum <= 0.0 {
+        // No strategy moves a chain out of its seed's pixel: path tracing.
+        return no_chains();
+    }
     let weights: Vec<f64> = kept.iter().map(|r| r / sum).collect();
     let step_work: f64 = weights
         .iter()
@@ -355,6 +419,7 @@ pub fn decide(census: &Census, norms: &[Norms], fallback: (&[f64], f64, u32)) ->
         weights,
         mutations_per_sample: m.clamp(1.0 / 16.0, 16.0),
         chain_length,
+        noise_bound,
     }
 }
 
@@ -446,12 +511,17 @@ pub struct Counters {
     caustic_seeds: Counter,
     caustic_share: Counter,
     indirect_r: Counter,
+    /// The census' relative variance per camera sample of the class and of the rest, and
+    /// Amdahl's bound G_max from them (`gain.rs`).
+    class_variance: Counter,
+    rest_variance: Counter,
+    noise_bound: Counter,
     /// Per lighting layer: Σ lum X per camera sample outside and inside the census' class
     /// (the caustic class, or the config's `chains_for`).
     per_layer: Vec<[Counter; 2]>,
     /// Per candidate: weight, acceptance, domain miss, seconds and rays per proposal,
-    /// accepted moves per second and per ray.
-    per_strategy: Vec<[Counter; 7]>,
+    /// accepted moves per second and per ray, effective deposits of a pilot chain.
+    per_strategy: Vec<[Counter; 8]>,
 }
 
 impl Counters {
@@ -471,6 +541,9 @@ impl Counters {
             caustic_seeds: hidden(b, "auto.pilot.chained_seeds".into()),
             caustic_share: n(b, "auto.pilot.chained_energy_share".into()),
             indirect_r: n(b, "auto.pilot.indirect_relative_second_moment".into()),
+            class_variance: hidden(b, "auto.pilot.class_variance".into()),
+            rest_variance: hidden(b, "auto.pilot.rest_variance".into()),
+            noise_bound: n(b, "auto.pilot.noise_bound".into()),
             per_layer: (0..layers)
                 .map(|k| {
                     [
@@ -490,6 +563,7 @@ impl Counters {
                         hidden(b, format!("auto.pilot.{s}.rays_per_proposal")),
                         hidden(b, format!("auto.pilot.{s}.accepted_per_second")),
                         hidden(b, format!("auto.pilot.{s}.accepted_per_ray")),
+                        hidden(b, format!("auto.pilot.{s}.effective_deposits")),
                     ]
                 })
                 .collect(),
@@ -515,6 +589,10 @@ impl Counters {
         stats.add(self.caustic_seeds, r.census.seeds[1] as f64);
         stats.add(self.caustic_share, r.census.caustic_share());
         stats.add(self.indirect_r, r.census.indirect_relative_second_moment());
+        stats.add(self.class_variance, r.census.moments[1].variance());
+        stats.add(self.rest_variance, r.census.moments[0].variance());
+        // A maximum over units: infinity (no noise left outside the class) as a large number.
+        stats.add(self.noise_bound, p.noise_bound.min(1e12));
         let samples = r.census.samples.max(1) as f64;
         for (c, e) in self.per_layer.iter().zip(&r.census.layer_energy) {
             stats.add(c[0], e[0] / samples);
@@ -530,6 +608,7 @@ impl Counters {
                 n.work_per_proposal(),
                 n.accepted_per_second(),
                 n.accepted_per_work(),
+                n.spread(),
             ];
             for (&counter, v) in c.iter().zip(values) {
                 stats.add(counter, v);
@@ -542,6 +621,18 @@ impl Counters {
 mod tests {
     use super::*;
 
+    /// Moments of 1000 camera samples whose per-pixel variance is `v`.
+    fn moments(v: f64) -> Moments {
+        Moments {
+            samples: 1000,
+            squares: 1000.0 * v,
+            neighbour_products: 0.0,
+            pairs: 900,
+        }
+    }
+
+    /// 1000 camera samples of 4 rays; the class' share of the energy `share`, its variance
+    /// 10× the rest's (the glass caustic's kind).
     fn census(caustic_seeds: u64, share: f64) -> Census {
         Census {
             samples: 1000,
@@ -549,6 +640,7 @@ mod tests {
             work: 4000.0,
             seeds: [5000, caustic_seeds],
             energy: [1.0 - share, share],
+            moments: [moments(1.0), moments(10.0)],
             ..Census::default()
         }
     }
@@ -561,6 +653,7 @@ mod tests {
         c.indirect_seeds = 1000;
         c.indirect_energy = 0.5;
         c.indirect_sample_squares = 1000.0 * 0.0005f64.powi(2);
+        c.layer_moments = [moments(2.0), moments(3.0)];
         assert!((c.indirect_relative_second_moment() - 1.0).abs() < 1e-9);
         assert!(!c.indirect_is_hard());
         c.indirect_sample_squares = 0.25;
@@ -568,54 +661,90 @@ mod tests {
         assert!(c.indirect_is_hard());
         c.chain_indirect();
         assert_eq!((c.seeds, c.energy), ([4000, 1000], [0.5, 0.5]));
+        // The class is now every path above direct light, with its variance.
+        assert_eq!(c.moments, c.layer_moments);
     }
 
-    /// Norms with `work` rays in all (and as many microseconds).
-    fn norms(proposals: u64, accepted: u64, misses: u64, work: f64) -> Norms {
+    /// Norms of 100 pilot chains with `work` rays in all (and as many microseconds), each
+    /// spreading its deposits over `spread` pixels.
+    fn norms(proposals: u64, accepted: u64, misses: u64, work: f64, spread: f64) -> Norms {
         Norms {
             proposals,
             accepted,
             misses,
             seconds: work * 1e-6,
             work,
+            chains: 100,
+            spread_sum: 100.0 * spread,
         }
     }
 
     #[test]
     fn without_caustic_seeds_or_moves_the_render_is_path_tracing() {
         let fallback = (&[0.5, 0.5][..], 8.0, 16);
-        let good = [norms(1000, 500, 0, 1000.0), norms(1000, 100, 0, 1000.0)];
+        let good = [
+            norms(1000, 500, 0, 1000.0, 11.0),
+            norms(1000, 100, 0, 1000.0, 3.0),
+        ];
         let p = decide(&census(2, 0.2), &good, fallback);
         assert!(!p.chains && p.weights == [0.5, 0.5] && p.chain_length == 16);
-        let stuck = [norms(1000, 0, 1000, 1000.0), norms(1000, 0, 10, 1000.0)];
+        // Chains that never leave their seed's pixel (K = 1) spread nothing.
+        let stuck = [
+            norms(1000, 0, 1000, 1000.0, 1.0),
+            norms(1000, 0, 10, 1000.0, 1.0),
+        ];
         assert!(!decide(&census(100, 0.2), &stuck, fallback).chains);
         assert!(decide(&census(100, 0.2), &good, fallback).chains);
     }
 
     #[test]
-    fn weights_follow_accepted_moves_per_ray_above_the_floor() {
-        let fallback = (&[1.0 / 3.0; 3][..], 8.0, 16);
-        // 0.5, 0.4 (as many moves at 1.25 rays a step) and 0.3 (under the floor of 1/3)
-        // moves per ray.
+    fn indirect_light_with_a_small_share_of_the_noise_is_path_traced() {
+        let fallback = (&[1.0][..], 8.0, 16);
+        let good = [norms(1000, 500, 0, 1000.0, 11.0)];
+        // Indirect light chained (the census' R was high) that carries most of the noise:
+        // chains (the indirect room's kind).
+        let mut noisy = census(100, 0.2);
+        noisy.indirect = true;
+        let p = decide(&noisy, &good, fallback);
+        assert!(p.chains && (p.noise_bound - 11.0).abs() < 1e-9, "{p:?}");
+        // veach-mis' kind: its indirect light is 0.003 of relative variance beside 2,652 of
+        // glossy highlights. Path tracing, whatever the seeds and strategies.
+        let mut quiet = noisy.clone();
+        quiet.moments = [moments(2652.0), moments(0.003)];
+        let p = decide(&quiet, &good, fallback);
+        assert!(!p.chains && p.noise_bound < gain::MIN_GAIN, "{p:?}");
+        assert_eq!((p.mutations_per_sample, p.chain_length), (8.0, 16));
+        // The caustic class is not gated: the census does not see its tail of rare seeds.
+        quiet.indirect = false;
+        assert!(decide(&quiet, &good, fallback).chains);
+    }
+
+    #[test]
+    fn acceptance_per_ray_selects_and_spread_per_ray_weights() {
+        let fallback = (&[0.25; 4][..], 8.0, 16);
+        // Accepted moves per ray 0.5, 0.4, 0.3 (under the floor of 2/3 · 0.5) and 0.5; pixels
+        // spread beyond the seed's per ray (100 chains): 1.0, 0.4, 1.9 and 0 (the fourth's
+        // moves never leave the pixel).
         let n = [
-            norms(1000, 500, 0, 1000.0),
-            norms(1000, 500, 100, 1250.0),
-            norms(1000, 300, 600, 1000.0),
+            norms(1000, 500, 0, 1000.0, 11.0),
+            norms(1000, 500, 100, 1250.0, 6.0),
+            norms(1000, 300, 600, 1000.0, 20.0),
+            norms(1000, 500, 0, 1000.0, 1.0),
         ];
         let p = decide(&census(100, 0.25), &n, fallback);
         assert!(p.chains);
-        assert!((p.weights[0] - 5.0 / 9.0).abs() < 1e-12, "{:?}", p.weights);
-        assert!((p.weights[1] - 4.0 / 9.0).abs() < 1e-12);
-        assert_eq!(p.weights[2], 0.0);
-        // w_m = (5/9)·1 + (4/9)·1.25 = 10/9 rays a step; M = √(1/3) · √(4 / (10/9)).
-        let m = (1.0f64 / 3.0).sqrt() * 3.6f64.sqrt();
+        assert!((p.weights[0] - 1.0 / 1.4).abs() < 1e-12, "{:?}", p.weights);
+        assert!((p.weights[1] - 0.4 / 1.4).abs() < 1e-12);
+        assert_eq!((p.weights[2], p.weights[3]), (0.0, 0.0));
+        // w_m = (1·1 + 0.4·1.25) / 1.4 rays a step; M = √(1/3) · √(4 / w_m).
+        let m = (1.0f64 / 3.0).sqrt() * (4.0 * 1.4 / 1.5f64).sqrt();
         assert!((p.mutations_per_sample - m).abs() < 1e-9, "{p:?}");
     }
 
     #[test]
     fn rare_seeds_get_long_chains_and_the_budget_stays_within_bounds() {
         let fallback = (&[1.0][..], 8.0, 16);
-        let good = [norms(1000, 500, 0, 1000.0)];
+        let good = [norms(1000, 500, 0, 1000.0, 11.0)];
         let at = |seeds: u64| decide(&census(seeds, 0.5), &good, fallback);
         // 2 / (seeds per camera sample), as a power of two in [16, 64].
         assert_eq!(at(200).chain_length, 16);
@@ -623,7 +752,11 @@ mod tests {
         assert_eq!(at(10).chain_length, 64);
         // M = √(0.5 / 0.5) · √(4 / 1) = 2, and within [1/16, 16].
         assert!((at(100).mutations_per_sample - 2.0).abs() < 1e-9);
-        let cheap = decide(&census(100, 1.0), &[norms(1000, 900, 0, 1e-3)], fallback);
+        let cheap = decide(
+            &census(100, 1.0),
+            &[norms(1000, 900, 0, 1e-3, 11.0)],
+            fallback,
+        );
         assert_eq!(cheap.mutations_per_sample, 16.0);
         let dim = decide(&census(100, 1e-6), &good, fallback);
         assert_eq!(dim.mutations_per_sample, 1.0 / 16.0);
@@ -633,7 +766,10 @@ mod tests {
     fn the_report_freezes_into_a_manual_config() {
         let plan = decide(
             &census(100, 0.5),
-            &[norms(1000, 500, 0, 1000.0), norms(1000, 0, 1000, 1000.0)],
+            &[
+                norms(1000, 500, 0, 1000.0, 11.0),
+                norms(1000, 0, 1000, 1000.0, 1.0),
+            ],
             (&[0.5, 0.5], 8.0, 16),
         );
         let r = Report {

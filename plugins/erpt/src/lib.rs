@@ -59,6 +59,7 @@
 mod auto;
 mod automaton;
 mod flow;
+mod gain;
 mod part;
 mod pilot;
 mod settings;
@@ -596,6 +597,9 @@ impl Integrator for Erpt {
             samples += row.store.samples;
         }
         self.image_quantum = Some(self.quantum(sum, samples));
+        if let Some((_, Some(report))) = &mut self.auto {
+            report.quantum = self.image_quantum;
+        }
         Ok(())
     }
 

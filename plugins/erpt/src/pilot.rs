@@ -6,6 +6,7 @@
 
 use crate::auto::{self, Census, Norms, PILOT_CHAIN_SEEDS, PILOT_SAMPLES, PILOT_STEPS};
 use crate::flow::acceptance;
+use crate::gain::{self, effective_deposits};
 use crate::part::Part;
 use crate::settings::{MixtureRatio, QuantumScope};
 use crate::{Erpt, UnitSeeds};
@@ -20,13 +21,19 @@ use std::time::Instant;
 /// A seed path of the census with its energy lum X.
 pub type WeightedSeed = (Box<Path>, f64);
 
-/// Pixels of the census grid: every `stride`-th pixel of every `stride`-th row, the stride
-/// the smallest with at most [`PILOT_SAMPLES`] pixels.
-fn grid(width: u32, height: u32) -> impl Iterator<Item = (u32, u32)> {
+/// The census grid's stride: the smallest with at most [`PILOT_SAMPLES`] pixels.
+fn grid_stride(width: u32, height: u32) -> u32 {
     let mut stride = 1;
     while width.div_ceil(stride) * height.div_ceil(stride) > PILOT_SAMPLES {
         stride += 1;
     }
+    stride
+}
+
+/// Pixels of the census grid: every `stride`-th pixel of every `stride`-th row, the stride
+/// the smallest with at most [`PILOT_SAMPLES`] pixels.
+fn grid(width: u32, height: u32) -> impl Iterator<Item = (u32, u32)> {
+    let stride = grid_stride(width, height);
     (0..height)
         .step_by(stride as usize)
         .flat_map(move |y| (0..width).step_by(stride as usize).map(move |x| (x, y)))
@@ -91,11 +98,12 @@ impl Erpt {
                 );
             }
             if free.quantum {
-                // e_d of Algorithm 1 from the pilot's seeds of the chained class.
+                // e_d of Algorithm 1 once for the image, from `prepare`'s pre-pass of one
+                // camera sample per pixel with the render's termination: the census' 4,096
+                // samples (with the config's termination) estimate the class' energy too
+                // coarsely for it (glass caustic: 60 spp in 4 s with the census' e_d, 99
+                // with the pre-pass', at the same choices).
                 self.settings.quantum = QuantumScope::Image;
-                self.image_quantum = Some(
-                    census.energy[1] / (census.samples as f64 * self.settings.mutations_per_sample),
-                );
             }
         } else {
             self.chains_part_empty = true;
@@ -107,10 +115,16 @@ impl Erpt {
             plan,
             census,
             norms,
-            quantum: self.image_quantum.filter(|_| !self.chains_part_empty),
+            // Set by `prepare`'s pre-pass (`Erpt::prepare`).
+            quantum: None,
             mixture: self.settings.mixture,
             plugins: (0..n).map(|i| self.mutations.name(i).to_string()).collect(),
-            chains_for: if indirect { "all" } else { "caustics" },
+            // Indirect light the rule then left to path tracing is not frozen as chained.
+            chains_for: if indirect && !self.chains_part_empty {
+                "all"
+            } else {
+                "caustics"
+            },
             by_letters,
             free,
         };
@@ -161,9 +175,15 @@ impl Erpt {
             census.samples += seeds.store.samples;
             census.work += (seeds.store.vertices.len() + seeds.store.seeds.len()) as f64;
             let count = seeds.store.seeds.len();
+            // Per grid pixel its camera sample's light per part: the rest and the class,
+            // layers ≤ 1 and ≥ 2 (for the variance per part, `gain.rs`).
+            let stride = grid_stride(w, h);
+            let cols = w.div_ceil(stride) as usize;
+            let mut cells = vec![[0.0; 4]; cols * h.div_ceil(stride) as usize];
             for (k, key) in seeds.keys.iter().enumerate() {
                 let end = seeds.keys.get(k + 1).map_or(count, |n| n.first);
                 let mut indirect = 0.0;
+                let mut parts = [0.0; 4];
                 for i in key.first..end {
                     let estimate = seeds.store.seeds[i].estimate;
                     let lum = estimate.luminance() as f64;
@@ -177,6 +197,8 @@ impl Erpt {
                     let layer = (path.layer as usize).min(depth + 1);
                     census.layer_energy[layer][c] += lum;
                     let deep = layer >= 2;
+                    parts[c] += lum;
+                    parts[2 + deep as usize] += lum;
                     if c == 0 && deep {
                         census.indirect_seeds += 1;
                         census.indirect_energy += lum;
@@ -190,7 +212,17 @@ impl Erpt {
                     }
                 }
                 census.indirect_sample_squares += indirect * indirect;
+                let cell = (key.y / stride) as usize * cols + (key.x / stride) as usize;
+                if let Some(c) = cells.get_mut(cell) {
+                    *c = parts;
+                }
             }
+            let [a, b] = census.moments;
+            let [c, d] = census.layer_moments;
+            let mut moments = [a, b, c, d];
+            gain::add_pass(&mut moments, cols, &cells);
+            census.moments = [moments[0], moments[1]];
+            census.layer_moments = [moments[2], moments[3]];
         }
         self.settings.part = saved;
         (census, class_seeds, deep_seeds)
@@ -215,6 +247,7 @@ impl Erpt {
             let mut rng = Rng::new(Rng::hash(&[auto::PILOT_SEED, m as u64]), 2);
             let mut n = Norms::default();
             let start = Instant::now();
+            let mut pixels = Vec::with_capacity(PILOT_STEPS as usize);
             for &k in &starts {
                 *state = *caustic[k].0;
                 state.film_window = self.settings.film_window;
@@ -222,6 +255,7 @@ impl Erpt {
                 if !(f_y.is_valid_radiance() && f_y.luminance() > 0.0) {
                     continue;
                 }
+                pixels.clear();
                 for _ in 0..PILOT_STEPS {
                     let p = self.mutations.propose(
                         m,
@@ -239,18 +273,24 @@ impl Erpt {
                         s.path_depth,
                         s.max_ray_depth,
                     ) && class.contains(&proposal);
-                    let Some(ratio) = p.transition_ratio().filter(|_| inside) else {
+                    let ratio = p.transition_ratio().filter(|_| inside);
+                    if ratio.is_none() {
                         n.misses += 1;
-                        continue;
-                    };
-                    let f_z = measurement(&self.scene, &proposal);
-                    let a = acceptance(f_y, f_z, ratio as f64).unwrap_or(0.0);
-                    if (rng.uniform() as f64) < a {
-                        n.accepted += 1;
-                        std::mem::swap(&mut state, &mut proposal);
-                        f_y = f_z;
                     }
+                    if let Some(ratio) = ratio {
+                        let f_z = measurement(&self.scene, &proposal);
+                        let a = acceptance(f_y, f_z, ratio as f64).unwrap_or(0.0);
+                        if (rng.uniform() as f64) < a {
+                            n.accepted += 1;
+                            std::mem::swap(&mut state, &mut proposal);
+                            f_y = f_z;
+                        }
+                    }
+                    // The flow deposits once a step, into the pixel of the state.
+                    pixels.push((state.raster.x.floor() as i64, state.raster.y.floor() as i64));
                 }
+                n.chains += 1;
+                n.spread_sum += effective_deposits(&mut pixels);
             }
             n.seconds = start.elapsed().as_secs_f64();
             all.push(n);
