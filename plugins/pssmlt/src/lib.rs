@@ -9,17 +9,23 @@
 //! a·b/f(y), current state with (1 − a)·b/f(x)). The library is
 //! `flowlight_pathtrace::pss`; docs/pssmlt.md has the formulas.
 //!
-//! `spp` keeps MCPT's meaning: a work unit of P pixels × n samples runs n chains of P
-//! mutations, W·H·spp mutations in all, and each chain's numbers depend only on (render seed,
-//! tile, sample index), so the image does not depend on the thread count (it does on the tile
-//! size). The first work unit of a render runs the bootstrap (from the render seed), the
-//! others wait for it.
+//! Each mutation also counts its large-step proposal as an independent sample, weighed
+//! against the chain by the balance heuristic (Kelemen's combination, `combine_large_steps`;
+//! `flowlight_pathtrace::pss::large_steps`), with an estimate of b drawn apart from the
+//! bootstrap so that the weights do not bias the image.
+//!
+//! `spp` keeps MCPT's meaning: a work unit of P pixels × n samples runs P·n mutations, W·H·spp
+//! in all, as pieces of its tile's chains of `chain_length` mutations, which run on across the
+//! tile's units (parked between them); each chain's numbers depend only on (render seed,
+//! tile, its first mutation), so the image does not depend on the thread count. The first
+//! work unit of a render runs the bootstrap (from the render seed), the others wait for it.
 //!
 //! Parameters (`[integrator]` table): `sampler` (the sampler the chains run over: `"mcpt"`,
 //! entangled path tracing, or `"bdpt"`, one bidirectional sample with every (s, t) strategy
-//! weighed by `heuristic`, each splatted at its own raster position), `large_step` (probability of a large step), `sigma` (the small
-//! step's standard deviation per number), `bootstrap` (independent samples of the
-//! normalisation), and the path tracer's `path_depth`, `max_ray_depth`, `termination`,
+//! weighed by `heuristic`, each splatted at its own raster position), `large_step`
+//! (probability of a large step), `sigma` (the small step's standard deviation per number),
+//! `chain_length` (mutations per chain; 0: one chain per unit), `combine_large_steps`,
+//! `bootstrap` (independent samples of the normalisation), and the path tracer's `path_depth`, `max_ray_depth`, `termination`,
 //! `rr_depth`, `rr_max_survival` and `layers`. The generated table is in docs/pssmlt.md
 //! ("Parameters"); `flowlight plugins --markdown` prints it.
 //!

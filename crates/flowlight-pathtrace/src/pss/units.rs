@@ -2,22 +2,33 @@
 //!
 //! The host renders work units, a tile of P pixels × a range of sample indices, and
 //! normalises a flanged integrator's film by the samples per pixel it completed (a pass cut
-//! short counts the share of its tiles done). A unit runs **one chain per sample index s of
-//! its range, of P mutations each**, seeded from (render seed, tile, s): the whole render is
-//! W·H mutations per sample index, W·H·spp in all, so by [`super::chain`]'s argument the
-//! film's sum per pixel is spp times the target's image in expectation, and the host's
-//! division by spp gives the image, under a time budget too. A chain's numbers depend only on
-//! (seed, tile, s), not on which unit or thread runs it, nor on how the samples are split
-//! into units: the image does not depend on the thread count (it does on the tile size,
-//! which sets the chains' length).
+//! short counts the share of its tiles done). A unit runs P mutations per sample index of its
+//! range: the whole render is W·H mutations per sample index, W·H·spp in all, so by
+//! [`super::chain`]'s argument the film's sum per pixel is spp times the target's image in
+//! expectation, and the host's division by spp gives the image, under a time budget too. Two
+//! ways to cut those mutations into chains:
+//!
+//! * [`render_unit_in_chains`] (`pssmlt`): chains of a fixed length L that run on across
+//!   the units of their tile, numbered by the tile's mutation index m = s·P + i; a chain
+//!   covers m ∈ [k·L, (k + 1)·L), seeded from (seed, tile, k·L), and is parked in
+//!   [`TileChains`] between units. The host runs a flanged integrator's passes one after the
+//!   other, so a tile's units come in order of s: the image does not depend on the thread
+//!   count.
+//! * [`render_unit`] (`mmlt`, and `pssmlt` with `chain_length = 0`): one chain per sample
+//!   index s of the unit, of P mutations, seeded from (seed, tile, s): the image does not
+//!   depend on the thread count, but on the tile size, which sets the chains' length.
+//!
+//! Either way a chain's numbers depend only on the seed, the tile and where it starts, not on
+//! which unit or thread runs it. Every chain starts from a bootstrap state resampled ∝ its
+//! scalar, so every mutation's deposits have their expectation whatever the chain's age: a
+//! chain cut anywhere (a short tile, a time budget, a unit that finds no parked chain) stays
+//! unbiased. Short chains cost one evaluation more per chain and repeat the bootstrap's own
+//! noise (docs/pssmlt.md, "Work units").
 //!
 //! The bootstrap must be drawn from the render seed: with one fixed bootstrap every render
 //! would share its b̂, and the mean of renders would be the image times b̂/b. The host's
 //! `prepare` does not know the seed, so the first work unit of a render computes it
 //! ([`BootstrapCell`]) while the others wait for it; its numbers depend only on the seed.
-//!
-//! Each chain starts from a bootstrap state resampled ∝ its scalar, so short chains (small
-//! tiles) cost one evaluation more per P mutations and explore less, but stay unbiased.
 
 use super::chain::{run_chain, Bootstrap, Chain, ChainBuffers, ChainCounts, PssTarget, Splat};
 use flowlight_core::rng::Rng;
