@@ -29,9 +29,7 @@ pub mod units;
 #[cfg(test)]
 mod tests;
 
-pub use chain::{
-    run_chain, scalar, Bootstrap, Chain, ChainBuffers, ChainCounts, PssTarget, Splat,
-};
+pub use chain::{run_chain, scalar, Bootstrap, Chain, ChainBuffers, ChainCounts, PssTarget, Splat};
 pub use mcpt::McptTarget;
 pub use samples::{Mutation, PrimarySamples, PssStream};
 pub use units::{

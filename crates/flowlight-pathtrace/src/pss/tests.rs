@@ -7,11 +7,11 @@
 
 use super::chain::{run_chain, Bootstrap, ChainBuffers, ChainCounts, PssTarget, Splat};
 use super::large_steps::scale_estimate;
-use super::units::{render_unit_in_chains, TileChains};
-use flowlight_sdk::WorkUnit;
 use super::samples::{Mutation, PrimarySamples};
+use super::units::{render_unit_in_chains, TileChains};
 use flowlight_core::sampler::SampleStream;
 use flowlight_core::Rgb;
+use flowlight_sdk::WorkUnit;
 use glam::Vec2;
 
 const BINS: usize = 8;
@@ -196,7 +196,10 @@ fn deposits_combined_with_the_large_steps_are_the_bin_integrals() {
         });
         let chi2 = chi_square(&run.deposits, &integrals);
         eprintln!("large steps combined, c = {scale:.3}: deposit χ² = {chi2:.1}");
-        assert!(chi2 < CHI_SQUARE_LIMIT, "c = {scale}: deposit χ² = {chi2:.1}");
+        assert!(
+            chi2 < CHI_SQUARE_LIMIT,
+            "c = {scale}: deposit χ² = {chi2:.1}"
+        );
     }
 }
 
@@ -210,10 +213,7 @@ fn large_step_weights_of_the_wrong_probability_fail_the_same_check() {
     });
     let chi2 = chi_square(&run.deposits, &integrals);
     eprintln!("large steps combined with p = 0.6 for 0.3: deposit χ² = {chi2:.1}");
-    assert!(
-        chi2 > 4.0 * CHI_SQUARE_LIMIT,
-        "deposit χ² = {chi2:.1}"
-    );
+    assert!(chi2 > 4.0 * CHI_SQUARE_LIMIT, "deposit χ² = {chi2:.1}");
 }
 
 #[test]
@@ -223,7 +223,11 @@ fn the_scale_estimate_is_the_integral_from_its_own_vectors() {
     let b = Bootstrap::run(&mut Bumps, 3, 50_000, mutation);
     assert_eq!(invalid, 0);
     // Within 4σ of ∫ f (σ of f's spread over 50,000 vectors is below 0.5% of it here) ...
-    assert!((c / total() - 1.0).abs() < 0.02, "c = {c} against {}", total());
+    assert!(
+        (c / total() - 1.0).abs() < 0.02,
+        "c = {c} against {}",
+        total()
+    );
     // ... and drawn apart from the bootstrap of the same seed.
     assert_ne!(c, b.normalisation());
 }

@@ -176,16 +176,25 @@ pub fn render_unit_in_chains<T: PssTarget>(
     while m < end {
         let mut current = match chain.take() {
             Some(c) => c,
-            None => match Chain::start(target, bootstrap, tile_chain_seed(unit, m), buffers, counts)
-            {
-                Some(c) => c,
-                // No light in the bootstrap: nothing to deposit.
-                None => return,
-            },
+            None => {
+                match Chain::start(target, bootstrap, tile_chain_seed(unit, m), buffers, counts) {
+                    Some(c) => c,
+                    // No light in the bootstrap: nothing to deposit.
+                    None => return,
+                }
+            }
         };
         let chain_end = (m / length + 1) * length;
         let stop = chain_end.min(end);
-        current.advance(target, bootstrap, stop - m, buffers, counts, deposit, &mut |_| {});
+        current.advance(
+            target,
+            bootstrap,
+            stop - m,
+            buffers,
+            counts,
+            deposit,
+            &mut |_| {},
+        );
         m = stop;
         if m < chain_end {
             chain = Some(current);
