@@ -75,7 +75,7 @@ impl LargeStepWeights {
 /// The seed of vector `i` of the scale estimate of a render with seed `seed` (apart from the
 /// bootstrap's vectors).
 fn scale_seed(seed: u64, i: u32) -> u64 {
-    Rng::hash(&[seed, 0x4b45_4c45_4d45_4e, i as u64])
+    Rng::hash(&[seed, 0x004b_454c_454d_454e, i as u64])
 }
 
 /// c: the mean scalar target of `count` independent vectors of `target` drawn from `seed`,

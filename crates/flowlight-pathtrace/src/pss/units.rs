@@ -171,7 +171,7 @@ pub fn render_unit_in_chains<T: PssTarget>(
         .unwrap_or_else(PoisonError::into_inner)
         .remove(&key);
     let mut chain = parked
-        .filter(|p| p.seed == unit.seed && p.next == m && m % length != 0)
+        .filter(|p| p.seed == unit.seed && p.next == m && !m.is_multiple_of(length))
         .map(|p| p.chain);
     while m < end {
         let mut current = match chain.take() {
