@@ -1,7 +1,9 @@
 //! The `pssmlt` plugin (`flowlight_pathtrace::pss`) on the Cornell box at 32×32:
 //!
 //! - **No start-up bias.** The mean of many short independent renders (different seeds, a
-//!   small bootstrap, chains of 64 mutations) equals the committed MCPT reference: a z-test
+//!   small bootstrap, chains of 96 mutations that run on across the units of their 64-pixel
+//!   tile, one boundary inside a unit, and the large steps combined with the chain) equals
+//!   the committed MCPT reference: a z-test
 //!   per 8×8 region, and the image mean within 3 standard errors. Each mutation deposits
 //!   luminance b̂ in all, so the image mean is the bootstrap's b̂ and checks the
 //!   normalisation; the regions check where the chains put it. Chains started from a
@@ -10,7 +12,8 @@
 //! - **Stationarity.** On the box lit by one bounce (`path_depth = 1`), the chain states'
 //!   raster positions, histogrammed over 8×8-pixel regions, follow the MCPT image's
 //!   luminance shares; with small steps made asymmetric on purpose (a drift) they do not.
-//! - **Thread count.** The image is the same with 1 and 2 threads.
+//! - **Thread count.** The image is the same with 1 and 2 threads, with chains that cross
+//!   units and with one chain per unit (`chain_length = 0`).
 //! - **Layers** sum to the image.
 //! - **Bad values** get the host's one-line refusal naming the parameter.
 //!
@@ -111,12 +114,17 @@ fn image(mut s: Renderer, seed: u64, tile: u32, threads: usize) -> Vec<Rgb> {
     img
 }
 
-/// Short runs: 8 mutations per pixel in chains of 64 (8×8 tiles), a bootstrap of 256. Their
-/// mean carries any start-up bias: the chains are short, and each run's bootstrap is small.
+/// Short runs: 8 mutations per pixel in chains of 96 (8×8 tiles: a chain runs on across
+/// units, and its successor starts inside a unit), a bootstrap of 256. Their mean carries any
+/// start-up bias: the chains are short, and each run's bootstrap is small.
 #[test]
 fn short_runs_match_the_mcpt_reference() {
     const RUNS: u64 = 64;
-    let params = [int("path_depth", 8), int("bootstrap", 256)];
+    let params = [
+        int("path_depth", 8),
+        int("bootstrap", 256),
+        int("chain_length", 96),
+    ];
     let images: Vec<Vec<Rgb>> = (0..RUNS)
         .map(|r| image(cornell("pssmlt", 8, &params), 7000 + r, 8, 2))
         .collect();
@@ -149,14 +157,21 @@ fn short_runs_match_the_mcpt_reference() {
     }
 }
 
-/// The image is the same bit for bit with one thread and two.
+/// The image is the same bit for bit with one thread and two: with chains that run on across
+/// a tile's units (parked between them) and with one chain per unit.
 #[test]
 fn the_image_does_not_depend_on_the_thread_count() {
-    let params = [int("path_depth", 4), int("bootstrap", 128)];
-    let one = image(cornell("pssmlt", 2, &params), 5, 8, 1);
-    let two = image(cornell("pssmlt", 2, &params), 5, 8, 2);
-    assert!(one.iter().any(|c| !c.is_black()));
-    assert_eq!(one, two);
+    for length in [96, 0] {
+        let params = [
+            int("path_depth", 4),
+            int("bootstrap", 128),
+            int("chain_length", length),
+        ];
+        let one = image(cornell("pssmlt", 3, &params), 5, 8, 1);
+        let two = image(cornell("pssmlt", 3, &params), 5, 8, 2);
+        assert!(one.iter().any(|c| !c.is_black()));
+        assert_eq!(one, two, "chain_length {length}");
+    }
 }
 
 /// Chain states over the one-bounce box, with small and large steps of `mutation`: per

@@ -9,17 +9,23 @@
 //! a·b/f(y), current state with (1 − a)·b/f(x)). The library is
 //! `flowlight_pathtrace::pss`; docs/pssmlt.md has the formulas.
 //!
-//! `spp` keeps MCPT's meaning: a work unit of P pixels × n samples runs n chains of P
-//! mutations, W·H·spp mutations in all, and each chain's numbers depend only on (render seed,
-//! tile, sample index), so the image does not depend on the thread count (it does on the tile
-//! size). The first work unit of a render runs the bootstrap (from the render seed), the
-//! others wait for it.
+//! Each mutation also counts its large-step proposal as an independent sample, weighed
+//! against the chain by the balance heuristic (Kelemen's combination, `combine_large_steps`;
+//! `flowlight_pathtrace::pss::large_steps`), with an estimate of b drawn apart from the
+//! bootstrap so that the weights do not bias the image.
+//!
+//! `spp` keeps MCPT's meaning: a work unit of P pixels × n samples runs P·n mutations, W·H·spp
+//! in all, as pieces of its tile's chains of `chain_length` mutations, which run on across the
+//! tile's units (parked between them); each chain's numbers depend only on (render seed,
+//! tile, its first mutation), so the image does not depend on the thread count. The first
+//! work unit of a render runs the bootstrap (from the render seed), the others wait for it.
 //!
 //! Parameters (`[integrator]` table): `sampler` (the sampler the chains run over: `"mcpt"`,
 //! entangled path tracing, or `"bdpt"`, one bidirectional sample with every (s, t) strategy
-//! weighed by `heuristic`, each splatted at its own raster position), `large_step` (probability of a large step), `sigma` (the small
-//! step's standard deviation per number), `bootstrap` (independent samples of the
-//! normalisation), and the path tracer's `path_depth`, `max_ray_depth`, `termination`,
+//! weighed by `heuristic`, each splatted at its own raster position), `large_step`
+//! (probability of a large step), `sigma` (the small step's standard deviation per number),
+//! `chain_length` (mutations per chain; 0: one chain per unit), `combine_large_steps`,
+//! `bootstrap` (independent samples of the normalisation), and the path tracer's `path_depth`, `max_ray_depth`, `termination`,
 //! `rr_depth`, `rr_max_survival` and `layers`. The generated table is in docs/pssmlt.md
 //! ("Parameters"); `flowlight plugins --markdown` prints it.
 //!
@@ -33,17 +39,18 @@ use flowlight_pathtrace::bidir::params::HEURISTIC;
 use flowlight_pathtrace::bidir::sample::{strategy_only_settings, FilmPlan, FilmSampler};
 use flowlight_pathtrace::bidir::Heuristic;
 use flowlight_pathtrace::pss::bdpt::BdptTarget;
+use flowlight_pathtrace::pss::large_steps::scale_estimate;
 use flowlight_pathtrace::pss::params::{mutation_from_params, LARGE_STEP, SIGMA};
 use flowlight_pathtrace::pss::{
-    render_unit, Bootstrap, BootstrapCell, ChainBuffers, ChainCounters, ChainCounts, McptTarget,
-    Mutation, PssTarget,
+    render_unit, render_unit_in_chains, Bootstrap, BootstrapCell, ChainBuffers, ChainCounters,
+    ChainCounts, McptTarget, Mutation, PssTarget, Splat, TileChains,
 };
 use flowlight_pathtrace::{settings, PathSettings, Variant};
 use flowlight_sdk::abi::ParamSpec;
-use flowlight_sdk::declare::{ChoiceParam, IntParam};
+use flowlight_sdk::declare::{BoolParam, ChoiceParam, IntParam};
 use flowlight_sdk::stats::Counter;
 use flowlight_sdk::{
-    choice_param, export_integrator, int_param, AccumulationStyle, Film, Integrator,
+    bool_param, choice_param, export_integrator, int_param, AccumulationStyle, Film, Integrator,
     IntegratorInfo, MutationSet, Params, Scene, Stats, StatsBuilder, Tracer, WorkUnit,
 };
 use std::cell::RefCell;
@@ -56,6 +63,21 @@ const SAMPLER: ChoiceParam = choice_param!(
     "the sampler the chains run over: \"mcpt\", one entangled path-tracing camera sample (next-event estimation and BSDF sampling by MIS) whose first pair of numbers is its position on the film; \"bdpt\", one light and one camera subpath (two streams) with every (s, t) strategy weighed by heuristic, each splatted at its own raster position"
 );
 
+/// `combine_large_steps`: Kelemen's balance of the chain against its large steps.
+const COMBINE_LARGE_STEPS: BoolParam = bool_param!(
+    "combine_large_steps",
+    true,
+    "weigh each deposit against the large steps by the balance heuristic (Kelemen et al. 2002, as LuxCore's Metropolis sampler): a large step's proposal also counts as an independent sample, so dark regions the chains rarely visit get a path tracer's estimate; the weights use an estimate of b from bootstrap/8 further independent samples; false: plain expected-value splatting (pbrt-v4's)"
+);
+
+/// `chain_length`: mutations per chain, whatever the tile.
+const CHAIN_LENGTH: IntParam = int_param!(
+    "chain_length",
+    65536,
+    0..=1_000_000_000,
+    "mutations per chain: a tile's chains run on across its work units (its passes), each started from the bootstrap, so that the bootstrap's own noise, which every chain's first mutations repeat, is spread over this many mutations; 0: one chain per work unit (a tile's pixels long, the image depending on the tile size)"
+);
+
 /// `bootstrap`: independent samples of the normalisation (pbrt-v4's default).
 const BOOTSTRAP: IntParam = int_param!(
     "bootstrap",
@@ -64,10 +86,12 @@ const BOOTSTRAP: IntParam = int_param!(
     "independent samples that estimate the normalisation b (the image's mean luminance integral) and that the chains start from, resampled by luminance; run once per render by its first work unit (8 bytes each)"
 );
 
-const PARAMS: [ParamSpec; 11] = [
+const PARAMS: [ParamSpec; 13] = [
     SAMPLER.spec(),
     LARGE_STEP.spec(),
     SIGMA.spec(),
+    CHAIN_LENGTH.spec(),
+    COMBINE_LARGE_STEPS.spec(),
     BOOTSTRAP.spec(),
     settings::TERMINATION.spec(),
     settings::PATH_DEPTH.spec(),
@@ -109,6 +133,9 @@ pub struct Pssmlt {
     layers: bool,
     mutation: Mutation,
     bootstrap_count: u32,
+    combine_large_steps: bool,
+    chain_length: u64,
+    chains: TileChains,
     bootstrap: BootstrapCell,
     counters: Counters,
 }
@@ -147,6 +174,8 @@ impl Integrator for Pssmlt {
         };
         let mutation = mutation_from_params(params)?;
         let bootstrap_count = BOOTSTRAP.get(params)? as u32;
+        let combine_large_steps = COMBINE_LARGE_STEPS.get(params)?;
+        let chain_length = CHAIN_LENGTH.get(params)? as u64;
         let info = IntegratorInfo {
             layer_count: if layers { settings.path_depth + 1 } else { 0 },
             accumulation: AccumulationStyle::FlangedTile,
@@ -161,6 +190,9 @@ impl Integrator for Pssmlt {
             layers,
             mutation,
             bootstrap_count,
+            combine_large_steps,
+            chain_length,
+            chains: TileChains::default(),
             bootstrap: BootstrapCell::default(),
             counters,
         };
@@ -197,20 +229,39 @@ impl Pssmlt {
         film: &mut Film,
         stats: &mut Stats,
     ) {
+        let mut scale = (0, 0);
         let (bootstrap, ran) = self.bootstrap.get_or_run(unit.seed, || {
-            Bootstrap::run(target, unit.seed, self.bootstrap_count, self.mutation)
+            let mut b = Bootstrap::run(target, unit.seed, self.bootstrap_count, self.mutation);
+            if self.combine_large_steps {
+                // c from vectors apart from the bootstrap's (pss::large_steps: unbiased).
+                let count = (self.bootstrap_count / 8).max(1);
+                let (c, invalid) = scale_estimate(target, unit.seed, count, self.mutation);
+                b.combine_large_steps(c);
+                scale = (count, invalid);
+            }
+            b
         });
         let mut bootstrap_invalid = 0;
         if ran {
-            stats.add(self.counters.bootstrap_samples, bootstrap.len() as f64);
-            bootstrap_invalid = bootstrap.invalid();
+            let samples = bootstrap.len() as u64 + scale.0 as u64;
+            stats.add(self.counters.bootstrap_samples, samples as f64);
+            bootstrap_invalid = bootstrap.invalid() + scale.1;
         }
         stats.add(self.counters.normalisation, bootstrap.normalisation());
         let mut counts = ChainCounts::default();
-        BUFFERS.with_borrow_mut(|buffers| {
-            render_unit(target, &bootstrap, unit, buffers, &mut counts, &mut |s| {
-                film.deposit(s.raster.x, s.raster.y, s.layer, s.value)
-            })
+        let mut deposit = |s: Splat| film.deposit(s.raster.x, s.raster.y, s.layer, s.value);
+        BUFFERS.with_borrow_mut(|buffers| match self.chain_length {
+            0 => render_unit(target, &bootstrap, unit, buffers, &mut counts, &mut deposit),
+            length => render_unit_in_chains(
+                target,
+                &bootstrap,
+                unit,
+                length,
+                &self.chains,
+                buffers,
+                &mut counts,
+                &mut deposit,
+            ),
         });
         self.counters
             .chains

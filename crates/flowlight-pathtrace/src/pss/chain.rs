@@ -23,7 +23,12 @@
 //! (1 − a)·b̂/f(x). By the argument above each mutation's deposits have expectation
 //! ∫ F(u) du: M mutations deposit M·∫F in expectation, so dividing the film by M / (W·H)
 //! (the host's samples per pixel, when M = W·H·spp) gives the image F estimates.
+//!
+//! With [`Bootstrap::combine_large_steps`] the weights become Kelemen's balance of the chain
+//! against its large steps, b̂/f → b̂/(f + p·c) and a large step's proposal gaining
+//! c/(f(y) + p·c), with the same expectation per mutation ([`super::large_steps`]).
 
+use super::large_steps::LargeStepWeights;
 use super::samples::{Mutation, PrimarySamples};
 use flowlight_core::rng::Rng;
 use flowlight_core::Rgb;
@@ -77,6 +82,9 @@ pub struct Bootstrap {
     /// Running sums of the samples' scalars (f64: B can be large).
     cumulative: Vec<f64>,
     invalid: u64,
+    /// The large steps' balance weights, when the chains combine them
+    /// ([`Bootstrap::combine_large_steps`]).
+    large_steps: Option<LargeStepWeights>,
 }
 
 impl Bootstrap {
@@ -108,7 +116,23 @@ impl Bootstrap {
             streams,
             cumulative,
             invalid,
+            large_steps: None,
         }
+    }
+
+    /// Weights for large-step probability `probability` although the chains draw theirs with
+    /// the mutation's: a deliberately wrong combination, for the test that must fail.
+    #[cfg(test)]
+    pub(crate) fn combine_large_steps_as(&mut self, probability: f32, scale: f64) {
+        self.large_steps = LargeStepWeights::new(probability, scale);
+    }
+
+    /// Makes the chains started from this bootstrap weigh their deposits against their large
+    /// steps by the balance heuristic ([`super::large_steps`]), with `scale` (c) an estimate
+    /// of b drawn independently of this bootstrap; a scale of 0 (or a large-step probability
+    /// of 0) keeps the plain splatting.
+    pub fn combine_large_steps(&mut self, scale: f64) {
+        self.large_steps = LargeStepWeights::new(self.mutation.large_step, scale);
     }
 
     /// B, the number of samples.
@@ -192,17 +216,137 @@ impl ChainCounts {
 /// Reusable buffers of a chain (one per thread, so a chain allocates nothing once warm).
 #[derive(Default)]
 pub struct ChainBuffers {
+    /// A spare splat list for the next chain's current state.
     current: Vec<Splat>,
     proposal: Vec<Splat>,
 }
 
+/// One Metropolis–Hastings chain of a target between its mutations: its primary sample
+/// vector, the generator of its start and acceptances, its state's scalar and splats. A
+/// chain can be advanced in pieces (a tile's chain runs on across its work units,
+/// [`super::units`]): the mutations of `advance(m)` then `advance(n)` are those of
+/// `advance(m + n)`.
+pub struct Chain {
+    samples: PrimarySamples,
+    rng: Rng,
+    f_x: f64,
+    current: Vec<Splat>,
+}
+
+impl Chain {
+    /// A chain started from a bootstrap sample chosen ∝ its scalar, every number from
+    /// `chain_seed`; `None` when there is no state to start from (the bootstrap found no
+    /// light). Counts the chain.
+    pub fn start<T: PssTarget>(
+        target: &mut T,
+        bootstrap: &Bootstrap,
+        chain_seed: u64,
+        buffers: &mut ChainBuffers,
+        counts: &mut ChainCounts,
+    ) -> Option<Chain> {
+        let mut rng = Rng::new(chain_seed, 1);
+        let start = bootstrap.pick(rng.uniform())?;
+        let mut samples = bootstrap.state(start);
+        let mut current = std::mem::take(&mut buffers.current);
+        target.evaluate(&samples, &mut current);
+        // The state reproduces its bootstrap evaluation; should a target not be
+        // deterministic, a non-positive value here would make the chain's weights meaningless.
+        let Some(f_x) = scalar(&current).filter(|&f| f > 0.0) else {
+            buffers.current = current;
+            return None;
+        };
+        samples.reseed(Rng::hash(&[chain_seed, 0x6d75_7461_7465]));
+        counts.chains += 1;
+        Some(Chain {
+            samples,
+            rng,
+            f_x: f_x as f64,
+            current,
+        })
+    }
+
+    /// Hands the chain's splat list back to `buffers` for the next chain.
+    pub fn recycle(self, buffers: &mut ChainBuffers) {
+        buffers.current = self.current;
+    }
+
+    /// Runs `mutations` mutations of `target` (which must be the one the chain started
+    /// with, over `bootstrap`). Each mutation hands its weighted splats to `deposit`
+    /// (expected-value splatting, module documentation); after each, `visit` sees the
+    /// splats of the chain's state (a test histograms the states through it).
+    #[allow(clippy::too_many_arguments)]
+    pub fn advance<T: PssTarget>(
+        &mut self,
+        target: &mut T,
+        bootstrap: &Bootstrap,
+        mutations: u64,
+        buffers: &mut ChainBuffers,
+        counts: &mut ChainCounts,
+        deposit: &mut impl FnMut(Splat),
+        visit: &mut impl FnMut(&[Splat]),
+    ) {
+        let b = bootstrap.normalisation();
+        let proposal = &mut buffers.proposal;
+        for _ in 0..mutations {
+            let large = self.samples.start_iteration();
+            target.evaluate(&self.samples, proposal);
+            let f_y = match scalar(proposal) {
+                Some(f) => f as f64,
+                None => {
+                    counts.invalid += 1;
+                    0.0
+                }
+            };
+            let a = (f_y / self.f_x).min(1.0);
+            if a > 0.0 {
+                let w = match &bootstrap.large_steps {
+                    Some(m) => m.proposal(a, b, f_y, large),
+                    None => a * b / f_y,
+                } as f32;
+                for s in proposal.iter() {
+                    deposit(Splat {
+                        value: s.value * w,
+                        ..*s
+                    });
+                }
+            }
+            if a < 1.0 {
+                let w = match &bootstrap.large_steps {
+                    Some(m) => m.current(a, b, self.f_x),
+                    None => (1.0 - a) * b / self.f_x,
+                } as f32;
+                for s in &self.current {
+                    deposit(Splat {
+                        value: s.value * w,
+                        ..*s
+                    });
+                }
+            }
+            counts.mutations += 1;
+            counts.large_steps += u64::from(large);
+            if (self.rng.uniform() as f64) < a {
+                self.samples.accept();
+                std::mem::swap(&mut self.current, proposal);
+                self.f_x = f_y;
+                if large {
+                    counts.accepted_large += 1;
+                } else {
+                    counts.accepted_small += 1;
+                }
+            } else {
+                self.samples.reject();
+            }
+            visit(&self.current);
+        }
+    }
+}
+
 /// Runs one chain of `mutations` Metropolis–Hastings mutations of `target`, started from a
-/// bootstrap sample chosen ∝ its scalar, every number from `chain_seed`. Each mutation hands
-/// its weighted splats to `deposit` (expected-value splatting, module documentation): over
-/// many chains, the deposits of M mutations sum to M·∫F in expectation. Nothing is deposited
-/// when the bootstrap found no light (b̂ = 0). After each mutation `visit` sees the splats
-/// of the chain's state (a test histograms the states through it). Returns `None`, having
-/// run nothing, when there is no state to start from.
+/// bootstrap sample chosen ∝ its scalar, every number from `chain_seed` ([`Chain`]). Each
+/// mutation hands its weighted splats to `deposit` (expected-value splatting, module
+/// documentation): over many chains, the deposits of M mutations sum to M·∫F in
+/// expectation. After each mutation `visit` sees the splats of the chain's state. Returns
+/// `None`, having run nothing, when there is no state to start from (b̂ = 0).
 #[allow(clippy::too_many_arguments)]
 pub fn run_chain<T: PssTarget>(
     target: &mut T,
@@ -214,60 +358,10 @@ pub fn run_chain<T: PssTarget>(
     deposit: &mut impl FnMut(Splat),
     visit: &mut impl FnMut(&[Splat]),
 ) -> Option<()> {
-    let b = bootstrap.normalisation();
-    let mut rng = Rng::new(chain_seed, 1);
-    let start = bootstrap.pick(rng.uniform())?;
-    let mut samples = bootstrap.state(start);
-    target.evaluate(&samples, &mut buffers.current);
-    // The state reproduces its bootstrap evaluation; should a target not be deterministic,
-    // a non-positive value here would make the chain's weights meaningless.
-    let mut f_x = scalar(&buffers.current).filter(|&f| f > 0.0)? as f64;
-    samples.reseed(Rng::hash(&[chain_seed, 0x6d75_7461_7465]));
-    counts.chains += 1;
-    for _ in 0..mutations {
-        let large = samples.start_iteration();
-        target.evaluate(&samples, &mut buffers.proposal);
-        let f_y = match scalar(&buffers.proposal) {
-            Some(f) => f as f64,
-            None => {
-                counts.invalid += 1;
-                0.0
-            }
-        };
-        let a = (f_y / f_x).min(1.0);
-        if a > 0.0 {
-            let w = (a * b / f_y) as f32;
-            for s in &buffers.proposal {
-                deposit(Splat {
-                    value: s.value * w,
-                    ..*s
-                });
-            }
-        }
-        if a < 1.0 {
-            let w = ((1.0 - a) * b / f_x) as f32;
-            for s in &buffers.current {
-                deposit(Splat {
-                    value: s.value * w,
-                    ..*s
-                });
-            }
-        }
-        counts.mutations += 1;
-        counts.large_steps += u64::from(large);
-        if (rng.uniform() as f64) < a {
-            samples.accept();
-            std::mem::swap(&mut buffers.current, &mut buffers.proposal);
-            f_x = f_y;
-            if large {
-                counts.accepted_large += 1;
-            } else {
-                counts.accepted_small += 1;
-            }
-        } else {
-            samples.reject();
-        }
-        visit(&buffers.current);
-    }
+    let mut chain = Chain::start(target, bootstrap, chain_seed, buffers, counts)?;
+    chain.advance(
+        target, bootstrap, mutations, buffers, counts, deposit, visit,
+    );
+    chain.recycle(buffers);
     Some(())
 }

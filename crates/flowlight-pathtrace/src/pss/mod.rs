@@ -8,6 +8,7 @@
 //! * [`chain`]: the target a sampler exposes ([`PssTarget`]), the bootstrap normalisation
 //!   ([`Bootstrap`]) and one Metropolis–Hastings chain with expected-value splatting
 //!   ([`run_chain`]); the formulas are there.
+//! * [`large_steps`]: Kelemen's balance of the large steps against the chain.
 //! * [`units`]: chains per host work unit, so that `spp` keeps MCPT's meaning.
 //! * [`mcpt`]: entangled MCPT as a target.
 //! * [`bdpt`]: BDPT (every strategy of one sample) as a target.
@@ -18,6 +19,7 @@
 
 pub mod bdpt;
 pub mod chain;
+pub mod large_steps;
 pub mod mcpt;
 pub mod mmlt;
 pub mod params;
@@ -27,7 +29,9 @@ pub mod units;
 #[cfg(test)]
 mod tests;
 
-pub use chain::{run_chain, scalar, Bootstrap, ChainBuffers, ChainCounts, PssTarget, Splat};
+pub use chain::{run_chain, scalar, Bootstrap, Chain, ChainBuffers, ChainCounts, PssTarget, Splat};
 pub use mcpt::McptTarget;
 pub use samples::{Mutation, PrimarySamples, PssStream};
-pub use units::{chain_seed, render_unit, BootstrapCell, ChainCounters};
+pub use units::{
+    chain_seed, render_unit, render_unit_in_chains, BootstrapCell, ChainCounters, TileChains,
+};

@@ -6,9 +6,12 @@
 //! the z² summed (≈ χ² with 64 degrees of freedom when the chain is right).
 
 use super::chain::{run_chain, Bootstrap, ChainBuffers, ChainCounts, PssTarget, Splat};
+use super::large_steps::scale_estimate;
 use super::samples::{Mutation, PrimarySamples};
+use super::units::{render_unit_in_chains, TileChains};
 use flowlight_core::sampler::SampleStream;
 use flowlight_core::Rgb;
+use flowlight_sdk::WorkUnit;
 use glam::Vec2;
 
 const BINS: usize = 8;
@@ -62,8 +65,19 @@ struct PerChain {
 }
 
 fn run_chains(mutation: Mutation, chains: u64, length: u64) -> PerChain {
+    run_chains_with(mutation, chains, length, |_| {})
+}
+
+/// As [`run_chains`], with `setup` applied to the bootstrap first (the large-step weights).
+fn run_chains_with(
+    mutation: Mutation,
+    chains: u64,
+    length: u64,
+    setup: impl FnOnce(&mut Bootstrap),
+) -> PerChain {
     let mut target = Bumps;
-    let bootstrap = Bootstrap::run(&mut target, 17, 20_000, mutation);
+    let mut bootstrap = Bootstrap::run(&mut target, 17, 20_000, mutation);
+    setup(&mut bootstrap);
     let mut buffers = ChainBuffers::default();
     let mut out = PerChain {
         states: Vec::new(),
@@ -165,4 +179,120 @@ fn the_bootstrap_normalisation_is_the_integral() {
         let i = b.pick(k as f32 / 100.0).unwrap();
         assert!(b.scalar(i) > 0.0);
     }
+}
+
+/// ∫ f of the toy integrand over the unit square.
+fn total() -> f64 {
+    bin_integrals().iter().sum()
+}
+
+#[test]
+fn deposits_combined_with_the_large_steps_are_the_bin_integrals() {
+    let integrals = bin_integrals();
+    // c need not be b (nor anything of the bootstrap's): any scale keeps the expectation.
+    for scale in [total(), 4.0 * total(), 0.25 * total()] {
+        let run = run_chains_with(Mutation::new(0.3, 0.05), CHAINS, 500, |b| {
+            b.combine_large_steps(scale)
+        });
+        let chi2 = chi_square(&run.deposits, &integrals);
+        eprintln!("large steps combined, c = {scale:.3}: deposit χ² = {chi2:.1}");
+        assert!(
+            chi2 < CHI_SQUARE_LIMIT,
+            "c = {scale}: deposit χ² = {chi2:.1}"
+        );
+    }
+}
+
+#[test]
+fn large_step_weights_of_the_wrong_probability_fail_the_same_check() {
+    let integrals = bin_integrals();
+    // Weights for large steps twice as frequent as the chains draw: the large steps'
+    // share is deposited at half its weight, the floor between the bumps too dark.
+    let run = run_chains_with(Mutation::new(0.3, 0.05), CHAINS, 500, |b| {
+        b.combine_large_steps_as(0.6, total())
+    });
+    let chi2 = chi_square(&run.deposits, &integrals);
+    eprintln!("large steps combined with p = 0.6 for 0.3: deposit χ² = {chi2:.1}");
+    assert!(chi2 > 4.0 * CHI_SQUARE_LIMIT, "deposit χ² = {chi2:.1}");
+}
+
+#[test]
+fn the_scale_estimate_is_the_integral_from_its_own_vectors() {
+    let mutation = Mutation::new(0.3, 0.05);
+    let (c, invalid) = scale_estimate(&mut Bumps, 3, 50_000, mutation);
+    let b = Bootstrap::run(&mut Bumps, 3, 50_000, mutation);
+    assert_eq!(invalid, 0);
+    // Within 4σ of ∫ f (σ of f's spread over 50,000 vectors is below 0.5% of it here) ...
+    assert!(
+        (c / total() - 1.0).abs() < 0.02,
+        "c = {c} against {}",
+        total()
+    );
+    // ... and drawn apart from the bootstrap of the same seed.
+    assert_ne!(c, b.normalisation());
+}
+
+/// Work units of a 4×4 tile (16 mutations per sample index) of `seed`.
+fn unit(seed: u64, sample_begin: u32, sample_count: u32) -> WorkUnit {
+    WorkUnit {
+        x0: 4,
+        y0: 0,
+        x1: 8,
+        y1: 4,
+        sample_begin,
+        sample_count,
+        seed,
+    }
+}
+
+/// The deposits (raster, value) and counts of `units`, in order, through one [`TileChains`]
+/// with chains of `length`.
+fn tile_deposits(units: &[WorkUnit], length: u64) -> (Vec<(Vec2, Rgb)>, ChainCounts) {
+    let mut target = Bumps;
+    let bootstrap = Bootstrap::run(&mut target, 5, 4096, Mutation::new(0.3, 0.05));
+    let chains = TileChains::default();
+    let mut buffers = ChainBuffers::default();
+    let mut counts = ChainCounts::default();
+    let mut out = Vec::new();
+    for u in units {
+        render_unit_in_chains(
+            &mut target,
+            &bootstrap,
+            u,
+            length,
+            &chains,
+            &mut buffers,
+            &mut counts,
+            &mut |s: Splat| out.push((s.raster, s.value)),
+        );
+    }
+    (out, counts)
+}
+
+#[test]
+fn a_tile_chain_cut_into_units_is_the_whole_chain() {
+    // 96 mutations in chains of 40: boundaries at 40 and 80 fall inside units of 16.
+    let (whole, whole_counts) = tile_deposits(&[unit(1, 0, 6)], 40);
+    let pieces: Vec<WorkUnit> = (0..6).map(|s| unit(1, s, 1)).collect();
+    let (cut, cut_counts) = tile_deposits(&pieces, 40);
+    assert_eq!(whole_counts.mutations, 96);
+    assert_eq!(whole_counts.chains, 3);
+    assert_eq!(cut_counts, whole_counts);
+    assert_eq!(cut, whole);
+}
+
+#[test]
+fn a_unit_without_its_parked_chain_starts_its_own() {
+    // Units 3..6 alone (the first unit of a distributed part): a chain of their own from
+    // m = 48, then the chain of m = 80; the same mutations, other numbers.
+    let (whole, _) = tile_deposits(&[unit(1, 0, 6)], 40);
+    let (part, counts) = tile_deposits(&[unit(1, 3, 3)], 40);
+    assert_eq!(counts.mutations, 48);
+    assert_eq!(counts.chains, 2);
+    assert_ne!(part, whole[whole.len() - part.len()..]);
+    // A chain parked by another render seed is not continued: seed 2's unit 1 after seed
+    // 1's unit 0 is seed 2's unit 1 alone.
+    let (after_other, _) = tile_deposits(&[unit(1, 0, 1), unit(2, 1, 1)], 40);
+    let (alone, _) = tile_deposits(&[unit(2, 1, 1)], 40);
+    assert_eq!(after_other[after_other.len() - alone.len()..], alone[..]);
 }

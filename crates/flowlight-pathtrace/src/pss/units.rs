@@ -2,27 +2,39 @@
 //!
 //! The host renders work units, a tile of P pixels × a range of sample indices, and
 //! normalises a flanged integrator's film by the samples per pixel it completed (a pass cut
-//! short counts the share of its tiles done). A unit runs **one chain per sample index s of
-//! its range, of P mutations each**, seeded from (render seed, tile, s): the whole render is
-//! W·H mutations per sample index, W·H·spp in all, so by [`super::chain`]'s argument the
-//! film's sum per pixel is spp times the target's image in expectation, and the host's
-//! division by spp gives the image, under a time budget too. A chain's numbers depend only on
-//! (seed, tile, s), not on which unit or thread runs it, nor on how the samples are split
-//! into units: the image does not depend on the thread count (it does on the tile size,
-//! which sets the chains' length).
+//! short counts the share of its tiles done). A unit runs P mutations per sample index of its
+//! range: the whole render is W·H mutations per sample index, W·H·spp in all, so by
+//! [`super::chain`]'s argument the film's sum per pixel is spp times the target's image in
+//! expectation, and the host's division by spp gives the image, under a time budget too. Two
+//! ways to cut those mutations into chains:
+//!
+//! * [`render_unit_in_chains`] (`pssmlt`): chains of a fixed length L that run on across
+//!   the units of their tile, numbered by the tile's mutation index m = s·P + i; a chain
+//!   covers m ∈ [k·L, (k + 1)·L), seeded from (seed, tile, k·L), and is parked in
+//!   [`TileChains`] between units. The host runs a flanged integrator's passes one after the
+//!   other, so a tile's units come in order of s: the image does not depend on the thread
+//!   count.
+//! * [`render_unit`] (`mmlt`, and `pssmlt` with `chain_length = 0`): one chain per sample
+//!   index s of the unit, of P mutations, seeded from (seed, tile, s): the image does not
+//!   depend on the thread count, but on the tile size, which sets the chains' length.
+//!
+//! Either way a chain's numbers depend only on the seed, the tile and where it starts, not on
+//! which unit or thread runs it. Every chain starts from a bootstrap state resampled ∝ its
+//! scalar, so every mutation's deposits have their expectation whatever the chain's age: a
+//! chain cut anywhere (a short tile, a time budget, a unit that finds no parked chain) stays
+//! unbiased. Short chains cost one evaluation more per chain and repeat the bootstrap's own
+//! noise (docs/pssmlt.md, "Work units").
 //!
 //! The bootstrap must be drawn from the render seed: with one fixed bootstrap every render
 //! would share its b̂, and the mean of renders would be the image times b̂/b. The host's
 //! `prepare` does not know the seed, so the first work unit of a render computes it
 //! ([`BootstrapCell`]) while the others wait for it; its numbers depend only on the seed.
-//!
-//! Each chain starts from a bootstrap state resampled ∝ its scalar, so short chains (small
-//! tiles) cost one evaluation more per P mutations and explore less, but stay unbiased.
 
-use super::chain::{run_chain, Bootstrap, ChainBuffers, ChainCounts, PssTarget, Splat};
+use super::chain::{run_chain, Bootstrap, Chain, ChainBuffers, ChainCounts, PssTarget, Splat};
 use flowlight_core::rng::Rng;
 use flowlight_sdk::stats::{Counter, Stats, StatsBuilder};
 use flowlight_sdk::WorkUnit;
+use std::collections::HashMap;
 use std::sync::{Arc, Mutex, PoisonError};
 
 /// The bootstrap of a render seed (`pssmlt`'s [`Bootstrap`], or `mmlt`'s per-depth one),
@@ -92,6 +104,115 @@ pub fn render_unit<T: PssTarget>(
             deposit,
             &mut |_| {},
         );
+    }
+}
+
+/// A tile's chain parked between two of the tile's work units.
+struct Parked {
+    /// The render seed it belongs to.
+    seed: u64,
+    /// The tile mutation index of its next mutation.
+    next: u64,
+    chain: Chain,
+}
+
+/// Chains of a fixed length that run on across the work units of their tile
+/// ([`render_unit_in_chains`]), parked here between units; keyed by the tile.
+#[derive(Default)]
+pub struct TileChains {
+    parked: Mutex<HashMap<(u32, u32, u32, u32), Parked>>,
+}
+
+/// The seed of the chain of `unit`'s tile that starts at tile mutation index `m`.
+fn tile_chain_seed(unit: &WorkUnit, m: u64) -> u64 {
+    Rng::hash(&[
+        unit.seed,
+        0x4348_4149_4e53,
+        unit.x0 as u64,
+        unit.y0 as u64,
+        unit.x1 as u64,
+        unit.y1 as u64,
+        m,
+    ])
+}
+
+/// Runs `unit`'s P·n mutations (P pixels, n sample indices) as pieces of its tile's chains
+/// of `chain_length` mutations each, handing their splats to `deposit` (docs/pssmlt.md,
+/// "Work units"). The mutations of the tile are numbered m = s·P + i (sample index s, i < P);
+/// a chain covers m ∈ [k·L, (k + 1)·L) and is seeded from (render seed, tile, k·L). The
+/// first unit of a chain starts it from the bootstrap; a unit whose first mutation lies
+/// inside a chain takes it from `chains`, where the tile's previous unit parked it. The host
+/// runs a flanged integrator's passes one after the other, so a tile's units come in order
+/// of s and the image does not depend on the thread count nor on the tile size beyond how
+/// the film is cut into chains' starting points. Should the parked chain not be the one
+/// expected (another seed, or a unit run out of order, as the first unit of a distributed
+/// part), the piece starts a chain of its own, seeded from its first m: every mutation's
+/// deposits keep their expectation whatever the chain's age ([`super::chain`]), so the
+/// image stays unbiased.
+#[allow(clippy::too_many_arguments)]
+pub fn render_unit_in_chains<T: PssTarget>(
+    target: &mut T,
+    bootstrap: &Bootstrap,
+    unit: &WorkUnit,
+    chain_length: u64,
+    chains: &TileChains,
+    buffers: &mut ChainBuffers,
+    counts: &mut ChainCounts,
+    deposit: &mut impl FnMut(Splat),
+) {
+    let key = (unit.x0, unit.y0, unit.x1, unit.y1);
+    let pixels = (unit.x1 - unit.x0) as u64 * (unit.y1 - unit.y0) as u64;
+    let length = chain_length.max(1);
+    let mut m = unit.sample_begin as u64 * pixels;
+    let end = (unit.sample_begin + unit.sample_count) as u64 * pixels;
+    let parked = chains
+        .parked
+        .lock()
+        .unwrap_or_else(PoisonError::into_inner)
+        .remove(&key);
+    let mut chain = parked
+        .filter(|p| p.seed == unit.seed && p.next == m && !m.is_multiple_of(length))
+        .map(|p| p.chain);
+    while m < end {
+        let mut current = match chain.take() {
+            Some(c) => c,
+            None => {
+                match Chain::start(target, bootstrap, tile_chain_seed(unit, m), buffers, counts) {
+                    Some(c) => c,
+                    // No light in the bootstrap: nothing to deposit.
+                    None => return,
+                }
+            }
+        };
+        let chain_end = (m / length + 1) * length;
+        let stop = chain_end.min(end);
+        current.advance(
+            target,
+            bootstrap,
+            stop - m,
+            buffers,
+            counts,
+            deposit,
+            &mut |_| {},
+        );
+        m = stop;
+        if m < chain_end {
+            chain = Some(current);
+        } else {
+            current.recycle(buffers);
+        }
+    }
+    if let Some(chain) = chain {
+        let parked = Parked {
+            seed: unit.seed,
+            next: m,
+            chain,
+        };
+        chains
+            .parked
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .insert(key, parked);
     }
 }
 
