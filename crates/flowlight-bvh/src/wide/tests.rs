@@ -240,7 +240,7 @@ fn parallel_layout_is_the_sequential_layout() {
                 "the far triangles are a leaf of the root fork"
             );
         }
-        assert!(parallel.nodes == sequential.nodes, "{n}: nodes differ");
+        assert!(parallel.nodes[..] == sequential.nodes[..], "{n}: nodes differ");
         assert!(parallel.leaves == sequential.leaves, "{n}: packs differ");
         assert!(
             refs.iter()
