@@ -54,7 +54,18 @@ unsafe impl<T: Copy + Sync> Sync for HugeArray<T> {}
 impl<T: Copy + Send + Sync> HugeArray<T> {
     /// The array `[f(0), f(1), …, f(len − 1)]`, filled in parallel when large.
     pub(crate) fn from_fn(len: usize, f: impl Fn(usize) -> T + Sync) -> HugeArray<T> {
-        let (ptr, owner) = allocate::<T>(len);
+        HugeArray::filled(len, true, f)
+    }
+
+    /// A copy of `items` on the heap, whatever its size (to compare against).
+    #[cfg(test)]
+    pub(crate) fn on_heap(items: &[T]) -> HugeArray<T> {
+        HugeArray::filled(items.len(), false, |i| items[i])
+    }
+
+    /// `from_fn`, on its own huge-page mapping only if `huge` allows.
+    fn filled(len: usize, huge: bool, f: impl Fn(usize) -> T + Sync) -> HugeArray<T> {
+        let (ptr, owner) = allocate::<T>(len, huge);
         // SAFETY: `allocate` returned room for `len` elements of `T` (or a dangling, aligned
         // pointer when no room is needed), not yet initialised and owned by nobody else.
         let slots = unsafe { std::slice::from_raw_parts_mut(ptr.as_ptr().cast(), len) };
@@ -97,15 +108,15 @@ fn fill<T: Send>(slots: &mut [MaybeUninit<T>], f: &(impl Fn(usize) -> T + Sync))
         });
 }
 
-/// Room for `len` elements of `T`: a mapping advised for huge pages when it is at least one
-/// huge page, else the heap.
-fn allocate<T>(len: usize) -> (NonNull<T>, Owner) {
+/// Room for `len` elements of `T`: a mapping advised for huge pages when `huge` allows and it
+/// is at least one huge page, else the heap.
+fn allocate<T>(len: usize, huge: bool) -> (NonNull<T>, Owner) {
     let layout = std::alloc::Layout::array::<T>(len).expect("HugeArray too large");
     if layout.size() == 0 {
         return (NonNull::dangling(), Owner::None);
     }
     #[cfg(target_os = "linux")]
-    if layout.size() >= HUGE_PAGE && std::mem::align_of::<T>() <= HUGE_PAGE {
+    if huge && layout.size() >= HUGE_PAGE && std::mem::align_of::<T>() <= HUGE_PAGE {
         if let Some((ptr, bytes)) = map_huge(layout.size()) {
             return (ptr.cast(), Owner::Mapped(bytes));
         }
@@ -225,7 +236,10 @@ mod tests {
             let b = a.clone();
             assert!(a == b && b.len() == len);
             // At least a huge page of u32s is mapped on its own (on Linux), less is not.
-            assert_eq!(a.advised(), cfg!(target_os = "linux") && len * 4 >= HUGE_PAGE);
+            assert_eq!(
+                a.advised(),
+                cfg!(target_os = "linux") && len * 4 >= HUGE_PAGE
+            );
         }
     }
 
@@ -239,7 +253,10 @@ mod tests {
         a[last] = 7;
         a[0] = 5;
         assert_eq!((a[0], a[1], a[last]), (5, 1, 7));
-        assert_eq!(a.iter().map(|&v| v as usize).sum::<usize>(), HUGE_PAGE + 8 - 2 + 5 + 7);
+        assert_eq!(
+            a.iter().map(|&v| v as usize).sum::<usize>(),
+            HUGE_PAGE + 8 - 2 + 5 + 7
+        );
     }
 
     #[test]
