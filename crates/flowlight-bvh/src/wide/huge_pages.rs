@@ -9,9 +9,11 @@
 //! Linux backs an anonymous mapping with transparent huge pages at its first touch when it
 //! is advised `MADV_HUGEPAGE` (the setting `transparent_hugepage=madvise`, the usual
 //! default, gives them only to such mappings; Embree advises its BVH memory the same way).
-//! So an array of at least [`HUGE_PAGE`] bytes is its own mapping, aligned to and rounded
-//! up to 2 MiB, advised before it is filled; the fill (in parallel) then faults it in as
-//! huge pages. Smaller arrays, other systems, and a failed `mmap` use the ordinary heap.
+//! So an array of at least [`HUGE_PAGE`] bytes is its own mapping, starting at a 2 MiB
+//! boundary, advised before it is filled; the fill (in parallel) then faults it in as huge
+//! pages. Its length is only rounded up to the base page size (as Embree's mappings of sizes
+//! that are not whole huge pages): a last, partial huge page stays on small pages rather
+//! than taking up to 2 MiB of memory the array does not use. Smaller arrays, other systems, and a failed `mmap` use the ordinary heap.
 //! The advice is a hint: where the kernel gives no huge pages, the array works as before.
 //! Only where the memory lies changes, never its contents, so hits are unchanged.
 
@@ -41,7 +43,7 @@ enum Owner {
     None,
     /// The global allocator, with `Layout::array::<T>(len)`.
     Heap,
-    /// An `mmap`ed range of this many bytes (a multiple of [`HUGE_PAGE`]).
+    /// An `mmap`ed range of this many bytes (whole base pages).
     #[cfg(target_os = "linux")]
     Mapped(usize),
 }
@@ -129,12 +131,17 @@ fn allocate<T>(len: usize, huge: bool) -> (NonNull<T>, Owner) {
     }
 }
 
-/// A fresh anonymous mapping of `size` bytes rounded up to whole huge pages, starting at a
-/// huge-page boundary (so that every page of it can be a huge page), advised
+/// A fresh anonymous mapping of `size` bytes rounded up to whole base pages, starting at a
+/// huge-page boundary (so that every whole huge page of it can be one), advised
 /// `MADV_HUGEPAGE`; `None` when the system refuses the mapping.
 #[cfg(target_os = "linux")]
 fn map_huge(size: usize) -> Option<(NonNull<u8>, usize)> {
-    let bytes = size.checked_next_multiple_of(HUGE_PAGE)?;
+    // SAFETY: `sysconf` only reads a system setting.
+    let page = match unsafe { libc::sysconf(libc::_SC_PAGESIZE) } {
+        p if p > 0 && HUGE_PAGE % p as usize == 0 => p as usize,
+        _ => return None,
+    };
+    let bytes = size.checked_next_multiple_of(page)?;
     // One huge page more than needed, so that an aligned start lies inside.
     let span = bytes.checked_add(HUGE_PAGE)?;
     // SAFETY: a new private anonymous mapping; it aliases nothing.
