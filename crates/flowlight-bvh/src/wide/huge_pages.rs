@@ -138,7 +138,7 @@ fn allocate<T>(len: usize, huge: bool) -> (NonNull<T>, Owner) {
 fn map_huge(size: usize) -> Option<(NonNull<u8>, usize)> {
     // SAFETY: `sysconf` only reads a system setting.
     let page = match unsafe { libc::sysconf(libc::_SC_PAGESIZE) } {
-        p if p > 0 && HUGE_PAGE % p as usize == 0 => p as usize,
+        p if p > 0 && HUGE_PAGE.is_multiple_of(p as usize) => p as usize,
         _ => return None,
     };
     let bytes = size.checked_next_multiple_of(page)?;
