@@ -11,7 +11,9 @@
 //!   children by repeatedly splitting its largest child with the same SAH, weighted by leaf
 //!   packs rather than triangles (Wald, Benthin & Boulos 2008; Embree's BVH8), stored as
 //!   256-byte nodes with the children's boxes in SoA order, and each leaf is a pack of up to
-//!   four triangles stored SoA with their ids. [`BinaryBvh`], the binary tree of the plain-SAH
+//!   four triangles stored SoA with their ids; both arrays lie on 2 MiB pages where Linux
+//!   offers them (`wide::huge_pages`), so a large tree's scattered loads do not also miss the
+//!   TLB. [`BinaryBvh`], the binary tree of the plain-SAH
 //!   splits flattened depth-first into 32-byte nodes (pbrt-v4's `LinearBVHNode`), is kept as
 //!   the reference the wide tree is tested and benchmarked against, and as the top level of
 //!   [`TwoLevelBvh`].

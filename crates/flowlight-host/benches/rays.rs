@@ -17,6 +17,9 @@
 //! quality; the first line on stderr names the mode). `FLOWLIGHT_BENCH_LEAKS=M` prints,
 //! instead of the timings, how many of M million rays from inside each closed mesh slip
 //! through it with Embree robust, Embree fast and the BVH.
+//! `FLOWLIGHT_BENCH_CLOCK=cpu` measures the ray throughputs against the process's CPU time
+//! divided by the thread count instead of wall time (Unix), which leaves out the time other
+//! processes held the cores on a shared machine (builds stay in wall time).
 //! `cargo build --release -p flowlight-host --bench rays` builds the same binary (under
 //! `target/release/deps/rays-*`) from the release artifacts, without rebuilding every
 //! dependency under the `bench` profile.
@@ -91,8 +94,40 @@ const BATCH: usize = 256;
 /// nothing is optimised away).
 type Query = Box<dyn Fn(&[Ray]) -> usize + Sync>;
 
+/// What ray throughputs are measured against (`FLOWLIGHT_BENCH_CLOCK`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Clock {
+    Wall,
+    /// The process's CPU time over the thread count.
+    Cpu,
+}
+
+/// The process's CPU time so far, in seconds (all threads).
+#[cfg(unix)]
+fn process_cpu_seconds() -> f64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `ts` is a valid place for the result.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut ts) };
+    assert_eq!(rc, 0, "clock_gettime(CLOCK_PROCESS_CPUTIME_ID) failed");
+    ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
+}
+
+#[cfg(not(unix))]
+fn process_cpu_seconds() -> f64 {
+    panic!("FLOWLIGHT_BENCH_CLOCK=cpu needs a Unix system")
+}
+
 /// Mrays/s of `f` over `rays` on `threads` threads, in batches of [`BATCH`] rays.
-fn throughput(rays: &[Ray], threads: usize, f: &(dyn Fn(&[Ray]) -> usize + Sync)) -> f64 {
+fn throughput(
+    rays: &[Ray],
+    threads: usize,
+    clock: Clock,
+    f: &(dyn Fn(&[Ray]) -> usize + Sync),
+) -> f64 {
+    let cpu_start = (clock == Clock::Cpu).then(process_cpu_seconds);
     let start = Instant::now();
     let chunk = rays.len().div_ceil(threads);
     let hits: usize = std::thread::scope(|s| {
@@ -103,7 +138,11 @@ fn throughput(rays: &[Ray], threads: usize, f: &(dyn Fn(&[Ray]) -> usize + Sync)
         hs.into_iter().map(|h| h.join().unwrap()).sum()
     });
     std::hint::black_box(hits);
-    rays.len() as f64 / start.elapsed().as_secs_f64() / 1e6
+    let seconds = match cpu_start {
+        Some(c) => (process_cpu_seconds() - c) / threads as f64,
+        None => start.elapsed().as_secs_f64(),
+    };
+    rays.len() as f64 / seconds / 1e6
 }
 
 /// A backend under test: its name and its two batch queries.
@@ -272,6 +311,14 @@ fn main() {
     let sizes = counts("FLOWLIGHT_BENCH_SIZES", vec![10_000, 100_000, 1_000_000]);
     // Thread counts to time each backend at (a many-core machine shows how each scales).
     let thread_counts = counts("FLOWLIGHT_BENCH_THREADS", vec![1, 2]);
+    let clock = match env("FLOWLIGHT_BENCH_CLOCK").as_deref() {
+        None | Some("wall") => Clock::Wall,
+        Some("cpu") => Clock::Cpu,
+        Some(c) => {
+            eprintln!("rays: FLOWLIGHT_BENCH_CLOCK must be wall or cpu, not {c:?}");
+            std::process::exit(2)
+        }
+    };
     let rays = rays(nrays);
     // The Embree scenes' mode: robust and medium quality unless `FLOWLIGHT_EMBREE_ROBUST=0`
     // or `FLOWLIGHT_EMBREE_QUALITY` say otherwise (the packet rows set their own policy).
@@ -293,6 +340,13 @@ fn main() {
         ),
         Err(e) => eprintln!("no Embree: {e}"),
     }
+    eprintln!(
+        "ray throughputs against {}",
+        match clock {
+            Clock::Wall => "wall time",
+            Clock::Cpu => "the process's CPU time / threads",
+        }
+    );
     if let Some(m) = env("FLOWLIGHT_BENCH_LEAKS") {
         let millions = m.parse().expect("FLOWLIGHT_BENCH_LEAKS: millions of rays");
         return leak_table(&sizes, millions);
@@ -321,8 +375,8 @@ fn main() {
             for (k, b) in backends.iter().enumerate() {
                 builds[k].push(times[k]);
                 for (ti, &threads) in thread_counts.iter().enumerate() {
-                    closest[k][ti].push(throughput(&rays, threads, &*b.closest));
-                    any[k][ti].push(throughput(&rays, threads, &*b.any));
+                    closest[k][ti].push(throughput(&rays, threads, clock, &*b.closest));
+                    any[k][ti].push(throughput(&rays, threads, clock, &*b.any));
                 }
             }
         }

@@ -18,6 +18,7 @@
 //! once at the end in the depth-first order of the sequential build, and the result does
 //! not depend on the thread schedule.
 
+use super::huge_pages::HugeArray;
 use super::{
     detect_avx2, leaf_packs, leaf_ref, push_leaf, stack_bound, Bvh, TriPack, WideNode, EMPTY_CHILD,
     LANES, LEAF_BIT, LEAF_PACKS, MAX_PACKS, STACK_SIZE, WIDTH,
@@ -314,22 +315,29 @@ pub(super) fn build_parallel(refs: &mut [PrimRef], base: usize, root: Child) -> 
     }))
 }
 
+/// The nodes and packs of a whole tree: [`Subtree`] with the nodes in their final memory.
+pub(super) struct Tree {
+    pub(super) nodes: HugeArray<WideNode>,
+    pub(super) leaves: Vec<(u32, u8)>,
+}
+
 /// The tree over `refs` (whose range is `root`), built in parallel where large and laid out
 /// as [`build_sequential`] lays it out.
-pub(super) fn build_tree(refs: &mut [PrimRef], root: Child) -> Subtree {
+pub(super) fn build_tree(refs: &mut [PrimRef], root: Child) -> Tree {
     let part = build_parallel(refs, 0, root);
     assert!(part.packs() <= MAX_PACKS, "too many triangles for a Bvh");
     match part {
-        Part::Flat(t) => t,
+        Part::Flat(t) => Tree {
+            nodes: HugeArray::from_slice(&t.nodes),
+            leaves: t.leaves,
+        },
         part => {
-            let mut t = Subtree {
-                nodes: Vec::new(),
-                leaves: vec![(0, 0); part.packs()],
-            };
-            t.nodes
-                .par_extend(rayon::iter::repeat_n(WideNode::EMPTY, part.nodes()));
-            part.write(&mut t.nodes, &mut t.leaves, 0, 0);
-            t
+            // Filled in parallel before the write, so that the pages are faulted in (as
+            // huge pages) by both threads rather than by the write's first thread.
+            let mut nodes = HugeArray::from_fn(part.nodes(), |_| WideNode::EMPTY);
+            let mut leaves = vec![(0, 0); part.packs()];
+            part.write(&mut nodes, &mut leaves, 0, 0);
+            Tree { nodes, leaves }
         }
     }
 }
@@ -373,8 +381,8 @@ impl Bvh {
             refs.retain(|r| !r.is_degenerate_marker());
         }
         let empty = Bvh {
-            nodes: Vec::new(),
-            packs: Vec::new(),
+            nodes: HugeArray::from_slice(&[]),
+            packs: HugeArray::from_slice(&[]),
             bounds: (Vec3::INFINITY, Vec3::NEG_INFINITY),
             stored: 0,
             input_count: count,
@@ -390,20 +398,17 @@ impl Bvh {
         let bound = stack_bound(&tree.nodes, 0);
         // The SAH depth cap keeps trees far below this (`MAX_SAH_DEPTH + 32` binary levels).
         assert!(bound <= STACK_SIZE, "BVH too deep for the traversal stack");
-        let packs = tree
-            .leaves
-            .par_iter()
-            .map(|&(first, count)| {
-                let r = &refs[first as usize..first as usize + count as usize];
-                let mut tris = [[Vec3::ZERO; 3]; LANES];
-                let mut prims = [u32::MAX; LANES];
-                for (k, p) in r.iter().enumerate() {
-                    tris[k] = triangle(p.index() as usize);
-                    prims[k] = p.index();
-                }
-                TriPack::new(&tris[..r.len()], prims)
-            })
-            .collect();
+        let packs = HugeArray::from_fn(tree.leaves.len(), |i| {
+            let (first, count) = tree.leaves[i];
+            let r = &refs[first as usize..first as usize + count as usize];
+            let mut tris = [[Vec3::ZERO; 3]; LANES];
+            let mut prims = [u32::MAX; LANES];
+            for (k, p) in r.iter().enumerate() {
+                tris[k] = triangle(p.index() as usize);
+                prims[k] = p.index();
+            }
+            TriPack::new(&tris[..r.len()], prims)
+        });
         Bvh {
             nodes: tree.nodes,
             packs,

@@ -15,13 +15,18 @@
 //!   `occluded` never reads them (the traversal returns pack and lane; only
 //!   `intersect` looks the index up).
 //!
+//! Both arrays are [`HugeArray`]s: on 2 MiB pages where the system offers them, so that a
+//! large tree's scattered loads do not also miss the TLB (module `huge_pages`).
+//!
 //! The build is in [`build`](mod@self::build), the queries in [`traversal`], their 8-lane
 //! box test and 4-lane triangle test in [`simd`].
 
 use crate::build::{Aabb, MAX_LEAF_SIZE};
 use glam::{Vec3, Vec4};
+use huge_pages::HugeArray;
 
 mod build;
+mod huge_pages;
 mod simd;
 #[cfg(test)]
 mod tests;
@@ -162,9 +167,10 @@ fn push_leaf(packs: &mut Vec<(u32, u8)>, first: usize, len: usize) -> u32 {
 /// queries (optionally filtered); see the crate documentation and the `wide` module.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Bvh {
-    /// Depth first, root at 0; empty when there is nothing to intersect.
-    nodes: Vec<WideNode>,
-    packs: Vec<TriPack>,
+    /// Depth first, root at 0; empty when there is nothing to intersect. Nodes and packs
+    /// lie on huge pages where the system offers them ([`HugeArray`]).
+    nodes: HugeArray<WideNode>,
+    packs: HugeArray<TriPack>,
     bounds: (Vec3, Vec3),
     stored: usize,
     input_count: usize,

@@ -240,7 +240,10 @@ fn parallel_layout_is_the_sequential_layout() {
                 "the far triangles are a leaf of the root fork"
             );
         }
-        assert!(parallel.nodes == sequential.nodes, "{n}: nodes differ");
+        assert!(
+            parallel.nodes[..] == sequential.nodes[..],
+            "{n}: nodes differ"
+        );
         assert!(parallel.leaves == sequential.leaves, "{n}: packs differ");
         assert!(
             refs.iter()
@@ -371,6 +374,24 @@ fn avx2_and_sse_agree() {
         ..bvh.clone()
     };
     let hits = assert_same_hits(&bvh, &sse, 4, 20_000);
+    assert!(hits > 5000, "{hits}");
+}
+
+/// A tree whose packs fill more than a huge page lies on its own advised mappings (Linux),
+/// and answers every ray as the same tree copied to the heap does.
+#[test]
+fn a_large_tree_on_huge_pages_answers_as_on_the_heap() {
+    let tris = random_soup(60_000, 79);
+    let bvh = Bvh::build(&tris);
+    assert!(bvh.packs.len() * std::mem::size_of::<TriPack>() >= 2 << 20);
+    assert_eq!(bvh.packs.advised(), cfg!(target_os = "linux"));
+    let heap = Bvh {
+        nodes: HugeArray::on_heap(&bvh.nodes),
+        packs: HugeArray::on_heap(&bvh.packs),
+        ..bvh.clone()
+    };
+    assert!(!heap.packs.advised() && heap == bvh);
+    let hits = assert_same_hits(&bvh, &heap, 5, 20_000);
     assert!(hits > 5000, "{hits}");
 }
 
