@@ -60,7 +60,7 @@ impl LargeStepWeights {
         (pc > 0.0 && pc.is_finite()).then_some(LargeStepWeights { pc, scale })
     }
 
-    /// The weight of the proposal's splats: (a·b̂ + [large]·c) / (f(y) + p·c).
+    /// The weight of the proposal's splats: (a·b̂ + \[large\]·c) / (f(y) + p·c).
     pub fn proposal(&self, a: f64, b: f64, f_y: f64, large: bool) -> f64 {
         let large = if large { self.scale } else { 0.0 };
         (a * b + large) / (f_y + self.pc)
