@@ -270,10 +270,14 @@ pub struct Norms {
 
 impl Norms {
     fn ratio(n: u64, d: u64) -> f64 {
-        if d == 0 {
-            0.0
+        Self::per(n as f64, d as f64)
+    }
+    /// n / d, or 0 where nothing was measured (d ≤ 0).
+    fn per(n: f64, d: f64) -> f64 {
+        if d > 0.0 {
+            n / d
         } else {
-            n as f64 / d as f64
+            0.0
         }
     }
     pub fn acceptance(&self) -> f64 {
@@ -283,53 +287,29 @@ impl Norms {
         Self::ratio(self.misses, self.proposals)
     }
     pub fn seconds_per_proposal(&self) -> f64 {
-        if self.proposals == 0 {
-            0.0
-        } else {
-            self.seconds / self.proposals as f64
-        }
+        Self::per(self.seconds, self.proposals as f64)
     }
     /// Accepted moves per second of the strategy's steps (reported).
     pub fn accepted_per_second(&self) -> f64 {
-        if self.seconds > 0.0 {
-            self.accepted as f64 / self.seconds
-        } else {
-            0.0
-        }
+        Self::per(self.accepted as f64, self.seconds)
     }
     /// w_s: rays per proposal.
     pub fn work_per_proposal(&self) -> f64 {
-        if self.proposals == 0 {
-            0.0
-        } else {
-            self.work / self.proposals as f64
-        }
+        Self::per(self.work, self.proposals as f64)
     }
     /// Accepted moves per ray of the strategy's steps (reported).
     pub fn accepted_per_work(&self) -> f64 {
-        if self.work > 0.0 {
-            self.accepted as f64 / self.work
-        } else {
-            0.0
-        }
+        Self::per(self.accepted as f64, self.work)
     }
     /// K: a pilot chain's effective deposits (pixels its deposits spread over).
     pub fn spread(&self) -> f64 {
-        if self.chains == 0 {
-            0.0
-        } else {
-            self.spread_sum / self.chains as f64
-        }
+        Self::per(self.spread_sum, self.chains as f64)
     }
     /// Pixels a pilot chain's deposits spread over beyond its seed's, per ray of its steps,
     /// Σ (K − 1) / Σ rays: what the rule weights by (a strategy that never leaves the seed's
     /// pixel gets 0).
     pub fn spread_per_work(&self) -> f64 {
-        if self.work > 0.0 {
-            (self.spread_sum - self.chains as f64).max(0.0) / self.work
-        } else {
-            0.0
-        }
+        Self::per((self.spread_sum - self.chains as f64).max(0.0), self.work)
     }
 }
 
