@@ -104,7 +104,7 @@ fn the_beauty_is_identical_with_and_without_aovs_and_denoising() {
         (0..3).all(|k| (got[k] - want[k]).abs() < 1e-5),
         "albedo {got:?} vs base colour {want:?}"
     );
-    match Denoiser::open() {
+    match Denoiser::open(0) {
         Err(e) => println!("skipped the --denoise run: Open Image Denoise is not available: {e}"),
         Ok(_) => {
             let c = render_cli(&plain, &dir.join("denoised.exr"), &["--denoise"]);
@@ -194,7 +194,7 @@ fn denoise_without_the_library_is_one_clear_line() {
 /// is absent (`.ci/setup` fetches it).
 #[test]
 fn denoising_lowers_the_error_of_a_noisy_cornell_box() {
-    if let Err(e) = Denoiser::open() {
+    if let Err(e) = Denoiser::open(0) {
         println!("skipped: Open Image Denoise is not available: {e}");
         return;
     }

@@ -53,7 +53,10 @@ pub fn run(
     // denoiser asked for must be there.
     renderer.check_outputs().map_err(|e| anyhow!(e))?;
     let mut denoiser = if denoise {
-        Some(flowlight_host::denoise::Denoiser::open().map_err(|e| anyhow!(e))?)
+        Some(
+            flowlight_host::denoise::Denoiser::open(renderer.options.threads)
+                .map_err(|e| anyhow!(e))?,
+        )
     } else {
         None
     };

@@ -59,8 +59,10 @@ pub fn render(
     // The denoiser asked for must be there before any time is spent rendering.
     let mut denoiser = if denoise {
         Some(
-            py.detach(flowlight_host::denoise::Denoiser::open)
-                .map_err(errors::RenderError::new_err)?,
+            py.detach(|| {
+                flowlight_host::denoise::Denoiser::open(ov.threads.unwrap_or(loaded.config.threads))
+            })
+            .map_err(errors::RenderError::new_err)?,
         )
     } else {
         None

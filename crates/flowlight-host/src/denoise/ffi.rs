@@ -21,6 +21,7 @@ pub struct Api {
     pub release_device: unsafe extern "C" fn(Device),
     pub get_device_error: unsafe extern "C" fn(Device, *mut *const c_char) -> c_int,
     pub get_device_int: unsafe extern "C" fn(Device, *const c_char) -> c_int,
+    pub set_device_int: unsafe extern "C" fn(Device, *const c_char, c_int),
     pub new_filter: unsafe extern "C" fn(Device, *const c_char) -> Filter,
     #[allow(clippy::type_complexity)]
     pub set_shared_filter_image: unsafe extern "C" fn(
@@ -63,6 +64,7 @@ impl Api {
             release_device: sym!("oidnReleaseDevice"),
             get_device_error: sym!("oidnGetDeviceError"),
             get_device_int: sym!("oidnGetDeviceInt"),
+            set_device_int: sym!("oidnSetDeviceInt"),
             new_filter: sym!("oidnNewFilter"),
             set_shared_filter_image: sym!("oidnSetSharedFilterImage"),
             set_filter_bool: sym!("oidnSetFilterBool"),

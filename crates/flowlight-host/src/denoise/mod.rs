@@ -23,7 +23,7 @@
 mod ffi;
 
 use libloading::Library;
-use std::ffi::{c_char, CStr, OsString};
+use std::ffi::{c_char, c_int, CStr, OsString};
 use std::path::{Path, PathBuf};
 
 /// The EXR layer of the denoised beauty.
@@ -87,11 +87,14 @@ fn candidates(
 }
 
 impl Denoiser {
-    /// Opens OIDN (module docs) and commits a CPU device, or says in one line why not.
-    pub fn open() -> Result<Denoiser, String> {
+    /// Opens OIDN (module docs) and commits a CPU device of `threads` threads (the render's
+    /// count, so the denoiser keeps to what `--threads` allows; 0: one per core), or says in
+    /// one line why not.
+    pub fn open(threads: usize) -> Result<Denoiser, String> {
         Denoiser::open_from(
             std::env::var_os("OIDN_DIR"),
             std::env::var_os("FLOWLIGHT_OIDN_FETCH_DIR"),
+            threads,
         )
     }
 
@@ -99,13 +102,14 @@ impl Denoiser {
     pub fn open_from(
         oidn_dir: Option<OsString>,
         fetch_dir: Option<OsString>,
+        threads: usize,
     ) -> Result<Denoiser, String> {
         let mut tried = Vec::new();
         for (how, path) in candidates(oidn_dir, fetch_dir)? {
             // SAFETY: loading runs the library's initialisers; OIDN's only set up its own
             // state. The path is an OIDN library by name.
             match unsafe { Library::new(&path) } {
-                Ok(lib) => return Denoiser::with_library(lib, &how, &path),
+                Ok(lib) => return Denoiser::with_library(lib, &how, &path, threads),
                 Err(e) => {
                     // libloading's message is "dlopen failed"; the loader's reason is its source.
                     let why =
@@ -120,7 +124,12 @@ impl Denoiser {
         ))
     }
 
-    fn with_library(lib: Library, how: &str, path: &Path) -> Result<Denoiser, String> {
+    fn with_library(
+        lib: Library,
+        how: &str,
+        path: &Path,
+        threads: usize,
+    ) -> Result<Denoiser, String> {
         let at = |e: String| format!("--denoise: {} ({how}): {e}", path.display());
         // SAFETY: the library is found under OIDN's SONAME.
         let api = unsafe { ffi::Api::resolve(lib) }.map_err(at)?;
@@ -134,8 +143,13 @@ impl Denoiser {
             device,
             source: String::new(),
         };
-        // SAFETY: as above.
-        unsafe { (d.api.commit_device)(d.device) };
+        // OIDN starts its own worker threads (TBB), all cores unless told: the render's count.
+        let threads = c_int::try_from(threads).unwrap_or(c_int::MAX);
+        // SAFETY: as above; a device parameter set by its documented name before the commit.
+        unsafe {
+            (d.api.set_device_int)(d.device, c"numThreads".as_ptr(), threads);
+            (d.api.commit_device)(d.device);
+        }
         d.check().map_err(at)?;
         let int = |name: &CStr| {
             // SAFETY: a device parameter read by its documented name.

@@ -6,7 +6,7 @@ use flowlight_core::rng::Rng;
 /// An `OIDN_DIR` without the library is one line naming the variable and the folder.
 #[test]
 fn a_wrong_oidn_dir_is_named_in_one_line() {
-    let e = Denoiser::open_from(Some("/nonexistent/oidn".into()), None)
+    let e = Denoiser::open_from(Some("/nonexistent/oidn".into()), None, 0)
         .err()
         .expect("no library there");
     assert!(!e.contains('\n'), "{e}");
@@ -34,7 +34,7 @@ fn a_missing_library_says_how_to_get_one() {
     // so does the fetched one once another test of this process has loaded it (the loader
     // then finds its SONAME loaded): tests/integration/aovs.rs checks this in a process of
     // its own.
-    match Denoiser::open_from(None, Some(fetch.clone().into())) {
+    match Denoiser::open_from(None, Some(fetch.clone().into()), 0) {
         Ok(d) => println!(
             "skipped: a system Open Image Denoise is installed ({})",
             d.source
@@ -48,12 +48,30 @@ fn a_missing_library_says_how_to_get_one() {
     }
 }
 
+/// The device keeps to the render's thread count (OIDN would take every core). Skipped,
+/// saying why, only where OIDN is absent.
+#[test]
+fn the_device_takes_the_renders_thread_count() {
+    for threads in [1usize, 2] {
+        let d = match Denoiser::open(threads) {
+            Ok(d) => d,
+            Err(e) => {
+                println!("skipped: Open Image Denoise is not available: {e}");
+                return;
+            }
+        };
+        // SAFETY: a device parameter read by its documented name.
+        let n = unsafe { (d.api.get_device_int)(d.device, c"numThreads".as_ptr()) };
+        assert_eq!(n, threads as i32);
+    }
+}
+
 /// A smooth HDR image with independent per-pixel noise comes out of the filter far closer
 /// to the clean one (its mean squared error at least 4× smaller), with flat guides; and
 /// the filter keeps the image's mean. Skipped, saying why, only where OIDN is absent.
 #[test]
 fn denoising_reduces_independent_noise() {
-    let mut d = match Denoiser::open() {
+    let mut d = match Denoiser::open(0) {
         Ok(d) => d,
         Err(e) => {
             println!("skipped: Open Image Denoise is not available: {e}");
