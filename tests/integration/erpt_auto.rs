@@ -207,6 +207,19 @@ fn erpt_without_a_mutation_list_is_auto_and_writes_its_choices() {
         get("flowlight.mutations.0.plugin"),
         "multichain-perturbation"
     );
+    // The film window lets the lens jump reach Veach's r₂ = √(0.05·W·H/π): 16 pixels at
+    // 64² (the default, 8, at 32²), frozen with the default candidates' own parameters.
+    let wide = auto_erpt("glass-caustic/glass-caustic.toml", 64, 1);
+    let out = render(&wide);
+    assert_eq!(stat(&out, "auto.chains"), 1.0);
+    let frozen = wide.instance.resolved_params();
+    let get = |k: &str| frozen.iter().find(|(n, _)| n == k).map(|(_, v)| v.clone());
+    assert_eq!(get("film_window").as_deref(), Some("16"), "{frozen:?}");
+    let list = get("mutations").unwrap();
+    assert!(
+        !list.contains("multichain") || list.contains("theta2 = 0.02"),
+        "{list}"
+    );
     // A list given by the config keeps the manual preset: no pilot, no `auto.*` counters.
     let list = common::mutations(&[("drill", &[])]);
     let mut params = depths();

@@ -493,7 +493,12 @@ impl Integrator for Erpt {
         scene: Scene<'static>,
         stats: &mut StatsBuilder,
     ) -> Result<(Self, IntegratorInfo), String> {
-        let settings = ErptSettings::from_params(params)?;
+        let mut settings = ErptSettings::from_params(params)?;
+        if settings.auto.is_some_and(|free| free.film_window) {
+            // Fixed here, not by the pilot: the flange below depends on it. The pilot's report
+            // records it with its other choices (`auto::Report::decided_params`).
+            settings.film_window = auto::film_window(scene.camera.width, scene.camera.height);
+        }
         if mutations.is_empty() {
             return Err("erpt needs at least one [[integrator.mutations]] entry".into());
         }

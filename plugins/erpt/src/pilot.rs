@@ -118,6 +118,7 @@ impl Erpt {
             // Set by `prepare`'s pre-pass (`Erpt::prepare`).
             quantum: None,
             mixture: self.settings.mixture,
+            film_window: self.settings.film_window,
             plugins: (0..n).map(|i| self.mutations.name(i).to_string()).collect(),
             // Indirect light the rule then left to path tracing is not frozen as chained.
             chains_for: if indirect && !self.chains_part_empty {
