@@ -72,7 +72,7 @@
 //! * *Film window*: K = 2·r₂ ([`film_window`]), r₂ = √(0.05·W·H/π) the largest jump of the
 //!   lens and multi-chain perturbations (Veach's, 5% of the image area), which the window
 //!   bounds by K/2; at most [`MAX_FILM_WINDOW`]. Fixed in `create`, before the pilot, since
-//!   the units' flange (2K) is (mirror chain, 8 s, seeds 1–4: 1.16× MCPT with K = 32 at 128²,
+//!   the units' flange (2K) is (mirror chain, 8 s, seeds 1–4: 1.13× MCPT with K = 32 at 128²,
 //!   1.02× with the default 8; the window the tuned config uses).
 //! * *Chain length*: N = [`STEPS_PER_SEED_GAP`] / ρ, ρ the class' seeds per camera sample,
 //!   rounded up to a power of two in [16, 64]: the rarer the class' seeds, the further apart
@@ -112,9 +112,9 @@ use flowlight_sdk::{Params, StatDisplay};
 /// θ₂ = 0.02 rad, not Veach's 0.1 (a macro, so that [`CANDIDATES`] and the frozen list take
 /// the same text). A direction perturbed at a smooth vertex is followed through a Dirac
 /// chain to the light, and every mirror of the chain turns the cone's angle into a wider
-/// miss: on the mirror chain θ₂ = 0.02 took the render from 1.16× to 1.30× MCPT (8 s, seeds
+/// miss: on the mirror chain θ₂ = 0.02 took the render from 1.13× to 1.24× MCPT (8 s, seeds
 /// 1–4), and on the glass caustic, the ring, `lens-spot` and `glass-rod` it was within
-/// 0.96–1.12× of θ₂ = 0.1 (docs/results.md, "`auto`'s film window").
+/// 0.96–1.10× of θ₂ = 0.1 (docs/results.md, "`auto`'s film window").
 macro_rules! multichain_candidate_params {
     () => {
         "theta2 = 0.02"
