@@ -3,9 +3,10 @@
 //! 32×32 with `path_depth` 3 (Lambertian: a path's depth is its lighting layer, so `bdpt` at
 //! the same `path_depth` renders the same paths):
 //!
-//! - **No start-up bias.** Many short independent runs of either (each its own bootstrap,
-//!   chains of one 16×16 tile's length started by resampling it) average to `bdpt`'s
-//!   independent runs:
+//! - **No start-up bias.** Many short independent runs of either (each its own bootstrap;
+//!   `mmlt`'s chains of 96 mutations, which cross its 16×16 tiles' units, with Kelemen's
+//!   large-step weights; `pssmlt`'s of its default length) started by resampling it average
+//!   to `bdpt`'s independent runs:
 //!   a z-test per 8×8 region (|z| < 5) and on the image mean (|z| < 4), with the
 //!   run-to-run variance of both sides. The test fails when the chains' deposits are 5% too
 //!   bright (checked by hand at this commit: the image mean at z = 4.8, regions up to 3.8;
@@ -87,7 +88,10 @@ fn assert_runs_average_to_bdpt(plugin: &str, params: &[(&str, toml::Value)]) {
 
 #[test]
 fn short_mmlt_runs_average_to_bdpt() {
-    assert_runs_average_to_bdpt("mmlt", &[("bootstrap", int(65536))]);
+    assert_runs_average_to_bdpt(
+        "mmlt",
+        &[("bootstrap", int(65536)), ("chain_length", int(96))],
+    );
 }
 
 #[test]

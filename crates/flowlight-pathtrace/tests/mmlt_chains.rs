@@ -22,8 +22,10 @@ use flowlight_pathtrace::bidir::sample::{
     strategy_only_settings, FilmPlan, FilmSampler, SampleScratch,
 };
 use flowlight_pathtrace::bidir::Heuristic;
-use flowlight_pathtrace::pss::mmlt::{render_unit, DepthBootstrap, MmltBuffers, MmltCounts};
-use flowlight_pathtrace::pss::Mutation;
+use flowlight_pathtrace::pss::mmlt::{
+    render_unit, render_unit_in_chains, DepthBootstrap, MmltBuffers, MmltCounts,
+};
+use flowlight_pathtrace::pss::{Mutation, Splat, TileChains};
 use flowlight_sdk::{Scene, Tracer, WorkUnit};
 use glam::Vec2;
 use loaded::load;
@@ -158,7 +160,7 @@ fn drifting_small_steps_fail_the_raster_space_check() {
         // the toy integrand catches, moves a bin here by only 0.0195: chains of one tile's
         // 256 mutations, 30% of them large steps, stay close to where they started.
         let drifting = Mutation::new(0.3, 0.01).with_drift(2.0);
-        let bootstrap = DepthBootstrap::run(sampler, DEPTH, 3, 20_000, drifting);
+        let bootstrap = DepthBootstrap::run(sampler, DEPTH, 3, 20_000, drifting, false);
         let (_, histogram, _) = run_chains(sampler, film, &bootstrap, 4);
         let (reference, _) = bdpt_estimates(scene, tracer, film, 200_000);
         let (worst, _) = share_errors(&reference, &histogram);
@@ -173,7 +175,7 @@ fn drifting_small_steps_fail_the_raster_space_check() {
 fn mmlt_chains_are_stationary_in_raster_space_and_over_depths() {
     with_sampler(|sampler, film, scene, tracer| {
         let mutation = Mutation::new(0.3, 0.01);
-        let bootstrap = DepthBootstrap::run(sampler, DEPTH, 3, 20_000, mutation);
+        let bootstrap = DepthBootstrap::run(sampler, DEPTH, 3, 20_000, mutation, false);
         let (b0, b1) = (bootstrap.brightness(0), bootstrap.brightness(1));
         assert!(b0 > 0.0 && b1 > 0.0, "both depths carry light: {b0} {b1}");
         let (counts, histogram, deposited) = run_chains(sampler, film, &bootstrap, 4);
@@ -210,4 +212,104 @@ fn mmlt_chains_are_stationary_in_raster_space_and_over_depths() {
             "depth 1's share {share1:.4} against {p1:.4}"
         );
     });
+}
+
+/// The deposits (raster, value) and counts of `units` in order through one [`TileChains`]
+/// of chains of `length` mutations, over the Cornell box's depths 0 and 1 with Kelemen's
+/// large-step weights.
+fn tile_deposits(units: &[WorkUnit], length: u64) -> (Vec<(Vec2, Rgb)>, MmltCounts) {
+    with_sampler(|sampler, _, _, _| {
+        let bootstrap =
+            DepthBootstrap::run(sampler, DEPTH, 3, 2_000, Mutation::new(0.3, 0.01), true);
+        assert!(bootstrap.scale_samples() > 0);
+        let chains = TileChains::default();
+        let mut buffers = MmltBuffers::default();
+        let mut counts = MmltCounts::default();
+        let mut out = Vec::new();
+        for u in units {
+            render_unit_in_chains(
+                sampler,
+                &bootstrap,
+                u,
+                length,
+                &chains,
+                &mut buffers,
+                &mut counts,
+                &mut |s: Splat| out.push((s.raster, s.value)),
+            );
+        }
+        (out, counts)
+    })
+}
+
+/// Work units of a 4×4 tile (16 mutations per sample index).
+fn tile_unit(sample_begin: u32, sample_count: u32) -> WorkUnit {
+    WorkUnit {
+        x0: 20,
+        y0: 24,
+        x1: 24,
+        y1: 28,
+        sample_begin,
+        sample_count,
+        seed: 11,
+    }
+}
+
+#[test]
+fn an_mmlt_tile_chain_cut_into_units_is_the_whole_chain() {
+    // 96 mutations in chains of 40: boundaries at 40 and 80 fall inside units of 16; each
+    // chain keeps the depth it drew when it started.
+    let (whole, whole_counts) = tile_deposits(&[tile_unit(0, 6)], 40);
+    let pieces: Vec<WorkUnit> = (0..6).map(|s| tile_unit(s, 1)).collect();
+    let (cut, cut_counts) = tile_deposits(&pieces, 40);
+    assert_eq!(whole_counts.chains.mutations, 96);
+    assert_eq!(whole_counts.chains.chains, 3);
+    assert_eq!(cut_counts.chains, whole_counts.chains);
+    assert_eq!(
+        cut_counts.mutations_per_depth,
+        whole_counts.mutations_per_depth
+    );
+    assert_eq!(whole_counts.mutations_per_depth.iter().sum::<u64>(), 96);
+    assert!(!whole.is_empty());
+    assert_eq!(cut, whole);
+    // Units run out of order start chains of their own: other deposits, as many mutations.
+    let (reordered, counts) = tile_deposits(&[tile_unit(3, 3), tile_unit(0, 3)], 40);
+    assert_eq!(counts.chains.mutations, 96);
+    assert_ne!(reordered, whole);
+}
+
+#[test]
+fn a_tiles_chains_share_the_depths_out_in_proportion() {
+    // 512 chains of one mutation in one tile: chain k's depth comes from frac(U + k·φ), so
+    // the chains per depth are 512·P_d within a few chains, where independent draws would
+    // scatter by √(512·P_d·(1 − P_d)), about 11.
+    with_sampler(|sampler, _, _, _| {
+        let bootstrap =
+            DepthBootstrap::run(sampler, DEPTH, 5, 2_000, Mutation::new(0.3, 0.01), false);
+        let share = bootstrap.brightness(0) / bootstrap.total();
+        assert!((0.2..0.8).contains(&share), "P_0 = {share}");
+        let mut worst: f64 = 0.0;
+        for seed in 0..4 {
+            let unit = WorkUnit {
+                seed,
+                ..tile_unit(0, 32)
+            };
+            let chains = TileChains::default();
+            let (mut buffers, mut counts) = (MmltBuffers::default(), MmltCounts::default());
+            render_unit_in_chains(
+                sampler,
+                &bootstrap,
+                &unit,
+                1,
+                &chains,
+                &mut buffers,
+                &mut counts,
+                &mut |_| {},
+            );
+            assert_eq!(counts.chains.chains, 512);
+            let off = counts.mutations_per_depth[0] as f64 - 512.0 * share;
+            worst = worst.max(off.abs());
+        }
+        assert!(worst <= 3.0, "depth 0's chains {worst} off 512·P_0");
+    })
 }

@@ -10,8 +10,12 @@
 //! chosen ∝ its value (no start-up bias), and deposits by expected-value splatting; the
 //! film's normalisation is Σ_d b_d. The chain driver is `flowlight_pathtrace::pss`
 //! (shared with `pssmlt`), the strategies are `bdpt`'s (`flowlight_pathtrace::bidir`), the
-//! per-depth part is `flowlight_pathtrace::pss::mmlt`. One chain per pixel sample index of
-//! a work unit, of (tile pixels) mutations, so `spp` means W·H·spp mutations in all.
+//! per-depth part is `flowlight_pathtrace::pss::mmlt`. A work unit of P pixels × n samples
+//! runs P·n mutations, W·H·spp in all, as pieces of its tile's chains of `chain_length`
+//! mutations, which run on across the tile's units as `pssmlt`'s do; each chain draws its
+//! depth once, when it starts, from numbers spread evenly over the tile's chains. Each
+//! depth's chains weigh their deposits against their large steps (Kelemen's combination,
+//! `combine_large_steps`) with that depth's estimate of b_d.
 //!
 //! Parameters (`[integrator]`; table generated in docs/mmlt.md, "Parameters"):
 //!
@@ -20,6 +24,10 @@
 //! * `large_step` (default 0.3, [0, 1]): probability of a large step (a fresh independent
 //!   state) per mutation.
 //! * `sigma` (default 0.01, (0, 1]): standard deviation of a small step per primary sample.
+//! * `chain_length` (default 4,096; 0: one chain per sample index of a unit, a tile's
+//!   pixels long): mutations per chain.
+//! * `combine_large_steps` (default true): Kelemen's balance of each depth's chain against
+//!   its large steps, with c_d from `bootstrap`/8 further samples of depth d.
 //! * `bootstrap` (default 16384, 1–1,000,000): independent samples per depth for b_d and the
 //!   chains' start states; computed once per render, by its first work unit (8 bytes each).
 //! * `heuristic` (`"power"` or `"balance"`): the MIS weights of a depth's strategies.
@@ -30,9 +38,13 @@
 use flowlight_pathtrace::bidir::params::HEURISTIC;
 use flowlight_pathtrace::bidir::sample::{strategy_only_settings, FilmPlan, FilmSampler};
 use flowlight_pathtrace::bidir::Heuristic;
-use flowlight_pathtrace::pss::mmlt::{render_unit, DepthBootstrap, MmltBuffers, MmltCounts};
-use flowlight_pathtrace::pss::params::{mutation_from_params, LARGE_STEP, SIGMA};
-use flowlight_pathtrace::pss::{BootstrapCell, ChainCounters, Mutation};
+use flowlight_pathtrace::pss::mmlt::{
+    render_unit, render_unit_in_chains, DepthBootstrap, MmltBuffers, MmltCounts,
+};
+use flowlight_pathtrace::pss::params::{
+    mutation_from_params, COMBINE_LARGE_STEPS, LARGE_STEP, MMLT_CHAIN_LENGTH, SIGMA,
+};
+use flowlight_pathtrace::pss::{BootstrapCell, ChainCounters, Mutation, Splat, TileChains};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::declare::IntParam;
 use flowlight_sdk::{
@@ -58,10 +70,12 @@ const BOOTSTRAP: IntParam = int_param!(
     "independent samples per depth that estimate its brightness b_d (chains per depth are proportional to it; the film is normalised by the sum) and from which chains start; run once per render by its first work unit (8 bytes each)"
 );
 
-const PARAMS: [ParamSpec; 5] = [
+const PARAMS: [ParamSpec; 7] = [
     PATH_DEPTH.spec(),
     LARGE_STEP.spec(),
     SIGMA.spec(),
+    MMLT_CHAIN_LENGTH.spec(),
+    COMBINE_LARGE_STEPS.spec(),
     BOOTSTRAP.spec(),
     HEURISTIC.spec(),
 ];
@@ -73,6 +87,11 @@ pub struct Mmlt {
     depth: u32,
     mutation: Mutation,
     bootstrap_count: u32,
+    combine_large_steps: bool,
+    /// Mutations per chain (0: one chain per sample index of a unit).
+    chain_length: u64,
+    /// The tiles' chains between their units, with their depths.
+    chains: TileChains<u32>,
     /// The per-depth bootstrap of the render seed, run by the first work unit of a render
     /// with that seed (it needs a tracer; the others wait for it).
     bootstrap: BootstrapCell<DepthBootstrap>,
@@ -98,6 +117,8 @@ impl Integrator for Mmlt {
         let depth = PATH_DEPTH.get(params)? as u32;
         let mutation = mutation_from_params(params)?;
         let bootstrap_count = BOOTSTRAP.get(params)? as u32;
+        let combine_large_steps = COMBINE_LARGE_STEPS.get(params)?;
+        let chain_length = MMLT_CHAIN_LENGTH.get(params)? as u64;
         let heuristic = Heuristic::parse(HEURISTIC.get(params)?).expect("declared choice");
         let counters = ChainCounters::declare(stats);
         let info = IntegratorInfo {
@@ -112,6 +133,9 @@ impl Integrator for Mmlt {
             depth,
             mutation,
             bootstrap_count,
+            combine_large_steps,
+            chain_length,
+            chains: TileChains::default(),
             bootstrap: BootstrapCell::default(),
             counters,
         };
@@ -133,21 +157,35 @@ impl Integrator for Mmlt {
                 unit.seed,
                 self.bootstrap_count,
                 self.mutation,
+                self.combine_large_steps,
             )
         });
         let bootstrap = &*bootstrap;
         let mut counts = MmltCounts::default();
         BUFFERS.with(|buffers| {
             let buffers = &mut *buffers.borrow_mut();
-            render_unit(
-                &sampler,
-                bootstrap,
-                unit,
-                buffers,
-                &mut counts,
-                &mut |s| film.deposit(s.raster.x, s.raster.y, 0, s.value),
-                &mut |_, _| {},
-            );
+            let mut deposit = |s: Splat| film.deposit(s.raster.x, s.raster.y, 0, s.value);
+            match self.chain_length {
+                0 => render_unit(
+                    &sampler,
+                    bootstrap,
+                    unit,
+                    buffers,
+                    &mut counts,
+                    &mut deposit,
+                    &mut |_, _| {},
+                ),
+                length => render_unit_in_chains(
+                    &sampler,
+                    bootstrap,
+                    unit,
+                    length,
+                    &self.chains,
+                    buffers,
+                    &mut counts,
+                    &mut deposit,
+                ),
+            }
         });
         self.counters.report(stats, &counts.chains, 0);
         Ok(())

@@ -40,17 +40,19 @@ use flowlight_pathtrace::bidir::sample::{strategy_only_settings, FilmPlan, FilmS
 use flowlight_pathtrace::bidir::Heuristic;
 use flowlight_pathtrace::pss::bdpt::BdptTarget;
 use flowlight_pathtrace::pss::large_steps::scale_estimate;
-use flowlight_pathtrace::pss::params::{mutation_from_params, LARGE_STEP, SIGMA};
+use flowlight_pathtrace::pss::params::{
+    mutation_from_params, CHAIN_LENGTH, COMBINE_LARGE_STEPS, LARGE_STEP, SIGMA,
+};
 use flowlight_pathtrace::pss::{
     render_unit, render_unit_in_chains, Bootstrap, BootstrapCell, ChainBuffers, ChainCounters,
     ChainCounts, McptTarget, Mutation, PssTarget, Splat, TileChains,
 };
 use flowlight_pathtrace::{settings, PathSettings, Variant};
 use flowlight_sdk::abi::ParamSpec;
-use flowlight_sdk::declare::{BoolParam, ChoiceParam, IntParam};
+use flowlight_sdk::declare::{ChoiceParam, IntParam};
 use flowlight_sdk::stats::Counter;
 use flowlight_sdk::{
-    bool_param, choice_param, export_integrator, int_param, AccumulationStyle, Film, Integrator,
+    choice_param, export_integrator, int_param, AccumulationStyle, Film, Integrator,
     IntegratorInfo, MutationSet, Params, Scene, Stats, StatsBuilder, Tracer, WorkUnit,
 };
 use std::cell::RefCell;
@@ -61,21 +63,6 @@ const SAMPLER: ChoiceParam = choice_param!(
     "mcpt",
     ["mcpt", "bdpt"],
     "the sampler the chains run over: \"mcpt\", one entangled path-tracing camera sample (next-event estimation and BSDF sampling by MIS) whose first pair of numbers is its position on the film; \"bdpt\", one light and one camera subpath (two streams) with every (s, t) strategy weighed by heuristic, each splatted at its own raster position"
-);
-
-/// `combine_large_steps`: Kelemen's balance of the chain against its large steps.
-const COMBINE_LARGE_STEPS: BoolParam = bool_param!(
-    "combine_large_steps",
-    true,
-    "weigh each deposit against the large steps by the balance heuristic (Kelemen et al. 2002, as LuxCore's Metropolis sampler): a large step's proposal also counts as an independent sample, so dark regions the chains rarely visit get a path tracer's estimate; the weights use an estimate of b from bootstrap/8 further independent samples; false: plain expected-value splatting (pbrt-v4's)"
-);
-
-/// `chain_length`: mutations per chain, whatever the tile.
-const CHAIN_LENGTH: IntParam = int_param!(
-    "chain_length",
-    65536,
-    0..=1_000_000_000,
-    "mutations per chain: a tile's chains run on across its work units (its passes), each started from the bootstrap, so that the bootstrap's own noise, which every chain's first mutations repeat, is spread over this many mutations; 0: one chain per work unit (a tile's pixels long, the image depending on the tile size)"
 );
 
 /// `bootstrap`: independent samples of the normalisation (pbrt-v4's default).

@@ -37,9 +37,10 @@
 //! pixels), seeded from (seed, tile, sample index), so that the host's division by spp gives
 //! the image and the image does not depend on the thread count.
 
-use super::chain::{run_chain, Bootstrap, ChainBuffers, ChainCounts, PssTarget, Splat};
+use super::chain::{run_chain, Bootstrap, Chain, ChainBuffers, ChainCounts, PssTarget, Splat};
+use super::large_steps::scale_estimate;
 use super::samples::{Mutation, PrimarySamples};
-use super::units::chain_seed;
+use super::units::{chain_seed, run_tile_chains, ChainStart, TileChainRunner, TileChains};
 use crate::bidir::sample::{FilmSampler, SampleScratch};
 use flowlight_core::rng::Rng;
 use flowlight_core::sampler::SampleStream;
@@ -99,30 +100,50 @@ pub struct DepthBootstrap {
     depths: Vec<Bootstrap>,
     /// Running sums of b̂_d over d.
     cumulative: Vec<f64>,
+    scale_samples: u64,
 }
 
 impl DepthBootstrap {
     /// Bootstraps of `count` vectors for every depth 0 ..= `max_depth` of `sampler`, depth d
-    /// from a seed of (`seed`, d).
+    /// from a seed of (`seed`, d). With `combine_large_steps`, each depth's chains weigh their
+    /// deposits against their large steps ([`super::large_steps`]) with that depth's c, the
+    /// mean of count/8 vectors apart from its bootstrap's.
     pub fn run(
         sampler: &FilmSampler,
         max_depth: u32,
         seed: u64,
         count: u32,
         mutation: Mutation,
+        combine_large_steps: bool,
     ) -> DepthBootstrap {
         let mut depths = Vec::with_capacity(max_depth as usize + 1);
         let mut cumulative = Vec::with_capacity(max_depth as usize + 1);
         let mut sum = 0.0;
+        let mut scale_samples = 0;
         for d in 0..=max_depth {
             let mut target = MmltTarget::new(sampler, d);
             let depth_seed = Rng::hash(&[seed, 0x4d4d_4c54, u64::from(d)]);
-            let bootstrap = Bootstrap::run(&mut target, depth_seed, count, mutation);
+            let mut bootstrap = Bootstrap::run(&mut target, depth_seed, count, mutation);
+            if combine_large_steps {
+                let n = (count / 8).max(1);
+                let (c, _) = scale_estimate(&mut target, depth_seed, n, mutation);
+                bootstrap.combine_large_steps(c);
+                scale_samples += u64::from(n);
+            }
             sum += bootstrap.normalisation();
             cumulative.push(sum);
             depths.push(bootstrap);
         }
-        DepthBootstrap { depths, cumulative }
+        DepthBootstrap {
+            depths,
+            cumulative,
+            scale_samples,
+        }
+    }
+
+    /// Samples drawn beside the bootstraps for the large-step weights' c (0 without them).
+    pub fn scale_samples(&self) -> u64 {
+        self.scale_samples
     }
 
     /// The deepest depth D.
@@ -227,4 +248,101 @@ pub fn render_unit(
         }
         buffers.scratch = target.scratch;
     }
+}
+
+/// `mmlt`'s chains for [`run_tile_chains`]: a chain's kind is its depth.
+struct MmltRunner<'r, 's, 'a, 'b, D> {
+    sampler: &'s FilmSampler<'a, 'b>,
+    bootstrap: &'r DepthBootstrap,
+    buffers: &'r mut MmltBuffers,
+    counts: &'r mut MmltCounts,
+    deposit: &'r mut D,
+}
+
+impl<'s, 'a, 'b, D> MmltRunner<'_, 's, 'a, 'b, D> {
+    /// Depth `d`'s target, holding the thread's scratch until [`Self::put_back`].
+    fn target(&mut self, d: u32) -> MmltTarget<'s, 'a, 'b> {
+        MmltTarget {
+            sampler: self.sampler,
+            depth: d,
+            scratch: std::mem::take(&mut self.buffers.scratch),
+        }
+    }
+
+    fn put_back(&mut self, target: MmltTarget) {
+        self.buffers.scratch = target.scratch;
+    }
+}
+
+impl<D: FnMut(Splat)> TileChainRunner for MmltRunner<'_, '_, '_, '_, D> {
+    type Kind = u32;
+
+    fn start(&mut self, start: ChainStart) -> Option<(u32, Chain)> {
+        // The depth from the tile's evenly spread numbers: each chain's is d with probability
+        // P_d, and a tile's chains share the depths out in proportion.
+        let d = self.bootstrap.pick(start.spread)?;
+        let mut target = self.target(d);
+        let chain = Chain::start(
+            &mut target,
+            self.bootstrap.depth(d),
+            start.seed,
+            &mut self.buffers.chain,
+            &mut self.counts.chains,
+        );
+        self.put_back(target);
+        chain.map(|c| (d, c))
+    }
+
+    fn advance(&mut self, &d: &u32, chain: &mut Chain, mutations: u64) {
+        let scale = (self.bootstrap.total() / self.bootstrap.brightness(d)) as f32;
+        let mut target = self.target(d);
+        let deposit = &mut *self.deposit;
+        chain.advance(
+            &mut target,
+            self.bootstrap.depth(d),
+            mutations,
+            &mut self.buffers.chain,
+            &mut self.counts.chains,
+            &mut |splat: Splat| {
+                deposit(Splat {
+                    value: splat.value * scale,
+                    ..splat
+                })
+            },
+            &mut |_| {},
+        );
+        self.put_back(target);
+        self.counts.mutations_per_depth[d as usize] += mutations;
+    }
+
+    fn finish(&mut self, chain: Chain) {
+        chain.recycle(&mut self.buffers.chain);
+    }
+}
+
+/// Runs `unit`'s mutations as pieces of its tile's chains of `chain_length` mutations each
+/// ([`run_tile_chains`]; a chain draws its depth once, when it starts), handing their
+/// splats, multiplied by 1/P_d, to `deposit`.
+#[allow(clippy::too_many_arguments)]
+pub fn render_unit_in_chains(
+    sampler: &FilmSampler,
+    bootstrap: &DepthBootstrap,
+    unit: &WorkUnit,
+    chain_length: u64,
+    chains: &TileChains<u32>,
+    buffers: &mut MmltBuffers,
+    counts: &mut MmltCounts,
+    deposit: &mut impl FnMut(Splat),
+) {
+    counts
+        .mutations_per_depth
+        .resize(bootstrap.max_depth() as usize + 1, 0);
+    let mut runner = MmltRunner {
+        sampler,
+        bootstrap,
+        buffers,
+        counts,
+        deposit,
+    };
+    run_tile_chains(&mut runner, unit, chain_length, chains);
 }

@@ -8,15 +8,16 @@
 //! expectation, and the host's division by spp gives the image, under a time budget too. Two
 //! ways to cut those mutations into chains:
 //!
-//! * [`render_unit_in_chains`] (`pssmlt`): chains of a fixed length L that run on across
+//! * [`run_tile_chains`] (`pssmlt`'s [`render_unit_in_chains`], `mmlt`'s
+//!   `super::mmlt::render_unit_in_chains`): chains of a fixed length L that run on across
 //!   the units of their tile, numbered by the tile's mutation index m = s·P + i; a chain
 //!   covers m ∈ [k·L, (k + 1)·L), seeded from (seed, tile, k·L), and is parked in
 //!   [`TileChains`] between units. The host runs a flanged integrator's passes one after the
 //!   other, so a tile's units come in order of s: the image does not depend on the thread
 //!   count.
-//! * [`render_unit`] (`mmlt`, and `pssmlt` with `chain_length = 0`): one chain per sample
-//!   index s of the unit, of P mutations, seeded from (seed, tile, s): the image does not
-//!   depend on the thread count, but on the tile size, which sets the chains' length.
+//! * [`render_unit`] (both with `chain_length = 0`): one chain per sample index s of the
+//!   unit, of P mutations, seeded from (seed, tile, s): the image does not depend on the
+//!   thread count, but on the tile size, which sets the chains' length.
 //!
 //! Either way a chain's numbers depend only on the seed, the tile and where it starts, not on
 //! which unit or thread runs it. Every chain starts from a bootstrap state resampled ∝ its
@@ -107,20 +108,33 @@ pub fn render_unit<T: PssTarget>(
     }
 }
 
-/// A tile's chain parked between two of the tile's work units.
-struct Parked {
+/// A tile's chain parked between two of the tile's work units, with what its runner needs
+/// besides the chain (`mmlt`: its depth).
+struct Parked<K> {
     /// The render seed it belongs to.
     seed: u64,
     /// The tile mutation index of its next mutation.
     next: u64,
+    kind: K,
     chain: Chain,
 }
 
 /// Chains of a fixed length that run on across the work units of their tile
-/// ([`render_unit_in_chains`]), parked here between units; keyed by the tile.
-#[derive(Default)]
-pub struct TileChains {
-    parked: Mutex<HashMap<(u32, u32, u32, u32), Parked>>,
+/// ([`run_tile_chains`]), parked here between units; keyed by the tile. `K` is what a
+/// [`TileChainRunner`] keeps with each chain.
+pub struct TileChains<K = ()> {
+    parked: Mutex<HashMap<TileKey, Parked<K>>>,
+}
+
+/// A tile by its corners (x0, y0, x1, y1).
+type TileKey = (u32, u32, u32, u32);
+
+impl<K> Default for TileChains<K> {
+    fn default() -> Self {
+        TileChains {
+            parked: Mutex::new(HashMap::new()),
+        }
+    }
 }
 
 /// The seed of the chain of `unit`'s tile that starts at tile mutation index `m`.
@@ -136,29 +150,62 @@ fn tile_chain_seed(unit: &WorkUnit, m: u64) -> u64 {
     ])
 }
 
+/// Where a tile's chain k (of mutations [k·L, (k + 1)·L)) starts.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ChainStart {
+    /// The seed of every number of the chain.
+    pub seed: u64,
+    /// u_k = frac(U + k·φ) (φ the golden ratio's conjugate, U uniform per tile and render
+    /// seed): uniform for every chain, and the successive chains of a tile spread evenly over
+    /// [0, 1) (a Kronecker sequence), for a choice made once per chain (`mmlt`'s depth), so
+    /// that a tile's few long chains share it out in proportion.
+    pub spread: f32,
+}
+
+impl ChainStart {
+    fn of(unit: &WorkUnit, m: u64, length: u64) -> ChainStart {
+        const PHI: f64 = 0.618_033_988_749_894_8;
+        let offset = Rng::new(tile_chain_seed(unit, u64::MAX), 0).uniform() as f64;
+        let spread = (offset + (m / length) as f64 * PHI).fract() as f32;
+        ChainStart {
+            seed: tile_chain_seed(unit, m),
+            // An f64 just below 1 may round to 1.0 as f32.
+            spread: spread.min(1.0 - f32::EPSILON / 2.0),
+        }
+    }
+}
+
+/// What [`run_tile_chains`] asks of a plugin's chains: to start one, to run a piece of one,
+/// and to take back a finished one's buffers.
+pub trait TileChainRunner {
+    /// What a chain keeps besides its state (`mmlt`: its depth; `pssmlt`: nothing).
+    type Kind;
+    /// A chain started at `start`, or `None` when there is nothing to start from (a
+    /// bootstrap that found no light): the unit then deposits nothing more.
+    fn start(&mut self, start: ChainStart) -> Option<(Self::Kind, Chain)>;
+    /// Runs `mutations` mutations of `chain`.
+    fn advance(&mut self, kind: &Self::Kind, chain: &mut Chain, mutations: u64);
+    /// A chain that reached its length.
+    fn finish(&mut self, chain: Chain);
+}
+
 /// Runs `unit`'s P·n mutations (P pixels, n sample indices) as pieces of its tile's chains
-/// of `chain_length` mutations each, handing their splats to `deposit` (docs/pssmlt.md,
-/// "Work units"). The mutations of the tile are numbered m = s·P + i (sample index s, i < P);
-/// a chain covers m ∈ [k·L, (k + 1)·L) and is seeded from (render seed, tile, k·L). The
-/// first unit of a chain starts it from the bootstrap; a unit whose first mutation lies
-/// inside a chain takes it from `chains`, where the tile's previous unit parked it. The host
-/// runs a flanged integrator's passes one after the other, so a tile's units come in order
-/// of s and the image does not depend on the thread count nor on the tile size beyond how
-/// the film is cut into chains' starting points. Should the parked chain not be the one
-/// expected (another seed, or a unit run out of order, as the first unit of a distributed
-/// part), the piece starts a chain of its own, seeded from its first m: every mutation's
-/// deposits keep their expectation whatever the chain's age ([`super::chain`]), so the
-/// image stays unbiased.
-#[allow(clippy::too_many_arguments)]
-pub fn render_unit_in_chains<T: PssTarget>(
-    target: &mut T,
-    bootstrap: &Bootstrap,
+/// of `chain_length` mutations each (docs/pssmlt.md, "Work units"). The mutations of the
+/// tile are numbered m = s·P + i (sample index s, i < P); a chain covers m ∈ [k·L, (k + 1)·L)
+/// and is seeded from (render seed, tile, k·L). The first unit of a chain starts it; a unit
+/// whose first mutation lies inside a chain takes it from `chains`, where the tile's previous
+/// unit parked it. The host runs a flanged integrator's passes one after the other, so a
+/// tile's units come in order of s and the image does not depend on the thread count nor on
+/// the tile size beyond how the film is cut into chains' starting points. Should the parked
+/// chain not be the one expected (another seed, or a unit run out of order, as the first unit
+/// of a distributed part), the piece starts a chain of its own, seeded from its first m:
+/// every mutation's deposits keep their expectation whatever the chain's age
+/// ([`super::chain`]), so the image stays unbiased.
+pub fn run_tile_chains<R: TileChainRunner>(
+    runner: &mut R,
     unit: &WorkUnit,
     chain_length: u64,
-    chains: &TileChains,
-    buffers: &mut ChainBuffers,
-    counts: &mut ChainCounts,
-    deposit: &mut impl FnMut(Splat),
+    chains: &TileChains<R::Kind>,
 ) {
     let key = (unit.x0, unit.y0, unit.x1, unit.y1);
     let pixels = (unit.x1 - unit.x0) as u64 * (unit.y1 - unit.y0) as u64;
@@ -172,40 +219,31 @@ pub fn render_unit_in_chains<T: PssTarget>(
         .remove(&key);
     let mut chain = parked
         .filter(|p| p.seed == unit.seed && p.next == m && !m.is_multiple_of(length))
-        .map(|p| p.chain);
+        .map(|p| (p.kind, p.chain));
     while m < end {
-        let mut current = match chain.take() {
+        let (kind, mut current) = match chain.take() {
             Some(c) => c,
-            None => {
-                match Chain::start(target, bootstrap, tile_chain_seed(unit, m), buffers, counts) {
-                    Some(c) => c,
-                    // No light in the bootstrap: nothing to deposit.
-                    None => return,
-                }
-            }
+            // None: no light in the bootstrap, nothing to deposit.
+            None => match runner.start(ChainStart::of(unit, m, length)) {
+                Some(c) => c,
+                None => return,
+            },
         };
         let chain_end = (m / length + 1) * length;
         let stop = chain_end.min(end);
-        current.advance(
-            target,
-            bootstrap,
-            stop - m,
-            buffers,
-            counts,
-            deposit,
-            &mut |_| {},
-        );
+        runner.advance(&kind, &mut current, stop - m);
         m = stop;
         if m < chain_end {
-            chain = Some(current);
+            chain = Some((kind, current));
         } else {
-            current.recycle(buffers);
+            runner.finish(current);
         }
     }
-    if let Some(chain) = chain {
+    if let Some((kind, chain)) = chain {
         let parked = Parked {
             seed: unit.seed,
             next: m,
+            kind,
             chain,
         };
         chains
@@ -214,6 +252,69 @@ pub fn render_unit_in_chains<T: PssTarget>(
             .unwrap_or_else(PoisonError::into_inner)
             .insert(key, parked);
     }
+}
+
+/// `pssmlt`'s chains over one target and bootstrap, for [`run_tile_chains`].
+struct PssRunner<'r, T, D> {
+    target: &'r mut T,
+    bootstrap: &'r Bootstrap,
+    buffers: &'r mut ChainBuffers,
+    counts: &'r mut ChainCounts,
+    deposit: &'r mut D,
+}
+
+impl<T: PssTarget, D: FnMut(Splat)> TileChainRunner for PssRunner<'_, T, D> {
+    type Kind = ();
+
+    fn start(&mut self, start: ChainStart) -> Option<((), Chain)> {
+        Chain::start(
+            self.target,
+            self.bootstrap,
+            start.seed,
+            self.buffers,
+            self.counts,
+        )
+        .map(|c| ((), c))
+    }
+
+    fn advance(&mut self, _: &(), chain: &mut Chain, mutations: u64) {
+        chain.advance(
+            self.target,
+            self.bootstrap,
+            mutations,
+            self.buffers,
+            self.counts,
+            self.deposit,
+            &mut |_| {},
+        );
+    }
+
+    fn finish(&mut self, chain: Chain) {
+        chain.recycle(self.buffers);
+    }
+}
+
+/// Runs `unit`'s mutations as pieces of its tile's chains of `chain_length` mutations over
+/// `target` ([`run_tile_chains`]), handing their splats to `deposit`.
+#[allow(clippy::too_many_arguments)]
+pub fn render_unit_in_chains<T: PssTarget>(
+    target: &mut T,
+    bootstrap: &Bootstrap,
+    unit: &WorkUnit,
+    chain_length: u64,
+    chains: &TileChains,
+    buffers: &mut ChainBuffers,
+    counts: &mut ChainCounts,
+    deposit: &mut impl FnMut(Splat),
+) {
+    let mut runner = PssRunner {
+        target,
+        bootstrap,
+        buffers,
+        counts,
+        deposit,
+    };
+    run_tile_chains(&mut runner, unit, chain_length, chains);
 }
 
 /// The chain counters a primary-sample-space plugin reports (`pssmlt`, `mmlt`): chains,
