@@ -811,6 +811,16 @@ mod tests {
         assert_eq!(dim.mutations_per_sample, 1.0 / 16.0);
     }
 
+    /// The report's frozen parameters as the TOML table a config would hold.
+    fn frozen(r: &Report) -> toml::Table {
+        let text: String = r
+            .decided_params()
+            .iter()
+            .map(|(k, v)| format!("{k} = {v}\n"))
+            .collect();
+        text.parse().expect("TOML")
+    }
+
     #[test]
     fn the_report_freezes_into_a_manual_config() {
         let plan = decide(
@@ -844,19 +854,14 @@ mod tests {
                 mutations: true,
             },
         };
-        let text: String = r
-            .decided_params()
-            .iter()
-            .map(|(k, v)| format!("{k} = {v}\n"))
-            .collect();
-        let table: toml::Table = text.parse().expect("TOML");
+        let table = frozen(&r);
         assert_eq!(table["preset"].as_str(), Some("manual"));
         assert_eq!(table["chains_for"].as_str(), Some("caustics"));
         assert_eq!(table["seeds"].as_str(), Some("entangled"));
         assert_eq!(table["direct"].as_str(), Some("mcpt"));
         assert_eq!(table["termination"].as_str(), Some("expo"));
         let list = table["mutations"].as_array().unwrap();
-        assert_eq!(list.len(), 1, "blow moved nothing: {text}");
+        assert_eq!(list.len(), 1, "blow moved nothing: {table:?}");
         assert_eq!(list[0]["plugin"].as_str(), Some("drill"));
         assert_eq!(table["mixture"].as_str(), Some("selected"));
         assert_eq!(table["film_window"].as_integer(), Some(32));
@@ -867,13 +872,7 @@ mod tests {
             let mut r = r.clone();
             r.plugins = vec!["multichain-perturbation".into(), "blow".into()];
             r.free.mutations = free_list;
-            let text: String = r
-                .decided_params()
-                .iter()
-                .map(|(k, v)| format!("{k} = {v}\n"))
-                .collect();
-            let table: toml::Table = text.parse().expect("TOML");
-            table["mutations"].as_array().unwrap()[0].clone()
+            frozen(&r)["mutations"].as_array().unwrap()[0].clone()
         };
         let defaulted = frozen_list(true);
         assert_eq!(
