@@ -88,6 +88,9 @@ impl Erpt {
             if free.chain_length {
                 self.settings.chain_length = plan.chain_length;
             }
+            if free.max_chains_per_seed {
+                self.settings.max_chains_per_seed = auto::MAX_CHAINS_PER_SEED;
+            }
             if free.mixture {
                 self.settings.mixture = MixtureRatio::Selected;
             }
