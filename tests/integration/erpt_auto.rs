@@ -215,7 +215,11 @@ fn erpt_without_a_mutation_list_is_auto_and_writes_its_choices() {
     let frozen = wide.instance.resolved_params();
     let get = |k: &str| frozen.iter().find(|(n, _)| n == k).map(|(_, v)| v.clone());
     assert_eq!(get("film_window").as_deref(), Some("16"), "{frozen:?}");
-    assert_eq!(get("max_chains_per_seed").as_deref(), Some("16"), "{frozen:?}");
+    assert_eq!(
+        get("max_chains_per_seed").as_deref(),
+        Some("16"),
+        "{frozen:?}"
+    );
     let list = get("mutations").unwrap();
     assert!(
         !list.contains("multichain") || list.contains("theta2 = 0.02"),
