@@ -37,7 +37,7 @@
 //! pixels), seeded from (seed, tile, sample index), so that the host's division by spp gives
 //! the image and the image does not depend on the thread count.
 
-use super::chain::{run_chain, Bootstrap, Chain, ChainBuffers, ChainCounts, PssTarget, Splat};
+use super::chain::{Bootstrap, Chain, ChainBuffers, ChainCounts, PssTarget, Splat};
 use super::large_steps::scale_estimate;
 use super::samples::{Mutation, PrimarySamples};
 use super::units::{chain_seed, run_tile_chains, ChainStart, TileChainRunner, TileChains};
@@ -213,53 +213,55 @@ pub fn render_unit(
     visit: &mut impl FnMut(u32, &[Splat]),
 ) {
     let pixels = (unit.x1 - unit.x0) as u64 * (unit.y1 - unit.y0) as u64;
-    let depths = bootstrap.max_depth() as usize + 1;
-    counts.mutations_per_depth.resize(depths, 0);
+    let mut runner = MmltRunner::new(sampler, bootstrap, buffers, counts, deposit, visit);
     for s in unit.sample_begin..unit.sample_begin + unit.sample_count {
         let seed = chain_seed(unit, s);
-        // Stream 3: run_chain draws its start and acceptances from stream 1 of the seed.
-        let mut rng = Rng::new(seed, 3);
-        let Some(d) = bootstrap.pick(rng.uniform()) else {
+        // Stream 3 picks the depth: the chain draws its start and acceptances from stream 1.
+        let start = ChainStart {
+            seed,
+            spread: Rng::new(seed, 3).uniform(),
+        };
+        let Some((d, mut chain)) = runner.start(start) else {
             return;
         };
-        let scale = (bootstrap.total() / bootstrap.brightness(d)) as f32;
-        let mut target = MmltTarget {
-            sampler,
-            depth: d,
-            scratch: std::mem::take(&mut buffers.scratch),
-        };
-        let ran = run_chain(
-            &mut target,
-            bootstrap.depth(d),
-            seed,
-            pixels,
-            &mut buffers.chain,
-            &mut counts.chains,
-            &mut |splat: Splat| {
-                deposit(Splat {
-                    value: splat.value * scale,
-                    ..splat
-                })
-            },
-            &mut |state: &[Splat]| visit(d, state),
-        );
-        if ran.is_some() {
-            counts.mutations_per_depth[d as usize] += pixels;
-        }
-        buffers.scratch = target.scratch;
+        runner.advance(&d, &mut chain, pixels);
+        runner.finish(chain);
     }
 }
 
-/// `mmlt`'s chains for [`run_tile_chains`]: a chain's kind is its depth.
-struct MmltRunner<'r, 's, 'a, 'b, D> {
+/// `mmlt`'s chains, for [`render_unit`] and [`run_tile_chains`]: a chain's kind is its
+/// depth; `visit` sees the depth and the state's splats after every mutation.
+struct MmltRunner<'r, 's, 'a, 'b, D, V> {
     sampler: &'s FilmSampler<'a, 'b>,
     bootstrap: &'r DepthBootstrap,
     buffers: &'r mut MmltBuffers,
     counts: &'r mut MmltCounts,
     deposit: &'r mut D,
+    visit: &'r mut V,
 }
 
-impl<'s, 'a, 'b, D> MmltRunner<'_, 's, 'a, 'b, D> {
+impl<'r, 's, 'a, 'b, D, V> MmltRunner<'r, 's, 'a, 'b, D, V> {
+    fn new(
+        sampler: &'s FilmSampler<'a, 'b>,
+        bootstrap: &'r DepthBootstrap,
+        buffers: &'r mut MmltBuffers,
+        counts: &'r mut MmltCounts,
+        deposit: &'r mut D,
+        visit: &'r mut V,
+    ) -> Self {
+        counts
+            .mutations_per_depth
+            .resize(bootstrap.max_depth() as usize + 1, 0);
+        MmltRunner {
+            sampler,
+            bootstrap,
+            buffers,
+            counts,
+            deposit,
+            visit,
+        }
+    }
+
     /// Depth `d`'s target, holding the thread's scratch until [`Self::put_back`].
     fn target(&mut self, d: u32) -> MmltTarget<'s, 'a, 'b> {
         MmltTarget {
@@ -274,7 +276,9 @@ impl<'s, 'a, 'b, D> MmltRunner<'_, 's, 'a, 'b, D> {
     }
 }
 
-impl<D: FnMut(Splat)> TileChainRunner for MmltRunner<'_, '_, '_, '_, D> {
+impl<D: FnMut(Splat), V: FnMut(u32, &[Splat])> TileChainRunner
+    for MmltRunner<'_, '_, '_, '_, D, V>
+{
     type Kind = u32;
 
     fn start(&mut self, start: ChainStart) -> Option<(u32, Chain)> {
@@ -296,7 +300,7 @@ impl<D: FnMut(Splat)> TileChainRunner for MmltRunner<'_, '_, '_, '_, D> {
     fn advance(&mut self, &d: &u32, chain: &mut Chain, mutations: u64) {
         let scale = (self.bootstrap.total() / self.bootstrap.brightness(d)) as f32;
         let mut target = self.target(d);
-        let deposit = &mut *self.deposit;
+        let (deposit, visit) = (&mut *self.deposit, &mut *self.visit);
         chain.advance(
             &mut target,
             self.bootstrap.depth(d),
@@ -309,7 +313,7 @@ impl<D: FnMut(Splat)> TileChainRunner for MmltRunner<'_, '_, '_, '_, D> {
                     ..splat
                 })
             },
-            &mut |_| {},
+            &mut |state: &[Splat]| visit(d, state),
         );
         self.put_back(target);
         self.counts.mutations_per_depth[d as usize] += mutations;
@@ -334,15 +338,7 @@ pub fn render_unit_in_chains(
     counts: &mut MmltCounts,
     deposit: &mut impl FnMut(Splat),
 ) {
-    counts
-        .mutations_per_depth
-        .resize(bootstrap.max_depth() as usize + 1, 0);
-    let mut runner = MmltRunner {
-        sampler,
-        bootstrap,
-        buffers,
-        counts,
-        deposit,
-    };
+    let mut visit = |_: u32, _: &[Splat]| {};
+    let mut runner = MmltRunner::new(sampler, bootstrap, buffers, counts, deposit, &mut visit);
     run_tile_chains(&mut runner, unit, chain_length, chains);
 }
