@@ -132,11 +132,7 @@ impl Emitter {
         } else {
             m.emission
         };
-        if self.vertex_colored != 0 {
-            emission * self.color_at(b)
-        } else {
-            emission
-        }
+        emission * self.color_at(b)
     }
 
     /// The vertex colour at barycentrics `b` (1s for an emitter without vertex colours).
