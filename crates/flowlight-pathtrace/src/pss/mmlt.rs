@@ -17,7 +17,7 @@
 //! [`DepthBootstrap`] runs the pss bootstrap ([`Bootstrap`]) once per depth d = 0 … D with
 //! B vectors each: b̂_d, the mean scalar target of depth d (its brightness), and the start
 //! states of depth-d chains, resampled ∝ f_d. A chain draws its depth with probability
-//! P_d = b̂_d / Σ_k b̂_k, then runs [`run_chain`] over depth d's target and bootstrap, which
+//! P_d = b̂_d / Σ_k b̂_k, then runs a [`Chain`] over depth d's target and bootstrap, which
 //! weighs its splats by b̂_d / f_d (expected-value splatting); its deposits are multiplied
 //! by 1/P_d. Given the bootstraps, a mutation's deposits then have expectation
 //!
