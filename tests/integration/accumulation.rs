@@ -175,6 +175,75 @@ fn the_host_chooses_blasting_for_path_tracing_and_caching_for_chains() {
 }
 
 #[test]
+fn the_host_buffers_integrators_whose_deposits_land_anywhere() {
+    // BDPT's light-tracing deposits scatter over the whole film: whole-image buffers, flushed
+    // once per thread, not a micro-tile cache that thrashes. The image is the one Caching
+    // gives, bit for bit.
+    let mut s = common::renderer_with(
+        "cornell-box/cornell-box.toml",
+        Some("bdpt"),
+        (24, 24),
+        2,
+        &[],
+    );
+    s.options.threads = 2;
+    let buffered = common::render(&s);
+    let a = buffered.stats.accumulation.unwrap();
+    assert_eq!(a.style, Style::Buffering);
+    assert!(
+        (1..=2).contains(&a.counts.flushes),
+        "at most one flush per thread, got {}",
+        a.counts.flushes
+    );
+    s.options.accumulation = Some(Style::Caching);
+    let cached = common::render(&s);
+    assert_eq!(cached.stats.accumulation.unwrap().style, Style::Caching);
+    for i in 0..24 * 24 {
+        assert_eq!(
+            buffered.frame.sum(0, i),
+            cached.frame.sum(0, i),
+            "pixel {i}"
+        );
+    }
+}
+
+#[test]
+fn a_live_preview_sees_what_the_threads_buffer_while_rendering() {
+    // Two units of BDPT, Buffering (the host's choice); the brightest image the progress
+    // callback saw before the render ended.
+    let mut s = common::renderer_with(
+        "cornell-box/cornell-box.toml",
+        Some("bdpt"),
+        (24, 24),
+        2,
+        &[],
+    );
+    s.options.threads = 1;
+    let mut brightest_seen = |flush: Option<std::time::Duration>| {
+        s.options.preview_flush = flush;
+        let brightest = std::sync::Mutex::new(0.0f64);
+        let stop = std::sync::atomic::AtomicBool::new(false);
+        let out = s
+            .render(&stop, &|p| {
+                if let Some(img) = p.image() {
+                    let sum: f64 = img.iter().map(|c| (c.r + c.g + c.b) as f64).sum();
+                    let mut b = brightest.lock().unwrap();
+                    *b = b.max(sum);
+                }
+            })
+            .unwrap();
+        assert_eq!(out.stats.accumulation.unwrap().style, Style::Buffering);
+        brightest.into_inner().unwrap()
+    };
+    assert_eq!(
+        brightest_seen(None),
+        0.0,
+        "held until the end without a preview"
+    );
+    assert!(brightest_seen(Some(std::time::Duration::ZERO)) > 0.0);
+}
+
+#[test]
 fn f32_precision_agrees_with_the_exact_sums_to_rounding() {
     let mut s = erpt(32, true);
     s.options.tile_size = 8;

@@ -48,6 +48,8 @@ pub fn run(
         }
     }
     let mut renderer = Renderer::prepare(config, ov).map_err(|e| anyhow!(e))?;
+    renderer.options.preview_flush =
+        flowlight_host::output::live::preview_flush(live.tev.is_some(), live.preview_every);
     crate::part_args::apply(&mut renderer, part.part, part.samples, ov.out.is_some())?;
     // Before any work: the outputs must be writable and must not overwrite an input, and a
     // denoiser asked for must be there.

@@ -48,6 +48,16 @@ impl ThreadBuffer {
         }
         shared.add_deposits(&self.large);
     }
+
+    /// [`ThreadBuffer::flush_into`], then empties the buffer for the deposits to come.
+    pub fn flush_and_clear(&mut self, shared: &SharedFrame) {
+        self.flush_into(shared);
+        for cells in &mut self.planes {
+            let n = cells.len();
+            cells.clear_range(0, n);
+        }
+        self.large.clear();
+    }
 }
 
 impl Accumulator for ThreadBuffer {

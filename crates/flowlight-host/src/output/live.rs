@@ -19,6 +19,21 @@ use std::time::{Duration, Instant};
 pub const TEV_INTERVAL: Duration = Duration::from_millis(500);
 /// How long connecting (and each write) to tev may take.
 pub const TEV_TIMEOUT: Duration = Duration::from_secs(2);
+/// The shortest interval at which a live preview has the worker threads move their private
+/// accumulation buffers into the frame ([`crate::render::RenderOptions::preview_flush`]): a
+/// whole-image buffer is a pass over the image, so not at tev's own rate.
+pub const PREVIEW_FLUSH_MIN: Duration = Duration::from_secs(2);
+
+/// How often a render previewed to tev (`tev`) and/or as a PNG every `png_every` seconds has
+/// its threads flush their private buffers: [`PREVIEW_FLUSH_MIN`], or the PNG's interval when
+/// it is longer and no tev is watching; `None` without a preview.
+pub fn preview_flush(tev: bool, png_every: Option<f64>) -> Option<Duration> {
+    match (tev, png_every) {
+        (false, None) => None,
+        (true, _) => Some(PREVIEW_FLUSH_MIN),
+        (false, Some(s)) => Some(Duration::from_secs_f64(s).max(PREVIEW_FLUSH_MIN)),
+    }
+}
 
 /// The live preview's outputs and when each was last refreshed.
 pub struct LivePreview {
@@ -141,5 +156,22 @@ impl LivePreview {
                 self.png = None;
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn previews_flush_the_threads_buffers_at_most_every_two_seconds() {
+        assert_eq!(preview_flush(false, None), None);
+        assert_eq!(preview_flush(true, None), Some(PREVIEW_FLUSH_MIN));
+        assert_eq!(preview_flush(true, Some(30.0)), Some(PREVIEW_FLUSH_MIN));
+        assert_eq!(preview_flush(false, Some(0.5)), Some(PREVIEW_FLUSH_MIN));
+        assert_eq!(
+            preview_flush(false, Some(10.0)),
+            Some(Duration::from_secs(10))
+        );
     }
 }

@@ -110,6 +110,12 @@ pub struct RenderOptions {
     /// Blasting: the flange of each unit's buffer in pixels; `None` the integrator's
     /// (`u32::MAX` covers the screen).
     pub flange: Option<u32>,
+    /// While a live preview reads the frame (`--tev`, `--preview-every`): Buffering and
+    /// Caching move what a thread holds into the frame when one of its units ends this long
+    /// after its last such flush, so that the preview shows it. `None`: a thread's buffer
+    /// reaches the frame only when Caching needs room and at the end. The image is the same
+    /// either way with exact sums.
+    pub preview_flush: Option<Duration>,
 }
 
 impl RenderOptions {
@@ -130,6 +136,7 @@ impl RenderOptions {
             precision: Precision::Exact,
             cache_bytes: DEFAULT_CACHE_MIB << 20,
             flange: None,
+            preview_flush: None,
         }
     }
 }
@@ -137,12 +144,30 @@ impl RenderOptions {
 /// Default of `render.accumulation_cache_mib`.
 pub const DEFAULT_CACHE_MIB: u64 = 16;
 
-/// The style the host uses when the config does not force one: Blasting for integrators
-/// whose deposits stay in their tile, Caching for flanged ones (Markov chains), whose
-/// deposits wander and whose memory must not grow with threads and layers.
-pub fn choose_style(requested: AccumulationStyle) -> Style {
+/// Most bytes of private buffers [`choose_style`] gives Buffering: 1 GiB over all threads.
+pub const AUTO_BUFFERING_MAX_BYTES: u64 = 1 << 30;
+
+/// The style the host uses when the config does not force one, from the integrator's
+/// `requested` style and `flange`, and the bytes Buffering's whole-image buffers would take
+/// over all threads (`buffering_bytes`):
+/// - **Blasting** for integrators whose deposits stay in their tile (path tracing);
+/// - **Caching** for flanged ones with a flange (ERPT's chains, which random-walk from their
+///   tile): their deposits stay near it, so the micro-tiles of a thread's unit stay cached,
+///   and memory does not grow with threads and layers;
+/// - **Buffering** for flanged ones without a flange (light tracing, BDPT, VCM, PSSMLT,
+///   MMLT: deposits anywhere on the film) while `buffering_bytes` is at most
+///   [`AUTO_BUFFERING_MAX_BYTES`], else Caching. Deposits scattered over the film hit a
+///   micro-tile cache smaller than the film at random, so it flushes half of itself every
+///   few thousand deposits under the frame's locks: BDPT on the 512² Cornell box took 25%
+///   more CPU at two threads than at one (944 flushes, a sixth of them waiting for the
+///   lock), with whole-image buffers 1% more (docs/performance.md, "Target 4").
+pub fn choose_style(requested: AccumulationStyle, flange: u32, buffering_bytes: u64) -> Style {
     match requested {
         AccumulationStyle::Tile => Style::Blasting,
+        AccumulationStyle::FlangedTile if flange > 0 => Style::Caching,
+        AccumulationStyle::FlangedTile if buffering_bytes <= AUTO_BUFFERING_MAX_BYTES => {
+            Style::Buffering
+        }
         AccumulationStyle::FlangedTile => Style::Caching,
     }
 }
@@ -239,8 +264,9 @@ impl Progress<'_> {
     /// The image as it stands, for a live preview (tev, `--preview-every`): a tile-local
     /// integrator's pixels over their own finished samples, a flanged one's (Markov chains
     /// deposit anywhere) over the mean samples per pixel so far. Deposits still in private
-    /// buffers (Buffering, Caching) show when they are flushed. Copies the frame under its
-    /// lock: call it at a limited rate. `None` without a frame.
+    /// buffers (Buffering, Caching) show when they are flushed
+    /// ([`RenderOptions::preview_flush`]). Copies the frame under its lock: call it at a
+    /// limited rate. `None` without a frame.
     pub fn image(&self) -> Option<Vec<flowlight_core::Rgb>> {
         let (shared, tiled) = self.frame?;
         let uniform = (!tiled).then(|| {

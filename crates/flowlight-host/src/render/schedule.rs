@@ -16,7 +16,7 @@ use crate::accumulation::{
 use crate::intersector::{Intersector, StopSignal, UnitTracer};
 use crate::plugin::{IntegratorInstance, PluginError};
 use flowlight_scene::Scene;
-use flowlight_sdk::abi::StatSpec;
+use flowlight_sdk::abi::{IntegratorInfo, StatSpec};
 use flowlight_sdk::{AccumulationStyle, Accumulator, WorkUnit};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
@@ -85,6 +85,9 @@ struct Run<'a, 'f> {
     planned: u64,
     shared: &'f SharedFrame,
     private: &'a [Mutex<Option<ThreadAccumulator<'f>>>],
+    /// Per thread, nanoseconds after `start` of its last preview flush
+    /// ([`RenderOptions::preview_flush`]).
+    last_flush: &'a [AtomicU64],
     counters: &'a Counters,
 }
 
@@ -100,13 +103,11 @@ pub fn render(
     let (width, height) = (opts.width, opts.height);
     let layer_count = instance.info.layer_count;
     let precision = opts.precision;
-    let style = opts
-        .accumulation
-        .unwrap_or_else(|| choose_style(instance.info.accumulation));
-    let (pool, shared, cache_slots) = accumulation_plan(style, opts, layer_count)?;
+    let (pool, style, shared, cache_slots) = accumulation_plan(&instance.info, opts)?;
     let threads = pool.current_num_threads();
     let private: Vec<Mutex<Option<ThreadAccumulator>>> =
         (0..threads).map(|_| Mutex::new(None)).collect();
+    let last_flush: Vec<AtomicU64> = (0..threads).map(|_| AtomicU64::new(0)).collect();
     let (tiles, flange) = unit_tiles(instance, opts);
     let start = Instant::now();
     let specs = instance.stat_specs();
@@ -150,6 +151,7 @@ pub fn render(
         },
         shared: &shared,
         private: &private,
+        last_flush: &last_flush,
         counters: &counters,
     };
     let tally = pool.install(|| run.passes());
@@ -225,21 +227,26 @@ fn prepare(
     Ok((tracer.counts.closest, tracer.counts.shadow))
 }
 
-/// The render's thread pool, its frame and the micro-tiles per thread's cache, once the
-/// memory they and the style's private buffers need is known to be available.
+/// The render's thread pool, its accumulation style (the config's, else the host's choice for
+/// the integrator `info` and the pool's threads), its frame and the micro-tiles per thread's
+/// cache, once the memory they and the style's private buffers need is known to be available.
 fn accumulation_plan(
-    style: Style,
+    info: &IntegratorInfo,
     opts: &RenderOptions,
-    layer_count: u32,
-) -> Result<(std::sync::Arc<rayon::ThreadPool>, SharedFrame, usize), String> {
+) -> Result<(std::sync::Arc<rayon::ThreadPool>, Style, SharedFrame, usize), String> {
     let pool = super::worker_pool(opts.threads)?;
     let threads = pool.current_num_threads();
+    let layer_count = info.layer_count;
+    let style = opts.accumulation.unwrap_or_else(|| {
+        let buffering = private_plan(Style::Buffering, opts, layer_count, threads);
+        choose_style(info.accumulation, info.flange, buffering)
+    });
     let (width, height, precision) = (opts.width, opts.height, opts.precision);
     let private = private_plan(style, opts, layer_count, threads);
     check_memory(width, height, layer_count, precision, private)?;
     let shared = SharedFrame::new(width, height, layer_count, precision);
     let cache_slots = cache_slots(style, opts, &shared, threads)?;
-    Ok((pool, shared, cache_slots))
+    Ok((pool, style, shared, cache_slots))
 }
 
 /// Bytes of private accumulation buffers the style will hold at most: Buffering's whole-image
@@ -621,6 +628,17 @@ impl Run<'_, '_> {
         };
         if result.is_ok() {
             shared.add_samples((unit.x0, unit.y0, unit.x1, unit.y1), unit.sample_count);
+        }
+        if let Some(every) = self.opts.preview_flush {
+            let now = self.start.elapsed().as_nanos() as u64;
+            let last = &self.last_flush[me];
+            if now.saturating_sub(last.load(Ordering::Relaxed)) >= every.as_nanos() as u64 {
+                last.store(now, Ordering::Relaxed);
+                match acc {
+                    ThreadAccumulator::Buffer(b) => b.flush_and_clear(shared),
+                    ThreadAccumulator::Cache(c) => c.flush(),
+                }
+            }
         }
         (result, counts)
     }

@@ -298,6 +298,7 @@ pub(super) fn render_options(
         precision: frame_precision(config),
         cache_bytes: (config.accumulation_cache_mib * 1048576.0) as u64,
         flange: config.flange,
+        preview_flush: None,
     }
 }
 
