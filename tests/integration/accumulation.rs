@@ -174,18 +174,23 @@ fn the_host_chooses_blasting_for_path_tracing_and_caching_for_chains() {
     assert!(a.counts.flushes > 0);
 }
 
-#[test]
-fn the_host_buffers_integrators_whose_deposits_land_anywhere() {
-    // BDPT's light-tracing deposits scatter over the whole film: whole-image buffers, flushed
-    // once per thread, not a micro-tile cache that thrashes. The image is the one Caching
-    // gives, bit for bit.
-    let mut s = common::renderer_with(
+/// BDPT on the Cornell box at 24², 2 samples: deposits anywhere on the film.
+fn bdpt_box() -> Renderer {
+    common::renderer_with(
         "cornell-box/cornell-box.toml",
         Some("bdpt"),
         (24, 24),
         2,
         &[],
-    );
+    )
+}
+
+#[test]
+fn the_host_buffers_integrators_whose_deposits_land_anywhere() {
+    // BDPT's light-tracing deposits scatter over the whole film: whole-image buffers, flushed
+    // once per thread, not a micro-tile cache that thrashes. The image is the one Caching
+    // gives, bit for bit.
+    let mut s = bdpt_box();
     s.options.threads = 2;
     let buffered = common::render(&s);
     let a = buffered.stats.accumulation.unwrap();
@@ -211,13 +216,7 @@ fn the_host_buffers_integrators_whose_deposits_land_anywhere() {
 fn a_live_preview_sees_what_the_threads_buffer_while_rendering() {
     // Two units of BDPT, Buffering (the host's choice); the brightest image the progress
     // callback saw before the render ended.
-    let mut s = common::renderer_with(
-        "cornell-box/cornell-box.toml",
-        Some("bdpt"),
-        (24, 24),
-        2,
-        &[],
-    );
+    let mut s = bdpt_box();
     s.options.threads = 1;
     let mut brightest_seen = |flush: Option<std::time::Duration>| {
         s.options.preview_flush = flush;
