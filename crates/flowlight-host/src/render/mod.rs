@@ -148,24 +148,33 @@ pub const DEFAULT_CACHE_MIB: u64 = 16;
 pub const AUTO_BUFFERING_MAX_BYTES: u64 = 1 << 30;
 
 /// The style the host uses when the config does not force one, from the integrator's
-/// `requested` style and `flange`, and the bytes Buffering's whole-image buffers would take
-/// over all threads (`buffering_bytes`):
+/// `requested` style and `flange`, the bytes Buffering's whole-image buffers would take over
+/// all threads (`buffering_bytes`) and whether they fit in the memory available
+/// (`buffering_fits`, with the frame):
 /// - **Blasting** for integrators whose deposits stay in their tile (path tracing);
 /// - **Caching** for flanged ones with a flange (ERPT's chains, which random-walk from their
 ///   tile): their deposits stay near it, so the micro-tiles of a thread's unit stay cached,
 ///   and memory does not grow with threads and layers;
 /// - **Buffering** for flanged ones without a flange (light tracing, BDPT, VCM, PSSMLT,
 ///   MMLT: deposits anywhere on the film) while `buffering_bytes` is at most
-///   [`AUTO_BUFFERING_MAX_BYTES`], else Caching. Deposits scattered over the film hit a
+///   [`AUTO_BUFFERING_MAX_BYTES`] and fits, else Caching (so the host's choice never fails
+///   for want of memory where Caching's cap would do). Deposits scattered over the film hit a
 ///   micro-tile cache smaller than the film at random, so it flushes half of itself every
 ///   few thousand deposits under the frame's locks: BDPT on the 512² Cornell box took 25%
 ///   more CPU at two threads than at one (944 flushes, a sixth of them waiting for the
 ///   lock), with whole-image buffers 1% more (docs/performance.md, "Target 4").
-pub fn choose_style(requested: AccumulationStyle, flange: u32, buffering_bytes: u64) -> Style {
+pub fn choose_style(
+    requested: AccumulationStyle,
+    flange: u32,
+    buffering_bytes: u64,
+    buffering_fits: bool,
+) -> Style {
     match requested {
         AccumulationStyle::Tile => Style::Blasting,
         AccumulationStyle::FlangedTile if flange > 0 => Style::Caching,
-        AccumulationStyle::FlangedTile if buffering_bytes <= AUTO_BUFFERING_MAX_BYTES => {
+        AccumulationStyle::FlangedTile
+            if buffering_fits && buffering_bytes <= AUTO_BUFFERING_MAX_BYTES =>
+        {
             Style::Buffering
         }
         AccumulationStyle::FlangedTile => Style::Caching,

@@ -237,11 +237,12 @@ fn accumulation_plan(
     let pool = super::worker_pool(opts.threads)?;
     let threads = pool.current_num_threads();
     let layer_count = info.layer_count;
+    let (width, height, precision) = (opts.width, opts.height, opts.precision);
     let style = opts.accumulation.unwrap_or_else(|| {
         let buffering = private_plan(Style::Buffering, opts, layer_count, threads);
-        choose_style(info.accumulation, info.flange, buffering)
+        let fits = check_memory(width, height, layer_count, precision, buffering).is_ok();
+        choose_style(info.accumulation, info.flange, buffering, fits)
     });
-    let (width, height, precision) = (opts.width, opts.height, opts.precision);
     let private = private_plan(style, opts, layer_count, threads);
     check_memory(width, height, layer_count, precision, private)?;
     let shared = SharedFrame::new(width, height, layer_count, precision);

@@ -120,15 +120,26 @@ fn tiles_cover_the_image_once() {
 
 /// The host's style: Blasting for tile-local deposits, Caching for chains with a flange,
 /// Buffering for deposits anywhere up to [`AUTO_BUFFERING_MAX_BYTES`] of whole-image buffers
-/// over all threads, Caching above.
+/// over all threads where they fit in memory, Caching otherwise.
 #[test]
 fn the_style_follows_where_the_deposits_land_and_what_buffers_cost() {
     use flowlight_sdk::AccumulationStyle::{FlangedTile, Tile};
-    assert_eq!(choose_style(Tile, 0, 0), Style::Blasting);
-    assert_eq!(choose_style(FlangedTile, 16, 0), Style::Caching);
-    assert_eq!(choose_style(FlangedTile, 0, 24 << 20), Style::Buffering);
+    assert_eq!(choose_style(Tile, 0, 0, true), Style::Blasting);
+    assert_eq!(choose_style(FlangedTile, 16, 0, true), Style::Caching);
+    assert_eq!(
+        choose_style(FlangedTile, 0, 24 << 20, true),
+        Style::Buffering
+    );
     let max = AUTO_BUFFERING_MAX_BYTES;
-    assert_eq!(choose_style(FlangedTile, 0, max), Style::Buffering);
-    assert_eq!(choose_style(FlangedTile, 0, max + 1), Style::Caching);
-    assert_eq!(choose_style(FlangedTile, 16, 24 << 20), Style::Caching);
+    assert_eq!(choose_style(FlangedTile, 0, max, true), Style::Buffering);
+    assert_eq!(choose_style(FlangedTile, 0, max + 1, true), Style::Caching);
+    assert_eq!(
+        choose_style(FlangedTile, 16, 24 << 20, true),
+        Style::Caching
+    );
+    // Buffers the machine cannot hold: Caching, whose cap it can.
+    assert_eq!(
+        choose_style(FlangedTile, 0, 24 << 20, false),
+        Style::Caching
+    );
 }
