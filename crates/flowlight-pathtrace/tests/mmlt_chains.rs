@@ -221,7 +221,6 @@ fn tile_deposits(units: &[WorkUnit], length: u64) -> (Vec<(Vec2, Rgb)>, MmltCoun
     with_sampler(|sampler, _, _, _| {
         let bootstrap =
             DepthBootstrap::run(sampler, DEPTH, 3, 2_000, Mutation::new(0.3, 0.01), true);
-        assert!(bootstrap.scale_samples() > 0);
         let chains = TileChains::default();
         let mut buffers = MmltBuffers::default();
         let mut counts = MmltCounts::default();

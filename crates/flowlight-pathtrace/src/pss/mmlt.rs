@@ -100,7 +100,6 @@ pub struct DepthBootstrap {
     depths: Vec<Bootstrap>,
     /// Running sums of b̂_d over d.
     cumulative: Vec<f64>,
-    scale_samples: u64,
 }
 
 impl DepthBootstrap {
@@ -119,7 +118,6 @@ impl DepthBootstrap {
         let mut depths = Vec::with_capacity(max_depth as usize + 1);
         let mut cumulative = Vec::with_capacity(max_depth as usize + 1);
         let mut sum = 0.0;
-        let mut scale_samples = 0;
         for d in 0..=max_depth {
             let mut target = MmltTarget::new(sampler, d);
             let depth_seed = Rng::hash(&[seed, 0x4d4d_4c54, u64::from(d)]);
@@ -128,22 +126,12 @@ impl DepthBootstrap {
                 let n = (count / 8).max(1);
                 let (c, _) = scale_estimate(&mut target, depth_seed, n, mutation);
                 bootstrap.combine_large_steps(c);
-                scale_samples += u64::from(n);
             }
             sum += bootstrap.normalisation();
             cumulative.push(sum);
             depths.push(bootstrap);
         }
-        DepthBootstrap {
-            depths,
-            cumulative,
-            scale_samples,
-        }
-    }
-
-    /// Samples drawn beside the bootstraps for the large-step weights' c (0 without them).
-    pub fn scale_samples(&self) -> u64 {
-        self.scale_samples
+        DepthBootstrap { depths, cumulative }
     }
 
     /// The deepest depth D.
