@@ -39,7 +39,7 @@ use flowlight_pathtrace::bidir::params::HEURISTIC;
 use flowlight_pathtrace::bidir::sample::{strategy_only_settings, FilmPlan, FilmSampler};
 use flowlight_pathtrace::bidir::Heuristic;
 use flowlight_pathtrace::pss::mmlt::{
-    render_unit, render_unit_in_chains, DepthBootstrap, MmltBuffers, MmltCounts,
+    render_unit_in_chains, DepthBootstrap, MmltBuffers, MmltCounts,
 };
 use flowlight_pathtrace::pss::params::{
     mutation_from_params, COMBINE_LARGE_STEPS, LARGE_STEP, MMLT_CHAIN_LENGTH, SIGMA,
@@ -165,27 +165,16 @@ impl Integrator for Mmlt {
         BUFFERS.with(|buffers| {
             let buffers = &mut *buffers.borrow_mut();
             let mut deposit = |s: Splat| film.deposit(s.raster.x, s.raster.y, 0, s.value);
-            match self.chain_length {
-                0 => render_unit(
-                    &sampler,
-                    bootstrap,
-                    unit,
-                    buffers,
-                    &mut counts,
-                    &mut deposit,
-                    &mut |_, _| {},
-                ),
-                length => render_unit_in_chains(
-                    &sampler,
-                    bootstrap,
-                    unit,
-                    length,
-                    &self.chains,
-                    buffers,
-                    &mut counts,
-                    &mut deposit,
-                ),
-            }
+            render_unit_in_chains(
+                &sampler,
+                bootstrap,
+                unit,
+                self.chain_length,
+                &self.chains,
+                buffers,
+                &mut counts,
+                &mut deposit,
+            );
         });
         self.counters.report(stats, &counts.chains, 0);
         Ok(())

@@ -44,8 +44,8 @@ use flowlight_pathtrace::pss::params::{
     mutation_from_params, CHAIN_LENGTH, COMBINE_LARGE_STEPS, LARGE_STEP, SIGMA,
 };
 use flowlight_pathtrace::pss::{
-    render_unit, render_unit_in_chains, Bootstrap, BootstrapCell, ChainBuffers, ChainCounters,
-    ChainCounts, McptTarget, Mutation, PssTarget, Splat, TileChains,
+    render_unit_in_chains, Bootstrap, BootstrapCell, ChainBuffers, ChainCounters, ChainCounts,
+    McptTarget, Mutation, PssTarget, Splat, TileChains,
 };
 use flowlight_pathtrace::{settings, PathSettings, Variant};
 use flowlight_sdk::abi::ParamSpec;
@@ -237,18 +237,17 @@ impl Pssmlt {
         stats.add(self.counters.normalisation, bootstrap.normalisation());
         let mut counts = ChainCounts::default();
         let mut deposit = |s: Splat| film.deposit(s.raster.x, s.raster.y, s.layer, s.value);
-        BUFFERS.with_borrow_mut(|buffers| match self.chain_length {
-            0 => render_unit(target, &bootstrap, unit, buffers, &mut counts, &mut deposit),
-            length => render_unit_in_chains(
+        BUFFERS.with_borrow_mut(|buffers| {
+            render_unit_in_chains(
                 target,
                 &bootstrap,
                 unit,
-                length,
+                self.chain_length,
                 &self.chains,
                 buffers,
                 &mut counts,
                 &mut deposit,
-            ),
+            )
         });
         self.counters
             .chains

@@ -314,7 +314,8 @@ impl<D: FnMut(Splat), V: FnMut(u32, &[Splat])> TileChainRunner
 
 /// Runs `unit`'s mutations as pieces of its tile's chains of `chain_length` mutations each
 /// ([`run_tile_chains`]; a chain draws its depth once, when it starts), handing their
-/// splats, multiplied by 1/P_d, to `deposit`.
+/// splats, multiplied by 1/P_d, to `deposit`; `chain_length` 0 runs one chain per sample
+/// index instead ([`render_unit`]).
 #[allow(clippy::too_many_arguments)]
 pub fn render_unit_in_chains(
     sampler: &FilmSampler,
@@ -327,6 +328,11 @@ pub fn render_unit_in_chains(
     deposit: &mut impl FnMut(Splat),
 ) {
     let mut visit = |_: u32, _: &[Splat]| {};
+    if chain_length == 0 {
+        return render_unit(
+            sampler, bootstrap, unit, buffers, counts, deposit, &mut visit,
+        );
+    }
     let mut runner = MmltRunner::new(sampler, bootstrap, buffers, counts, deposit, &mut visit);
     run_tile_chains(&mut runner, unit, chain_length, chains);
 }

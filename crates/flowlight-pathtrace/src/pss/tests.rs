@@ -296,3 +296,24 @@ fn a_unit_without_its_parked_chain_starts_its_own() {
     let (alone, _) = tile_deposits(&[unit(2, 1, 1)], 40);
     assert_eq!(after_other[after_other.len() - alone.len()..], alone[..]);
 }
+
+#[test]
+fn chain_length_zero_runs_one_chain_per_sample_index() {
+    // The plugins' `chain_length = 0`: render_unit's chains, a tile's pixels long each.
+    let (chained, counts) = tile_deposits(&[unit(1, 0, 6)], 0);
+    assert_eq!(counts.chains, 6);
+    let mut target = Bumps;
+    let bootstrap = Bootstrap::run(&mut target, 5, 4096, Mutation::new(0.3, 0.05));
+    let (mut buffers, mut direct_counts, mut direct) =
+        (ChainBuffers::default(), ChainCounts::default(), Vec::new());
+    super::units::render_unit(
+        &mut target,
+        &bootstrap,
+        &unit(1, 0, 6),
+        &mut buffers,
+        &mut direct_counts,
+        &mut |s: Splat| direct.push((s.raster, s.value)),
+    );
+    assert_eq!(direct_counts, counts);
+    assert_eq!(direct, chained);
+}

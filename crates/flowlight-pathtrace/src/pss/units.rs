@@ -295,7 +295,8 @@ impl<T: PssTarget, D: FnMut(Splat)> TileChainRunner for PssRunner<'_, T, D> {
 }
 
 /// Runs `unit`'s mutations as pieces of its tile's chains of `chain_length` mutations over
-/// `target` ([`run_tile_chains`]), handing their splats to `deposit`.
+/// `target` ([`run_tile_chains`]), handing their splats to `deposit`; `chain_length` 0 runs
+/// one chain per sample index instead ([`render_unit`]).
 #[allow(clippy::too_many_arguments)]
 pub fn render_unit_in_chains<T: PssTarget>(
     target: &mut T,
@@ -307,6 +308,9 @@ pub fn render_unit_in_chains<T: PssTarget>(
     counts: &mut ChainCounts,
     deposit: &mut impl FnMut(Splat),
 ) {
+    if chain_length == 0 {
+        return render_unit(target, bootstrap, unit, buffers, counts, deposit);
+    }
     let mut runner = PssRunner {
         target,
         bootstrap,
