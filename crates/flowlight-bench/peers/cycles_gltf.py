@@ -94,7 +94,10 @@ def render_flowlight(binary, name, path, pos, target, ortho, w, h, spp, out):
     return read_exr(exr)
 
 
-def render_cycles(name, path, pos, target, ortho, w, h, spp, out):
+def render_cycles(name, path, pos, target, ortho, w, h, spp, out, adjust=None, tag="cycles"):
+    """Renders with Cycles; `adjust(material, principled_node)`, if given, runs on every
+    Principled BSDF after the distribution is set to single-scattering GGX, and `tag` names
+    the EXR ({name}-{tag}.exr)."""
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.ops.import_scene.gltf(filepath=path)
     scene = bpy.context.scene
@@ -122,14 +125,25 @@ def render_cycles(name, path, pos, target, ortho, w, h, spp, out):
     scene.render.resolution_x = w
     scene.render.resolution_y = h
     scene.render.image_settings.file_format = "OPEN_EXR"
-    exr = os.path.join(out, f"{name}-cycles.exr")
+    exr = os.path.join(out, f"{name}-{tag}.exr")
     scene.render.filepath = exr
     for mat in bpy.data.materials:
         for node in mat.node_tree.nodes if mat.node_tree else []:
             if node.type == "BSDF_PRINCIPLED":
                 node.distribution = "GGX"
+                if adjust:
+                    adjust(mat, node)
     bpy.ops.render.render(write_still=True)
     return read_exr(exr)
+
+
+def disk_masks(ortho, w, h, disks):
+    """Pixel masks of `disks` (x, y, radius in the image plane's world units, y up) under the
+    orthographic camera (`ortho` world units over `h` pixels)."""
+    ys, xs = np.mgrid[0:h, 0:w]
+    px = ortho / h
+    wx, wy = (xs + 0.5 - w / 2) * px, (h / 2 - ys - 0.5) * px
+    return [(wx - cx) ** 2 + (wy - cy) ** 2 < r * r for cx, cy, r in disks]
 
 
 def main():
@@ -152,12 +166,7 @@ def main():
         lf, lc = luminance(fl), luminance(cy)
         diff = np.abs(lf - lc).mean() / lc.mean()
         print(f"| {name} | {lf.mean():.4f} | {lc.mean():.4f} | {lf.mean() / lc.mean():.4f} | {diff:.4f} |")
-        # Disks in the image plane (orthographic: `ortho` world units over `h` pixels).
-        ys, xs = np.mgrid[0:h, 0:w]
-        px = ortho / h
-        wx, wy = (xs + 0.5 - w / 2) * px, (h / 2 - ys - 0.5) * px
-        for k, (cx, cy_, r) in enumerate(disks):
-            m = (wx - cx) ** 2 + (wy - cy_) ** 2 < r * r
+        for k, m in enumerate(disk_masks(ortho, w, h, disks)):
             a, b = lf[m].mean(), lc[m].mean()
             print(f"| {name}, disk {k} | {a:.4f} | {b:.4f} | {a / b:.4f} | {np.abs(lf - lc)[m].mean() / b:.4f} |")
 
