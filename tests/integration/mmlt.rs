@@ -49,8 +49,13 @@ fn region_moments(images: &[Vec<Rgb>]) -> Vec<(f64, f64)> {
         .collect()
 }
 
-/// 16 runs of `plugin` with `params` (and `path_depth` 3) at 64 spp against 16 of `bdpt`.
-fn assert_runs_average_to_bdpt(plugin: &str, params: &[(&str, toml::Value)]) {
+/// 16 runs of `plugin` with `params` (and `path_depth` 3) at 64 spp against 16 of `bdpt`;
+/// each run's seed bootstraps once, evaluating `bootstrap_samples` vectors.
+fn assert_runs_average_to_bdpt(
+    plugin: &str,
+    params: &[(&str, toml::Value)],
+    bootstrap_samples: f64,
+) {
     let size = (SIZE, SIZE);
     let depth = [("path_depth", int(3))];
     let bdpt = || common::renderer_with(CORNELL, Some("bdpt"), size, 64, &depth);
@@ -65,6 +70,16 @@ fn assert_runs_average_to_bdpt(plugin: &str, params: &[(&str, toml::Value)]) {
             .iter()
             .any(|(name, v)| name == "mutations" && *v > 0.0),
         "{plugin} reported no mutations: {counters:?}"
+    );
+    let counter = |key: &str| counters.iter().find(|(name, _)| name == key).map(|c| c.1);
+    assert_eq!(
+        counter("bootstrap samples"),
+        Some(bootstrap_samples),
+        "{plugin}: {counters:?}"
+    );
+    assert!(
+        counter("bootstrap b").is_some_and(|b| b > 0.0),
+        "{plugin}: {counters:?}"
     );
     let (a, b) = (region_moments(&images), region_moments(&reference));
     for k in 0..17 {
@@ -88,16 +103,22 @@ fn assert_runs_average_to_bdpt(plugin: &str, params: &[(&str, toml::Value)]) {
 
 #[test]
 fn short_mmlt_runs_average_to_bdpt() {
+    // Four depths (0 ..= 3), each a bootstrap and a scale estimate of 65536 / 8 vectors.
     assert_runs_average_to_bdpt(
         "mmlt",
         &[("bootstrap", int(65536)), ("chain_length", int(96))],
+        4.0 * (65536.0 + 8192.0),
     );
 }
 
 #[test]
 fn short_pssmlt_runs_over_bdpt_average_to_bdpt() {
     let sampler = toml::Value::String("bdpt".into());
-    assert_runs_average_to_bdpt("pssmlt", &[("sampler", sampler), ("bootstrap", int(65536))]);
+    assert_runs_average_to_bdpt(
+        "pssmlt",
+        &[("sampler", sampler), ("bootstrap", int(65536))],
+        65536.0 + 8192.0,
+    );
 }
 
 #[test]

@@ -44,7 +44,9 @@ use flowlight_pathtrace::pss::mmlt::{
 use flowlight_pathtrace::pss::params::{
     mutation_from_params, COMBINE_LARGE_STEPS, LARGE_STEP, MMLT_CHAIN_LENGTH, SIGMA,
 };
-use flowlight_pathtrace::pss::{BootstrapCell, ChainCounters, Mutation, Splat, TileChains};
+use flowlight_pathtrace::pss::{
+    BootstrapCell, BootstrapCounters, ChainCounters, Mutation, Splat, TileChains,
+};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::declare::IntParam;
 use flowlight_sdk::{
@@ -96,6 +98,7 @@ pub struct Mmlt {
     /// with that seed (it needs a tracer; the others wait for it).
     bootstrap: BootstrapCell<DepthBootstrap>,
     counters: ChainCounters,
+    bootstrap_counters: BootstrapCounters,
 }
 
 thread_local! {
@@ -121,6 +124,7 @@ impl Integrator for Mmlt {
         let chain_length = MMLT_CHAIN_LENGTH.get(params)? as u64;
         let heuristic = Heuristic::parse(HEURISTIC.get(params)?).expect("declared choice");
         let counters = ChainCounters::declare(stats);
+        let bootstrap_counters = BootstrapCounters::declare(stats);
         let info = IntegratorInfo {
             layer_count: 0,
             accumulation: AccumulationStyle::FlangedTile,
@@ -138,6 +142,7 @@ impl Integrator for Mmlt {
             chains: TileChains::default(),
             bootstrap: BootstrapCell::default(),
             counters,
+            bootstrap_counters,
         };
         Ok((integrator, info))
     }
@@ -150,7 +155,7 @@ impl Integrator for Mmlt {
         stats: &mut Stats,
     ) -> Result<(), String> {
         let sampler = FilmSampler::new(&self.scene, tracer, &self.plan);
-        let (bootstrap, _) = self.bootstrap.get_or_run(unit.seed, || {
+        let (bootstrap, ran) = self.bootstrap.get_or_run(unit.seed, || {
             DepthBootstrap::run(
                 &sampler,
                 self.depth,
@@ -161,6 +166,9 @@ impl Integrator for Mmlt {
             )
         });
         let bootstrap = &*bootstrap;
+        self.bootstrap_counters
+            .report(stats, ran, bootstrap.samples(), bootstrap.total());
+        let bootstrap_invalid = if ran { bootstrap.invalid() } else { 0 };
         let mut counts = MmltCounts::default();
         BUFFERS.with(|buffers| {
             let buffers = &mut *buffers.borrow_mut();
@@ -176,7 +184,8 @@ impl Integrator for Mmlt {
                 &mut deposit,
             );
         });
-        self.counters.report(stats, &counts.chains, 0);
+        self.counters
+            .report(stats, &counts.chains, bootstrap_invalid);
         Ok(())
     }
 }

@@ -44,13 +44,12 @@ use flowlight_pathtrace::pss::params::{
     mutation_from_params, CHAIN_LENGTH, COMBINE_LARGE_STEPS, LARGE_STEP, SIGMA,
 };
 use flowlight_pathtrace::pss::{
-    render_unit_in_chains, Bootstrap, BootstrapCell, ChainBuffers, ChainCounters, ChainCounts,
-    McptTarget, Mutation, PssTarget, Splat, TileChains,
+    render_unit_in_chains, Bootstrap, BootstrapCell, BootstrapCounters, ChainBuffers,
+    ChainCounters, ChainCounts, McptTarget, Mutation, PssTarget, Splat, TileChains,
 };
 use flowlight_pathtrace::{settings, PathSettings, Variant};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::declare::{ChoiceParam, IntParam};
-use flowlight_sdk::stats::Counter;
 use flowlight_sdk::{
     choice_param, export_integrator, int_param, AccumulationStyle, Film, Integrator,
     IntegratorInfo, MutationSet, Params, Scene, Stats, StatsBuilder, Tracer, WorkUnit,
@@ -92,16 +91,14 @@ const PARAMS: [ParamSpec; 13] = [
 /// The counters the plugin reports: the chains', and the bootstrap's.
 struct Counters {
     chains: ChainCounters,
-    bootstrap_samples: Counter,
-    normalisation: Counter,
+    bootstrap: BootstrapCounters,
 }
 
 impl Counters {
     fn declare(stats: &mut StatsBuilder) -> Counters {
         Counters {
             chains: ChainCounters::declare(stats),
-            bootstrap_samples: stats.sum("bootstrap samples"),
-            normalisation: stats.max("bootstrap b"),
+            bootstrap: BootstrapCounters::declare(stats),
         }
     }
 }
@@ -228,13 +225,15 @@ impl Pssmlt {
             }
             b
         });
-        let mut bootstrap_invalid = 0;
-        if ran {
-            let samples = bootstrap.len() as u64 + scale.0 as u64;
-            stats.add(self.counters.bootstrap_samples, samples as f64);
-            bootstrap_invalid = bootstrap.invalid() + scale.1;
-        }
-        stats.add(self.counters.normalisation, bootstrap.normalisation());
+        let samples = bootstrap.len() as u64 + scale.0 as u64;
+        let bootstrap_invalid = if ran {
+            bootstrap.invalid() + scale.1
+        } else {
+            0
+        };
+        self.counters
+            .bootstrap
+            .report(stats, ran, samples, bootstrap.normalisation());
         let mut counts = ChainCounts::default();
         let mut deposit = |s: Splat| film.deposit(s.raster.x, s.raster.y, s.layer, s.value);
         BUFFERS.with_borrow_mut(|buffers| {

@@ -100,6 +100,10 @@ pub struct DepthBootstrap {
     depths: Vec<Bootstrap>,
     /// Running sums of b̂_d over d.
     cumulative: Vec<f64>,
+    /// The vectors of the depths' scale estimates (`combine_large_steps`), and how many of
+    /// them were invalid.
+    scale_samples: u64,
+    scale_invalid: u64,
 }
 
 impl DepthBootstrap {
@@ -117,21 +121,34 @@ impl DepthBootstrap {
     ) -> DepthBootstrap {
         let mut depths = Vec::with_capacity(max_depth as usize + 1);
         let mut cumulative = Vec::with_capacity(max_depth as usize + 1);
-        let mut sum = 0.0;
+        let (mut sum, mut scale_samples, mut scale_invalid) = (0.0, 0, 0);
         for d in 0..=max_depth {
             let mut target = MmltTarget::new(sampler, d);
             let depth_seed = Rng::hash(&[seed, 0x4d4d_4c54, u64::from(d)]);
             let mut bootstrap = Bootstrap::run(&mut target, depth_seed, count, mutation);
             if combine_large_steps {
                 let n = (count / 8).max(1);
-                let (c, _) = scale_estimate(&mut target, depth_seed, n, mutation);
+                let (c, invalid) = scale_estimate(&mut target, depth_seed, n, mutation);
                 bootstrap.combine_large_steps(c);
+                scale_samples += u64::from(n);
+                scale_invalid += invalid;
             }
             sum += bootstrap.normalisation();
             cumulative.push(sum);
             depths.push(bootstrap);
         }
-        DepthBootstrap { depths, cumulative }
+        DepthBootstrap {
+            depths,
+            cumulative,
+            scale_samples,
+            scale_invalid,
+        }
+    }
+
+    /// The vectors evaluated to build it: every depth's bootstrap and scale estimate.
+    pub fn samples(&self) -> u64 {
+        let bootstraps: usize = self.depths.iter().map(Bootstrap::len).sum();
+        bootstraps as u64 + self.scale_samples
     }
 
     /// The deepest depth D.
@@ -154,9 +171,10 @@ impl DepthBootstrap {
         &self.depths[d as usize]
     }
 
-    /// Samples whose splats were not finite and non-negative, over every depth.
+    /// Samples whose splats were not finite and non-negative, over every depth's bootstrap
+    /// and scale estimate.
     pub fn invalid(&self) -> u64 {
-        self.depths.iter().map(Bootstrap::invalid).sum()
+        self.depths.iter().map(Bootstrap::invalid).sum::<u64>() + self.scale_invalid
     }
 
     /// The depth whose share of Σ b̂ covers `u` ∈ [0, 1): d with probability b̂_d / Σ b̂.

@@ -33,5 +33,6 @@ pub use chain::{run_chain, scalar, Bootstrap, Chain, ChainBuffers, ChainCounts, 
 pub use mcpt::McptTarget;
 pub use samples::{Mutation, PrimarySamples, PssStream};
 pub use units::{
-    chain_seed, render_unit, render_unit_in_chains, BootstrapCell, ChainCounters, TileChains,
+    chain_seed, render_unit, render_unit_in_chains, BootstrapCell, BootstrapCounters,
+    ChainCounters, TileChains,
 };

@@ -363,3 +363,32 @@ impl ChainCounters {
         stats.add(self.invalid, (c.invalid + extra_invalid) as f64);
     }
 }
+
+/// The bootstrap counters a primary-sample-space plugin reports (`pssmlt`, `mmlt`):
+/// `bootstrap samples`, the vectors the bootstrap evaluated (with `combine_large_steps`, the
+/// scale estimate's too), and `bootstrap b`, the normalisation of the film it found.
+#[derive(Clone, Copy, Debug)]
+pub struct BootstrapCounters {
+    samples: Counter,
+    normalisation: Counter,
+}
+
+impl BootstrapCounters {
+    /// Declares the counters.
+    pub fn declare(stats: &mut StatsBuilder) -> BootstrapCounters {
+        BootstrapCounters {
+            samples: stats.sum("bootstrap samples"),
+            normalisation: stats.max("bootstrap b"),
+        }
+    }
+
+    /// Reports what a unit saw of its seed's bootstrap: the `samples` only from the unit
+    /// that `ran` it (the others waited for it), so they are counted once per seed; the
+    /// normalisation from every unit (a maximum).
+    pub fn report(&self, stats: &mut Stats, ran: bool, samples: u64, normalisation: f64) {
+        if ran {
+            stats.add(self.samples, samples as f64);
+        }
+        stats.add(self.normalisation, normalisation);
+    }
+}
