@@ -69,7 +69,7 @@ const BOOTSTRAP: IntParam = int_param!(
     "bootstrap",
     16384,
     1..=1_000_000,
-    "independent samples per depth that estimate its brightness b_d (chains per depth are proportional to it; the film is normalised by the sum) and from which chains start; run once per render by its first work unit (8 bytes each)"
+    "independent samples per depth that estimate its brightness b_d (chains per depth are proportional to it; the film is normalised by the sum) and from which chains start; run once per render, shared out over the work units that wait for it (8 bytes each)"
 );
 
 const PARAMS: [ParamSpec; 7] = [
@@ -155,16 +155,17 @@ impl Integrator for Mmlt {
         stats: &mut Stats,
     ) -> Result<(), String> {
         let sampler = FilmSampler::new(&self.scene, tracer, &self.plan);
-        let (bootstrap, ran) = self.bootstrap.get_or_run(unit.seed, || {
-            DepthBootstrap::run(
-                &sampler,
-                self.depth,
-                unit.seed,
-                self.bootstrap_count,
-                self.mutation,
-                self.combine_large_steps,
-            )
-        });
+        // Every unit that finds no bootstrap for this seed evaluates pieces of it.
+        let plan = DepthBootstrap::plan(self.depth, self.bootstrap_count, self.combine_large_steps);
+        let pieces = plan.pieces();
+        let (bootstrap, ran) = self.bootstrap.get_or_build(
+            unit.seed,
+            pieces.len(),
+            |k| DepthBootstrap::evaluate_piece(&sampler, &pieces[k], unit.seed, self.mutation),
+            |evaluated| {
+                DepthBootstrap::assemble(&pieces, &evaluated, plan, unit.seed, self.mutation)
+            },
+        );
         let bootstrap = &*bootstrap;
         self.bootstrap_counters
             .report(stats, ran, bootstrap.samples(), bootstrap.total());

@@ -39,13 +39,13 @@ use flowlight_pathtrace::bidir::params::HEURISTIC;
 use flowlight_pathtrace::bidir::sample::{strategy_only_settings, FilmPlan, FilmSampler};
 use flowlight_pathtrace::bidir::Heuristic;
 use flowlight_pathtrace::pss::bdpt::BdptTarget;
-use flowlight_pathtrace::pss::large_steps::scale_estimate;
+use flowlight_pathtrace::pss::bootstrap::{assemble_part, evaluate};
 use flowlight_pathtrace::pss::params::{
     mutation_from_params, CHAIN_LENGTH, COMBINE_LARGE_STEPS, LARGE_STEP, SIGMA,
 };
 use flowlight_pathtrace::pss::{
-    render_unit_in_chains, Bootstrap, BootstrapCell, BootstrapCounters, ChainBuffers,
-    ChainCounters, ChainCounts, McptTarget, Mutation, PssTarget, Splat, TileChains,
+    render_unit_in_chains, Bootstrap, BootstrapCell, BootstrapCounters, BootstrapPlan,
+    ChainBuffers, ChainCounters, ChainCounts, McptTarget, Mutation, PssTarget, Splat, TileChains,
 };
 use flowlight_pathtrace::{settings, PathSettings, Variant};
 use flowlight_sdk::abi::ParamSpec;
@@ -69,7 +69,7 @@ const BOOTSTRAP: IntParam = int_param!(
     "bootstrap",
     100000,
     1..=10_000_000,
-    "independent samples that estimate the normalisation b (the image's mean luminance integral) and that the chains start from, resampled by luminance; run once per render by its first work unit (8 bytes each)"
+    "independent samples that estimate the normalisation b (the image's mean luminance integral) and that the chains start from, resampled by luminance; run once per render, shared out over the work units that wait for it (8 bytes each)"
 );
 
 const PARAMS: [ParamSpec; 13] = [
@@ -120,8 +120,14 @@ pub struct Pssmlt {
     combine_large_steps: bool,
     chain_length: u64,
     chains: TileChains,
-    bootstrap: BootstrapCell,
+    bootstrap: BootstrapCell<Built>,
     counters: Counters,
+}
+
+/// A render seed's bootstrap, and the invalid samples of it and of its scale estimate.
+struct Built {
+    bootstrap: Bootstrap,
+    invalid: u64,
 }
 
 thread_local! {
@@ -213,33 +219,48 @@ impl Pssmlt {
         film: &mut Film,
         stats: &mut Stats,
     ) {
-        let mut scale = (0, 0);
-        let (bootstrap, ran) = self.bootstrap.get_or_run(unit.seed, || {
-            let mut b = Bootstrap::run(target, unit.seed, self.bootstrap_count, self.mutation);
-            if self.combine_large_steps {
-                // c from vectors apart from the bootstrap's (pss::large_steps: unbiased).
-                let count = (self.bootstrap_count / 8).max(1);
-                let (c, invalid) = scale_estimate(target, unit.seed, count, self.mutation);
-                b.combine_large_steps(c);
-                scale = (count, invalid);
-            }
-            b
-        });
-        let samples = bootstrap.len() as u64 + scale.0 as u64;
-        let bootstrap_invalid = if ran {
-            bootstrap.invalid() + scale.1
-        } else {
-            0
+        // Every unit that finds no bootstrap for this seed evaluates pieces of it, and with
+        // `combine_large_steps` of c, from vectors apart from the bootstrap's
+        // (pss::large_steps: unbiased).
+        let plan = BootstrapPlan {
+            parts: 1,
+            count: self.bootstrap_count,
+            scale_count: if self.combine_large_steps {
+                (self.bootstrap_count / 8).max(1)
+            } else {
+                0
+            },
         };
+        let pieces = plan.pieces();
+        let streams = target.streams();
+        let (built, ran) = self.bootstrap.get_or_build(
+            unit.seed,
+            pieces.len(),
+            |k| {
+                let p = &pieces[k];
+                evaluate(target, unit.seed, p.scale, p.vectors.clone(), self.mutation)
+            },
+            |evaluated| {
+                let (mut bootstrap, scale) =
+                    assemble_part(&pieces, &evaluated, 0, unit.seed, self.mutation, streams);
+                if let Some(scale) = scale {
+                    bootstrap.combine_large_steps(scale.c);
+                }
+                let invalid = bootstrap.invalid() + scale.map_or(0, |s| s.invalid);
+                Built { bootstrap, invalid }
+            },
+        );
+        let bootstrap = &built.bootstrap;
+        let bootstrap_invalid = if ran { built.invalid } else { 0 };
         self.counters
             .bootstrap
-            .report(stats, ran, samples, bootstrap.normalisation());
+            .report(stats, ran, plan.samples(), bootstrap.normalisation());
         let mut counts = ChainCounts::default();
         let mut deposit = |s: Splat| film.deposit(s.raster.x, s.raster.y, s.layer, s.value);
         BUFFERS.with_borrow_mut(|buffers| {
             render_unit_in_chains(
                 target,
-                &bootstrap,
+                bootstrap,
                 unit,
                 self.chain_length,
                 &self.chains,

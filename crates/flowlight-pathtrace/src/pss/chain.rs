@@ -28,6 +28,7 @@
 //! against its large steps, b̂/f → b̂/(f + p·c) and a large step's proposal gaining
 //! c/(f(y) + p·c), with the same expectation per mutation ([`super::large_steps`]).
 
+use super::bootstrap::{evaluate, Evaluated};
 use super::large_steps::LargeStepWeights;
 use super::samples::{Mutation, PrimarySamples};
 use flowlight_core::rng::Rng;
@@ -68,7 +69,7 @@ pub fn scalar(splats: &[Splat]) -> Option<f32> {
 }
 
 /// The seed of bootstrap vector `i` of a render with seed `seed`.
-fn bootstrap_seed(seed: u64, i: u32) -> u64 {
+pub(super) fn bootstrap_seed(seed: u64, i: u32) -> u64 {
     Rng::hash(&[seed, 0x0050_5353_424f_4f54, i as u64])
 }
 
@@ -89,26 +90,34 @@ pub struct Bootstrap {
 
 impl Bootstrap {
     /// Evaluates `count` independent vectors of `target`, vector i drawn from a seed of
-    /// (`seed`, i).
+    /// (`seed`, i) (on one thread; [`super::bootstrap`] shares the vectors out).
     pub fn run<T: PssTarget>(
         target: &mut T,
         seed: u64,
         count: u32,
         mutation: Mutation,
     ) -> Bootstrap {
-        let streams = target.streams();
-        let mut splats = Vec::new();
-        let mut cumulative = Vec::with_capacity(count as usize);
-        let (mut sum, mut invalid) = (0.0f64, 0);
-        for i in 0..count {
-            let samples = PrimarySamples::new(bootstrap_seed(seed, i), mutation, streams);
-            target.evaluate(&samples, &mut splats);
-            let f = scalar(&splats).unwrap_or_else(|| {
-                invalid += 1;
-                0.0
-            });
-            sum += f as f64;
-            cumulative.push(sum);
+        let evaluated = evaluate(target, seed, false, 0..count, mutation);
+        Bootstrap::from_pieces(seed, mutation, target.streams(), [&evaluated])
+    }
+
+    /// The bootstrap of seed `seed` over a target of `streams` streams from the evaluations
+    /// of its vectors, piece by piece in vector order (summed in that order, so any split of
+    /// the vectors gives the same bits).
+    pub fn from_pieces<'e>(
+        seed: u64,
+        mutation: Mutation,
+        streams: u32,
+        pieces: impl IntoIterator<Item = &'e Evaluated>,
+    ) -> Bootstrap {
+        let (mut cumulative, mut sum, mut invalid) = (Vec::new(), 0.0f64, 0);
+        for e in pieces {
+            cumulative.reserve(e.scalars.len());
+            for &f in &e.scalars {
+                sum += f as f64;
+                cumulative.push(sum);
+            }
+            invalid += e.invalid;
         }
         Bootstrap {
             seed,

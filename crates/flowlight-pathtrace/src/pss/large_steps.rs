@@ -37,8 +37,9 @@
 //! the bootstrap's); an estimate from a few thousand vectors is good enough, since c only
 //! weighs the two techniques.
 
-use super::chain::{scalar, PssTarget};
-use super::samples::{Mutation, PrimarySamples};
+use super::bootstrap::{evaluate, ScaleEstimate};
+use super::chain::PssTarget;
+use super::samples::Mutation;
 use flowlight_core::rng::Rng;
 
 /// The balance-heuristic weights of a chain's deposits with its large steps (module
@@ -74,28 +75,20 @@ impl LargeStepWeights {
 
 /// The seed of vector `i` of the scale estimate of a render with seed `seed` (apart from the
 /// bootstrap's vectors).
-fn scale_seed(seed: u64, i: u32) -> u64 {
+pub(super) fn scale_seed(seed: u64, i: u32) -> u64 {
     Rng::hash(&[seed, 0x004b_454c_454d_454e, i as u64])
 }
 
 /// c: the mean scalar target of `count` independent vectors of `target` drawn from `seed`,
-/// apart from the bootstrap's (module documentation), and how many were invalid (f = 0).
+/// apart from the bootstrap's (module documentation), and how many were invalid (f = 0); on
+/// one thread ([`super::bootstrap`] shares the vectors out).
 pub fn scale_estimate<T: PssTarget>(
     target: &mut T,
     seed: u64,
     count: u32,
     mutation: Mutation,
 ) -> (f64, u64) {
-    let streams = target.streams();
-    let mut splats = Vec::new();
-    let (mut sum, mut invalid) = (0.0f64, 0);
-    for i in 0..count {
-        let samples = PrimarySamples::new(scale_seed(seed, i), mutation, streams);
-        target.evaluate(&samples, &mut splats);
-        match scalar(&splats) {
-            Some(f) => sum += f as f64,
-            None => invalid += 1,
-        }
-    }
-    (sum / count.max(1) as f64, invalid)
+    let evaluated = evaluate(target, seed, true, 0..count, mutation);
+    let estimate = ScaleEstimate::from_pieces([&evaluated]);
+    (estimate.c, estimate.invalid)
 }

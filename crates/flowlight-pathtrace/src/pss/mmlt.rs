@@ -37,8 +37,8 @@
 //! pixels), seeded from (seed, tile, sample index), so that the host's division by spp gives
 //! the image and the image does not depend on the thread count.
 
+use super::bootstrap::{assemble_part, evaluate, BootstrapPlan, Evaluated, Piece};
 use super::chain::{Bootstrap, Chain, ChainBuffers, ChainCounts, PssTarget, Splat};
-use super::large_steps::scale_estimate;
 use super::samples::{Mutation, PrimarySamples};
 use super::units::{chain_seed, run_tile_chains, ChainStart, TileChainRunner, TileChains};
 use crate::bidir::sample::{FilmSampler, SampleScratch};
@@ -72,9 +72,12 @@ impl<'s, 'a, 'b> MmltTarget<'s, 'a, 'b> {
 /// The stream of the strategy choice (after the camera's 0 and the light's 1).
 const STRATEGY_STREAM: u32 = 2;
 
+/// The streams of an [`MmltTarget`]: the camera's, the light's and the strategy's.
+const STREAMS: u32 = 3;
+
 impl PssTarget for MmltTarget<'_, '_, '_> {
     fn streams(&self) -> u32 {
-        3
+        STREAMS
     }
 
     fn evaluate(&mut self, samples: &PrimarySamples, splats: &mut Vec<Splat>) {
@@ -108,9 +111,9 @@ pub struct DepthBootstrap {
 
 impl DepthBootstrap {
     /// Bootstraps of `count` vectors for every depth 0 ..= `max_depth` of `sampler`, depth d
-    /// from a seed of (`seed`, d). With `combine_large_steps`, each depth's chains weigh their
-    /// deposits against their large steps ([`super::large_steps`]) with that depth's c, the
-    /// mean of count/8 vectors apart from its bootstrap's.
+    /// from a seed of (`seed`, d), on one thread. With `combine_large_steps`, each depth's
+    /// chains weigh their deposits against their large steps ([`super::large_steps`]) with
+    /// that depth's c, the mean of count/8 vectors apart from its bootstrap's.
     pub fn run(
         sampler: &FilmSampler,
         max_depth: u32,
@@ -119,19 +122,68 @@ impl DepthBootstrap {
         mutation: Mutation,
         combine_large_steps: bool,
     ) -> DepthBootstrap {
-        let mut depths = Vec::with_capacity(max_depth as usize + 1);
-        let mut cumulative = Vec::with_capacity(max_depth as usize + 1);
-        let (mut sum, mut scale_samples, mut scale_invalid) = (0.0, 0, 0);
-        for d in 0..=max_depth {
-            let mut target = MmltTarget::new(sampler, d);
-            let depth_seed = Rng::hash(&[seed, 0x4d4d_4c54, u64::from(d)]);
-            let mut bootstrap = Bootstrap::run(&mut target, depth_seed, count, mutation);
-            if combine_large_steps {
-                let n = (count / 8).max(1);
-                let (c, invalid) = scale_estimate(&mut target, depth_seed, n, mutation);
-                bootstrap.combine_large_steps(c);
-                scale_samples += u64::from(n);
-                scale_invalid += invalid;
+        let plan = DepthBootstrap::plan(max_depth, count, combine_large_steps);
+        let pieces = plan.pieces();
+        let evaluated: Vec<Evaluated> = (0..pieces.len())
+            .map(|k| DepthBootstrap::evaluate_piece(sampler, &pieces[k], seed, mutation))
+            .collect();
+        DepthBootstrap::assemble(&pieces, &evaluated, plan, seed, mutation)
+    }
+
+    /// The pieces of [`DepthBootstrap::run`]'s vectors: one part per depth.
+    pub fn plan(max_depth: u32, count: u32, combine_large_steps: bool) -> BootstrapPlan {
+        BootstrapPlan {
+            parts: max_depth + 1,
+            count,
+            scale_count: if combine_large_steps {
+                (count / 8).max(1)
+            } else {
+                0
+            },
+        }
+    }
+
+    /// The seed of depth `d`'s bootstrap and scale estimate in a render of seed `seed`.
+    fn depth_seed(seed: u64, d: u32) -> u64 {
+        Rng::hash(&[seed, 0x4d4d_4c54, u64::from(d)])
+    }
+
+    /// Evaluates `piece` of a [`DepthBootstrap::plan`] (of render seed `seed`) over `sampler`.
+    pub fn evaluate_piece(
+        sampler: &FilmSampler,
+        piece: &Piece,
+        seed: u64,
+        mutation: Mutation,
+    ) -> Evaluated {
+        let mut target = MmltTarget::new(sampler, piece.part);
+        let depth_seed = DepthBootstrap::depth_seed(seed, piece.part);
+        evaluate(
+            &mut target,
+            depth_seed,
+            piece.scale,
+            piece.vectors.clone(),
+            mutation,
+        )
+    }
+
+    /// The bootstrap from `evaluated`, the evaluations of `plan`'s `pieces` in its order.
+    pub fn assemble(
+        pieces: &[Piece],
+        evaluated: &[Evaluated],
+        plan: BootstrapPlan,
+        seed: u64,
+        mutation: Mutation,
+    ) -> DepthBootstrap {
+        let mut depths = Vec::with_capacity(plan.parts as usize);
+        let mut cumulative = Vec::with_capacity(plan.parts as usize);
+        let (mut sum, mut scale_invalid) = (0.0, 0);
+        for d in 0..plan.parts {
+            let depth_seed = DepthBootstrap::depth_seed(seed, d);
+            let (mut bootstrap, scale) =
+                assemble_part(pieces, evaluated, d, depth_seed, mutation, STREAMS);
+            if let Some(scale) = scale {
+                bootstrap.combine_large_steps(scale.c);
+                scale_invalid += scale.invalid;
             }
             sum += bootstrap.normalisation();
             cumulative.push(sum);
@@ -140,7 +192,7 @@ impl DepthBootstrap {
         DepthBootstrap {
             depths,
             cumulative,
-            scale_samples,
+            scale_samples: u64::from(plan.parts) * u64::from(plan.scale_count),
             scale_invalid,
         }
     }

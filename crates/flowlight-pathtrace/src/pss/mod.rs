@@ -8,6 +8,7 @@
 //! * [`chain`]: the target a sampler exposes ([`PssTarget`]), the bootstrap normalisation
 //!   ([`Bootstrap`]) and one Metropolis–Hastings chain with expected-value splatting
 //!   ([`run_chain`]); the formulas are there.
+//! * [`bootstrap`]: the bootstrap built in pieces by the work units that wait for it.
 //! * [`large_steps`]: Kelemen's balance of the large steps against the chain.
 //! * [`units`]: chains per host work unit, so that `spp` keeps MCPT's meaning.
 //! * [`mcpt`]: entangled MCPT as a target.
@@ -18,6 +19,7 @@
 //! The `pssmlt` plugin is the user; docs/pssmlt.md is the user documentation.
 
 pub mod bdpt;
+pub mod bootstrap;
 pub mod chain;
 pub mod large_steps;
 pub mod mcpt;
@@ -29,10 +31,10 @@ pub mod units;
 #[cfg(test)]
 mod tests;
 
+pub use bootstrap::{BootstrapCell, BootstrapPlan};
 pub use chain::{run_chain, scalar, Bootstrap, Chain, ChainBuffers, ChainCounts, PssTarget, Splat};
 pub use mcpt::McptTarget;
 pub use samples::{Mutation, PrimarySamples, PssStream};
 pub use units::{
-    chain_seed, render_unit, render_unit_in_chains, BootstrapCell, BootstrapCounters,
-    ChainCounters, TileChains,
+    chain_seed, render_unit, render_unit_in_chains, BootstrapCounters, ChainCounters, TileChains,
 };

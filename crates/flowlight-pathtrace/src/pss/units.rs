@@ -28,47 +28,15 @@
 //!
 //! The bootstrap must be drawn from the render seed: with one fixed bootstrap every render
 //! would share its b̂, and the mean of renders would be the image times b̂/b. The host's
-//! `prepare` does not know the seed, so the first work unit of a render computes it
-//! ([`BootstrapCell`]) while the others wait for it; its numbers depend only on the seed.
+//! `prepare` does not know the seed, so the work units of a render compute it together
+//! ([`super::bootstrap::BootstrapCell`]); its numbers depend only on the seed.
 
 use super::chain::{run_chain, Bootstrap, Chain, ChainBuffers, ChainCounts, PssTarget, Splat};
 use flowlight_core::rng::Rng;
 use flowlight_sdk::stats::{Counter, Stats, StatsBuilder};
 use flowlight_sdk::WorkUnit;
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex, PoisonError};
-
-/// The bootstrap of a render seed (`pssmlt`'s [`Bootstrap`], or `mmlt`'s per-depth one),
-/// computed once by the first work unit that asks for it (the others wait on the lock), and
-/// again only for another seed: a fixed bootstrap would scale every render alike, biasing the
-/// mean over renders.
-pub struct BootstrapCell<B = Bootstrap> {
-    inner: Mutex<Option<(u64, Arc<B>)>>,
-}
-
-impl<B> Default for BootstrapCell<B> {
-    fn default() -> Self {
-        BootstrapCell {
-            inner: Mutex::new(None),
-        }
-    }
-}
-
-impl<B> BootstrapCell<B> {
-    /// The bootstrap of render seed `seed`, from `run` if none is stored for that seed, and
-    /// whether this call ran it (so that its cost is reported once).
-    pub fn get_or_run(&self, seed: u64, run: impl FnOnce() -> B) -> (Arc<B>, bool) {
-        let mut guard = self.inner.lock().unwrap_or_else(PoisonError::into_inner);
-        if let Some((stored, b)) = guard.as_ref() {
-            if *stored == seed {
-                return (b.clone(), false);
-            }
-        }
-        let b = Arc::new(run());
-        *guard = Some((seed, b.clone()));
-        (b, true)
-    }
-}
+use std::sync::{Mutex, PoisonError};
 
 /// The seed of the chain of sample index `s` of the tile of `unit`.
 pub fn chain_seed(unit: &WorkUnit, s: u32) -> u64 {
@@ -383,8 +351,8 @@ impl BootstrapCounters {
     }
 
     /// Reports what a unit saw of its seed's bootstrap: the `samples` only from the unit
-    /// that `ran` it (the others waited for it), so they are counted once per seed; the
-    /// normalisation from every unit (a maximum).
+    /// that assembled it (`ran`), so they are counted once per seed; the normalisation from
+    /// every unit (a maximum).
     pub fn report(&self, stats: &mut Stats, ran: bool, samples: u64, normalisation: f64) {
         if ran {
             stats.add(self.samples, samples as f64);
