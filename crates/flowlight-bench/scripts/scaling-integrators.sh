@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Thread scaling of every integrator family the performance targets name (docs/performance.md,
-# "Target 4"): MCPT, ERPT, BDPT and VCM on the Cornell box at 512², each at 1, 2, 4, 8 and 16
+# Thread scaling of every integrator family: the four the performance targets name
+# (docs/performance.md, "Target 4": MCPT, ERPT, BDPT, VCM) and the primary-sample-space
+# Metropolis plugins (PSSMLT, MMLT) on the Cornell box at 512², each at 1, 2, 4, 8 and 16
 # threads (those the machine has), one process per row. Prints the render's wall and CPU time
 # (the summary's, which leave out loading and the acceleration-structure build) and the
 # parallel efficiency T(1) / (n · T(n)) of wall time, as markdown rows.
@@ -10,8 +11,8 @@
 # The sample counts give each integrator 5–15 s at one thread on a Zen 4 core; the rows at 1
 # and 2 threads took one minute there, and 4, 8 and 16 threads add less than the one-thread
 # rows again (not yet timed on a 16-core machine). Needs
-# `cargo build --release --workspace`. SPP_MCPT, SPP_ERPT, SPP_BDPT and SPP_VCM override the
-# sample counts; OUT_DIR keeps the configs and logs (default a temp dir).
+# `cargo build --release --workspace`. SPP_MCPT, SPP_ERPT, SPP_BDPT, SPP_VCM, SPP_PSSMLT and
+# SPP_MMLT override the sample counts; OUT_DIR keeps the configs and logs (default a temp dir).
 set -euo pipefail
 cd "$(dirname "$0")/../../.."
 bin=${FLOWLIGHT_BIN:-target/release/flowlight}
@@ -48,6 +49,8 @@ rows=(
     "erpt|$(config scale-erpt erpt "${SPP_ERPT:-2}")"
     "bdpt|$(config scale-bdpt cornell-box "${SPP_BDPT:-8}" bdpt)"
     "vcm|$(config scale-vcm cornell-box "${SPP_VCM:-4}" vcm)"
+    "pssmlt|$(config scale-pssmlt cornell-box "${SPP_PSSMLT:-16}" pssmlt)"
+    "mmlt|$(config scale-mmlt cornell-box "${SPP_MMLT:-64}" mmlt)"
 )
 
 echo "| integrator | threads | wall (s) | CPU (s) | parallel efficiency |"
