@@ -9,7 +9,7 @@
 #   crates/flowlight-bench/scripts/scaling-integrators.sh [THREADS...]   # default 1 2 4 8 16
 #
 # The sample counts give each integrator 5–15 s at one thread on a Zen 4 core; the rows at 1
-# and 2 threads took one minute there, and 4, 8 and 16 threads add less than the one-thread
+# and 2 threads took 85 s there, and 4, 8 and 16 threads add less than the one-thread
 # rows again (not yet timed on a 16-core machine). Needs
 # `cargo build --release --workspace`. SPP_MCPT, SPP_ERPT, SPP_BDPT, SPP_VCM, SPP_PSSMLT and
 # SPP_MMLT override the sample counts; OUT_DIR keeps the configs and logs (default a temp dir).
