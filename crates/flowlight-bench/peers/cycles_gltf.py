@@ -146,15 +146,23 @@ def disk_masks(ortho, w, h, disks):
     return [(wx - cx) ** 2 + (wy - cy) ** 2 < r * r for cx, cy, r in disks]
 
 
-def main():
+def arguments(spp, only=False):
+    """The command line (after `--` when Blender passes its own): --flowlight, --out (made
+    if missing), --spp (default `spp`) and, with `only`, --only NAME."""
     argv = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else sys.argv[1:]
     ap = argparse.ArgumentParser()
     ap.add_argument("--flowlight", required=True)
     ap.add_argument("--out", required=True)
-    ap.add_argument("--spp", type=int, default=64)
-    ap.add_argument("--only")
+    ap.add_argument("--spp", type=int, default=spp)
+    if only:
+        ap.add_argument("--only")
     args = ap.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
+    return args
+
+
+def main():
+    args = arguments(64, only=True)
     print("| asset | Flowlight | Cycles | ratio | mean abs. difference / mean |")
     print("|---|---|---|---|---|")
     for name, path, pos, target, ortho, w, h, disks in ASSETS:

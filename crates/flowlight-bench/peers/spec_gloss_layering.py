@@ -15,7 +15,6 @@ The Cycles columns:
 
 Needs the PyPI `bpy` 4.5; Flowlight renders as in `cycles_gltf.py` (MCPT, path depth 8).
 """
-import argparse
 import os
 import sys
 
@@ -46,13 +45,7 @@ def matched(distribution):
 
 
 def main():
-    argv = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else sys.argv[1:]
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--flowlight", required=True)
-    ap.add_argument("--out", required=True)
-    ap.add_argument("--spp", type=int, default=256)
-    args = ap.parse_args(argv)
-    os.makedirs(args.out, exist_ok=True)
+    args = cg.arguments(256)
     name, path, pos, target, ortho, w, h, disks = next(a for a in cg.ASSETS if a[0] == "spec-gloss-spheres")
     spec = (name, path, pos, target, ortho, w, h, args.spp, args.out)
     masks = cg.disk_masks(ortho, w, h, disks)
