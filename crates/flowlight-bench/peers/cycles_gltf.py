@@ -146,9 +146,10 @@ def disk_masks(ortho, w, h, disks):
     return [(wx - cx) ** 2 + (wy - cy) ** 2 < r * r for cx, cy, r in disks]
 
 
-def arguments(spp, only=False):
+def arguments(spp, only=False, extend=None):
     """The command line (after `--` when Blender passes its own): --flowlight, --out (made
-    if missing), --spp (default `spp`) and, with `only`, --only NAME."""
+    if missing), --spp (default `spp`), with `only` --only NAME, and what `extend(parser)`
+    adds."""
     argv = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else sys.argv[1:]
     ap = argparse.ArgumentParser()
     ap.add_argument("--flowlight", required=True)
@@ -156,6 +157,8 @@ def arguments(spp, only=False):
     ap.add_argument("--spp", type=int, default=spp)
     if only:
         ap.add_argument("--only")
+    if extend:
+        extend(ap)
     args = ap.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
     return args
