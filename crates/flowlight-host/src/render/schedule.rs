@@ -29,6 +29,15 @@ enum ThreadAccumulator<'a> {
     Cache(MicroTileCache<'a>),
 }
 
+/// What a worker thread keeps between its units (Buffering, Caching): its accumulator, and
+/// when after the render's start it last moved it into the frame for a live preview
+/// ([`RenderOptions::preview_flush`]).
+#[derive(Default)]
+struct ThreadSlot<'a> {
+    acc: Option<ThreadAccumulator<'a>>,
+    preview_flushed: Duration,
+}
+
 /// The counters the units add to, shared by every thread.
 struct Counters {
     /// Pixel samples of the finished rounds.
@@ -84,10 +93,7 @@ struct Run<'a, 'f> {
     /// Pixel samples of the whole render, or 0 for a time budget.
     planned: u64,
     shared: &'f SharedFrame,
-    private: &'a [Mutex<Option<ThreadAccumulator<'f>>>],
-    /// Per thread, nanoseconds after `start` of its last preview flush
-    /// ([`RenderOptions::preview_flush`]).
-    last_flush: &'a [AtomicU64],
+    private: &'a [Mutex<ThreadSlot<'f>>],
     counters: &'a Counters,
 }
 
@@ -105,9 +111,7 @@ pub fn render(
     let precision = opts.precision;
     let (pool, style, shared, cache_slots) = accumulation_plan(&instance.info, opts)?;
     let threads = pool.current_num_threads();
-    let private: Vec<Mutex<Option<ThreadAccumulator>>> =
-        (0..threads).map(|_| Mutex::new(None)).collect();
-    let last_flush: Vec<AtomicU64> = (0..threads).map(|_| AtomicU64::new(0)).collect();
+    let private: Vec<Mutex<ThreadSlot>> = (0..threads).map(|_| Mutex::default()).collect();
     let (tiles, flange) = unit_tiles(instance, opts);
     let start = Instant::now();
     let specs = instance.stat_specs();
@@ -151,7 +155,6 @@ pub fn render(
         },
         shared: &shared,
         private: &private,
-        last_flush: &last_flush,
         counters: &counters,
     };
     let tally = pool.install(|| run.passes());
@@ -290,14 +293,14 @@ fn cache_slots(
 /// bytes of private buffers held: the threads' accumulators, or for Blasting the largest
 /// unit buffer (`blast_bytes`) times the threads.
 fn flush_private(
-    private: Vec<Mutex<Option<ThreadAccumulator>>>,
+    private: Vec<Mutex<ThreadSlot>>,
     shared: &SharedFrame,
     blast_bytes: u64,
     threads: usize,
 ) -> u64 {
     let mut private_bytes = blast_bytes * threads as u64;
     for slot in private {
-        match slot.into_inner().unwrap_or_else(|e| e.into_inner()) {
+        match slot.into_inner().unwrap_or_else(|e| e.into_inner()).acc {
             Some(ThreadAccumulator::Buffer(b)) => {
                 private_bytes += b.bytes();
                 b.flush_into(shared);
@@ -604,7 +607,8 @@ impl Run<'_, '_> {
         // contended.
         let me = rayon::current_thread_index().unwrap_or(0) % self.threads;
         let mut slot = self.private[me].lock().unwrap_or_else(|e| e.into_inner());
-        let acc = slot.get_or_insert_with(|| match self.style {
+        let slot = &mut *slot;
+        let acc = slot.acc.get_or_insert_with(|| match self.style {
             Style::Buffering => ThreadAccumulator::Buffer(ThreadBuffer::new(
                 self.opts.width,
                 self.opts.height,
@@ -631,10 +635,9 @@ impl Run<'_, '_> {
             shared.add_samples((unit.x0, unit.y0, unit.x1, unit.y1), unit.sample_count);
         }
         if let Some(every) = self.opts.preview_flush {
-            let now = self.start.elapsed().as_nanos() as u64;
-            let last = &self.last_flush[me];
-            if now.saturating_sub(last.load(Ordering::Relaxed)) >= every.as_nanos() as u64 {
-                last.store(now, Ordering::Relaxed);
+            let now = self.start.elapsed();
+            if now.saturating_sub(slot.preview_flushed) >= every {
+                slot.preview_flushed = now;
                 match acc {
                     ThreadAccumulator::Buffer(b) => b.flush_and_clear(shared),
                     ThreadAccumulator::Cache(c) => c.flush(),
