@@ -44,9 +44,7 @@ use flowlight_pathtrace::pss::mmlt::{
 use flowlight_pathtrace::pss::params::{
     mutation_from_params, COMBINE_LARGE_STEPS, LARGE_STEP, MMLT_CHAIN_LENGTH, SIGMA,
 };
-use flowlight_pathtrace::pss::{
-    BootstrapCell, BootstrapCounters, ChainCounters, Mutation, Splat, TileChains,
-};
+use flowlight_pathtrace::pss::{BootstrapCell, Mutation, PssCounters, Splat, TileChains};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::declare::IntParam;
 use flowlight_sdk::{
@@ -97,8 +95,7 @@ pub struct Mmlt {
     /// The per-depth bootstrap of the render seed, run by the first work unit of a render
     /// with that seed (it needs a tracer; the others wait for it).
     bootstrap: BootstrapCell<DepthBootstrap>,
-    counters: ChainCounters,
-    bootstrap_counters: BootstrapCounters,
+    counters: PssCounters,
 }
 
 thread_local! {
@@ -123,8 +120,7 @@ impl Integrator for Mmlt {
         let combine_large_steps = COMBINE_LARGE_STEPS.get(params)?;
         let chain_length = MMLT_CHAIN_LENGTH.get(params)? as u64;
         let heuristic = Heuristic::parse(HEURISTIC.get(params)?).expect("declared choice");
-        let counters = ChainCounters::declare(stats);
-        let bootstrap_counters = BootstrapCounters::declare(stats);
+        let counters = PssCounters::declare(stats);
         let info = IntegratorInfo {
             layer_count: 0,
             accumulation: AccumulationStyle::FlangedTile,
@@ -142,7 +138,6 @@ impl Integrator for Mmlt {
             chains: TileChains::default(),
             bootstrap: BootstrapCell::default(),
             counters,
-            bootstrap_counters,
         };
         Ok((integrator, info))
     }
@@ -158,7 +153,7 @@ impl Integrator for Mmlt {
         // Every unit that finds no bootstrap for this seed evaluates pieces of it.
         let plan = DepthBootstrap::plan(self.depth, self.bootstrap_count, self.combine_large_steps);
         let pieces = plan.pieces();
-        let (bootstrap, ran) = self.bootstrap.get_or_build(
+        let (bootstrap, assembled) = self.bootstrap.get_or_build(
             unit.seed,
             pieces.len(),
             |k| DepthBootstrap::evaluate_piece(&sampler, &pieces[k], unit.seed, self.mutation),
@@ -167,9 +162,6 @@ impl Integrator for Mmlt {
             },
         );
         let bootstrap = &*bootstrap;
-        self.bootstrap_counters
-            .report(stats, ran, bootstrap.samples(), bootstrap.total());
-        let bootstrap_invalid = if ran { bootstrap.invalid() } else { 0 };
         let mut counts = MmltCounts::default();
         BUFFERS.with(|buffers| {
             let buffers = &mut *buffers.borrow_mut();
@@ -186,7 +178,7 @@ impl Integrator for Mmlt {
             );
         });
         self.counters
-            .report(stats, &counts.chains, bootstrap_invalid);
+            .report(stats, &counts.chains, bootstrap, assembled);
         Ok(())
     }
 }

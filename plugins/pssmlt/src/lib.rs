@@ -44,8 +44,8 @@ use flowlight_pathtrace::pss::params::{
     mutation_from_params, CHAIN_LENGTH, COMBINE_LARGE_STEPS, LARGE_STEP, SIGMA,
 };
 use flowlight_pathtrace::pss::{
-    render_unit_in_chains, Bootstrap, BootstrapCell, BootstrapCounters, BootstrapPlan,
-    ChainBuffers, ChainCounters, ChainCounts, McptTarget, Mutation, PssTarget, Splat, TileChains,
+    render_unit_in_chains, BootstrapCell, BootstrapPlan, ChainBuffers, ChainCounts, McptTarget,
+    Mutation, PssCounters, PssTarget, Splat, TileChains,
 };
 use flowlight_pathtrace::{settings, PathSettings, Variant};
 use flowlight_sdk::abi::ParamSpec;
@@ -88,21 +88,6 @@ const PARAMS: [ParamSpec; 13] = [
     HEURISTIC.spec(),
 ];
 
-/// The counters the plugin reports: the chains', and the bootstrap's.
-struct Counters {
-    chains: ChainCounters,
-    bootstrap: BootstrapCounters,
-}
-
-impl Counters {
-    fn declare(stats: &mut StatsBuilder) -> Counters {
-        Counters {
-            chains: ChainCounters::declare(stats),
-            bootstrap: BootstrapCounters::declare(stats),
-        }
-    }
-}
-
 /// The sampler the chains run over.
 enum Sampler {
     Mcpt,
@@ -120,14 +105,8 @@ pub struct Pssmlt {
     combine_large_steps: bool,
     chain_length: u64,
     chains: TileChains,
-    bootstrap: BootstrapCell<Built>,
-    counters: Counters,
-}
-
-/// A render seed's bootstrap, and the invalid samples of it and of its scale estimate.
-struct Built {
-    bootstrap: Bootstrap,
-    invalid: u64,
+    bootstrap: BootstrapCell,
+    counters: PssCounters,
 }
 
 thread_local! {
@@ -172,7 +151,7 @@ impl Integrator for Pssmlt {
             flange: 0,
             biased: 0,
         };
-        let counters = Counters::declare(stats);
+        let counters = PssCounters::declare(stats);
         let integrator = Pssmlt {
             scene,
             sampler,
@@ -222,45 +201,23 @@ impl Pssmlt {
         // Every unit that finds no bootstrap for this seed evaluates pieces of it, and with
         // `combine_large_steps` of c, from vectors apart from the bootstrap's
         // (pss::large_steps: unbiased).
-        let plan = BootstrapPlan {
-            parts: 1,
-            count: self.bootstrap_count,
-            scale_count: if self.combine_large_steps {
-                (self.bootstrap_count / 8).max(1)
-            } else {
-                0
-            },
-        };
-        let pieces = plan.pieces();
+        let pieces = BootstrapPlan::new(1, self.bootstrap_count, self.combine_large_steps).pieces();
         let streams = target.streams();
-        let (built, ran) = self.bootstrap.get_or_build(
+        let (bootstrap, assembled) = self.bootstrap.get_or_build(
             unit.seed,
             pieces.len(),
             |k| {
                 let p = &pieces[k];
                 evaluate(target, unit.seed, p.scale, p.vectors.clone(), self.mutation)
             },
-            |evaluated| {
-                let (mut bootstrap, scale) =
-                    assemble_part(&pieces, &evaluated, 0, unit.seed, self.mutation, streams);
-                if let Some(scale) = scale {
-                    bootstrap.combine_large_steps(scale.c);
-                }
-                let invalid = bootstrap.invalid() + scale.map_or(0, |s| s.invalid);
-                Built { bootstrap, invalid }
-            },
+            |evaluated| assemble_part(&pieces, &evaluated, 0, unit.seed, self.mutation, streams),
         );
-        let bootstrap = &built.bootstrap;
-        let bootstrap_invalid = if ran { built.invalid } else { 0 };
-        self.counters
-            .bootstrap
-            .report(stats, ran, plan.samples(), bootstrap.normalisation());
         let mut counts = ChainCounts::default();
         let mut deposit = |s: Splat| film.deposit(s.raster.x, s.raster.y, s.layer, s.value);
         BUFFERS.with_borrow_mut(|buffers| {
             render_unit_in_chains(
                 target,
-                bootstrap,
+                &bootstrap,
                 unit,
                 self.chain_length,
                 &self.chains,
@@ -269,9 +226,7 @@ impl Pssmlt {
                 &mut deposit,
             )
         });
-        self.counters
-            .chains
-            .report(stats, &counts, bootstrap_invalid);
+        self.counters.report(stats, &counts, &*bootstrap, assembled);
     }
 }
 

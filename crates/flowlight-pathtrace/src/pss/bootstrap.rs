@@ -88,6 +88,21 @@ pub struct BootstrapPlan {
 }
 
 impl BootstrapPlan {
+    /// `parts` bootstraps of `count` vectors, each with a scale estimate of count/8 (at least
+    /// one) vectors apart from its own when `combine_large_steps`
+    /// ([`super::large_steps`]).
+    pub fn new(parts: u32, count: u32, combine_large_steps: bool) -> BootstrapPlan {
+        BootstrapPlan {
+            parts,
+            count,
+            scale_count: if combine_large_steps {
+                (count / 8).max(1)
+            } else {
+                0
+            },
+        }
+    }
+
     /// The pieces, part by part, each part's bootstrap before its scale estimate, in vector
     /// order.
     pub fn pieces(&self) -> Vec<Piece> {
@@ -106,17 +121,36 @@ impl BootstrapPlan {
         }
         pieces
     }
+}
 
-    /// The vectors evaluated in all.
-    pub fn samples(&self) -> u64 {
-        u64::from(self.parts) * (u64::from(self.count) + u64::from(self.scale_count))
+/// What a built bootstrap reports ([`super::PssCounters`]): the vectors it evaluated, how
+/// many were invalid, and the normalisation of the film it found.
+pub trait BootstrapTotals {
+    fn samples(&self) -> u64;
+    fn invalid(&self) -> u64;
+    fn normalisation(&self) -> f64;
+}
+
+impl BootstrapTotals for Bootstrap {
+    fn samples(&self) -> u64 {
+        Bootstrap::samples(self)
+    }
+
+    fn invalid(&self) -> u64 {
+        Bootstrap::invalid(self)
+    }
+
+    fn normalisation(&self) -> f64 {
+        Bootstrap::normalisation(self)
     }
 }
 
-/// A scale estimate: c, the mean scalar of its vectors, and how many were invalid.
+/// A scale estimate: c, the mean scalar of its vectors, how many vectors, and how many of
+/// them were invalid.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ScaleEstimate {
     pub c: f64,
+    pub vectors: u64,
     pub invalid: u64,
 }
 
@@ -133,14 +167,15 @@ impl ScaleEstimate {
         }
         ScaleEstimate {
             c: sum / count.max(1) as f64,
+            vectors: count,
             invalid,
         }
     }
 }
 
 /// Part `part` of a plan assembled from `evaluated`, the evaluations of `pieces` (the plan's,
-/// in its order): the bootstrap of seed `seed` over a target of `streams` streams, and its
-/// scale estimate when the plan has one.
+/// in its order): the bootstrap of seed `seed` over a target of `streams` streams, combined
+/// with its scale estimate ([`Bootstrap::combine_large_steps`]) when the plan has one.
 pub fn assemble_part(
     pieces: &[Piece],
     evaluated: &[Evaluated],
@@ -148,7 +183,7 @@ pub fn assemble_part(
     seed: u64,
     mutation: Mutation,
     streams: u32,
-) -> (Bootstrap, Option<ScaleEstimate>) {
+) -> Bootstrap {
     let of = |scale: bool| {
         pieces
             .iter()
@@ -156,10 +191,11 @@ pub fn assemble_part(
             .filter(move |(p, _)| p.part == part && p.scale == scale)
             .map(|(_, e)| e)
     };
-    let bootstrap = Bootstrap::from_pieces(seed, mutation, streams, of(false));
-    let has_scale = of(true).next().is_some();
-    let scale = has_scale.then(|| ScaleEstimate::from_pieces(of(true)));
-    (bootstrap, scale)
+    let mut bootstrap = Bootstrap::from_pieces(seed, mutation, streams, of(false));
+    if of(true).next().is_some() {
+        bootstrap.combine_large_steps(ScaleEstimate::from_pieces(of(true)));
+    }
+    bootstrap
 }
 
 /// The bootstrap of the latest render seed (a [`Bootstrap`], or `mmlt`'s per-depth one),
@@ -354,40 +390,43 @@ mod tests {
         }
     }
 
+    /// Two parts of 5000 vectors, each with a scale estimate of 5000 / 8 = 625.
     const PLAN: BootstrapPlan = BootstrapPlan {
         parts: 2,
         count: 5000,
-        scale_count: 700,
+        scale_count: 625,
     };
 
-    fn serial(mutation: Mutation) -> Vec<(Bootstrap, Option<ScaleEstimate>)> {
+    /// The plan's parts on one thread: `Bootstrap::run` combined with `scale_estimate`.
+    fn serial(mutation: Mutation) -> Vec<Bootstrap> {
         (0..PLAN.parts)
             .map(|part| {
                 let seed = 10 + u64::from(part);
-                let b = Bootstrap::run(&mut Product, seed, PLAN.count, mutation);
-                let (c, invalid) =
-                    super::super::large_steps::scale_estimate(&mut Product, seed, 700, mutation);
-                (b, Some(ScaleEstimate { c, invalid }))
+                let mut b = Bootstrap::run(&mut Product, seed, PLAN.count, mutation);
+                let scale = super::super::large_steps::scale_estimate(
+                    &mut Product,
+                    seed,
+                    PLAN.scale_count,
+                    mutation,
+                );
+                b.combine_large_steps(scale);
+                b
             })
             .collect()
     }
 
-    fn same(a: &[(Bootstrap, Option<ScaleEstimate>)], b: &[(Bootstrap, Option<ScaleEstimate>)]) {
-        assert_eq!(a.len(), b.len());
-        for ((ba, sa), (bb, sb)) in a.iter().zip(b) {
-            assert_eq!(ba.len(), bb.len());
-            assert_eq!(ba.normalisation().to_bits(), bb.normalisation().to_bits());
-            assert!((0..ba.len()).all(|i| ba.scalar(i).to_bits() == bb.scalar(i).to_bits()));
-            assert_eq!(sa, sb);
-        }
+    /// Every field the same bits (Debug prints each f64 so that it reads back exactly).
+    fn same(a: &[Bootstrap], b: &[Bootstrap]) {
+        assert_eq!(format!("{a:?}"), format!("{b:?}"));
     }
 
     #[test]
     fn a_plan_covers_every_vector_once_in_pieces_of_at_most_piece_vectors() {
         let pieces = PLAN.pieces();
+        assert_eq!(PLAN, BootstrapPlan::new(2, 5000, true));
         assert_eq!(pieces.len(), 2 * (3 + 1));
         for part in 0..2 {
-            for (scale, n) in [(false, 5000), (true, 700)] {
+            for (scale, n) in [(false, 5000), (true, 625)] {
                 let mut next = 0;
                 for p in pieces.iter().filter(|p| p.part == part && p.scale == scale) {
                     assert_eq!(p.vectors.start, next);
@@ -397,7 +436,6 @@ mod tests {
                 assert_eq!(next, n);
             }
         }
-        assert_eq!(PLAN.samples(), 2 * 5700);
     }
 
     /// Four threads share the pieces: each piece is evaluated once, one call assembles, and

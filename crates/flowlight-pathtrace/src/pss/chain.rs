@@ -28,7 +28,7 @@
 //! against its large steps, b̂/f → b̂/(f + p·c) and a large step's proposal gaining
 //! c/(f(y) + p·c), with the same expectation per mutation ([`super::large_steps`]).
 
-use super::bootstrap::{evaluate, Evaluated};
+use super::bootstrap::{evaluate, Evaluated, ScaleEstimate};
 use super::large_steps::LargeStepWeights;
 use super::samples::{Mutation, PrimarySamples};
 use flowlight_core::rng::Rng;
@@ -86,6 +86,9 @@ pub struct Bootstrap {
     /// The large steps' balance weights, when the chains combine them
     /// ([`Bootstrap::combine_large_steps`]).
     large_steps: Option<LargeStepWeights>,
+    /// The vectors of the scale estimate combined with it, and how many were invalid.
+    scale_vectors: u64,
+    scale_invalid: u64,
 }
 
 impl Bootstrap {
@@ -126,6 +129,8 @@ impl Bootstrap {
             cumulative,
             invalid,
             large_steps: None,
+            scale_vectors: 0,
+            scale_invalid: 0,
         }
     }
 
@@ -137,11 +142,14 @@ impl Bootstrap {
     }
 
     /// Makes the chains started from this bootstrap weigh their deposits against their large
-    /// steps by the balance heuristic ([`super::large_steps`]), with `scale` (c) an estimate
-    /// of b drawn independently of this bootstrap; a scale of 0 (or a large-step probability
-    /// of 0) keeps the plain splatting.
-    pub fn combine_large_steps(&mut self, scale: f64) {
-        self.large_steps = LargeStepWeights::new(self.mutation.large_step, scale);
+    /// steps by the balance heuristic ([`super::large_steps`]), with `scale.c` an estimate of b
+    /// drawn independently of this bootstrap (its vectors and invalid ones count as the
+    /// bootstrap's: [`Bootstrap::samples`], [`Bootstrap::invalid`]); a c of 0 (or a
+    /// large-step probability of 0) keeps the plain splatting.
+    pub fn combine_large_steps(&mut self, scale: ScaleEstimate) {
+        self.large_steps = LargeStepWeights::new(self.mutation.large_step, scale.c);
+        self.scale_vectors = scale.vectors;
+        self.scale_invalid = scale.invalid;
     }
 
     /// B, the number of samples.
@@ -162,9 +170,15 @@ impl Bootstrap {
         }
     }
 
-    /// Samples whose splats were not finite and non-negative (counted as f = 0).
+    /// The vectors evaluated to build it: B, and the scale estimate's.
+    pub fn samples(&self) -> u64 {
+        self.cumulative.len() as u64 + self.scale_vectors
+    }
+
+    /// Samples (of the bootstrap and its scale estimate) whose splats were not finite and
+    /// non-negative (counted as f = 0).
     pub fn invalid(&self) -> u64 {
-        self.invalid
+        self.invalid + self.scale_invalid
     }
 
     /// The scalar target of sample `i`.

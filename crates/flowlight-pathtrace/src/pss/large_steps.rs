@@ -87,8 +87,7 @@ pub fn scale_estimate<T: PssTarget>(
     seed: u64,
     count: u32,
     mutation: Mutation,
-) -> (f64, u64) {
+) -> ScaleEstimate {
     let evaluated = evaluate(target, seed, true, 0..count, mutation);
-    let estimate = ScaleEstimate::from_pieces([&evaluated]);
-    (estimate.c, estimate.invalid)
+    ScaleEstimate::from_pieces([&evaluated])
 }

@@ -37,7 +37,7 @@
 //! pixels), seeded from (seed, tile, sample index), so that the host's division by spp gives
 //! the image and the image does not depend on the thread count.
 
-use super::bootstrap::{assemble_part, evaluate, BootstrapPlan, Evaluated, Piece};
+use super::bootstrap::{assemble_part, evaluate, BootstrapPlan, BootstrapTotals, Evaluated, Piece};
 use super::chain::{Bootstrap, Chain, ChainBuffers, ChainCounts, PssTarget, Splat};
 use super::samples::{Mutation, PrimarySamples};
 use super::units::{chain_seed, run_tile_chains, ChainStart, TileChainRunner, TileChains};
@@ -103,10 +103,6 @@ pub struct DepthBootstrap {
     depths: Vec<Bootstrap>,
     /// Running sums of b̂_d over d.
     cumulative: Vec<f64>,
-    /// The vectors of the depths' scale estimates (`combine_large_steps`), and how many of
-    /// them were invalid.
-    scale_samples: u64,
-    scale_invalid: u64,
 }
 
 impl DepthBootstrap {
@@ -132,15 +128,7 @@ impl DepthBootstrap {
 
     /// The pieces of [`DepthBootstrap::run`]'s vectors: one part per depth.
     pub fn plan(max_depth: u32, count: u32, combine_large_steps: bool) -> BootstrapPlan {
-        BootstrapPlan {
-            parts: max_depth + 1,
-            count,
-            scale_count: if combine_large_steps {
-                (count / 8).max(1)
-            } else {
-                0
-            },
-        }
+        BootstrapPlan::new(max_depth + 1, count, combine_large_steps)
     }
 
     /// The seed of depth `d`'s bootstrap and scale estimate in a render of seed `seed`.
@@ -176,31 +164,15 @@ impl DepthBootstrap {
     ) -> DepthBootstrap {
         let mut depths = Vec::with_capacity(plan.parts as usize);
         let mut cumulative = Vec::with_capacity(plan.parts as usize);
-        let (mut sum, mut scale_invalid) = (0.0, 0);
+        let mut sum = 0.0;
         for d in 0..plan.parts {
             let depth_seed = DepthBootstrap::depth_seed(seed, d);
-            let (mut bootstrap, scale) =
-                assemble_part(pieces, evaluated, d, depth_seed, mutation, STREAMS);
-            if let Some(scale) = scale {
-                bootstrap.combine_large_steps(scale.c);
-                scale_invalid += scale.invalid;
-            }
+            let bootstrap = assemble_part(pieces, evaluated, d, depth_seed, mutation, STREAMS);
             sum += bootstrap.normalisation();
             cumulative.push(sum);
             depths.push(bootstrap);
         }
-        DepthBootstrap {
-            depths,
-            cumulative,
-            scale_samples: u64::from(plan.parts) * u64::from(plan.scale_count),
-            scale_invalid,
-        }
-    }
-
-    /// The vectors evaluated to build it: every depth's bootstrap and scale estimate.
-    pub fn samples(&self) -> u64 {
-        let bootstraps: usize = self.depths.iter().map(Bootstrap::len).sum();
-        bootstraps as u64 + self.scale_samples
+        DepthBootstrap { depths, cumulative }
     }
 
     /// The deepest depth D.
@@ -223,12 +195,6 @@ impl DepthBootstrap {
         &self.depths[d as usize]
     }
 
-    /// Samples whose splats were not finite and non-negative, over every depth's bootstrap
-    /// and scale estimate.
-    pub fn invalid(&self) -> u64 {
-        self.depths.iter().map(Bootstrap::invalid).sum::<u64>() + self.scale_invalid
-    }
-
     /// The depth whose share of Σ b̂ covers `u` ∈ [0, 1): d with probability b̂_d / Σ b̂.
     /// `None` when every depth is black.
     pub fn pick(&self, u: f32) -> Option<u32> {
@@ -241,6 +207,21 @@ impl DepthBootstrap {
         let d = d.min(self.cumulative.len() - 1) as u32;
         // Rounding can leave the target at the total: the deepest depth with light.
         (0..=d).rev().find(|&k| self.brightness(k) > 0.0)
+    }
+}
+
+/// Summed over the depths; the normalisation is Σ_d b̂_d ([`DepthBootstrap::total`]).
+impl BootstrapTotals for DepthBootstrap {
+    fn samples(&self) -> u64 {
+        self.depths.iter().map(Bootstrap::samples).sum()
+    }
+
+    fn invalid(&self) -> u64 {
+        self.depths.iter().map(Bootstrap::invalid).sum()
+    }
+
+    fn normalisation(&self) -> f64 {
+        self.total()
     }
 }
 

@@ -31,10 +31,8 @@ pub mod units;
 #[cfg(test)]
 mod tests;
 
-pub use bootstrap::{BootstrapCell, BootstrapPlan};
+pub use bootstrap::{BootstrapCell, BootstrapPlan, BootstrapTotals};
 pub use chain::{run_chain, scalar, Bootstrap, Chain, ChainBuffers, ChainCounts, PssTarget, Splat};
 pub use mcpt::McptTarget;
 pub use samples::{Mutation, PrimarySamples, PssStream};
-pub use units::{
-    chain_seed, render_unit, render_unit_in_chains, BootstrapCounters, ChainCounters, TileChains,
-};
+pub use units::{chain_seed, render_unit, render_unit_in_chains, PssCounters, TileChains};

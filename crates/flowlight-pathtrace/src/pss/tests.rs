@@ -5,6 +5,7 @@
 //! of the states; each bin's mean over chains is z-tested against the bin's share of ∫f, and
 //! the z² summed (≈ χ² with 64 degrees of freedom when the chain is right).
 
+use super::bootstrap::ScaleEstimate;
 use super::chain::{run_chain, Bootstrap, ChainBuffers, ChainCounts, PssTarget, Splat};
 use super::large_steps::scale_estimate;
 use super::samples::{Mutation, PrimarySamples};
@@ -192,7 +193,11 @@ fn deposits_combined_with_the_large_steps_are_the_bin_integrals() {
     // c need not be b (nor anything of the bootstrap's): any scale keeps the expectation.
     for scale in [total(), 4.0 * total(), 0.25 * total()] {
         let run = run_chains_with(Mutation::new(0.3, 0.05), CHAINS, 500, |b| {
-            b.combine_large_steps(scale)
+            b.combine_large_steps(ScaleEstimate {
+                c: scale,
+                vectors: 0,
+                invalid: 0,
+            })
         });
         let chi2 = chi_square(&run.deposits, &integrals);
         eprintln!("large steps combined, c = {scale:.3}: deposit χ² = {chi2:.1}");
@@ -219,9 +224,13 @@ fn large_step_weights_of_the_wrong_probability_fail_the_same_check() {
 #[test]
 fn the_scale_estimate_is_the_integral_from_its_own_vectors() {
     let mutation = Mutation::new(0.3, 0.05);
-    let (c, invalid) = scale_estimate(&mut Bumps, 3, 50_000, mutation);
+    let ScaleEstimate {
+        c,
+        vectors,
+        invalid,
+    } = scale_estimate(&mut Bumps, 3, 50_000, mutation);
     let b = Bootstrap::run(&mut Bumps, 3, 50_000, mutation);
-    assert_eq!(invalid, 0);
+    assert_eq!((vectors, invalid), (50_000, 0));
     // Within 4σ of ∫ f (σ of f's spread over 50,000 vectors is below 0.5% of it here) ...
     assert!(
         (c / total() - 1.0).abs() < 0.02,

@@ -31,6 +31,7 @@
 //! `prepare` does not know the seed, so the work units of a render compute it together
 //! ([`super::bootstrap::BootstrapCell`]); its numbers depend only on the seed.
 
+use super::bootstrap::BootstrapTotals;
 use super::chain::{run_chain, Bootstrap, Chain, ChainBuffers, ChainCounts, PssTarget, Splat};
 use flowlight_core::rng::Rng;
 use flowlight_sdk::stats::{Counter, Stats, StatsBuilder};
@@ -289,74 +290,64 @@ pub fn render_unit_in_chains<T: PssTarget>(
     run_tile_chains(&mut runner, unit, chain_length, chains);
 }
 
-/// The chain counters a primary-sample-space plugin reports (`pssmlt`, `mmlt`): chains,
-/// mutations, large steps, accepted large and small steps, the large-step acceptance and
-/// the invalid samples.
+/// The counters a primary-sample-space plugin reports (`pssmlt`, `mmlt`): its chains'
+/// (chains, mutations, large steps, accepted large and small steps, the large-step
+/// acceptance) and its bootstrap's (`bootstrap samples`: the vectors evaluated, scale
+/// estimates included; `bootstrap b`: the film's normalisation), and the invalid samples of
+/// both.
 #[derive(Clone, Copy, Debug)]
-pub struct ChainCounters {
+pub struct PssCounters {
     chains: Counter,
     mutations: Counter,
     large_steps: Counter,
     accepted_large: Counter,
     accepted_small: Counter,
     invalid: Counter,
+    bootstrap_samples: Counter,
+    normalisation: Counter,
 }
 
-impl ChainCounters {
+impl PssCounters {
     /// Declares the counters.
-    pub fn declare(stats: &mut StatsBuilder) -> ChainCounters {
+    pub fn declare(stats: &mut StatsBuilder) -> PssCounters {
         let mutations = stats.sum("mutations");
         let large_steps = stats.sum("large steps");
         let accepted_large = stats.sum("accepted large steps");
         let accepted_small = stats.sum("accepted small steps");
         stats.ratio("large-step acceptance", accepted_large, large_steps);
-        ChainCounters {
+        PssCounters {
             chains: stats.sum("chains"),
             mutations,
             large_steps,
             accepted_large,
             accepted_small,
             invalid: stats.sum("invalid samples"),
+            bootstrap_samples: stats.sum("bootstrap samples"),
+            normalisation: stats.max("bootstrap b"),
         }
     }
 
-    /// Reports a unit's counts (and, as `invalid samples`, `extra_invalid` more: a
-    /// bootstrap's).
-    pub fn report(&self, stats: &mut Stats, c: &ChainCounts, extra_invalid: u64) {
+    /// Reports a unit's chain counts `c` and what it saw of its seed's `bootstrap`: its
+    /// samples and invalid ones only from the unit that assembled it (`assembled`), so that
+    /// they count once per seed; its normalisation from every unit (a maximum).
+    pub fn report(
+        &self,
+        stats: &mut Stats,
+        c: &ChainCounts,
+        bootstrap: &impl BootstrapTotals,
+        assembled: bool,
+    ) {
         stats.add(self.chains, c.chains as f64);
         stats.add(self.mutations, c.mutations as f64);
         stats.add(self.large_steps, c.large_steps as f64);
         stats.add(self.accepted_large, c.accepted_large as f64);
         stats.add(self.accepted_small, c.accepted_small as f64);
-        stats.add(self.invalid, (c.invalid + extra_invalid) as f64);
-    }
-}
-
-/// The bootstrap counters a primary-sample-space plugin reports (`pssmlt`, `mmlt`):
-/// `bootstrap samples`, the vectors the bootstrap evaluated (with `combine_large_steps`, the
-/// scale estimate's too), and `bootstrap b`, the normalisation of the film it found.
-#[derive(Clone, Copy, Debug)]
-pub struct BootstrapCounters {
-    samples: Counter,
-    normalisation: Counter,
-}
-
-impl BootstrapCounters {
-    /// Declares the counters.
-    pub fn declare(stats: &mut StatsBuilder) -> BootstrapCounters {
-        BootstrapCounters {
-            samples: stats.sum("bootstrap samples"),
-            normalisation: stats.max("bootstrap b"),
+        let mut invalid = c.invalid;
+        if assembled {
+            invalid += bootstrap.invalid();
+            stats.add(self.bootstrap_samples, bootstrap.samples() as f64);
         }
-    }
-
-    /// Reports what a unit saw of its seed's bootstrap: the `samples` only from the unit
-    /// that assembled it (`ran`), so they are counted once per seed; the normalisation from
-    /// every unit (a maximum).
-    pub fn report(&self, stats: &mut Stats, ran: bool, samples: u64, normalisation: f64) {
-        if ran {
-            stats.add(self.samples, samples as f64);
-        }
-        stats.add(self.normalisation, normalisation);
+        stats.add(self.invalid, invalid as f64);
+        stats.add(self.normalisation, bootstrap.normalisation());
     }
 }
