@@ -81,14 +81,13 @@ def compare(flowlight, asset, spp, out, lambertian):
     print("|---|---:|---|---:|---:|---:|---:|---:|")
     for material, cells in groups:
         for r, y in enumerate(ROWS):
-            disks = [(x, y, RADIUS) for _, x in cells]
-            masks = cg.disk_masks(ortho, w, h, [(x, y - target[1], rad) for x, y, rad in disks])
-            means = [[img[m].mean() for m in masks] for img in images]
-            for k, (cell, _) in enumerate(cells):
-                f, c = means[0][k], means[1][k]
-                rel = "" if k == 0 else f" {f / means[0][0]:.4f} | {c / means[1][0]:.4f}"
-                rel = rel or " | "
-                print(f"| {material} | {r + 1} | {cell} | {f:.4f} | {c:.4f} | {f / c:.4f} |{rel} |")
+            # Disks about the cells' centres, in the image plane (centred on the camera).
+            masks = cg.disk_masks(ortho, w, h, [(x, y - target[1], RADIUS) for _, x in cells])
+            (f0, *fs), (c0, *cs) = [[img[m].mean() for m in masks] for img in images]
+            print(f"| {material} | {r + 1} | geometry | {f0:.4f} | {c0:.4f} | {f0 / c0:.4f} | | |")
+            for (cell, _), f, c in zip(cells[1:], fs, cs):
+                print(f"| {material} | {r + 1} | {cell} | {f:.4f} | {c:.4f} | {f / c:.4f} | "
+                      f"{f / f0:.4f} | {c / c0:.4f} |")
 
 
 def main():

@@ -49,7 +49,10 @@ def main():
     name, path, pos, target, ortho, w, h, disks = next(a for a in cg.ASSETS if a[0] == "spec-gloss-spheres")
     spec = (name, path, pos, target, ortho, w, h, args.spp, args.out)
     masks = cg.disk_masks(ortho, w, h, disks)
-    means = lambda img: [cg.luminance(img)[m].mean() for m in masks]  # noqa: E731
+
+    def means(img):
+        return [cg.luminance(img)[m].mean() for m in masks]
+
     ours = means(cg.render_flowlight(os.path.abspath(args.flowlight), *spec))
     cycles = [
         means(cg.render_cycles(*spec, tag="cycles-imported")),
