@@ -120,8 +120,9 @@ impl DepthBootstrap {
     ) -> DepthBootstrap {
         let plan = DepthBootstrap::plan(max_depth, count, combine_large_steps);
         let pieces = plan.pieces();
-        let evaluated: Vec<Evaluated> = (0..pieces.len())
-            .map(|k| DepthBootstrap::evaluate_piece(sampler, &pieces[k], seed, mutation))
+        let evaluated: Vec<Evaluated> = pieces
+            .iter()
+            .map(|piece| DepthBootstrap::evaluate_piece(sampler, piece, seed, mutation))
             .collect();
         DepthBootstrap::assemble(&pieces, &evaluated, plan, seed, mutation)
     }
