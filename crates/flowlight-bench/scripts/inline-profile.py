@@ -12,7 +12,8 @@ instructions, and its instructions per closest-hit ray of the render (the summar
         -- target/release/flowlight render scenes/cornell-box/cornell-box.toml --spp 1 --threads 1
 
 Needs `valgrind` and `addr2line` (Debian: valgrind, binutils) and a release build (its line
-tables: `[profile.release] debug = 1`). A 256x256 Cornell box at 1 spp takes about 30 s.
+tables: `[profile.release] debug = 1`). The Cornell box at 1 spp takes about 25 s at 256x256 and
+85 s at its config's 512x512 on a Zen 4 core.
 """
 
 import argparse
