@@ -29,7 +29,8 @@
 //! * `combine_large_steps` (default true): Kelemen's balance of each depth's chain against
 //!   its large steps, with c_d from `bootstrap`/8 further samples of depth d.
 //! * `bootstrap` (default 16384, 1–1,000,000): independent samples per depth for b_d and the
-//!   chains' start states; computed once per render, by its first work unit (8 bytes each).
+//!   chains' start states; computed once per render, in pieces by the work units that wait
+//!   for it (8 bytes each).
 //! * `heuristic` (`"power"` or `"balance"`): the MIS weights of a depth's strategies.
 
 // A plugin writes no `unsafe`: the SDK's glue holds the raw side of the boundary.
@@ -38,13 +39,16 @@
 use flowlight_pathtrace::bidir::params::HEURISTIC;
 use flowlight_pathtrace::bidir::sample::{strategy_only_settings, FilmPlan, FilmSampler};
 use flowlight_pathtrace::bidir::Heuristic;
+use flowlight_pathtrace::pss::bootstrap::Piece;
 use flowlight_pathtrace::pss::mmlt::{
     render_unit_in_chains, DepthBootstrap, MmltBuffers, MmltCounts,
 };
 use flowlight_pathtrace::pss::params::{
     mutation_from_params, COMBINE_LARGE_STEPS, LARGE_STEP, MMLT_CHAIN_LENGTH, SIGMA,
 };
-use flowlight_pathtrace::pss::{BootstrapCell, Mutation, PssCounters, Splat, TileChains};
+use flowlight_pathtrace::pss::{
+    BootstrapCell, BootstrapPlan, Mutation, PssCounters, Splat, TileChains,
+};
 use flowlight_sdk::abi::ParamSpec;
 use flowlight_sdk::declare::IntParam;
 use flowlight_sdk::{
@@ -84,16 +88,16 @@ pub struct Mmlt {
     scene: Scene<'static>,
     /// The strategies' settings up to `depth`, made once.
     plan: FilmPlan,
-    depth: u32,
     mutation: Mutation,
-    bootstrap_count: u32,
-    combine_large_steps: bool,
     /// Mutations per chain (0: one chain per sample index of a unit).
     chain_length: u64,
     /// The tiles' chains between their units, with their depths.
     chains: TileChains<u32>,
-    /// The per-depth bootstrap of the render seed, run by the first work unit of a render
-    /// with that seed (it needs a tracer; the others wait for it).
+    /// The per-depth bootstraps' plan and its pieces, the same for every render seed.
+    bootstrap_plan: BootstrapPlan,
+    bootstrap_pieces: Vec<Piece>,
+    /// The per-depth bootstrap of the render seed, built by the work units that need it (it
+    /// needs a tracer, which `create` has not).
     bootstrap: BootstrapCell<DepthBootstrap>,
     counters: PssCounters,
 }
@@ -116,8 +120,11 @@ impl Integrator for Mmlt {
     ) -> Result<(Self, IntegratorInfo), String> {
         let depth = PATH_DEPTH.get(params)? as u32;
         let mutation = mutation_from_params(params)?;
-        let bootstrap_count = BOOTSTRAP.get(params)? as u32;
-        let combine_large_steps = COMBINE_LARGE_STEPS.get(params)?;
+        let bootstrap_plan = DepthBootstrap::plan(
+            depth,
+            BOOTSTRAP.get(params)? as u32,
+            COMBINE_LARGE_STEPS.get(params)?,
+        );
         let chain_length = MMLT_CHAIN_LENGTH.get(params)? as u64;
         let heuristic = Heuristic::parse(HEURISTIC.get(params)?).expect("declared choice");
         let counters = PssCounters::declare(stats);
@@ -130,12 +137,11 @@ impl Integrator for Mmlt {
         let integrator = Mmlt {
             scene,
             plan: FilmPlan::new(&scene, strategy_only_settings(heuristic), depth),
-            depth,
             mutation,
-            bootstrap_count,
-            combine_large_steps,
             chain_length,
             chains: TileChains::default(),
+            bootstrap_plan,
+            bootstrap_pieces: bootstrap_plan.pieces(),
             bootstrap: BootstrapCell::default(),
             counters,
         };
@@ -151,14 +157,13 @@ impl Integrator for Mmlt {
     ) -> Result<(), String> {
         let sampler = FilmSampler::new(&self.scene, tracer, &self.plan);
         // Every unit that finds no bootstrap for this seed evaluates pieces of it.
-        let plan = DepthBootstrap::plan(self.depth, self.bootstrap_count, self.combine_large_steps);
-        let pieces = plan.pieces();
+        let (plan, pieces) = (self.bootstrap_plan, &self.bootstrap_pieces);
         let (bootstrap, assembled) = self.bootstrap.get_or_build(
             unit.seed,
             pieces.len(),
             |k| DepthBootstrap::evaluate_piece(&sampler, &pieces[k], unit.seed, self.mutation),
             |evaluated| {
-                DepthBootstrap::assemble(&pieces, &evaluated, plan, unit.seed, self.mutation)
+                DepthBootstrap::assemble(pieces, &evaluated, plan, unit.seed, self.mutation)
             },
         );
         let bootstrap = &*bootstrap;

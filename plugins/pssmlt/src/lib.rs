@@ -17,8 +17,9 @@
 //! `spp` keeps MCPT's meaning: a work unit of P pixels × n samples runs P·n mutations, W·H·spp
 //! in all, as pieces of its tile's chains of `chain_length` mutations, which run on across the
 //! tile's units (parked between them); each chain's numbers depend only on (render seed,
-//! tile, its first mutation), so the image does not depend on the thread count. The first
-//! work unit of a render runs the bootstrap (from the render seed), the others wait for it.
+//! tile, its first mutation), so the image does not depend on the thread count. The work
+//! units of a render that find no bootstrap for its seed build it together, in pieces
+//! (`pss::bootstrap`), and the image is the same bits whatever the thread count.
 //!
 //! Parameters (`[integrator]` table): `sampler` (the sampler the chains run over: `"mcpt"`,
 //! entangled path tracing, or `"bdpt"`, one bidirectional sample with every (s, t) strategy
@@ -39,7 +40,7 @@ use flowlight_pathtrace::bidir::params::HEURISTIC;
 use flowlight_pathtrace::bidir::sample::{strategy_only_settings, FilmPlan, FilmSampler};
 use flowlight_pathtrace::bidir::Heuristic;
 use flowlight_pathtrace::pss::bdpt::BdptTarget;
-use flowlight_pathtrace::pss::bootstrap::{assemble_part, evaluate};
+use flowlight_pathtrace::pss::bootstrap::{assemble_part, evaluate, Piece};
 use flowlight_pathtrace::pss::params::{
     mutation_from_params, CHAIN_LENGTH, COMBINE_LARGE_STEPS, LARGE_STEP, SIGMA,
 };
@@ -101,10 +102,11 @@ pub struct Pssmlt {
     settings: PathSettings,
     layers: bool,
     mutation: Mutation,
-    bootstrap_count: u32,
-    combine_large_steps: bool,
     chain_length: u64,
     chains: TileChains,
+    /// The pieces of the bootstrap's vectors (and, with `combine_large_steps`, of the scale
+    /// estimate's), the same for every render seed.
+    bootstrap_pieces: Vec<Piece>,
     bootstrap: BootstrapCell,
     counters: PssCounters,
 }
@@ -144,6 +146,9 @@ impl Integrator for Pssmlt {
         let mutation = mutation_from_params(params)?;
         let bootstrap_count = BOOTSTRAP.get(params)? as u32;
         let combine_large_steps = COMBINE_LARGE_STEPS.get(params)?;
+        // With `combine_large_steps`, c from vectors apart from the bootstrap's
+        // (pss::large_steps: unbiased).
+        let bootstrap_pieces = BootstrapPlan::new(1, bootstrap_count, combine_large_steps).pieces();
         let chain_length = CHAIN_LENGTH.get(params)? as u64;
         let info = IntegratorInfo {
             layer_count: if layers { settings.path_depth + 1 } else { 0 },
@@ -158,10 +163,9 @@ impl Integrator for Pssmlt {
             settings,
             layers,
             mutation,
-            bootstrap_count,
-            combine_large_steps,
             chain_length,
             chains: TileChains::default(),
+            bootstrap_pieces,
             bootstrap: BootstrapCell::default(),
             counters,
         };
@@ -198,10 +202,8 @@ impl Pssmlt {
         film: &mut Film,
         stats: &mut Stats,
     ) {
-        // Every unit that finds no bootstrap for this seed evaluates pieces of it, and with
-        // `combine_large_steps` of c, from vectors apart from the bootstrap's
-        // (pss::large_steps: unbiased).
-        let pieces = BootstrapPlan::new(1, self.bootstrap_count, self.combine_large_steps).pieces();
+        // Every unit that finds no bootstrap for this seed evaluates pieces of it.
+        let pieces = &self.bootstrap_pieces;
         let streams = target.streams();
         let (bootstrap, assembled) = self.bootstrap.get_or_build(
             unit.seed,
@@ -210,7 +212,7 @@ impl Pssmlt {
                 let p = &pieces[k];
                 evaluate(target, unit.seed, p.scale, p.vectors.clone(), self.mutation)
             },
-            |evaluated| assemble_part(&pieces, &evaluated, 0, unit.seed, self.mutation, streams),
+            |evaluated| assemble_part(pieces, &evaluated, 0, unit.seed, self.mutation, streams),
         );
         let mut counts = ChainCounts::default();
         let mut deposit = |s: Splat| film.deposit(s.raster.x, s.raster.y, s.layer, s.value);
