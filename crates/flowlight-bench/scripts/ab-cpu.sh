@@ -39,7 +39,7 @@ for scene in cornell-box stanford-dragon; do
     [ -f "$peers/$scene.toml" ] || { echo "$peers/$scene.toml missing: run peers.py first" >&2; exit 1; }
     ta=() tb=()
     # One untimed render each first: the first render after a build or a pause pays for
-    # cold caches (up to 20% more CPU here), which would fall on A.
+    # cold caches (22% more CPU in one check here), which would fall on A.
     cpu "$a" "$scene" a >/dev/null
     cpu "$b" "$scene" b >/dev/null
     for i in $(seq "$pairs"); do
