@@ -52,7 +52,9 @@ def without_specular(asset, out):
     doc, rest = json.loads(data[20 : 20 + length]), data[20 + length :]
     for m in doc["materials"]:
         m.setdefault("extensions", {})["KHR_materials_specular"] = {"specularFactor": 0.0}
-    doc.setdefault("extensionsUsed", []).append("KHR_materials_specular")
+    used = doc.setdefault("extensionsUsed", [])
+    if "KHR_materials_specular" not in used:  # the spec's entries are unique
+        used.append("KHR_materials_specular")
     text = json.dumps(doc).encode()
     text += b" " * (-len(text) % 4)
     body = struct.pack("<I", len(text)) + b"JSON" + text + rest
