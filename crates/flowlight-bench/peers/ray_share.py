@@ -1,0 +1,169 @@
+#!/usr/bin/env python3
+"""Where each renderer's CPU goes on the peers' scenes: Embree's ray queries against the rest
+(sampling, shading, surface data, film), per camera sample, Flowlight beside Mitsuba 3.
+
+    crates/flowlight-bench/peers/peers.py --reference-only          # once: writes the configs
+    crates/flowlight-bench/peers/ray_share.py                       # both scenes, 64 spp, 2 threads
+    crates/flowlight-bench/peers/ray_share.py --set branches=1 --scenes cornell-box
+
+Each render runs under `perf record -F 999` (cpu-clock samples; Debian: linux-perf). A sample
+counts as Embree's when it falls in Embree's library: libembree4 for Flowlight, the
+libembree3 that Mitsuba's wheel bundles. What is left out:
+  * Flowlight: every thread but the render workers (`flowlight-worke`: the loader, the
+    acceleration-structure build and the EXR writer run elsewhere);
+  * Mitsuba: every sample outside the timed passes (loading, the untimed warm-up pass that
+    JIT-compiles the kernels, writing), by the samples' CLOCK_MONOTONIC time stamps.
+The CPU per camera sample is each renderer's own clock, as peers.py takes it (Flowlight's
+summary `cpu time`; `time.process_time()` around Mitsuba's timed pass), split by the shares.
+The rest is split by library too: Flowlight's plugin (`libflowlight_*`), its host (the
+`flowlight` binary: batch callbacks, accumulation) and the others (libc, the kernel);
+Mitsuba's compiled kernels (JIT code, perf's `perf-PID.map`), Dr.Jit's runtime and the others.
+
+Why: the two renderers trace nearly the same rays per path (a camera ray, then per vertex
+one shadow ray and one extension ray), so what separates their costs beyond Embree's own
+(robust here, fast there: peers.py `--render-set robust=false` measures ours in Mitsuba's
+mode) is the rest of a path, Mitsuba's compiled wavefront loop against Flowlight's walker.
+"""
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.abspath(os.path.join(HERE, "..", "..", ".."))
+sys.path.insert(0, HERE)
+import peers  # noqa: E402  (the same venv, configs and renderer arguments)
+
+
+def perf_record(out, cmd, env=None):
+    rec = ["perf", "record", "-q", "-F", "999", "-k", "CLOCK_MONOTONIC", "-o", out, "--"]
+    r = subprocess.run(rec + cmd, capture_output=True, text=True, env=env)
+    if r.returncode != 0:
+        peers.die(f"`{' '.join(rec + cmd)}` failed ({r.returncode}):\n{r.stdout}\n{r.stderr}")
+    return r.stdout
+
+
+def ours(a, cfg, tmp):
+    data = os.path.join(tmp, "ours.data")
+    text = perf_record(data, [a.flowlight, "render", cfg, "--quiet", "--spp", str(a.spp),
+                              "--seed", "1", "--threads", str(a.threads),
+                              "--out", os.path.join(tmp, "ours.exr")]
+                       + sum((["--set", s] for s in a.set), []))
+    cpu = peers.field(text, "cpu time", "flowlight render")
+    rep = subprocess.run(["perf", "report", "-i", data, "--no-children", "--sort", "comm,dso",
+                          "--stdio"], capture_output=True, text=True).stdout
+    groups = {}
+    for line in rep.splitlines():
+        f = line.split()
+        if len(f) >= 3 and f[1] == "flowlight-worke" and f[0].endswith("%"):
+            group = ("Embree" if f[2].startswith("libembree4") else
+                     "plugin" if f[2].startswith("libflowlight_") else
+                     "host" if f[2] == "flowlight" else "other")
+            groups[group] = groups.get(group, 0.0) + float(f[0][:-1])
+    if not groups:
+        peers.die("no samples of Flowlight's render threads (is perf allowed? kernel.perf_event_paranoid)")
+    return cpu, groups
+
+
+def mitsuba(a, xml, tmp):
+    data = os.path.join(tmp, "mitsuba.data")
+    env = dict(os.environ)
+    llvm_env = os.path.join(peers.VENV, "llvm.env")
+    if "DRJIT_LIBLLVM_PATH" not in env and os.path.exists(llvm_env):
+        env["DRJIT_LIBLLVM_PATH"] = open(llvm_env).read().strip().split("=", 1)[1]
+    job = {"variant": a.variant, "sampler": a.sampler, "xml": xml, "spp": a.spp,
+           "threads": a.threads, "depth": a.depth + 1, "width": a.width, "height": a.height}
+    py = os.path.join(peers.VENV, "bin", "python")
+    text = perf_record(data, [py, os.path.abspath(__file__), "--mitsuba-worker", json.dumps(job)], env)
+    last = text.strip().splitlines()[-1]
+    w = json.loads(last[last.index("{"):])
+    script = subprocess.run(["perf", "script", "-i", data, "-F", "time,ip,dso"],
+                            capture_output=True, text=True).stdout
+    groups = {}
+    for line in script.splitlines():
+        m = re.match(r"\s*([0-9.]+):\s+\S+\s+\((.*)\)", line)
+        if not m or not w["t0"] <= float(m.group(1)) <= w["t1"]:
+            continue
+        dso = os.path.basename(m.group(2))
+        group = ("Embree" if dso.startswith("libembree3") else
+                 "kernels" if dso.startswith("perf-") or dso in ("unknown", "[unknown]") else
+                 "Dr.Jit" if dso.startswith(("libdrjit", "libnanothread")) else "other")
+        groups[group] = groups.get(group, 0) + 1
+    if not groups:
+        peers.die("no samples inside Mitsuba's timed passes")
+    return w["cpu"], groups
+
+
+def mitsuba_worker(job):
+    """In the venv: load, one untimed pass (JIT compilation), then one timed pass, with its
+    CLOCK_MONOTONIC window for the samples."""
+    import drjit as dr
+    import mitsuba as mi
+    dr.set_thread_count(job["threads"])
+    mi.set_variant(job["variant"])
+    xml = job["xml"]
+    size = {"res": job["width"]} if xml.endswith("cbox.xml") else {"width": job["width"], "height": job["height"]}
+    scene = mi.load_file(xml, max_depth=job["depth"], sampler=job["sampler"], **size)
+    dr.eval(mi.render(scene, seed=0xFFFF, spp=job["spp"]))
+    dr.sync_thread()
+    t0, c0 = time.clock_gettime(time.CLOCK_MONOTONIC), time.process_time()
+    img = mi.render(scene, seed=1, spp=job["spp"])
+    dr.eval(img)
+    dr.sync_thread()
+    cpu, t1 = time.process_time() - c0, time.clock_gettime(time.CLOCK_MONOTONIC)
+    print(json.dumps({"cpu": cpu, "t0": t0, "t1": t1}))
+
+
+def main():
+    if len(sys.argv) == 3 and sys.argv[1] == "--mitsuba-worker":
+        return mitsuba_worker(json.loads(sys.argv[2]))
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scenes", default="cornell-box,stanford-dragon")
+    ap.add_argument("--flowlight", default=os.path.join(ROOT, "target", "release", "flowlight"))
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="Flowlight MCPT parameter (repeatable), e.g. branches=1")
+    ap.add_argument("--variant", default="llvm_ad_rgb")
+    ap.add_argument("--sampler", default="multijitter", help="Mitsuba's sampler")
+    ap.add_argument("--spp", type=int, default=64)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--width", type=int, default=256)
+    ap.add_argument("--height", type=int, default=256)
+    ap.add_argument("--depth", type=int, default=32)
+    ap.add_argument("--runs", type=int, default=2)
+    ap.add_argument("--out", default=os.path.join(ROOT, "target", "peers", "out"),
+                    help="peers.py's --out, where its configs are")
+    a = ap.parse_args()
+    files = {"cornell-box": ("cornell-box.toml", os.path.join(HERE, "mitsuba-cbox", "cbox.xml")),
+             "stanford-dragon": ("stanford-dragon.toml", os.path.join(a.out, "stanford-dragon.xml"))}
+    pixels = a.width * a.height * a.spp
+    rev = subprocess.run(["git", "-C", ROOT, "describe", "--always", "--dirty"], capture_output=True, text=True).stdout.strip()
+    print(f"# Embree's share: Flowlight {rev} ({', '.join(a.set) or 'defaults'}) vs Mitsuba "
+          f"{peers.MITSUBA_VERSION} {a.variant}/{a.sampler}; {a.width}x{a.height}, {a.spp} spp, "
+          f"depth {a.depth}, {a.threads} threads, perf -F 999\n")
+    print("| scene | run | renderer | CPU per camera sample (µs) | Embree's share | Embree (µs) | the rest (µs) | the rest by library |")
+    print("|---|---:|---|---:|---:|---:|---:|---|")
+    for scene in a.scenes.split(","):
+        cfg, xml = files[scene]
+        cfg = os.path.join(a.out, cfg)
+        for path in (cfg, xml):
+            if not os.path.exists(path):
+                peers.die(f"{path} is missing: run peers.py --reference-only --out {a.out} first")
+        for run in range(1, a.runs + 1):
+            with tempfile.TemporaryDirectory() as tmp:
+                for name, fn, src in (("Flowlight", ours, cfg), ("Mitsuba", mitsuba, xml)):
+                    cpu, groups = fn(a, src, tmp)
+                    total = sum(groups.values())
+                    share = groups.get("Embree", 0) / total
+                    us = cpu / pixels * 1e6
+                    rest = ", ".join(f"{g} {us * v / total:.3f}" for g, v in
+                                     sorted(groups.items(), key=lambda kv: -kv[1]) if g != "Embree")
+                    print(f"| {scene} | {run} | {name} | {us:.3f} | {share:.3f} | "
+                          f"{us * share:.3f} | {us * (1 - share):.3f} | {rest} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
