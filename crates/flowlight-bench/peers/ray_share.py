@@ -5,13 +5,14 @@
     crates/flowlight-bench/peers/peers.py --reference-only          # once: writes the configs
     crates/flowlight-bench/peers/ray_share.py                       # both scenes, 64 spp, 2 threads
     crates/flowlight-bench/peers/ray_share.py --set branches=1 --scenes cornell-box
+    crates/flowlight-bench/peers/ray_share.py --render-set robust=false   # Embree in Mitsuba's mode
 
 Each render runs under `perf record -F 999` (cpu-clock samples; Debian: linux-perf). A sample
 counts as Embree's when it falls in Embree's library: libembree4 for Flowlight, the
 libembree3 that Mitsuba's wheel bundles. What is left out:
   * Flowlight: every thread but the render workers (`flowlight-worke`: the loader, the
     acceleration-structure build and the EXR writer run elsewhere);
-  * Mitsuba: every sample outside the timed passes (loading, the untimed warm-up pass that
+  * Mitsuba: every sample outside the timed pass (loading, the untimed warm-up pass that
     JIT-compiles the kernels, writing), by the samples' CLOCK_MONOTONIC time stamps.
 The CPU per camera sample is each renderer's own clock, as peers.py takes it (Flowlight's
 summary `cpu time`; `time.process_time()` around Mitsuba's timed pass), split by the shares.
@@ -19,10 +20,10 @@ The rest is split by library too: Flowlight's plugin (`libflowlight_*`), its hos
 `flowlight` binary: batch callbacks, accumulation) and the others (libc, the kernel);
 Mitsuba's compiled kernels (JIT code, perf's `perf-PID.map`), Dr.Jit's runtime and the others.
 
-Why: the two renderers trace nearly the same rays per path (a camera ray, then per vertex
-one shadow ray and one extension ray), so what separates their costs beyond Embree's own
-(robust here, fast there: peers.py `--render-set robust=false` measures ours in Mitsuba's
-mode) is the rest of a path, Mitsuba's compiled wavefront loop against Flowlight's walker.
+Why: both path tracers trace the same kinds of rays per path (a camera ray, then per vertex a
+shadow ray and an extension ray), so what separates their costs beyond Embree's own (robust
+here, fast there: `--render-set robust=false` puts ours in Mitsuba's mode) is the rest of a
+path, Mitsuba's compiled wavefront loop against Flowlight's walker.
 """
 import argparse
 import json
@@ -126,6 +127,9 @@ def main():
     ap.add_argument("--flowlight", default=os.path.join(ROOT, "target", "release", "flowlight"))
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="Flowlight MCPT parameter (repeatable), e.g. branches=1")
+    ap.add_argument("--render-set", action="append", default=[], metavar="KEY=VALUE",
+                    help="a [render] setting of Flowlight's render, TOML syntax (repeatable), "
+                         "e.g. robust=false (Embree's fast mode, Mitsuba's own)")
     ap.add_argument("--variant", default="llvm_ad_rgb")
     ap.add_argument("--sampler", default="multijitter", help="Mitsuba's sampler")
     ap.add_argument("--spp", type=int, default=64)
@@ -141,7 +145,7 @@ def main():
              "stanford-dragon": ("stanford-dragon.toml", os.path.join(a.out, "stanford-dragon.xml"))}
     pixels = a.width * a.height * a.spp
     rev = subprocess.run(["git", "-C", ROOT, "describe", "--always", "--dirty"], capture_output=True, text=True).stdout.strip()
-    print(f"# Embree's share: Flowlight {rev} ({', '.join(a.set) or 'defaults'}) vs Mitsuba "
+    print(f"# Embree's share: Flowlight {rev} ({', '.join(a.set + a.render_set) or 'defaults'}) vs Mitsuba "
           f"{peers.MITSUBA_VERSION} {a.variant}/{a.sampler}; {a.width}x{a.height}, {a.spp} spp, "
           f"depth {a.depth}, {a.threads} threads, perf -F 999\n")
     print("| scene | run | renderer | CPU per camera sample (µs) | Embree's share | Embree (µs) | the rest (µs) | the rest by library |")
@@ -152,6 +156,7 @@ def main():
         for path in (cfg, xml):
             if not os.path.exists(path):
                 peers.die(f"{path} is missing: run peers.py --reference-only --out {a.out} first")
+        cfg = peers.with_render_settings(cfg, a.render_set)
         for run in range(1, a.runs + 1):
             with tempfile.TemporaryDirectory() as tmp:
                 for name, fn, src in (("Flowlight", ours, cfg), ("Mitsuba", mitsuba, xml)):
