@@ -29,6 +29,7 @@ import argparse
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -40,11 +41,16 @@ sys.path.insert(0, HERE)
 import peers  # noqa: E402  (the same venv, configs and renderer arguments)
 
 
+def die(msg):
+    print(f"ray_share.py: error: {msg}", file=sys.stderr)
+    sys.exit(1)
+
+
 def perf_record(out, cmd, env=None):
     rec = ["perf", "record", "-q", "-F", "999", "-k", "CLOCK_MONOTONIC", "-o", out, "--"]
     r = subprocess.run(rec + cmd, capture_output=True, text=True, env=env)
     if r.returncode != 0:
-        peers.die(f"`{' '.join(rec + cmd)}` failed ({r.returncode}):\n{r.stdout}\n{r.stderr}")
+        die(f"`{' '.join(rec + cmd)}` failed ({r.returncode}):\n{r.stdout}\n{r.stderr}")
     return r.stdout
 
 
@@ -66,7 +72,7 @@ def ours(a, cfg, tmp):
                      "host" if f[2] == "flowlight" else "other")
             groups[group] = groups.get(group, 0.0) + float(f[0][:-1])
     if not groups:
-        peers.die("no samples of Flowlight's render threads (is perf allowed? kernel.perf_event_paranoid)")
+        die("no samples of Flowlight's render threads (is perf allowed? kernel.perf_event_paranoid)")
     return cpu, groups
 
 
@@ -95,7 +101,7 @@ def mitsuba(a, xml, tmp):
                  "Dr.Jit" if dso.startswith(("libdrjit", "libnanothread")) else "other")
         groups[group] = groups.get(group, 0) + 1
     if not groups:
-        peers.die("no samples inside Mitsuba's timed passes")
+        die("no samples inside Mitsuba's timed passes")
     return w["cpu"], groups
 
 
@@ -141,6 +147,15 @@ def main():
     ap.add_argument("--out", default=os.path.join(ROOT, "target", "peers", "out"),
                     help="peers.py's --out, where its configs are")
     a = ap.parse_args()
+    if shutil.which("perf") is None:
+        die("perf is missing (Debian: linux-perf)")
+    if not os.access(a.flowlight, os.X_OK):
+        die(f"{a.flowlight} is not an executable: `cargo build --release -p flowlight -p flowlight-mcpt`, or pass --flowlight")
+    if not os.path.exists(os.path.join(peers.VENV, "bin", "python")):
+        die(f"{peers.VENV} has no Python: run crates/flowlight-bench/peers/setup.sh first")
+    unknown = [s for s in a.scenes.split(",") if s not in ("cornell-box", "stanford-dragon")]
+    if unknown:
+        die(f"--scenes: unknown scene '{unknown[0]}' (known: cornell-box, stanford-dragon)")
     files = {"cornell-box": ("cornell-box.toml", os.path.join(HERE, "mitsuba-cbox", "cbox.xml")),
              "stanford-dragon": ("stanford-dragon.toml", os.path.join(a.out, "stanford-dragon.xml"))}
     pixels = a.width * a.height * a.spp
@@ -155,7 +170,7 @@ def main():
         cfg = os.path.join(a.out, cfg)
         for path in (cfg, xml):
             if not os.path.exists(path):
-                peers.die(f"{path} is missing: run peers.py --reference-only --out {a.out} first")
+                die(f"{path} is missing: run peers.py --reference-only --out {a.out} first")
         cfg = peers.with_render_settings(cfg, a.render_set)
         for run in range(1, a.runs + 1):
             with tempfile.TemporaryDirectory() as tmp:
