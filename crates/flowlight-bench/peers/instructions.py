@@ -22,21 +22,16 @@ import collections
 import json
 import os
 import re
-import shutil
 import subprocess
 import sys
 import tempfile
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.abspath(os.path.join(HERE, "..", "..", ".."))
-sys.path.insert(0, HERE)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import peers  # noqa: E402
-import ray_share  # noqa: E402
+import ray_share  # noqa: E402  (its checks, scene files and Mitsuba worker)
 
-
-def die(msg):
-    print(f"instructions.py: error: {msg}", file=sys.stderr)
-    sys.exit(1)
+ROOT = ray_share.ROOT
+die = ray_share.die_as("instructions.py")
 
 
 def counts_by_object(path):
@@ -100,10 +95,7 @@ def ours(a, cfg, spp, tmp):
 
 
 def mitsuba(a, xml, spp, tmp):
-    env = dict(os.environ)
-    llvm_env = os.path.join(peers.VENV, "llvm.env")
-    if "DRJIT_LIBLLVM_PATH" not in env and os.path.exists(llvm_env):
-        env["DRJIT_LIBLLVM_PATH"] = open(llvm_env).read().strip().split("=", 1)[1]
+    env = ray_share.mitsuba_env()
     job = {"variant": a.variant, "sampler": a.sampler, "xml": xml, "spp": spp, "threads": 1,
            "depth": a.depth + 1, "width": a.width, "height": a.height}
     py = os.path.join(peers.VENV, "bin", "python")
@@ -120,36 +112,19 @@ def main():
     ap.add_argument("--variant", default="llvm_ad_rgb")
     ap.add_argument("--sampler", default="multijitter", help="Mitsuba's sampler")
     ap.add_argument("--spp", type=int, default=1, help="the difference of the two runs (at SPP and 2 SPP)")
-    ap.add_argument("--width", type=int, default=256)
-    ap.add_argument("--height", type=int, default=256)
-    ap.add_argument("--depth", type=int, default=32)
     ap.add_argument("--out", default=os.path.join(ROOT, "target", "peers", "out"),
                     help="peers.py's --out, where its configs are")
     a = ap.parse_args()
     a.set = a.set if a.set is not None else ["branches=1"]
-    if shutil.which("valgrind") is None:
-        die("valgrind is missing (Debian: valgrind)")
-    if not os.access(a.flowlight, os.X_OK):
-        die(f"{a.flowlight} is not an executable: `cargo build --release -p flowlight -p flowlight-mcpt`, or pass --flowlight")
-    if not os.path.exists(os.path.join(peers.VENV, "bin", "python")):
-        die(f"{peers.VENV} has no Python: run crates/flowlight-bench/peers/setup.sh first")
-    files = {"cornell-box": ("cornell-box.toml", os.path.join(HERE, "mitsuba-cbox", "cbox.xml")),
-             "stanford-dragon": ("stanford-dragon.toml", os.path.join(a.out, "stanford-dragon.xml"))}
-    for scene in a.scenes.split(","):
-        if scene not in files:
-            die(f"--scenes: unknown scene '{scene}' (known: {', '.join(files)})")
+    ray_share.check_inputs(a, "valgrind", "valgrind", die)
     rev = subprocess.run(["git", "-C", ROOT, "describe", "--always", "--dirty"], capture_output=True, text=True).stdout.strip()
     print(f"# Instructions per camera sample: Flowlight {rev} ({', '.join(a.set)}) vs Mitsuba "
-          f"{peers.MITSUBA_VERSION} {a.variant}/{a.sampler}; {a.width}x{a.height}, difference of "
-          f"{a.spp} and {2 * a.spp} spp, depth {a.depth}, one thread, callgrind\n")
+          f"{peers.MITSUBA_VERSION} {a.variant}/{a.sampler}; peers.py's image size, difference of "
+          f"{a.spp} and {2 * a.spp} spp, one thread, callgrind\n")
     print("| scene | renderer | total | by library |")
     print("|---|---|---:|---|")
     for scene in a.scenes.split(","):
-        cfg, xml = files[scene]
-        cfg = os.path.join(a.out, cfg)
-        for path in (cfg, xml):
-            if not os.path.exists(path):
-                die(f"{path} is missing: run peers.py --reference-only --out {a.out} first")
+        cfg, xml = ray_share.scene_files(a, scene, die)
         # Mitsuba renders each run's passes twice (warm-up and timed).
         for name, fn, src, renders in (("Flowlight", ours, cfg, 1), ("Mitsuba", mitsuba, xml, 2)):
             with tempfile.TemporaryDirectory() as tmp:

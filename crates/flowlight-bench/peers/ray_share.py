@@ -34,6 +34,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import tomllib
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.abspath(os.path.join(HERE, "..", "..", ".."))
@@ -41,9 +42,15 @@ sys.path.insert(0, HERE)
 import peers  # noqa: E402  (the same venv, configs and renderer arguments)
 
 
-def die(msg):
-    print(f"ray_share.py: error: {msg}", file=sys.stderr)
-    sys.exit(1)
+def die_as(script):
+    """A one-line error exit, "SCRIPT: error: ...", for this script and those that use it."""
+    def die(msg):
+        print(f"{script}: error: {msg}", file=sys.stderr)
+        sys.exit(1)
+    return die
+
+
+die = die_as("ray_share.py")
 
 
 def perf_record(out, cmd, env=None):
@@ -52,6 +59,46 @@ def perf_record(out, cmd, env=None):
     if r.returncode != 0:
         die(f"`{' '.join(rec + cmd)}` failed ({r.returncode}):\n{r.stdout}\n{r.stderr}")
     return r.stdout
+
+
+def mitsuba_env():
+    """The environment of a Mitsuba process: Dr.Jit's LLVM from the venv's llvm.env."""
+    env = dict(os.environ)
+    llvm_env = os.path.join(peers.VENV, "llvm.env")
+    if "DRJIT_LIBLLVM_PATH" not in env and os.path.exists(llvm_env):
+        env["DRJIT_LIBLLVM_PATH"] = open(llvm_env).read().strip().split("=", 1)[1]
+    return env
+
+
+def check_inputs(a, tool, package, fail):
+    """One-line errors (through `fail`) for what a measurement needs: `tool` on the PATH (its
+    Debian `package`), the Flowlight binary, the peers' venv and known --scenes."""
+    if shutil.which(tool) is None:
+        fail(f"{tool} is missing (Debian: {package})")
+    if not os.access(a.flowlight, os.X_OK):
+        fail(f"{a.flowlight} is not an executable: `cargo build --release -p flowlight -p flowlight-mcpt`, or pass --flowlight")
+    if not os.path.exists(os.path.join(peers.VENV, "bin", "python")):
+        fail(f"{peers.VENV} has no Python: run crates/flowlight-bench/peers/setup.sh first")
+    unknown = [s for s in a.scenes.split(",") if s not in ("cornell-box", "stanford-dragon")]
+    if unknown:
+        fail(f"--scenes: unknown scene '{unknown[0]}' (known: cornell-box, stanford-dragon)")
+
+
+def scene_files(a, scene, fail):
+    """(Flowlight config, Mitsuba scene) of `scene` as peers.py writes them into --out. Sets
+    `a.width`, `a.height` and `a.depth` to the config's image size and path depth (or a --set
+    path_depth), which Mitsuba then renders with (its max_depth is the depth + 1)."""
+    cfg, xml = {"cornell-box": ("cornell-box.toml", os.path.join(HERE, "mitsuba-cbox", "cbox.xml")),
+                "stanford-dragon": ("stanford-dragon.toml", os.path.join(a.out, "stanford-dragon.xml"))}[scene]
+    cfg = os.path.join(a.out, cfg)
+    for path in (cfg, xml):
+        if not os.path.exists(path):
+            fail(f"{path} is missing: run peers.py --reference-only --out {a.out} first")
+    config = tomllib.load(open(cfg, "rb"))
+    a.width, a.height = config["render"]["width"], config["render"]["height"]
+    sets = dict(s.split("=", 1) for s in a.set if "=" in s)
+    a.depth = int(sets.get("path_depth", config["integrator"]["path_depth"]))
+    return cfg, xml
 
 
 def ours(a, cfg, tmp):
@@ -78,10 +125,7 @@ def ours(a, cfg, tmp):
 
 def mitsuba(a, xml, tmp):
     data = os.path.join(tmp, "mitsuba.data")
-    env = dict(os.environ)
-    llvm_env = os.path.join(peers.VENV, "llvm.env")
-    if "DRJIT_LIBLLVM_PATH" not in env and os.path.exists(llvm_env):
-        env["DRJIT_LIBLLVM_PATH"] = open(llvm_env).read().strip().split("=", 1)[1]
+    env = mitsuba_env()
     job = {"variant": a.variant, "sampler": a.sampler, "xml": xml, "spp": a.spp,
            "threads": a.threads, "depth": a.depth + 1, "width": a.width, "height": a.height}
     py = os.path.join(peers.VENV, "bin", "python")
@@ -140,38 +184,21 @@ def main():
     ap.add_argument("--sampler", default="multijitter", help="Mitsuba's sampler")
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--width", type=int, default=256)
-    ap.add_argument("--height", type=int, default=256)
-    ap.add_argument("--depth", type=int, default=32)
     ap.add_argument("--runs", type=int, default=2)
     ap.add_argument("--out", default=os.path.join(ROOT, "target", "peers", "out"),
                     help="peers.py's --out, where its configs are")
     a = ap.parse_args()
-    if shutil.which("perf") is None:
-        die("perf is missing (Debian: linux-perf)")
-    if not os.access(a.flowlight, os.X_OK):
-        die(f"{a.flowlight} is not an executable: `cargo build --release -p flowlight -p flowlight-mcpt`, or pass --flowlight")
-    if not os.path.exists(os.path.join(peers.VENV, "bin", "python")):
-        die(f"{peers.VENV} has no Python: run crates/flowlight-bench/peers/setup.sh first")
-    unknown = [s for s in a.scenes.split(",") if s not in ("cornell-box", "stanford-dragon")]
-    if unknown:
-        die(f"--scenes: unknown scene '{unknown[0]}' (known: cornell-box, stanford-dragon)")
-    files = {"cornell-box": ("cornell-box.toml", os.path.join(HERE, "mitsuba-cbox", "cbox.xml")),
-             "stanford-dragon": ("stanford-dragon.toml", os.path.join(a.out, "stanford-dragon.xml"))}
-    pixels = a.width * a.height * a.spp
+    check_inputs(a, "perf", "linux-perf", die)
     rev = subprocess.run(["git", "-C", ROOT, "describe", "--always", "--dirty"], capture_output=True, text=True).stdout.strip()
     print(f"# Embree's share: Flowlight {rev} ({', '.join(a.set + a.render_set) or 'defaults'}) vs Mitsuba "
-          f"{peers.MITSUBA_VERSION} {a.variant}/{a.sampler}; {a.width}x{a.height}, {a.spp} spp, "
-          f"depth {a.depth}, {a.threads} threads, perf -F 999\n")
+          f"{peers.MITSUBA_VERSION} {a.variant}/{a.sampler}; peers.py's image size, {a.spp} spp, "
+          f"{a.threads} threads, perf -F 999\n")
     print("| scene | run | renderer | CPU per camera sample (µs) | Embree's share | Embree (µs) | the rest (µs) | the rest by library |")
     print("|---|---:|---|---:|---:|---:|---:|---|")
     for scene in a.scenes.split(","):
-        cfg, xml = files[scene]
-        cfg = os.path.join(a.out, cfg)
-        for path in (cfg, xml):
-            if not os.path.exists(path):
-                die(f"{path} is missing: run peers.py --reference-only --out {a.out} first")
+        cfg, xml = scene_files(a, scene, die)
         cfg = peers.with_render_settings(cfg, a.render_set)
+        pixels = a.width * a.height * a.spp
         for run in range(1, a.runs + 1):
             with tempfile.TemporaryDirectory() as tmp:
                 for name, fn, src in (("Flowlight", ours, cfg), ("Mitsuba", mitsuba, xml)):
