@@ -19,7 +19,6 @@ valgrind); each Mitsuba run of the dragon takes minutes under it.
 """
 import argparse
 import collections
-import json
 import os
 import re
 import subprocess
@@ -28,10 +27,10 @@ import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import peers  # noqa: E402
-import ray_share  # noqa: E402  (its checks, scene files and Mitsuba worker)
+import ray_share  # noqa: E402  (its checks, scenes and Mitsuba command)
 
 ROOT = ray_share.ROOT
-die = ray_share.die_as("instructions.py")
+die = peers.die_as("instructions.py")
 
 
 def counts_by_object(path):
@@ -88,19 +87,14 @@ def callgrind(cmd, out, env=None):
     return groups
 
 
-def ours(a, cfg, spp, tmp):
-    return callgrind([a.flowlight, "render", cfg, "--quiet", "--spp", str(spp), "--seed", "1",
-                      "--threads", "1", "--out", os.path.join(tmp, "ours.exr")]
-                     + sum((["--set", s] for s in a.set), []), os.path.join(tmp, "ours.cg"))
+def ours(a, scene, spp, tmp):
+    cmd = peers.flowlight_argv(a, scene.cfg, 1, os.path.join(tmp, "ours.exr"), budget=["--spp", str(spp)])
+    return callgrind(cmd, os.path.join(tmp, "ours.cg"))
 
 
-def mitsuba(a, xml, spp, tmp):
-    env = ray_share.mitsuba_env()
-    job = {"variant": a.variant, "sampler": a.sampler, "xml": xml, "spp": spp, "threads": 1,
-           "depth": a.depth + 1, "width": a.width, "height": a.height}
-    py = os.path.join(peers.VENV, "bin", "python")
-    return callgrind([py, ray_share.__file__, "--mitsuba-worker", json.dumps(job)],
-                     os.path.join(tmp, "mitsuba.cg"), env)
+def mitsuba(a, scene, spp, tmp):
+    cmd, env = ray_share.mitsuba_command(a, scene, spp)
+    return callgrind(cmd, os.path.join(tmp, "mitsuba.cg"), env)
 
 
 def main():
@@ -116,6 +110,7 @@ def main():
                     help="peers.py's --out, where its configs are")
     a = ap.parse_args()
     a.set = a.set if a.set is not None else ["branches=1"]
+    a.threads = 1  # callgrind runs one thread at a time anyway
     ray_share.check_inputs(a, "valgrind", "valgrind", die)
     rev = subprocess.run(["git", "-C", ROOT, "describe", "--always", "--dirty"], capture_output=True, text=True).stdout.strip()
     print(f"# Instructions per camera sample: Flowlight {rev} ({', '.join(a.set)}) vs Mitsuba "
@@ -124,12 +119,12 @@ def main():
     print("| scene | renderer | total | by library |")
     print("|---|---|---:|---|")
     for scene in a.scenes.split(","):
-        cfg, xml = ray_share.scene_files(a, scene, die)
-        # Mitsuba renders each run's passes twice (warm-up and timed).
-        for name, fn, src, renders in (("Flowlight", ours, cfg, 1), ("Mitsuba", mitsuba, xml, 2)):
+        files = ray_share.scene_files(a, scene, die)
+        # Mitsuba renders each run's pass twice (warm-up and timed).
+        for name, fn, renders in (("Flowlight", ours, 1), ("Mitsuba", mitsuba, 2)):
             with tempfile.TemporaryDirectory() as tmp:
-                low, high = fn(a, src, a.spp, tmp), fn(a, src, 2 * a.spp, tmp)
-            samples = renders * a.spp * a.width * a.height
+                low, high = fn(a, files, a.spp, tmp), fn(a, files, 2 * a.spp, tmp)
+            samples = renders * a.spp * files.width * files.height
             per = {g: (high[g] - low[g]) / samples for g in set(low) | set(high)}
             # A library that renders nothing differs by a handful of instructions (the vDSO).
             per = {g: v for g, v in per.items() if abs(v) >= 1}

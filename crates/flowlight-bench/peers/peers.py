@@ -60,9 +60,15 @@ VARIANTS = ("llvm_ad_rgb", "scalar_rgb")
 MITSUBA_SAMPLERS = ("independent", "stratified", "multijitter", "ldsampler")
 
 
-def die(msg):
-    print(f"peers.py: error: {msg}", file=sys.stderr)
-    sys.exit(1)
+def die_as(script):
+    """A one-line error exit, "SCRIPT: error: ...", for this script and those that use it."""
+    def die(msg):
+        print(f"{script}: error: {msg}", file=sys.stderr)
+        sys.exit(1)
+    return die
+
+
+die = die_as("peers.py")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -299,15 +305,29 @@ def field(text, name, what):
     return float(m.group(1))
 
 
-def flowlight_render(a, cfg, seed, out, budget=None, sets=None):
-    """CPU and wall time of a render of `cfg`; `budget` (default `--spp a.spp`) and `sets`
-    (default --set of the command line) as `flowlight render` arguments."""
+def flowlight_argv(a, cfg, seed, out, budget=None, sets=None):
+    """The `flowlight render` command of `cfg` with `a.threads` threads; `budget` (default
+    `--spp a.spp`) and `sets` (default --set of the command line) as its arguments."""
     budget = ["--spp", str(a.spp)] if budget is None else budget
     sets = a.set if sets is None else sets
-    text = run([a.flowlight, "render", cfg, "--quiet", *budget, "--seed", str(seed),
-                "--threads", str(a.threads), "--out", out] + sum((["--set", s] for s in sets), []))
+    return ([a.flowlight, "render", cfg, "--quiet", *budget, "--seed", str(seed),
+             "--threads", str(a.threads), "--out", out] + sum((["--set", s] for s in sets), []))
+
+
+def flowlight_render(a, cfg, seed, out, budget=None, sets=None):
+    """CPU and wall time of a render of `cfg` ([`flowlight_argv`]'s arguments)."""
+    text = run(flowlight_argv(a, cfg, seed, out, budget, sets))
     return {"cpu": field(text, "cpu time", "flowlight render"),
             "wall": field(text, "wall time", "flowlight render")}
+
+
+def mitsuba_env():
+    """The environment of a Mitsuba process: Dr.Jit's LLVM from the venv's llvm.env."""
+    env = dict(os.environ)
+    llvm_env = os.path.join(VENV, "llvm.env")
+    if "DRJIT_LIBLLVM_PATH" not in env and os.path.exists(llvm_env):
+        env["DRJIT_LIBLLVM_PATH"] = open(llvm_env).read().strip().split("=", 1)[1]
+    return env
 
 
 def mitsuba_render(a, renderer, xml, seed, out):
@@ -317,10 +337,7 @@ def mitsuba_render(a, renderer, xml, seed, out):
     py = os.path.join(VENV, "bin", "python")
     if not os.path.exists(py):
         die(f"{py} is missing: run crates/flowlight-bench/peers/setup.sh first")
-    env = dict(os.environ)
-    llvm_env = os.path.join(VENV, "llvm.env")
-    if "DRJIT_LIBLLVM_PATH" not in env and os.path.exists(llvm_env):
-        env["DRJIT_LIBLLVM_PATH"] = open(llvm_env).read().strip().split("=", 1)[1]
+    env = mitsuba_env()
     job = {"variant": variant, "sampler": sampler, "xml": xml, "spp": a.spp, "pass_spp": a.mitsuba_pass_spp,
            "seed": seed, "threads": a.threads, "depth": a.depth + a.mitsuba_depth_offset,
            "width": a.width, "height": a.height, "out": out}
@@ -332,7 +349,7 @@ def mitsuba_render(a, renderer, xml, seed, out):
 def mitsuba_worker(job):
     """In the venv: load, warm up (JIT compilation, kernel cache), then render spp in
     passes of at most pass_spp (bounded memory for the wavefront variants), timing only the
-    passes, and write their mean as EXR."""
+    passes, and write their mean as EXR (where the job names an "out")."""
     import drjit as dr
     import mitsuba as mi
     dr.set_thread_count(job["threads"])
@@ -350,6 +367,7 @@ def mitsuba_worker(job):
     dr.sync_thread()
     passes, left, acc = 0, job["spp"], None
     c0, w0 = time.process_time(), time.perf_counter()
+    t0 = time.clock_gettime(time.CLOCK_MONOTONIC)
     while left > 0:
         n = min(left, job["pass_spp"])
         img = mi.render(scene, seed=job["seed"] * 4096 + passes, spp=n) * (n / job["spp"])
@@ -359,8 +377,14 @@ def mitsuba_worker(job):
         passes += 1
     dr.sync_thread()
     cpu, wall = time.process_time() - c0, time.perf_counter() - w0
-    mi.Bitmap(acc).write(job["out"])
-    print(json.dumps({"cpu": cpu, "wall": wall}))
+    t1 = time.clock_gettime(time.CLOCK_MONOTONIC)
+    # No image for a job without "out" (ray_share.py, instructions.py): Mitsuba 3.9.1's EXR
+    # writer never returns with a thread count of 1 here.
+    if job.get("out"):
+        mi.Bitmap(acc).write(job["out"])
+    # t0 and t1 bound the timed passes on CLOCK_MONOTONIC, for a profiler's time stamps
+    # (ray_share.py).
+    print(json.dumps({"cpu": cpu, "wall": wall, "t0": t0, "t1": t1}))
 
 
 def compare(a, img, ref):

@@ -33,8 +33,8 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import time
 import tomllib
+from typing import NamedTuple
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.abspath(os.path.join(HERE, "..", "..", ".."))
@@ -42,15 +42,7 @@ sys.path.insert(0, HERE)
 import peers  # noqa: E402  (the same venv, configs and renderer arguments)
 
 
-def die_as(script):
-    """A one-line error exit, "SCRIPT: error: ...", for this script and those that use it."""
-    def die(msg):
-        print(f"{script}: error: {msg}", file=sys.stderr)
-        sys.exit(1)
-    return die
-
-
-die = die_as("ray_share.py")
+die = peers.die_as("ray_share.py")
 
 
 def perf_record(out, cmd, env=None):
@@ -59,15 +51,6 @@ def perf_record(out, cmd, env=None):
     if r.returncode != 0:
         die(f"`{' '.join(rec + cmd)}` failed ({r.returncode}):\n{r.stdout}\n{r.stderr}")
     return r.stdout
-
-
-def mitsuba_env():
-    """The environment of a Mitsuba process: Dr.Jit's LLVM from the venv's llvm.env."""
-    env = dict(os.environ)
-    llvm_env = os.path.join(peers.VENV, "llvm.env")
-    if "DRJIT_LIBLLVM_PATH" not in env and os.path.exists(llvm_env):
-        env["DRJIT_LIBLLVM_PATH"] = open(llvm_env).read().strip().split("=", 1)[1]
-    return env
 
 
 def check_inputs(a, tool, package, fail):
@@ -79,34 +62,50 @@ def check_inputs(a, tool, package, fail):
         fail(f"{a.flowlight} is not an executable: `cargo build --release -p flowlight -p flowlight-mcpt`, or pass --flowlight")
     if not os.path.exists(os.path.join(peers.VENV, "bin", "python")):
         fail(f"{peers.VENV} has no Python: run crates/flowlight-bench/peers/setup.sh first")
-    unknown = [s for s in a.scenes.split(",") if s not in ("cornell-box", "stanford-dragon")]
+    unknown = [s for s in a.scenes.split(",") if s not in peers.SCENES]
     if unknown:
-        fail(f"--scenes: unknown scene '{unknown[0]}' (known: cornell-box, stanford-dragon)")
+        fail(f"--scenes: unknown scene '{unknown[0]}' (known: {', '.join(peers.SCENES)})")
 
 
-def scene_files(a, scene, fail):
-    """(Flowlight config, Mitsuba scene) of `scene` as peers.py writes them into --out. Sets
-    `a.width`, `a.height` and `a.depth` to the config's image size and path depth (or a --set
-    path_depth), which Mitsuba then renders with (its max_depth is the depth + 1)."""
+class Scene(NamedTuple):
+    """A peers' scene as peers.py writes it into --out: Flowlight's config, Mitsuba's scene,
+    and the config's image size and path depth (a --set path_depth in its place), which
+    Mitsuba renders with."""
+    cfg: str
+    xml: str
+    width: int
+    height: int
+    depth: int
+
+
+def scene_files(a, name, fail):
+    """The [`Scene`] `name`, or a one-line error (through `fail`) where peers.py has not
+    written it."""
     cfg, xml = {"cornell-box": ("cornell-box.toml", os.path.join(HERE, "mitsuba-cbox", "cbox.xml")),
-                "stanford-dragon": ("stanford-dragon.toml", os.path.join(a.out, "stanford-dragon.xml"))}[scene]
+                "stanford-dragon": ("stanford-dragon.toml", os.path.join(a.out, "stanford-dragon.xml"))}[name]
     cfg = os.path.join(a.out, cfg)
     for path in (cfg, xml):
         if not os.path.exists(path):
             fail(f"{path} is missing: run peers.py --reference-only --out {a.out} first")
     config = tomllib.load(open(cfg, "rb"))
-    a.width, a.height = config["render"]["width"], config["render"]["height"]
     sets = dict(s.split("=", 1) for s in a.set if "=" in s)
-    a.depth = int(sets.get("path_depth", config["integrator"]["path_depth"]))
-    return cfg, xml
+    depth = int(sets.get("path_depth", config["integrator"]["path_depth"]))
+    return Scene(cfg, xml, config["render"]["width"], config["render"]["height"], depth)
 
 
-def ours(a, cfg, tmp):
+def mitsuba_command(a, scene, spp):
+    """peers.py's Mitsuba worker for `scene` at `spp` (one untimed pass, then one timed pass,
+    no image written) with `a.threads` threads: (its command, its environment)."""
+    job = {"variant": a.variant, "sampler": a.sampler, "xml": scene.xml, "spp": spp, "pass_spp": spp,
+           "seed": 1, "threads": a.threads, "depth": scene.depth + 1, "width": scene.width,
+           "height": scene.height}
+    py = os.path.join(peers.VENV, "bin", "python")
+    return [py, peers.__file__, "--mitsuba-worker", json.dumps(job)], peers.mitsuba_env()
+
+
+def ours(a, scene, tmp):
     data = os.path.join(tmp, "ours.data")
-    text = perf_record(data, [a.flowlight, "render", cfg, "--quiet", "--spp", str(a.spp),
-                              "--seed", "1", "--threads", str(a.threads),
-                              "--out", os.path.join(tmp, "ours.exr")]
-                       + sum((["--set", s] for s in a.set), []))
+    text = perf_record(data, peers.flowlight_argv(a, scene.cfg, 1, os.path.join(tmp, "ours.exr")))
     cpu = peers.field(text, "cpu time", "flowlight render")
     rep = subprocess.run(["perf", "report", "-i", data, "--no-children", "--sort", "comm,dso",
                           "--stdio"], capture_output=True, text=True).stdout
@@ -123,15 +122,11 @@ def ours(a, cfg, tmp):
     return cpu, groups
 
 
-def mitsuba(a, xml, tmp):
+def mitsuba(a, scene, tmp):
     data = os.path.join(tmp, "mitsuba.data")
-    env = mitsuba_env()
-    job = {"variant": a.variant, "sampler": a.sampler, "xml": xml, "spp": a.spp,
-           "threads": a.threads, "depth": a.depth + 1, "width": a.width, "height": a.height}
-    py = os.path.join(peers.VENV, "bin", "python")
-    text = perf_record(data, [py, os.path.abspath(__file__), "--mitsuba-worker", json.dumps(job)], env)
-    last = text.strip().splitlines()[-1]
-    w = json.loads(last[last.index("{"):])
+    cmd, env = mitsuba_command(a, scene, a.spp)
+    last = perf_record(data, cmd, env).strip().splitlines()[-1]
+    w = json.loads(last[last.index("{"):])  # after any colour codes of Mitsuba's log
     script = subprocess.run(["perf", "script", "-i", data, "-F", "time,ip,dso"],
                             capture_output=True, text=True).stdout
     groups = {}
@@ -145,33 +140,11 @@ def mitsuba(a, xml, tmp):
                  "Dr.Jit" if dso.startswith(("libdrjit", "libnanothread")) else "other")
         groups[group] = groups.get(group, 0) + 1
     if not groups:
-        die("no samples inside Mitsuba's timed passes")
+        die("no samples inside Mitsuba's timed pass")
     return w["cpu"], groups
 
 
-def mitsuba_worker(job):
-    """In the venv: load, one untimed pass (JIT compilation), then one timed pass, with its
-    CLOCK_MONOTONIC window for the samples."""
-    import drjit as dr
-    import mitsuba as mi
-    dr.set_thread_count(job["threads"])
-    mi.set_variant(job["variant"])
-    xml = job["xml"]
-    size = {"res": job["width"]} if xml.endswith("cbox.xml") else {"width": job["width"], "height": job["height"]}
-    scene = mi.load_file(xml, max_depth=job["depth"], sampler=job["sampler"], **size)
-    dr.eval(mi.render(scene, seed=0xFFFF, spp=job["spp"]))
-    dr.sync_thread()
-    t0, c0 = time.clock_gettime(time.CLOCK_MONOTONIC), time.process_time()
-    img = mi.render(scene, seed=1, spp=job["spp"])
-    dr.eval(img)
-    dr.sync_thread()
-    cpu, t1 = time.process_time() - c0, time.clock_gettime(time.CLOCK_MONOTONIC)
-    print(json.dumps({"cpu": cpu, "t0": t0, "t1": t1}))
-
-
 def main():
-    if len(sys.argv) == 3 and sys.argv[1] == "--mitsuba-worker":
-        return mitsuba_worker(json.loads(sys.argv[2]))
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scenes", default="cornell-box,stanford-dragon")
     ap.add_argument("--flowlight", default=os.path.join(ROOT, "target", "release", "flowlight"))
@@ -196,13 +169,13 @@ def main():
     print("| scene | run | renderer | CPU per camera sample (µs) | Embree's share | Embree (µs) | the rest (µs) | the rest by library |")
     print("|---|---:|---|---:|---:|---:|---:|---|")
     for scene in a.scenes.split(","):
-        cfg, xml = scene_files(a, scene, die)
-        cfg = peers.with_render_settings(cfg, a.render_set)
-        pixels = a.width * a.height * a.spp
+        files = scene_files(a, scene, die)
+        files = files._replace(cfg=peers.with_render_settings(files.cfg, a.render_set))
+        pixels = files.width * files.height * a.spp
         for run in range(1, a.runs + 1):
             with tempfile.TemporaryDirectory() as tmp:
-                for name, fn, src in (("Flowlight", ours, cfg), ("Mitsuba", mitsuba, xml)):
-                    cpu, groups = fn(a, src, tmp)
+                for name, fn in (("Flowlight", ours), ("Mitsuba", mitsuba)):
+                    cpu, groups = fn(a, files, tmp)
                     total = sum(groups.values())
                     share = groups.get("Embree", 0) / total
                     us = cpu / pixels * 1e6
