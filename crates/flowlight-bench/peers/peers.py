@@ -43,7 +43,6 @@ import hashlib
 import json
 import os
 import re
-import shutil
 import statistics
 import struct
 import subprocess
@@ -194,12 +193,21 @@ def with_render_settings(cfg, lines):
     return timed
 
 
+def scene_paths(out):
+    """{scene: (its Flowlight config, its Mitsuba scene)} as peers.py writes them under `out`
+    (the Cornell box's Mitsuba scene is committed beside this script)."""
+    return {"cornell-box": (os.path.join(out, "cornell-box.toml"),
+                            os.path.join(HERE, "mitsuba-cbox", "cbox.xml")),
+            "stanford-dragon": (os.path.join(out, "stanford-dragon.toml"),
+                                os.path.join(out, "stanford-dragon.xml"))}
+
+
 def prepare_cornell(a, out):
     """Flowlight: scenes/cornell-box/cornell-box.gltf. Mitsuba: mitsuba-cbox/cbox.xml (same
     geometry in mm, albedos, light and camera; see its SOURCE.md)."""
-    cfg = os.path.join(out, "cornell-box.toml")
+    cfg, xml = scene_paths(out)["cornell-box"]
     fl_config(cfg, os.path.join(ROOT, "scenes", "cornell-box", "cornell-box.gltf"), a)
-    return cfg, os.path.join(HERE, "mitsuba-cbox", "cbox.xml")
+    return cfg, xml
 
 
 def prepare_dragon(a, out):
@@ -221,7 +229,7 @@ def prepare_dragon(a, out):
         b["uri"] = os.path.relpath(os.path.join(src_dir, b["uri"]), out)
     gltf = os.path.join(out, "dragon-lambert.gltf")
     json.dump(g, open(gltf, "w"), indent=1)
-    cfg = os.path.join(out, "stanford-dragon.toml")
+    cfg, path = scene_paths(out)["stanford-dragon"]
     fl_config(cfg, gltf, a, camera={"position": cam["position"], "look_at": cam["look_at"],
                                     "fov_y": cam["fov_y"]})
 
@@ -280,7 +288,6 @@ def prepare_dragon(a, out):
 {chr(10).join(shapes)}
 </scene>
 '''
-    path = os.path.join(out, "stanford-dragon.xml")
     open(path, "w").write(xml)
     return cfg, path
 

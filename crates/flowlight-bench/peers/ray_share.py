@@ -81,9 +81,7 @@ class Scene(NamedTuple):
 def scene_files(a, name, fail):
     """The [`Scene`] `name`, or a one-line error (through `fail`) where peers.py has not
     written it."""
-    cfg, xml = {"cornell-box": ("cornell-box.toml", os.path.join(HERE, "mitsuba-cbox", "cbox.xml")),
-                "stanford-dragon": ("stanford-dragon.toml", os.path.join(a.out, "stanford-dragon.xml"))}[name]
-    cfg = os.path.join(a.out, cfg)
+    cfg, xml = peers.scene_paths(a.out)[name]
     for path in (cfg, xml):
         if not os.path.exists(path):
             fail(f"{path} is missing: run peers.py --reference-only --out {a.out} first")
