@@ -1,0 +1,337 @@
+//! A bound, not a renderer: the least a wavefront path tracer over Flowlight's own scene,
+//! Embree and sampler has to do on a Lambertian scene lit by emissive triangles, to size
+//! what MCPT's walker spends beyond it (docs/performance.md, "What a lean path costs").
+//!
+//! The same estimator as MCPT at `branches = 1` with the `throughput` roulette: paths from
+//! the camera, next-event estimation at every vertex weighted by the power heuristic
+//! against the cosine-sampled BSDF direction, the same Sobol' numbers slot by slot, the same
+//! robust ray offsets and the same batches of 256 paths through the host's intersector. What
+//! it leaves out is everything a general scene needs: textures, the glTF BSDF, punctual and
+//! environment lights, instancing, volumes, lighting layers, sinks. It refuses a scene that
+//! needs any of these, so its image must match MCPT's in expectation.
+//!
+//!     cargo run --release -p flowlight-bench --example lean_path -- CONFIG.toml SPP OUT.exr
+//!
+//! One thread; prints the render's wall time per camera sample. `LEAN_MODE` picks how a
+//! bounce's vertices are run:
+//!
+//! - `scalar` (default): one path at a time ([`scalar`]);
+//! - `phased`: each of the vertex's three phases for every path of the wave before the next
+//!   (whether short loops let the core overlap paths' chains of dependent operations);
+//! - `lanes`: eight paths at a time, the geometry and shading in eight lanes ([`vertex8`]),
+//!   as compiled for the default target (SSE);
+//! - `avx2`: the same compiled for AVX2, eight lanes per instruction.
+//!
+//! Every mode gives the same image, bit for bit.
+
+use flowlight_core::geometry::Ray;
+use flowlight_core::mesh::CompactHit;
+use flowlight_core::rng::Rng;
+use flowlight_core::sampler::SampleStream;
+use flowlight_core::sobol::SobolSampler;
+use flowlight_core::Rgb;
+use flowlight_host::intersector::Intersector;
+use flowlight_host::output::exr::{write_exr, ExrMetadata, ImageLayer};
+use flowlight_host::renderer::LoadedScene;
+use flowlight_scene::config::load_config;
+use glam::{Vec2, Vec3};
+use std::path::Path as FilePath;
+use std::time::Instant;
+
+mod lanes;
+mod scalar;
+mod vertex8;
+
+/// Paths per wave, as MCPT's.
+const WAVE: usize = 256;
+/// The first lighting depth the roulette plays at (MCPT's default `rr_depth`).
+const RR_DEPTH: u32 = 5;
+
+/// A shadow ray, the pixel it lights and the contribution it carries if unblocked.
+type Shadow = (Ray, u32, Rgb);
+
+/// One camera path between two vertices.
+struct Path {
+    rng: SobolSampler,
+    ray: Ray,
+    beta: Rgb,
+    pixel: u32,
+    /// Lighting depth of the vertex the ray leaves.
+    depth: u32,
+    /// Solid-angle density of the BSDF sample that made `ray`; 0 for the camera ray.
+    pdf: f32,
+    prev_p: Vec3,
+    /// The vertex the ray leaves was the path's last: it is traced for emission only.
+    last: bool,
+}
+
+/// The scene as the lean path reads it.
+struct Lean<'a> {
+    scene: &'a flowlight_scene::Scene,
+    /// Per material: its Lambertian albedo.
+    albedo: Vec<Rgb>,
+    path_depth: u32,
+}
+
+#[derive(Clone, Copy, PartialEq)]
+enum Mode {
+    Scalar,
+    Phased,
+    Lanes,
+    Avx2,
+}
+
+fn fail(msg: String) -> ! {
+    eprintln!("lean_path: {msg}");
+    std::process::exit(2)
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let [config, spp, out] = &args[..] else {
+        fail("usage: lean_path CONFIG.toml SPP OUT.exr".into())
+    };
+    let spp: u32 = spp
+        .parse()
+        .unwrap_or_else(|_| fail(format!("SPP {spp:?}: not a whole number")));
+    let mode = match std::env::var("LEAN_MODE").as_deref() {
+        Err(_) | Ok("scalar") => Mode::Scalar,
+        Ok("phased") => Mode::Phased,
+        Ok("lanes") => Mode::Lanes,
+        Ok("avx2") if avx2_available() => Mode::Avx2,
+        Ok("avx2") => fail("LEAN_MODE=avx2: this CPU has no AVX2".into()),
+        Ok(other) => fail(format!(
+            "LEAN_MODE={other:?}: scalar, phased, lanes or avx2"
+        )),
+    };
+    let config = load_config(FilePath::new(config)).unwrap_or_else(|e| fail(e.to_string()));
+    let (width, height, seed) = (config.width, config.height, config.seed);
+    let path_depth = config
+        .integrator_params
+        .iter()
+        .find(|(k, _)| k == "path_depth")
+        .map_or(Some(32), |(_, v)| v.as_integer())
+        .unwrap_or_else(|| fail("path_depth: not a whole number".into()))
+        as u32;
+    let loaded = LoadedScene::load(config).unwrap_or_else(|e| fail(e.to_string()));
+    let lean = Lean::new(&loaded.scene, path_depth).unwrap_or_else(|e| fail(e));
+    let t0 = Instant::now();
+    let mut image = lean.render(&loaded, mode, spp, seed, width, height);
+    let elapsed = t0.elapsed().as_secs_f64();
+    let samples = width as f64 * height as f64 * spp as f64;
+    println!(
+        "lean_path: {elapsed:.3} s, {:.3} µs per camera sample",
+        elapsed / samples * 1e6
+    );
+    for p in &mut image {
+        *p *= 1.0 / spp as f32;
+    }
+    let layer = ImageLayer {
+        name: String::new(),
+        pixels: &image,
+    };
+    let meta = ExrMetadata::default();
+    write_exr(
+        FilePath::new(out),
+        width as usize,
+        height as usize,
+        &[layer],
+        &meta,
+    )
+    .unwrap_or_else(|e| fail(e.to_string()));
+}
+
+fn avx2_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return is_x86_feature_detected!("avx2");
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
+impl<'a> Lean<'a> {
+    /// The scene's tables, or why the lean path cannot render it.
+    fn new(scene: &'a flowlight_scene::Scene, path_depth: u32) -> Result<Lean<'a>, String> {
+        use flowlight_core::material::DiffuseModel;
+        if scene.is_instanced() || !scene.punctual_lights.is_empty() || scene.emitters.is_empty() {
+            return Err("a scene without instancing, lit by emissive triangles only".into());
+        }
+        let mut albedo = Vec::new();
+        for (m, name) in scene.materials.iter().zip(&scene.material_names) {
+            let lambertian = m.base_color_texture.index < 0
+                && m.metallic == 0.0
+                && m.transmission == 0.0
+                && m.specular == 0.0
+                && m.clearcoat == 0.0
+                && m.normal_texture.index < 0
+                && m.diffuse_model == DiffuseModel::Lambert;
+            if !lambertian {
+                return Err(format!(
+                    "material '{name}': Lambertian materials without textures only"
+                ));
+            }
+            albedo.push(m.base_color);
+        }
+        Ok(Lean {
+            scene,
+            albedo,
+            path_depth,
+        })
+    }
+
+    /// Every pixel's `spp` samples, in waves of [`WAVE`] paths: the sum per pixel.
+    fn render(
+        &self,
+        loaded: &LoadedScene,
+        mode: Mode,
+        spp: u32,
+        seed: u64,
+        width: u32,
+        height: u32,
+    ) -> Vec<Rgb> {
+        let isect = &*loaded.intersector;
+        let mut image = vec![Rgb::ZERO; (width * height) as usize];
+        let mut paths: Vec<Path> = Vec::with_capacity(WAVE);
+        let mut wave = Buffers::default();
+        let total = width as u64 * height as u64 * spp as u64;
+        for first in (0..total).step_by(WAVE) {
+            paths.clear();
+            for n in first..(first + WAVE as u64).min(total) {
+                let (pixel, s) = ((n / spp as u64) as u32, (n % spp as u64) as u32);
+                let (x, y) = (pixel % width, pixel / width);
+                let mut rng = SobolSampler::new(Rng::hash(&[seed, x as u64, y as u64]), s);
+                let raster = Vec2::new(x as f32, y as f32) + rng.uniform2();
+                let ray = loaded.camera.sample_ray(raster, &mut rng);
+                paths.push(Path {
+                    rng,
+                    ray,
+                    beta: Rgb::ONE,
+                    pixel,
+                    depth: 0,
+                    pdf: 0.0,
+                    prev_p: ray.origin,
+                    last: false,
+                });
+            }
+            let mut coherent = true;
+            while !paths.is_empty() {
+                wave.trace(isect, &paths, coherent);
+                coherent = false;
+                self.bounce(mode, &mut paths, &mut wave, &mut image);
+                wave.shadows_traced(isect, &mut image);
+            }
+        }
+        image
+    }
+
+    /// The vertices of every path of the wave at its hit, as `mode` runs them; the paths
+    /// that go on are kept, in order.
+    fn bounce(&self, mode: Mode, paths: &mut Vec<Path>, wave: &mut Buffers, image: &mut [Rgb]) {
+        let n = paths.len();
+        let (hits, shadows, going) = (&wave.hits[..n], &mut wave.shadows, &mut wave.going[..n]);
+        shadows.clear();
+        match mode {
+            Mode::Scalar => {
+                for k in 0..n {
+                    going[k] = self.vertex(&mut paths[k], &hits[k], image, shadows);
+                }
+            }
+            Mode::Phased => {
+                let surfs: Vec<_> = (0..n)
+                    .map(|k| self.surface(&mut paths[k], &hits[k], image))
+                    .collect();
+                for (path, s) in paths.iter_mut().zip(&surfs) {
+                    if let Some(s) = s {
+                        self.connect(path, s, shadows);
+                    }
+                }
+                for (k, s) in surfs.iter().enumerate() {
+                    going[k] = s.as_ref().is_some_and(|s| self.extend(&mut paths[k], s));
+                }
+            }
+            Mode::Lanes | Mode::Avx2 => {
+                for c in (0..n).step_by(lanes::L) {
+                    let end = (c + lanes::L).min(n);
+                    let mut g = [false; lanes::L];
+                    let (ps, hs) = (&mut paths[c..end], &hits[c..end]);
+                    #[cfg(target_arch = "x86_64")]
+                    if mode == Mode::Avx2 {
+                        // SAFETY: `Mode::Avx2` is chosen only where the CPU has AVX2.
+                        unsafe { vertex8::vertex8_avx2(self, ps, hs, image, shadows, &mut g) };
+                        going[c..end].copy_from_slice(&g[..end - c]);
+                        continue;
+                    }
+                    vertex8::vertex8(self, ps, hs, image, shadows, &mut g);
+                    going[c..end].copy_from_slice(&g[..end - c]);
+                }
+            }
+        }
+        let mut kept = 0;
+        for (k, &g) in going.iter().enumerate() {
+            if g {
+                paths.swap(kept, k);
+                kept += 1;
+            }
+        }
+        paths.truncate(kept);
+    }
+}
+
+/// A wave's ray batches.
+struct Buffers {
+    rays: Vec<Ray>,
+    hits: Vec<CompactHit>,
+    going: Vec<bool>,
+    shadows: Vec<Shadow>,
+    shadow_rays: Vec<Ray>,
+    blocked: Vec<u8>,
+}
+
+impl Default for Buffers {
+    fn default() -> Self {
+        let miss = CompactHit {
+            t: 0.0,
+            prim: u32::MAX,
+            b1: 0.0,
+            b2: 0.0,
+            instance: u32::MAX,
+        };
+        Buffers {
+            rays: Vec::with_capacity(WAVE),
+            hits: vec![miss; WAVE],
+            going: vec![false; WAVE],
+            shadows: Vec::with_capacity(WAVE),
+            shadow_rays: Vec::with_capacity(WAVE),
+            blocked: vec![0; WAVE],
+        }
+    }
+}
+
+impl Buffers {
+    /// The closest hits of the paths' rays (the camera rays as one coherent batch).
+    fn trace(&mut self, isect: &dyn Intersector, paths: &[Path], coherent: bool) {
+        self.rays.clear();
+        self.rays.extend(paths.iter().map(|p| p.ray));
+        let hits = &mut self.hits[..paths.len()];
+        if coherent {
+            isect.intersect_coherent_batch(&self.rays, hits);
+        } else {
+            isect.intersect_batch(&self.rays, hits);
+        }
+    }
+
+    /// The bounce's shadow rays traced, the unblocked ones' contributions added.
+    fn shadows_traced(&mut self, isect: &dyn Intersector, image: &mut [Rgb]) {
+        if self.shadows.is_empty() {
+            return;
+        }
+        self.shadow_rays.clear();
+        self.shadow_rays.extend(self.shadows.iter().map(|s| s.0));
+        let blocked = &mut self.blocked[..self.shadow_rays.len()];
+        isect.occluded_batch(&self.shadow_rays, blocked);
+        for (&(_, pixel, c), &b) in self.shadows.iter().zip(blocked.iter()) {
+            if b == 0 {
+                image[pixel as usize] += c;
+            }
+        }
+    }
+}
