@@ -14,6 +14,12 @@
 # so a faster mode that computed something else would show.
 #
 #   crates/flowlight-bench/scripts/lean-path.sh [ROUNDS [SPP]]     # default 3 rounds, 64 spp
+#   crates/flowlight-bench/scripts/lean-path.sh --instructions
+#
+# `--instructions` counts instead, exactly, by callgrind: MCPT at one branch and the lean
+# path's `scalar` and `avx2` modes, each as the difference of a 1-spp and a 2-spp render
+# (loading and the BVH build cancel), split into Embree's and everything else's
+# instructions per camera sample (needs Debian `valgrind`; about five minutes).
 #
 # Needs `cargo build --release --workspace` and `cargo build --release -p flowlight-bench
 # --example lean_path`, and the peers' configs and references (run
@@ -29,6 +35,49 @@ peers=${PEERS_OUT:-target/peers/out}
 for f in cornell-box.toml cornell-box.ref.exr stanford-dragon.toml stanford-dragon.ref.exr; do
     [ -f "$peers/$f" ] || { echo "$peers/$f missing: run crates/flowlight-bench/peers/peers.py first" >&2; exit 1; }
 done
+if [ "${1:-}" = --instructions ]; then
+    command -v valgrind >/dev/null || { echo "valgrind missing (Debian: valgrind)" >&2; exit 1; }
+    out=$(mktemp -d)
+    trap 'rm -rf "$out"' EXIT
+    count() { # LABEL SCENE ENV-MODE COMMAND-WITH-@SPP@...
+        local label=$1 scene=$2 mode=$3
+        shift 3
+        for spp in 1 2; do
+            LEAN_MODE=$mode valgrind --tool=callgrind --dump-instr=yes --compress-strings=no --compress-pos=no \
+                --callgrind-out-file="$out/$spp.cg" "${@//@SPP@/$spp}" >/dev/null 2>&1
+        done
+        python3 - "$out/1.cg" "$out/2.cg" "$label" "$scene" <<'PY'
+import importlib.util, os, sys
+here = "crates/flowlight-bench/scripts/inline-profile.py"
+spec = importlib.util.spec_from_file_location("inline_profile", here)
+ip = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(ip)
+split = []
+for f in sys.argv[1:3]:
+    embree = rest = 0
+    for obj, costs in ip.instruction_counts(f).items():
+        n = sum(costs.values())
+        if obj and "embree" in os.path.basename(obj):
+            embree += n
+        else:
+            rest += n
+    split.append((embree, rest))
+samples = 256 * 256
+e, r = ((b - a) / samples for a, b in zip(*split))
+print(f"| {sys.argv[4]} | {sys.argv[3]} | {r:,.0f} | {e:,.0f} |")
+PY
+    }
+    echo "| scene | renderer | instructions besides Embree | Embree's |"
+    echo "|---|---|---:|---:|"
+    for scene in cornell-box stanford-dragon; do
+        count "MCPT, 1 branch" "$scene" scalar "$bin" render "$peers/$scene.toml" --spp @SPP@ \
+            --threads 1 --quiet --set branches=1 --out "$out/mcpt.exr"
+        for mode in scalar avx2; do
+            count "lean $mode" "$scene" "$mode" "$lean" "$peers/$scene.toml" @SPP@ "$out/lean.exr"
+        done
+    done
+    exit 0
+fi
 rounds=${1:-3}
 spp=${2:-64}
 out=$(mktemp -d)
