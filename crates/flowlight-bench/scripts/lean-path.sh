@@ -6,8 +6,8 @@
 #   - `flowlight render` with MCPT at one branch (`--set branches=1`), its summary's CPU time;
 #   - the `lean_path` example (crates/flowlight-bench/examples/lean_path/) in each of its
 #     modes: `scalar` (one path at a time), `phased` (each phase of the vertex over the whole
-#     wave), `lanes` (eight paths per step, SSE) and `avx2` (the same compiled for AVX2), its
-#     wall time on one thread.
+#     wave), `lanes` (eight paths per step, SSE), `avx2` (the same compiled for AVX2) and
+#     `surface8` (only the surface in AVX2 lanes), its wall time on one thread.
 #
 # Each is divided by the camera samples (256² × SPP). Every lean mode's image is checked to
 # be the scalar mode's bits, and each image's relMSE against the peers' reference is printed,
@@ -86,20 +86,20 @@ samples=$((256 * 256 * spp))
 
 relmse() { "$bin" compare "$1" "$2" | awk '/relMSE/ {print $2; exit}'; }
 
-echo "| scene | round | MCPT, 1 branch (µs) | lean scalar (µs) | lean phased (µs) | lean lanes (µs) | lean avx2 (µs) |"
-echo "|---|---:|---:|---:|---:|---:|---:|"
+echo "| scene | round | MCPT, 1 branch (µs) | lean scalar (µs) | lean phased (µs) | lean lanes (µs) | lean avx2 (µs) | lean surface8 (µs) |"
+echo "|---|---:|---:|---:|---:|---:|---:|---:|"
 for scene in cornell-box stanford-dragon; do
     for r in $(seq "$rounds"); do
         cpu=$("$bin" render "$peers/$scene.toml" --spp "$spp" --threads 1 --set branches=1 \
             --out "$out/mcpt.exr" 2>/dev/null | awk '/cpu time/ {print $3; exit}')
         row="| $scene | $r | $(awk -v c="$cpu" -v n="$samples" 'BEGIN { printf "%.3f", c / n * 1e6 }')"
-        for mode in scalar phased lanes avx2; do
+        for mode in scalar phased lanes avx2 surface8; do
             t=$(LEAN_MODE=$mode "$lean" "$peers/$scene.toml" "$spp" "$out/$mode.exr" 2>/dev/null \
                 | awk '/lean_path:/ {print $2; exit}')
             row="$row | $(awk -v c="$t" -v n="$samples" 'BEGIN { printf "%.3f", c / n * 1e6 }')"
         done
         echo "$row |"
-        for mode in phased lanes avx2; do
+        for mode in phased lanes avx2 surface8; do
             rmse=$("$bin" compare "$out/$mode.exr" "$out/scalar.exr" | awk '$1 == "RMSE" {print $2; exit}')
             awk -v e="$rmse" 'BEGIN { exit !(e == 0) }' \
                 || { echo "$scene: the $mode image differs from the scalar one (RMSE $rmse)" >&2; exit 1; }

@@ -20,7 +20,9 @@
 //!   (whether short loops let the core overlap paths' chains of dependent operations);
 //! - `lanes`: eight paths at a time, the geometry and shading in eight lanes ([`vertex8`]),
 //!   as compiled for the default target (SSE);
-//! - `avx2`: the same compiled for AVX2, eight lanes per instruction.
+//! - `avx2`: the same compiled for AVX2, eight lanes per instruction;
+//! - `surface8`: only the surface in AVX2 lanes, the light connection and the extension path
+//!   by path (what a phase in lanes between per-path code gains).
 //!
 //! Every mode gives the same image, bit for bit.
 
@@ -79,6 +81,7 @@ enum Mode {
     Phased,
     Lanes,
     Avx2,
+    Surface8,
 }
 
 fn fail(msg: String) -> ! {
@@ -99,9 +102,10 @@ fn main() {
         Ok("phased") => Mode::Phased,
         Ok("lanes") => Mode::Lanes,
         Ok("avx2") if avx2_available() => Mode::Avx2,
-        Ok("avx2") => fail("LEAN_MODE=avx2: this CPU has no AVX2".into()),
+        Ok("surface8") if avx2_available() => Mode::Surface8,
+        Ok(m @ ("avx2" | "surface8")) => fail(format!("LEAN_MODE={m}: this CPU has no AVX2")),
         Ok(other) => fail(format!(
-            "LEAN_MODE={other:?}: scalar, phased, lanes or avx2"
+            "LEAN_MODE={other:?}: scalar, phased, lanes, avx2 or surface8"
         )),
     };
     let config = load_config(FilePath::new(config)).unwrap_or_else(|e| fail(e.to_string()));
@@ -248,6 +252,21 @@ impl<'a> Lean<'a> {
                     going[k] = s.as_ref().is_some_and(|s| self.extend(&mut paths[k], s));
                 }
             }
+            #[cfg(target_arch = "x86_64")]
+            Mode::Surface8 => {
+                for c in (0..n).step_by(lanes::L) {
+                    let end = (c + lanes::L).min(n);
+                    let mut g = [false; lanes::L];
+                    let (ps, hs) = (&mut paths[c..end], &hits[c..end]);
+                    // SAFETY: `Mode::Surface8` is chosen only where the CPU has AVX2.
+                    unsafe {
+                        vertex8::surface8_then_scalar_avx2(self, ps, hs, image, shadows, &mut g)
+                    };
+                    going[c..end].copy_from_slice(&g[..end - c]);
+                }
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            Mode::Surface8 => unreachable!("AVX2 only"),
             Mode::Lanes | Mode::Avx2 => {
                 for c in (0..n).step_by(lanes::L) {
                     let end = (c + lanes::L).min(n);

@@ -24,6 +24,19 @@ pub struct Surf {
     albedo: Rgb,
 }
 
+impl Surf {
+    pub fn new(p: Vec3, p_error: Vec3, ng: Vec3, frame: Frame, wo: Vec3, albedo: Rgb) -> Surf {
+        Surf {
+            p,
+            p_error,
+            ng,
+            frame,
+            wo,
+            albedo,
+        }
+    }
+}
+
 /// A light sample's choice: the emitter, its probability and the pair for the point on it.
 pub struct LightChoice {
     pub emitter: usize,

@@ -8,7 +8,9 @@
 #![allow(clippy::needless_range_loop)]
 
 use super::lanes::{F, L, M, V3};
+use super::scalar::Surf;
 use super::{Lean, Path, Shadow};
+use flowlight_core::geometry::Frame;
 use flowlight_core::geometry::{gamma, Ray};
 use flowlight_core::mesh::CompactHit;
 use flowlight_core::Rgb;
@@ -156,6 +158,37 @@ fn set_rgb(v: &mut V3, i: usize, c: Rgb) {
     v.z.0[i] = c.b;
 }
 
+/// What the three steps of an eight-lane vertex share: the surfaces in lanes, and which
+/// lanes' paths scatter there.
+pub struct Surf8 {
+    live: [bool; L],
+    p: V3,
+    p_error: V3,
+    ng: V3,
+    frame: Frame8,
+    wo: V3,
+    albedo: V3,
+}
+
+impl Surf8 {
+    /// Lane `i` as the scalar vertex's [`Surf`], where its path scatters.
+    pub fn lane(&self, i: usize) -> Option<Surf> {
+        let f = &self.frame;
+        let frame = Frame {
+            x: f.x.get(i),
+            y: f.y.get(i),
+            z: f.z.get(i),
+        };
+        let (p, p_error, ng, wo) = (
+            self.p.get(i),
+            self.p_error.get(i),
+            self.ng.get(i),
+            self.wo.get(i),
+        );
+        self.live[i].then(|| Surf::new(p, p_error, ng, frame, wo, rgb(&self.albedo, i)))
+    }
+}
+
 /// The vertex of up to eight `paths` at their `hits`; `going[i]`: path `i` goes on.
 #[inline(always)]
 pub fn vertex8(
@@ -166,6 +199,14 @@ pub fn vertex8(
     shadows: &mut Vec<Shadow>,
     going: &mut [bool; L],
 ) {
+    let mut s = surface8(lean, paths, hits, image);
+    connect8(lean, paths, &s, shadows);
+    extend8(lean, paths, &mut s, going);
+}
+
+/// The surfaces of up to eight `paths` at their `hits` in lanes, and their emission.
+#[inline(always)]
+pub fn surface8(lean: &Lean, paths: &mut [Path], hits: &[CompactHit], image: &mut [Rgb]) -> Surf8 {
     let scene = lean.scene;
     let n = paths.len();
     let mut live = [false; L];
@@ -224,6 +265,25 @@ pub fn vertex8(
     }
     let frame = Frame8::from_z(ns);
     let wo = frame.to_local(wo_world);
+    Surf8 {
+        live,
+        p,
+        p_error,
+        ng,
+        frame,
+        wo,
+        albedo,
+    }
+}
+
+/// The light connections of the live lanes of `s`.
+#[inline(always)]
+pub fn connect8(lean: &Lean, paths: &mut [Path], s: &Surf8, shadows: &mut Vec<Shadow>) {
+    let scene = lean.scene;
+    let n = paths.len();
+    let (live, p, p_error, ng, frame, wo, albedo) =
+        (s.live, s.p, s.p_error, s.ng, &s.frame, s.wo, s.albedo);
+    let (zero, one) = (F::splat(0.0), F::splat(1.0));
     // The light sample: its numbers and the light's choice lane by lane, its geometry in lanes.
     let (mut ux, mut uy, mut p_choose, mut area) =
         (F::default(), F::default(), F::splat(1.0), F::splat(1.0));
@@ -283,6 +343,16 @@ pub fn vertex8(
             shadows.push((ray, paths[i].pixel, rgb(&c, i)));
         }
     }
+}
+
+/// The roulette and BSDF samples of the live lanes of `s`; `going[i]`: path `i` goes on.
+#[inline(always)]
+pub fn extend8(lean: &Lean, paths: &mut [Path], s: &mut Surf8, going: &mut [bool; L]) {
+    let n = paths.len();
+    let (p, p_error, ng, frame, wo, albedo) = (s.p, s.p_error, s.ng, &s.frame, s.wo, s.albedo);
+    let live = &mut s.live;
+    let zero = F::splat(0.0);
+    let (mut ux, mut uy) = (F::default(), F::default());
     // The roulette and the BSDF's numbers path by path, its sample in lanes.
     for i in 0..n {
         if !live[i] {
@@ -314,6 +384,48 @@ pub fn vertex8(
                 wi_world.get(i),
             );
     }
+}
+
+/// [`vertex8`] with only the surface in lanes ([`surface8`]); the connection and the
+/// extension path by path as the scalar vertex runs them: what the surface alone gains.
+#[inline(always)]
+pub fn surface8_then_scalar(
+    lean: &Lean,
+    paths: &mut [Path],
+    hits: &[CompactHit],
+    image: &mut [Rgb],
+    shadows: &mut Vec<Shadow>,
+    going: &mut [bool; L],
+) {
+    let s = surface8(lean, paths, hits, image);
+    let surfs: [Option<Surf>; L] = std::array::from_fn(|i| s.lane(i));
+    for (path, surf) in paths.iter_mut().zip(&surfs) {
+        if let Some(surf) = surf {
+            lean.connect(path, surf, shadows);
+        }
+    }
+    for (i, path) in paths.iter_mut().enumerate() {
+        going[i] = surfs[i]
+            .as_ref()
+            .is_some_and(|surf| lean.extend(path, surf));
+    }
+}
+
+/// [`surface8_then_scalar`] compiled for AVX2.
+///
+/// # Safety
+/// The CPU must have AVX2 (`is_x86_feature_detected!("avx2")`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+pub unsafe fn surface8_then_scalar_avx2(
+    lean: &Lean,
+    paths: &mut [Path],
+    hits: &[CompactHit],
+    image: &mut [Rgb],
+    shadows: &mut Vec<Shadow>,
+    going: &mut [bool; L],
+) {
+    surface8_then_scalar(lean, paths, hits, image, shadows, going)
 }
 
 /// [`vertex8`] compiled for AVX2: eight lanes per instruction.
