@@ -252,34 +252,24 @@ impl<'a> Lean<'a> {
                     going[k] = s.as_ref().is_some_and(|s| self.extend(&mut paths[k], s));
                 }
             }
-            #[cfg(target_arch = "x86_64")]
-            Mode::Surface8 => {
+            Mode::Lanes | Mode::Avx2 | Mode::Surface8 => {
                 for c in (0..n).step_by(lanes::L) {
                     let end = (c + lanes::L).min(n);
                     let mut g = [false; lanes::L];
                     let (ps, hs) = (&mut paths[c..end], &hits[c..end]);
-                    // SAFETY: `Mode::Surface8` is chosen only where the CPU has AVX2.
-                    unsafe {
-                        vertex8::surface8_then_scalar_avx2(self, ps, hs, image, shadows, &mut g)
-                    };
-                    going[c..end].copy_from_slice(&g[..end - c]);
-                }
-            }
-            #[cfg(not(target_arch = "x86_64"))]
-            Mode::Surface8 => unreachable!("AVX2 only"),
-            Mode::Lanes | Mode::Avx2 => {
-                for c in (0..n).step_by(lanes::L) {
-                    let end = (c + lanes::L).min(n);
-                    let mut g = [false; lanes::L];
-                    let (ps, hs) = (&mut paths[c..end], &hits[c..end]);
-                    #[cfg(target_arch = "x86_64")]
-                    if mode == Mode::Avx2 {
-                        // SAFETY: `Mode::Avx2` is chosen only where the CPU has AVX2.
-                        unsafe { vertex8::vertex8_avx2(self, ps, hs, image, shadows, &mut g) };
-                        going[c..end].copy_from_slice(&g[..end - c]);
-                        continue;
+                    let g = &mut g;
+                    match mode {
+                        // SAFETY (both): the AVX2 modes are chosen only where the CPU has AVX2.
+                        #[cfg(target_arch = "x86_64")]
+                        Mode::Avx2 => unsafe {
+                            vertex8::vertex8_avx2(self, ps, hs, image, shadows, g)
+                        },
+                        #[cfg(target_arch = "x86_64")]
+                        Mode::Surface8 => unsafe {
+                            vertex8::surface8_then_scalar_avx2(self, ps, hs, image, shadows, g)
+                        },
+                        _ => vertex8::vertex8(self, ps, hs, image, shadows, g),
                     }
-                    vertex8::vertex8(self, ps, hs, image, shadows, &mut g);
                     going[c..end].copy_from_slice(&g[..end - c]);
                 }
             }

@@ -411,39 +411,30 @@ pub fn surface8_then_scalar(
     }
 }
 
-/// [`surface8_then_scalar`] compiled for AVX2.
-///
-/// # Safety
-/// The CPU must have AVX2 (`is_x86_feature_detected!("avx2")`).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-pub unsafe fn surface8_then_scalar_avx2(
-    lean: &Lean,
-    paths: &mut [Path],
-    hits: &[CompactHit],
-    image: &mut [Rgb],
-    shadows: &mut Vec<Shadow>,
-    going: &mut [bool; L],
-) {
-    surface8_then_scalar(lean, paths, hits, image, shadows, going)
+/// `$avx2`: `$step` compiled for AVX2, eight lanes per instruction (`$step` and what it
+/// calls are inlined into it).
+macro_rules! avx2_version {
+    ($avx2:ident, $step:ident) => {
+        #[doc = concat!("[`", stringify!($step), "`] compiled for AVX2.")]
+        ///
+        /// # Safety
+        /// The CPU must have AVX2 (`is_x86_feature_detected!("avx2")`).
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2")]
+        pub unsafe fn $avx2(
+            lean: &Lean,
+            paths: &mut [Path],
+            hits: &[CompactHit],
+            image: &mut [Rgb],
+            shadows: &mut Vec<Shadow>,
+            going: &mut [bool; L],
+        ) {
+            $step(lean, paths, hits, image, shadows, going)
+        }
+    };
 }
-
-/// [`vertex8`] compiled for AVX2: eight lanes per instruction.
-///
-/// # Safety
-/// The CPU must have AVX2 (`is_x86_feature_detected!("avx2")`).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-pub unsafe fn vertex8_avx2(
-    lean: &Lean,
-    paths: &mut [Path],
-    hits: &[CompactHit],
-    image: &mut [Rgb],
-    shadows: &mut Vec<Shadow>,
-    going: &mut [bool; L],
-) {
-    vertex8(lean, paths, hits, image, shadows, going)
-}
+avx2_version!(vertex8_avx2, vertex8);
+avx2_version!(surface8_then_scalar_avx2, surface8_then_scalar);
 
 #[cfg(test)]
 mod tests {
