@@ -9,7 +9,7 @@
 #
 #   crates/flowlight-bench/scripts/mcpt-levers.sh [SPP]        # default 32
 #
-# Rows: `branches` 1, 4 (the default), 8, 16; `rr_depth` 1, 2, 3, 5 (the default); the
+# Rows: `branches` 1, 4 (the default), 8, 16; `rr_depth` 1, 2, 3, 5 (the default), 8, 12; the
 # independent sampler against Sobol' at 1 and 4 branches (the Cornell box); `branches` 1, 2,
 # 4, 8 on the dragon; and how much of each scene's error is direct light: direct light alone
 # (`path_depth = 1`) at SPP against its own reference of 1024 spp, one branch and four.
@@ -52,7 +52,7 @@ echo "| scene | setting | seed | CPU (s) | relMSE | efficiency |"
 echo "|---|---|---:|---:|---:|---:|"
 cbox_ref=$peers/cornell-box.ref.exr
 for b in 1 4 8 16; do row cornell-box "$cbox_ref" "branches = $b" --set "branches=$b"; done
-for r in 1 2 3 5; do row cornell-box "$cbox_ref" "rr_depth = $r" --set "rr_depth=$r"; done
+for r in 1 2 3 5 8 12; do row cornell-box "$cbox_ref" "rr_depth = $r" --set "rr_depth=$r"; done
 for b in 1 4; do
     row cornell-box "$cbox_ref" "independent sampler, branches = $b" --set "branches=$b" --set sampler=independent
 done
