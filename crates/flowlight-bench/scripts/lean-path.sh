@@ -21,6 +21,9 @@
 # (loading and the BVH build cancel), split into Embree's and everything else's
 # instructions per camera sample (needs Debian `valgrind`; about five minutes).
 #
+# `FAST=1` renders everything with Embree's fast mode (`[render] robust = false` in copies of
+# the peers' configs), to see what a vectorised path and fast mode would reach together.
+#
 # Needs `cargo build --release --workspace` and `cargo build --release -p flowlight-bench
 # --example lean_path`, and the peers' configs and references (run
 # crates/flowlight-bench/peers/peers.py once; PEERS_OUT, default target/peers/out).
@@ -82,6 +85,16 @@ rounds=${1:-3}
 spp=${2:-64}
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
+cfg() { echo "$peers/$1.toml"; }
+if [ "${FAST:-0}" = 1 ]; then
+    for scene in cornell-box stanford-dragon; do
+        grep -q '^robust' "$peers/$scene.toml" && { echo "$peers/$scene.toml sets robust already" >&2; exit 1; }
+        sed 's/^\[render\]$/[render]\nrobust = false/' "$peers/$scene.toml" >"$out/$scene.toml"
+    done
+    cfg() { echo "$out/$1.toml"; }
+    echo "Embree's fast mode (robust = false) for every render."
+    echo
+fi
 samples=$((256 * 256 * spp))
 
 relmse() { "$bin" compare "$1" "$2" | awk '/relMSE/ {print $2; exit}'; }
@@ -90,11 +103,11 @@ echo "| scene | round | MCPT, 1 branch (µs) | lean scalar (µs) | lean phased (
 echo "|---|---:|---:|---:|---:|---:|---:|---:|"
 for scene in cornell-box stanford-dragon; do
     for r in $(seq "$rounds"); do
-        cpu=$("$bin" render "$peers/$scene.toml" --spp "$spp" --threads 1 --set branches=1 \
+        cpu=$("$bin" render "$(cfg "$scene")" --spp "$spp" --threads 1 --set branches=1 \
             --out "$out/mcpt.exr" 2>/dev/null | awk '/cpu time/ {print $3; exit}')
         row="| $scene | $r | $(awk -v c="$cpu" -v n="$samples" 'BEGIN { printf "%.3f", c / n * 1e6 }')"
         for mode in scalar phased lanes avx2 surface8; do
-            t=$(LEAN_MODE=$mode "$lean" "$peers/$scene.toml" "$spp" "$out/$mode.exr" 2>/dev/null \
+            t=$(LEAN_MODE=$mode "$lean" "$(cfg "$scene")" "$spp" "$out/$mode.exr" 2>/dev/null \
                 | awk '/lean_path:/ {print $2; exit}')
             row="$row | $(awk -v c="$t" -v n="$samples" 'BEGIN { printf "%.3f", c / n * 1e6 }')"
         done
