@@ -28,15 +28,14 @@
 
 use flowlight_core::geometry::Ray;
 use flowlight_core::mesh::CompactHit;
-use flowlight_core::rng::Rng;
-use flowlight_core::sampler::SampleStream;
 use flowlight_core::sobol::SobolSampler;
 use flowlight_core::Rgb;
 use flowlight_host::intersector::Intersector;
 use flowlight_host::output::exr::{write_exr, ExrMetadata, ImageLayer};
 use flowlight_host::renderer::LoadedScene;
+use flowlight_pathtrace::sampler::sample_start;
 use flowlight_scene::config::load_config;
-use glam::{Vec2, Vec3};
+use glam::Vec3;
 use std::path::Path as FilePath;
 use std::time::Instant;
 
@@ -202,8 +201,7 @@ impl<'a> Lean<'a> {
             for n in first..(first + WAVE as u64).min(total) {
                 let (pixel, s) = ((n / spp as u64) as u32, (n % spp as u64) as u32);
                 let (x, y) = (pixel % width, pixel / width);
-                let mut rng = SobolSampler::new(Rng::hash(&[seed, x as u64, y as u64]), s);
-                let raster = Vec2::new(x as f32, y as f32) + rng.uniform2();
+                let (mut rng, raster) = sample_start::<SobolSampler>(seed, x, y, s);
                 let ray = loaded.camera.sample_ray(raster, &mut rng);
                 paths.push(Path {
                     rng,
@@ -231,7 +229,8 @@ impl<'a> Lean<'a> {
     /// that go on are kept, in order.
     fn bounce(&self, mode: Mode, paths: &mut Vec<Path>, wave: &mut Buffers, image: &mut [Rgb]) {
         let n = paths.len();
-        let (hits, shadows, going) = (&wave.hits[..n], &mut wave.shadows, &mut wave.going[..n]);
+        let (hits, going) = (&wave.hits[..n], &mut wave.going[..n]);
+        let shadows = &mut wave.shadows;
         shadows.clear();
         match mode {
             Mode::Scalar => {
@@ -240,10 +239,10 @@ impl<'a> Lean<'a> {
                 }
             }
             Mode::Phased => {
-                let surfs: Vec<_> = (0..n)
-                    .map(|k| self.surface(&mut paths[k], &hits[k], image))
-                    .collect();
-                for (path, s) in paths.iter_mut().zip(&surfs) {
+                let surfs = &mut wave.surfs;
+                surfs.clear();
+                surfs.extend((0..n).map(|k| self.surface(&mut paths[k], &hits[k], image)));
+                for (path, s) in paths.iter_mut().zip(surfs.iter()) {
                     if let Some(s) = s {
                         self.connect(path, s, shadows);
                     }
@@ -293,6 +292,8 @@ struct Buffers {
     shadows: Vec<Shadow>,
     shadow_rays: Vec<Ray>,
     blocked: Vec<u8>,
+    /// The `phased` mode's surfaces, one per path, between its phases.
+    surfs: Vec<Option<scalar::Surf>>,
 }
 
 impl Default for Buffers {
@@ -311,6 +312,7 @@ impl Default for Buffers {
             shadows: Vec::with_capacity(WAVE),
             shadow_rays: Vec::with_capacity(WAVE),
             blocked: vec![0; WAVE],
+            surfs: Vec::with_capacity(WAVE),
         }
     }
 }
