@@ -27,6 +27,7 @@
 //! Every mode gives the same image, bit for bit.
 
 use flowlight_core::geometry::Ray;
+use flowlight_core::light::Lights;
 use flowlight_core::mesh::CompactHit;
 use flowlight_core::sobol::SobolSampler;
 use flowlight_core::Rgb;
@@ -69,6 +70,8 @@ struct Path {
 /// The scene as the lean path reads it.
 struct Lean<'a> {
     scene: &'a flowlight_scene::Scene,
+    /// The scene's emitters and power CDF, for the emitters' densities.
+    lights: Lights<'a>,
     /// Per material: its Lambertian albedo.
     albedo: Vec<Rgb>,
     path_depth: u32,
@@ -176,6 +179,7 @@ impl<'a> Lean<'a> {
         }
         Ok(Lean {
             scene,
+            lights: Lights::area_only(&scene.emitters, &scene.emitter_power_cdf),
             albedo,
             path_depth,
         })

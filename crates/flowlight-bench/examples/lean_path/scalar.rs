@@ -179,8 +179,7 @@ impl Lean<'_> {
                 let w = if path.pdf > 0.0 {
                     let d = p - path.prev_p;
                     let cos = (em.n.dot(d) / d.length()).abs();
-                    let pdf_light =
-                        self.choose_pdf(e as usize) / em.area * d.length_squared() / cos;
+                    let pdf_light = self.lights.pdf_area(e as usize) * d.length_squared() / cos;
                     power_heuristic(path.pdf, pdf_light)
                 } else {
                     1.0
@@ -250,11 +249,5 @@ impl Lean<'_> {
         path.prev_p = p;
         path.ray = Ray::new(origin, dir, f32::INFINITY);
         true
-    }
-
-    /// The probability of choosing emitter `i`.
-    fn choose_pdf(&self, i: usize) -> f32 {
-        let cdf = &self.scene.emitter_power_cdf;
-        cdf[i] - if i == 0 { 0.0 } else { cdf[i - 1] }
     }
 }
