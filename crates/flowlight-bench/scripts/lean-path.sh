@@ -3,7 +3,8 @@
 # instruction take off that least (docs/performance.md, "What a lean path costs"): on the
 # peers' scenes, one thread, alternated rounds of
 #
-#   - `flowlight render` with MCPT at one branch (`--set branches=1`), its summary's CPU time;
+#   - `flowlight render` with MCPT at one branch (`--set branches=1`; `BRANCHES=k` for k),
+#     its summary's CPU time;
 #   - the `lean_path` example (crates/flowlight-bench/examples/lean_path/) in each of its
 #     modes: `scalar` (one path at a time), `phased` (each phase of the vertex over the whole
 #     wave), `lanes` (eight paths per step, SSE), `avx2` (the same compiled for AVX2) and
@@ -23,6 +24,8 @@
 #
 # `FAST=1` renders everything with Embree's fast mode (`[render] robust = false` in copies of
 # the peers' configs), to see what a vectorised path and fast mode would reach together.
+# `BRANCHES=k` (default 1) splits every camera path into k branches at its first vertex in
+# MCPT and the lean path alike (`--set branches=k`, `LEAN_BRANCHES=k`): MCPT's default is 4.
 #
 # Needs `cargo build --release --workspace` and `cargo build --release -p flowlight-bench
 # --example lean_path`, and the peers' configs and references (run
@@ -35,6 +38,12 @@ for b in "$bin" "$lean"; do
     [ -x "$b" ] || { echo "$b missing: build it first (see the header)" >&2; exit 1; }
 done
 peers=${PEERS_OUT:-target/peers/out}
+branches=${BRANCHES:-1}
+case $branches in
+    [1-9] | [1-5][0-9] | 6[0-4]) ;;
+    *) echo "BRANCHES=$branches: a whole number in 1..64" >&2; exit 1 ;;
+esac
+export LEAN_BRANCHES=$branches
 for f in cornell-box.toml cornell-box.ref.exr stanford-dragon.toml stanford-dragon.ref.exr; do
     [ -f "$peers/$f" ] || { echo "$peers/$f missing: run crates/flowlight-bench/peers/peers.py first" >&2; exit 1; }
 done
@@ -73,8 +82,8 @@ PY
     echo "| scene | renderer | instructions besides Embree | Embree's |"
     echo "|---|---|---:|---:|"
     for scene in cornell-box stanford-dragon; do
-        count "MCPT, 1 branch" "$scene" scalar "$bin" render "$peers/$scene.toml" --spp @SPP@ \
-            --threads 1 --quiet --set branches=1 --out "$out/mcpt.exr"
+        count "MCPT, $branches branch(es)" "$scene" scalar "$bin" render "$peers/$scene.toml" --spp @SPP@ \
+            --threads 1 --quiet --set branches="$branches" --out "$out/mcpt.exr"
         for mode in scalar avx2; do
             count "lean $mode" "$scene" "$mode" "$lean" "$peers/$scene.toml" @SPP@ "$out/lean.exr"
         done
@@ -99,11 +108,13 @@ samples=$((256 * 256 * spp))
 
 relmse() { "$bin" compare "$1" "$2" | awk '/relMSE/ {print $2; exit}'; }
 
-echo "| scene | round | MCPT, 1 branch (µs) | lean scalar (µs) | lean phased (µs) | lean lanes (µs) | lean avx2 (µs) | lean surface8 (µs) |"
+echo "Branches per camera sample: $branches (MCPT and the lean path)."
+echo
+echo "| scene | round | MCPT (µs) | lean scalar (µs) | lean phased (µs) | lean lanes (µs) | lean avx2 (µs) | lean surface8 (µs) |"
 echo "|---|---:|---:|---:|---:|---:|---:|---:|"
 for scene in cornell-box stanford-dragon; do
     for r in $(seq "$rounds"); do
-        cpu=$("$bin" render "$(cfg "$scene")" --spp "$spp" --threads 1 --set branches=1 \
+        cpu=$("$bin" render "$(cfg "$scene")" --spp "$spp" --threads 1 --set branches="$branches" \
             --out "$out/mcpt.exr" 2>/dev/null | awk '/cpu time/ {print $3; exit}')
         row="| $scene | $r | $(awk -v c="$cpu" -v n="$samples" 'BEGIN { printf "%.3f", c / n * 1e6 }')"
         for mode in scalar phased lanes avx2 surface8; do

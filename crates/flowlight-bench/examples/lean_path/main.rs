@@ -2,13 +2,19 @@
 //! Embree and sampler has to do on a Lambertian scene lit by emissive triangles, to size
 //! what MCPT's walker spends beyond it (docs/performance.md, "What a lean path costs").
 //!
-//! The same estimator as MCPT at `branches = 1` with the `throughput` roulette: paths from
+//! The same estimator as MCPT with the `throughput` roulette: paths from
 //! the camera, next-event estimation at every vertex weighted by the power heuristic
 //! against the cosine-sampled BSDF direction, the same Sobol' numbers slot by slot, the same
 //! robust ray offsets and the same batches of 256 paths through the host's intersector. What
 //! it leaves out is everything a general scene needs: textures, the glTF BSDF, punctual and
 //! environment lights, instancing, volumes, lighting layers, sinks. It refuses a scene that
 //! needs any of these, so its image must match MCPT's in expectation.
+//!
+//! `LEAN_BRANCHES=k` (default 1) splits each camera path into k branches at its first
+//! vertex, as MCPT's `branches = k`: the surface once, then per branch its own numbers
+//! (`rng.branch(j, k)`), light connection and extension with β/k; the branches join the wave.
+//! The split vertex runs path by path in every mode ([`Lean::split_vertex`]), the vertices
+//! after it as the mode runs them.
 //!
 //!     cargo run --release -p flowlight-bench --example lean_path -- CONFIG.toml SPP OUT.exr
 //!
@@ -53,6 +59,7 @@ const RR_DEPTH: u32 = 5;
 type Shadow = (Ray, u32, Rgb);
 
 /// One camera path between two vertices.
+#[derive(Clone)]
 struct Path {
     rng: SobolSampler,
     ray: Ray,
@@ -75,6 +82,8 @@ struct Lean<'a> {
     /// Per material: its Lambertian albedo.
     albedo: Vec<Rgb>,
     path_depth: u32,
+    /// Branches per camera path from its first vertex on (MCPT's `branches`).
+    branches: u32,
 }
 
 #[derive(Clone, Copy, PartialEq)]
@@ -119,8 +128,16 @@ fn main() {
         .map_or(Some(32), |(_, v)| v.as_integer())
         .unwrap_or_else(|| fail("path_depth: not a whole number".into()))
         as u32;
+    let branches = match std::env::var("LEAN_BRANCHES") {
+        Err(_) => 1,
+        Ok(k) => match k.parse::<u32>() {
+            Ok(k @ 1..=64) => k,
+            _ => fail(format!("LEAN_BRANCHES={k:?}: a whole number in 1..=64")),
+        },
+    };
     let loaded = LoadedScene::load(config).unwrap_or_else(|e| fail(e.to_string()));
-    let lean = Lean::new(&loaded.scene, path_depth).unwrap_or_else(|e| fail(e));
+    let mut lean = Lean::new(&loaded.scene, path_depth).unwrap_or_else(|e| fail(e));
+    lean.branches = branches;
     let t0 = Instant::now();
     let mut image = lean.render(&loaded, mode, spp, seed, width, height);
     let elapsed = t0.elapsed().as_secs_f64();
@@ -182,6 +199,7 @@ impl<'a> Lean<'a> {
             lights: Lights::area_only(&scene.emitters, &scene.emitter_power_cdf),
             albedo,
             path_depth,
+            branches: 1,
         })
     }
 
@@ -230,13 +248,24 @@ impl<'a> Lean<'a> {
     }
 
     /// The vertices of every path of the wave at its hit, as `mode` runs them; the paths
-    /// that go on are kept, in order.
+    /// that go on are kept, in order, and the branches split off this bounce join after them.
     fn bounce(&self, mode: Mode, paths: &mut Vec<Path>, wave: &mut Buffers, image: &mut [Rgb]) {
         let n = paths.len();
+        wave.going.resize(n.max(wave.going.len()), false);
         let (hits, going) = (&wave.hits[..n], &mut wave.going[..n]);
         let shadows = &mut wave.shadows;
         shadows.clear();
+        let spawned = &mut wave.spawned;
+        spawned.clear();
+        // Every path of a wave reaches its first vertex in the first bounce.
+        let splits = self.branches > 1 && paths.first().is_some_and(|p| p.depth == 0);
+        if splits {
+            for k in 0..n {
+                going[k] = self.split_vertex(&mut paths[k], &hits[k], image, shadows, spawned);
+            }
+        }
         match mode {
+            _ if splits => {}
             Mode::Scalar => {
                 for k in 0..n {
                     going[k] = self.vertex(&mut paths[k], &hits[k], image, shadows);
@@ -285,6 +314,7 @@ impl<'a> Lean<'a> {
             }
         }
         paths.truncate(kept);
+        paths.append(spawned);
     }
 }
 
@@ -298,6 +328,8 @@ struct Buffers {
     blocked: Vec<u8>,
     /// The `phased` mode's surfaces, one per path, between its phases.
     surfs: Vec<Option<scalar::Surf>>,
+    /// Branches split off in a bounce, before they join the wave.
+    spawned: Vec<Path>,
 }
 
 impl Default for Buffers {
@@ -317,6 +349,7 @@ impl Default for Buffers {
             shadow_rays: Vec::with_capacity(WAVE),
             blocked: vec![0; WAVE],
             surfs: Vec::with_capacity(WAVE),
+            spawned: Vec::new(),
         }
     }
 }
@@ -326,6 +359,9 @@ impl Buffers {
     fn trace(&mut self, isect: &dyn Intersector, paths: &[Path], coherent: bool) {
         self.rays.clear();
         self.rays.extend(paths.iter().map(|p| p.ray));
+        if self.hits.len() < paths.len() {
+            self.hits.resize(paths.len(), self.hits[0]);
+        }
         let hits = &mut self.hits[..paths.len()];
         if coherent {
             isect.intersect_coherent_batch(&self.rays, hits);
@@ -341,6 +377,8 @@ impl Buffers {
         }
         self.shadow_rays.clear();
         self.shadow_rays.extend(self.shadows.iter().map(|s| s.0));
+        self.blocked
+            .resize(self.shadow_rays.len().max(self.blocked.len()), 0);
         let blocked = &mut self.blocked[..self.shadow_rays.len()];
         isect.occluded_batch(&self.shadow_rays, blocked);
         for (&(_, pixel, c), &b) in self.shadows.iter().zip(blocked.iter()) {

@@ -61,6 +61,41 @@ impl Lean<'_> {
         self.extend(path, &s)
     }
 
+    /// The vertex where a camera path splits into [`Lean::branches`] branches (its first, as
+    /// MCPT's): the surface and its emission once; then per branch j, with the numbers
+    /// `rng.branch(j, k)` and β/k, its own light connection and extension, in MCPT's order
+    /// (the connections in branch order, each branch j ≥ 1 extended at once and pushed onto
+    /// `spawned` where it goes on, branch 0 extended last and going on as the path itself).
+    /// Whether the path goes on.
+    pub fn split_vertex(
+        &self,
+        path: &mut Path,
+        hit: &CompactHit,
+        image: &mut [Rgb],
+        shadows: &mut Vec<Shadow>,
+        spawned: &mut Vec<Path>,
+    ) -> bool {
+        let Some(s) = self.surface(path, hit, image) else {
+            return false;
+        };
+        let k = self.branches;
+        let trunk = path.rng.clone();
+        path.beta /= k as f32;
+        let mut first = None;
+        for j in 0..k {
+            let mut branch = path.clone();
+            branch.rng = trunk.branch(j, k);
+            self.connect(&mut branch, &s, shadows);
+            if j == 0 {
+                first = Some(branch);
+            } else if self.extend(&mut branch, &s) {
+                spawned.push(branch);
+            }
+        }
+        *path = first.expect("at least one branch");
+        self.extend(path, &s)
+    }
+
     /// Phase 1: the surface at the hit and its emission; `None` where the path ends here.
     #[inline(always)]
     pub fn surface(&self, path: &mut Path, hit: &CompactHit, image: &mut [Rgb]) -> Option<Surf> {
@@ -208,14 +243,23 @@ impl Lean<'_> {
     }
 
     /// The roulette on the throughput (from [`RR_DEPTH`] on, survivors divided by their
-    /// probability), then the BSDF's numbers: its one number (drawn for the slot, unused by a
-    /// Lambertian surface) and the pair of its direction. `None` where the path stops.
+    /// probability; a branch's throughput without its split's 1/k), then the BSDF's
+    /// numbers: its one number (drawn for the slot, unused by a Lambertian surface) and the
+    /// pair of its direction. `None` where the path stops.
     #[inline(always)]
     pub fn bsdf_numbers(&self, path: &mut Path, albedo: Rgb) -> Option<Vec2> {
         let vertex = path.depth;
         let last = vertex >= self.path_depth;
         if !last && vertex >= RR_DEPTH {
-            let survive = (path.beta.max_component() * albedo.max_component()).min(0.95);
+            // Past the split a branch's β holds its 1/k, which the roulette multiplies back
+            // out, as MCPT's does (×1 without branches: the same bits).
+            let split = if vertex > 1 {
+                self.branches as f32
+            } else {
+                1.0
+            };
+            let throughput = path.beta.max_component() * split;
+            let survive = (throughput * albedo.max_component()).min(0.95);
             path.rng.seek(vertex, SLOT_ROULETTE);
             if path.rng.uniform() >= survive {
                 return None;
