@@ -260,8 +260,15 @@ impl<'a> Lean<'a> {
         // Every path of a wave reaches its first vertex in the first bounce.
         let splits = self.branches > 1 && paths.first().is_some_and(|p| p.depth == 0);
         if splits {
-            for k in 0..n {
-                going[k] = self.split_vertex(&mut paths[k], &hits[k], image, shadows, spawned);
+            let lanes_split = matches!(mode, Mode::Lanes | Mode::Avx2);
+            if lanes_split {
+                let (b, avx2) = (&mut wave.branches, mode == Mode::Avx2);
+                self.split_in_lanes(avx2, &mut paths[..n], hits, image, shadows, going, b);
+                spawned.append(&mut b.paths);
+            } else {
+                for k in 0..n {
+                    going[k] = self.split_vertex(&mut paths[k], &hits[k], image, shadows, spawned);
+                }
             }
         }
         match mode {
@@ -318,6 +325,81 @@ impl<'a> Lean<'a> {
     }
 }
 
+impl Lean<'_> {
+    /// [`Lean::split_vertex`] for every path of the wave, the branches' connections and
+    /// extensions eight at a time in lanes ([`vertex8::branches8`]): the surfaces first, path
+    /// by path, then the branches in (path, branch) order, so the shadow rays come in the same
+    /// order as the scalar split's. Branch 0 of each path takes its place (`going` says
+    /// whether it goes on); the other branches that go on are left in `b.paths`, in order.
+    #[allow(clippy::too_many_arguments)]
+    fn split_in_lanes(
+        &self,
+        avx2: bool,
+        paths: &mut [Path],
+        hits: &[CompactHit],
+        image: &mut [Rgb],
+        shadows: &mut Vec<Shadow>,
+        going: &mut [bool],
+        b: &mut BranchBuffers,
+    ) {
+        let k = self.branches;
+        b.paths.clear();
+        b.surfs.clear();
+        b.owner.clear();
+        for (t, path) in paths.iter_mut().enumerate() {
+            going[t] = false;
+            let Some(s) = self.surface(path, &hits[t], image) else {
+                continue;
+            };
+            let trunk = path.rng.clone();
+            path.beta /= k as f32;
+            for j in 0..k {
+                let mut branch = path.clone();
+                branch.rng = trunk.branch(j, k);
+                b.paths.push(branch);
+                b.surfs.push(s.clone());
+                b.owner.push((t as u32, j));
+            }
+        }
+        let count = b.paths.len();
+        b.going.clear();
+        b.going.resize(count, false);
+        for c in (0..count).step_by(lanes::L) {
+            let end = (c + lanes::L).min(count);
+            let mut g = [false; lanes::L];
+            let (ps, ss) = (&mut b.paths[c..end], &b.surfs[c..end]);
+            match avx2 {
+                // SAFETY: the AVX2 mode is chosen only where the CPU has AVX2.
+                #[cfg(target_arch = "x86_64")]
+                true => unsafe { vertex8::branches8_avx2(self, ps, ss, shadows, &mut g) },
+                _ => vertex8::branches8(self, ps, ss, shadows, &mut g),
+            }
+            b.going[c..end].copy_from_slice(&g[..end - c]);
+        }
+        let mut kept = 0;
+        for i in 0..count {
+            let (t, j) = b.owner[i];
+            if j == 0 {
+                going[t as usize] = b.going[i];
+                std::mem::swap(&mut paths[t as usize], &mut b.paths[i]);
+            } else if b.going[i] {
+                b.paths.swap(kept, i);
+                kept += 1;
+            }
+        }
+        b.paths.truncate(kept);
+    }
+}
+
+/// The branches of a wave's split in lanes: each with its surface and its (path, branch).
+#[derive(Default)]
+struct BranchBuffers {
+    paths: Vec<Path>,
+    surfs: Vec<scalar::Surf>,
+    owner: Vec<(u32, u32)>,
+    going: Vec<bool>,
+}
+
 /// A wave's ray batches.
 struct Buffers {
     rays: Vec<Ray>,
@@ -330,6 +412,7 @@ struct Buffers {
     surfs: Vec<Option<scalar::Surf>>,
     /// Branches split off in a bounce, before they join the wave.
     spawned: Vec<Path>,
+    branches: BranchBuffers,
 }
 
 impl Default for Buffers {
@@ -350,6 +433,7 @@ impl Default for Buffers {
             blocked: vec![0; WAVE],
             surfs: Vec::with_capacity(WAVE),
             spawned: Vec::new(),
+            branches: BranchBuffers::default(),
         }
     }
 }

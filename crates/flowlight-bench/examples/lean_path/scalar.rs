@@ -15,13 +15,14 @@ use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
 
 /// What the phases of a vertex share.
+#[derive(Clone)]
 pub struct Surf {
-    p: Vec3,
-    p_error: Vec3,
-    ng: Vec3,
-    frame: Frame,
-    wo: Vec3,
-    albedo: Rgb,
+    pub p: Vec3,
+    pub p_error: Vec3,
+    pub ng: Vec3,
+    pub frame: Frame,
+    pub wo: Vec3,
+    pub albedo: Rgb,
 }
 
 impl Surf {

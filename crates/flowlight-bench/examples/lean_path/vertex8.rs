@@ -171,6 +171,35 @@ pub struct Surf8 {
 }
 
 impl Surf8 {
+    /// Up to eight of the scalar vertex's surfaces in lanes, the lanes past them dead.
+    pub fn gather(surfs: &[Surf]) -> Surf8 {
+        let mut s = Surf8 {
+            live: [false; L],
+            p: V3::default(),
+            p_error: V3::default(),
+            ng: V3::default(),
+            frame: Frame8 {
+                x: V3::default(),
+                y: V3::default(),
+                z: V3::default(),
+            },
+            wo: V3::default(),
+            albedo: V3::default(),
+        };
+        for (i, surf) in surfs.iter().enumerate() {
+            s.live[i] = true;
+            s.p.set(i, surf.p);
+            s.p_error.set(i, surf.p_error);
+            s.ng.set(i, surf.ng);
+            s.frame.x.set(i, surf.frame.x);
+            s.frame.y.set(i, surf.frame.y);
+            s.frame.z.set(i, surf.frame.z);
+            s.wo.set(i, surf.wo);
+            set_rgb(&mut s.albedo, i, surf.albedo);
+        }
+        s
+    }
+
     /// Lane `i` as the scalar vertex's [`Surf`], where its path scatters.
     pub fn lane(&self, i: usize) -> Option<Surf> {
         let f = &self.frame;
@@ -411,30 +440,60 @@ pub fn surface8_then_scalar(
     }
 }
 
+/// The light connections and extensions of up to eight branches at the vertex where their
+/// camera paths split, `surfs[i]` the surface of `paths[i]`'s split vertex, in lanes: the
+/// same connections and extensions as [`Lean::split_vertex`] makes path by path.
+#[inline(always)]
+pub fn branches8(
+    lean: &Lean,
+    paths: &mut [Path],
+    surfs: &[Surf],
+    shadows: &mut Vec<Shadow>,
+    going: &mut [bool; L],
+) {
+    let mut s = Surf8::gather(surfs);
+    connect8(lean, paths, &s, shadows);
+    extend8(lean, paths, &mut s, going);
+}
+
 /// `$avx2`: `$step` compiled for AVX2, eight lanes per instruction (`$step` and what it
 /// calls are inlined into it).
 macro_rules! avx2_version {
-    ($avx2:ident, $step:ident) => {
+    ($avx2:ident = $step:ident($($arg:ident: $ty:ty),* $(,)?)) => {
         #[doc = concat!("[`", stringify!($step), "`] compiled for AVX2.")]
         ///
         /// # Safety
         /// The CPU must have AVX2 (`is_x86_feature_detected!("avx2")`).
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx2")]
-        pub unsafe fn $avx2(
+        pub unsafe fn $avx2($($arg: $ty),*) {
+            $step($($arg),*)
+        }
+    };
+}
+
+/// The arguments of a vertex's step in lanes: the paths at their hits.
+macro_rules! vertex_step_avx2 {
+    ($avx2:ident = $step:ident) => {
+        avx2_version!($avx2 = $step(
             lean: &Lean,
             paths: &mut [Path],
             hits: &[CompactHit],
             image: &mut [Rgb],
             shadows: &mut Vec<Shadow>,
             going: &mut [bool; L],
-        ) {
-            $step(lean, paths, hits, image, shadows, going)
-        }
+        ));
     };
 }
-avx2_version!(vertex8_avx2, vertex8);
-avx2_version!(surface8_then_scalar_avx2, surface8_then_scalar);
+vertex_step_avx2!(vertex8_avx2 = vertex8);
+vertex_step_avx2!(surface8_then_scalar_avx2 = surface8_then_scalar);
+avx2_version!(branches8_avx2 = branches8(
+    lean: &Lean,
+    paths: &mut [Path],
+    surfs: &[Surf],
+    shadows: &mut Vec<Shadow>,
+    going: &mut [bool; L],
+));
 
 #[cfg(test)]
 mod tests {
