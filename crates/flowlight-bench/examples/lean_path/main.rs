@@ -13,7 +13,9 @@
 //! `LEAN_BRANCHES=k` (default 1) splits each camera path into k branches at its first
 //! vertex, as MCPT's `branches = k`: the surface once, then per branch its own numbers
 //! (`rng.branch(j, k)`), light connection and extension with β/k; the branches join the wave.
-//! The split vertex runs path by path in every mode ([`Lean::split_vertex`]), the vertices
+//! The split vertex's surface runs path by path in every mode; its branches' connections and
+//! extensions path by path in `scalar`, `phased` and `surface8` ([`Lean::split_vertex`]) and
+//! eight at a time in lanes in `lanes` and `avx2` ([`vertex8::branches8`]); the vertices
 //! after it as the mode runs them.
 //!
 //!     cargo run --release -p flowlight-bench --example lean_path -- CONFIG.toml SPP OUT.exr
