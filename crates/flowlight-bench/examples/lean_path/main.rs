@@ -5,7 +5,8 @@
 //! The same estimator as MCPT with the `throughput` roulette: paths from
 //! the camera, next-event estimation at every vertex weighted by the power heuristic
 //! against the cosine-sampled BSDF direction, the same Sobol' numbers slot by slot, the same
-//! robust ray offsets and the same batches of 256 paths through the host's intersector. What
+//! robust ray offsets, the same batches of 256 paths through the host's intersector and the
+//! same cache hints for a large mesh's surface data ([`Lean::prefetch_surfaces`]). What
 //! it leaves out is everything a general scene needs: textures, the glTF BSDF, punctual and
 //! environment lights, instancing, volumes, lighting layers, sinks. It refuses a scene that
 //! needs any of these, so its image must match MCPT's in expectation.
@@ -269,6 +270,7 @@ impl<'a> Lean<'a> {
                 spawned.append(&mut b.paths);
             } else {
                 for k in 0..n {
+                    self.prefetch_surfaces(hits, k, 1);
                     going[k] = self.split_vertex(&mut paths[k], &hits[k], image, shadows, spawned);
                 }
             }
@@ -277,13 +279,17 @@ impl<'a> Lean<'a> {
             _ if splits => {}
             Mode::Scalar => {
                 for k in 0..n {
+                    self.prefetch_surfaces(hits, k, 1);
                     going[k] = self.vertex(&mut paths[k], &hits[k], image, shadows);
                 }
             }
             Mode::Phased => {
                 let surfs = &mut wave.surfs;
                 surfs.clear();
-                surfs.extend((0..n).map(|k| self.surface(&mut paths[k], &hits[k], image)));
+                surfs.extend((0..n).map(|k| {
+                    self.prefetch_surfaces(hits, k, 1);
+                    self.surface(&mut paths[k], &hits[k], image)
+                }));
                 for (path, s) in paths.iter_mut().zip(surfs.iter()) {
                     if let Some(s) = s {
                         self.connect(path, s, shadows);
@@ -296,6 +302,7 @@ impl<'a> Lean<'a> {
             Mode::Lanes | Mode::Avx2 | Mode::Surface8 => {
                 for c in (0..n).step_by(lanes::L) {
                     let end = (c + lanes::L).min(n);
+                    self.prefetch_surfaces(hits, c, lanes::L);
                     let mut g = [false; lanes::L];
                     let (ps, hs) = (&mut paths[c..end], &hits[c..end]);
                     let g = &mut g;
@@ -328,6 +335,33 @@ impl<'a> Lean<'a> {
 }
 
 impl Lean<'_> {
+    /// Cache hints for a step that shades `hits[from..from + count]`, as MCPT's walker gives
+    /// them ([`flowlight_sdk::scene::Scene::prefetch_surfaces`], whose distances a step of one
+    /// hit uses; a step of eight asks for the records two steps ahead and the vertices one
+    /// step ahead). Large meshes only; changes no result.
+    fn prefetch_surfaces(&self, hits: &[CompactHit], from: usize, count: usize) {
+        use flowlight_sdk::scene::{
+            SURFACE_PREFETCH_MIN_TRIANGLES, SURFACE_PREFETCH_TRIANGLES, SURFACE_PREFETCH_VERTICES,
+        };
+        if self.scene.triangles.len() < SURFACE_PREFETCH_MIN_TRIANGLES {
+            return;
+        }
+        let (records, vertices) = match count {
+            1 => (SURFACE_PREFETCH_TRIANGLES, SURFACE_PREFETCH_VERTICES),
+            _ => (2 * count, count),
+        };
+        let mesh = self.scene.mesh();
+        let hit = |j: usize| hits.get(j).filter(|h| h.is_hit());
+        let record = |j: usize| hit(j).map(|h| mesh.prefetch_triangle(h.prim, h.instance));
+        let vertex = |j: usize| hit(j).map(|h| mesh.prefetch_vertices(h.prim, h.instance));
+        if from == 0 {
+            (0..records).for_each(|j| _ = record(j));
+            (0..vertices).for_each(|j| _ = vertex(j));
+        }
+        (from + records..from + records + count).for_each(|j| _ = record(j));
+        (from + vertices..from + vertices + count).for_each(|j| _ = vertex(j));
+    }
+
     /// [`Lean::split_vertex`] for every path of the wave, the branches' connections and
     /// extensions eight at a time in lanes ([`vertex8::branches8`]): the surfaces first, path
     /// by path, then the branches in (path, branch) order, so the shadow rays come in the same
@@ -350,6 +384,7 @@ impl Lean<'_> {
         b.owner.clear();
         for (t, path) in paths.iter_mut().enumerate() {
             going[t] = false;
+            self.prefetch_surfaces(hits, t, 1);
             let Some(s) = self.surface(path, &hits[t], image) else {
                 continue;
             };
