@@ -11,14 +11,9 @@ use flowlight_core::mesh::{CompactHit, MeshView};
 use glam::{Vec2, Vec3};
 use std::borrow::Cow;
 
-/// How many hits ahead [`Scene::prefetch_surfaces`] asks for a hit's triangle record.
-pub const SURFACE_PREFETCH_TRIANGLES: usize = 8;
-/// Below this many triangles [`Scene::prefetch_surfaces`] does nothing: index rows,
-/// vertices and materials of 16k triangles take about 1 MiB, which the cache holds.
-pub const SURFACE_PREFETCH_MIN_TRIANGLES: usize = 16 * 1024;
-/// How many hits ahead [`Scene::prefetch_surfaces`] asks for a hit's vertices (fewer than
-/// [`SURFACE_PREFETCH_TRIANGLES`]: it reads the index row asked for earlier).
-pub const SURFACE_PREFETCH_VERTICES: usize = 4;
+pub use flowlight_core::mesh::{
+    SURFACE_PREFETCH_MIN_TRIANGLES, SURFACE_PREFETCH_TRIANGLES, SURFACE_PREFETCH_VERTICES,
+};
 
 /// The scene as plugins see it. Borrowed from the host for the plugin instance's lifetime.
 #[derive(Clone, Copy)]
@@ -228,34 +223,11 @@ impl<'a> Scene<'a> {
     }
 
     /// Cache hints for a loop that calls [`Scene::surface`] on `hits[k]` at its step `k`:
-    /// call it at each step before that call. It asks for the triangle records of the hit
-    /// [`SURFACE_PREFETCH_TRIANGLES`] steps ahead and the vertices of the one
-    /// [`SURFACE_PREFETCH_VERTICES`] ahead, whose records it asked for earlier, so that the
-    /// cache misses of a large mesh's surface data overlap with the shading of the hits
-    /// before them instead of stalling each hit in turn. Changes no result.
-    /// Meshes of fewer than [`SURFACE_PREFETCH_MIN_TRIANGLES`] triangles stay in the cache
-    /// anyway and get no hints.
+    /// call it at each step before that call ([`MeshView::prefetch_surfaces`], which says
+    /// how far ahead it asks and for which meshes). Changes no result.
     #[inline]
     pub fn prefetch_surfaces(&self, hits: &[CompactHit], k: usize) {
-        if self.mesh.triangles.len() < SURFACE_PREFETCH_MIN_TRIANGLES {
-            return;
-        }
-        let triangle = |j: usize| {
-            if let Some(h) = hits.get(j).filter(|h| h.is_hit()) {
-                self.mesh.prefetch_triangle(h.prim, h.instance);
-            }
-        };
-        let vertices = |j: usize| {
-            if let Some(h) = hits.get(j).filter(|h| h.is_hit()) {
-                self.mesh.prefetch_vertices(h.prim, h.instance);
-            }
-        };
-        if k == 0 {
-            (0..SURFACE_PREFETCH_TRIANGLES).for_each(triangle);
-            (0..SURFACE_PREFETCH_VERTICES).for_each(vertices);
-        }
-        triangle(k + SURFACE_PREFETCH_TRIANGLES);
-        vertices(k + SURFACE_PREFETCH_VERTICES);
+        self.mesh.prefetch_surfaces(hits, k);
     }
 
     /// The material of a hit, its textures not applied.

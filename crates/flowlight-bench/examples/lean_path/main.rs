@@ -6,7 +6,7 @@
 //! the camera, next-event estimation at every vertex weighted by the power heuristic
 //! against the cosine-sampled BSDF direction, the same Sobol' numbers slot by slot, the same
 //! robust ray offsets, the same batches of 256 paths through the host's intersector and the
-//! same cache hints for a large mesh's surface data ([`Lean::prefetch_surfaces`]). What
+//! same cache hints for a large mesh's surface data (`MeshView::prefetch_surfaces`). What
 //! it leaves out is everything a general scene needs: textures, the glTF BSDF, punctual and
 //! environment lights, instancing, volumes, lighting layers, sinks. It refuses a scene that
 //! needs any of these, so its image must match MCPT's in expectation.
@@ -37,7 +37,7 @@
 
 use flowlight_core::geometry::Ray;
 use flowlight_core::light::Lights;
-use flowlight_core::mesh::CompactHit;
+use flowlight_core::mesh::{CompactHit, MeshView};
 use flowlight_core::sobol::SobolSampler;
 use flowlight_core::Rgb;
 use flowlight_host::intersector::Intersector;
@@ -80,6 +80,8 @@ struct Path {
 /// The scene as the lean path reads it.
 struct Lean<'a> {
     scene: &'a flowlight_scene::Scene,
+    /// Its mesh, for the cache hints of a wave's hits.
+    mesh: MeshView<'a>,
     /// The scene's emitters and power CDF, for the emitters' densities.
     lights: Lights<'a>,
     /// Per material: its Lambertian albedo.
@@ -199,6 +201,7 @@ impl<'a> Lean<'a> {
         }
         Ok(Lean {
             scene,
+            mesh: scene.mesh(),
             lights: Lights::area_only(&scene.emitters, &scene.emitter_power_cdf),
             albedo,
             path_depth,
@@ -270,7 +273,7 @@ impl<'a> Lean<'a> {
                 spawned.append(&mut b.paths);
             } else {
                 for k in 0..n {
-                    self.prefetch_surfaces(hits, k, 1);
+                    self.mesh.prefetch_surfaces(hits, k);
                     going[k] = self.split_vertex(&mut paths[k], &hits[k], image, shadows, spawned);
                 }
             }
@@ -279,7 +282,7 @@ impl<'a> Lean<'a> {
             _ if splits => {}
             Mode::Scalar => {
                 for k in 0..n {
-                    self.prefetch_surfaces(hits, k, 1);
+                    self.mesh.prefetch_surfaces(hits, k);
                     going[k] = self.vertex(&mut paths[k], &hits[k], image, shadows);
                 }
             }
@@ -287,7 +290,7 @@ impl<'a> Lean<'a> {
                 let surfs = &mut wave.surfs;
                 surfs.clear();
                 surfs.extend((0..n).map(|k| {
-                    self.prefetch_surfaces(hits, k, 1);
+                    self.mesh.prefetch_surfaces(hits, k);
                     self.surface(&mut paths[k], &hits[k], image)
                 }));
                 for (path, s) in paths.iter_mut().zip(surfs.iter()) {
@@ -302,7 +305,7 @@ impl<'a> Lean<'a> {
             Mode::Lanes | Mode::Avx2 | Mode::Surface8 => {
                 for c in (0..n).step_by(lanes::L) {
                     let end = (c + lanes::L).min(n);
-                    self.prefetch_surfaces(hits, c, lanes::L);
+                    (c..end).for_each(|k| self.mesh.prefetch_surfaces(hits, k));
                     let mut g = [false; lanes::L];
                     let (ps, hs) = (&mut paths[c..end], &hits[c..end]);
                     let g = &mut g;
@@ -335,33 +338,6 @@ impl<'a> Lean<'a> {
 }
 
 impl Lean<'_> {
-    /// Cache hints for a step that shades `hits[from..from + count]`, as MCPT's walker gives
-    /// them ([`flowlight_sdk::scene::Scene::prefetch_surfaces`], whose distances a step of one
-    /// hit uses; a step of eight asks for the records two steps ahead and the vertices one
-    /// step ahead). Large meshes only; changes no result.
-    fn prefetch_surfaces(&self, hits: &[CompactHit], from: usize, count: usize) {
-        use flowlight_sdk::scene::{
-            SURFACE_PREFETCH_MIN_TRIANGLES, SURFACE_PREFETCH_TRIANGLES, SURFACE_PREFETCH_VERTICES,
-        };
-        if self.scene.triangles.len() < SURFACE_PREFETCH_MIN_TRIANGLES {
-            return;
-        }
-        let (records, vertices) = match count {
-            1 => (SURFACE_PREFETCH_TRIANGLES, SURFACE_PREFETCH_VERTICES),
-            _ => (2 * count, count),
-        };
-        let mesh = self.scene.mesh();
-        let hit = |j: usize| hits.get(j).filter(|h| h.is_hit());
-        let record = |j: usize| hit(j).map(|h| mesh.prefetch_triangle(h.prim, h.instance));
-        let vertex = |j: usize| hit(j).map(|h| mesh.prefetch_vertices(h.prim, h.instance));
-        if from == 0 {
-            (0..records).for_each(|j| _ = record(j));
-            (0..vertices).for_each(|j| _ = vertex(j));
-        }
-        (from + records..from + records + count).for_each(|j| _ = record(j));
-        (from + vertices..from + vertices + count).for_each(|j| _ = vertex(j));
-    }
-
     /// [`Lean::split_vertex`] for every path of the wave, the branches' connections and
     /// extensions eight at a time in lanes ([`vertex8::branches8`]): the surfaces first, path
     /// by path, then the branches in (path, branch) order, so the shadow rays come in the same
@@ -384,7 +360,7 @@ impl Lean<'_> {
         b.owner.clear();
         for (t, path) in paths.iter_mut().enumerate() {
             going[t] = false;
-            self.prefetch_surfaces(hits, t, 1);
+            self.mesh.prefetch_surfaces(hits, t);
             let Some(s) = self.surface(path, &hits[t], image) else {
                 continue;
             };
