@@ -57,6 +57,8 @@ mod vertex8;
 const WAVE: usize = 256;
 /// The first lighting depth the roulette plays at (MCPT's default `rr_depth`).
 const RR_DEPTH: u32 = 5;
+// The roulette divides out the split's 1/k, so it must start past the split vertex.
+const _: () = assert!(RR_DEPTH > 1);
 
 /// A shadow ray, the pixel it lights and the contribution it carries if unblocked.
 type Shadow = (Ray, u32, Rgb);
@@ -483,5 +485,72 @@ impl Buffers {
                 image[pixel as usize] += c;
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SIZE: u32 = 24;
+
+    /// The repository's Cornell box (Lambertian, lit by its emissive lamp) at SIZE².
+    fn cornell_box() -> LoadedScene {
+        let repo = FilePath::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let mut config = load_config(&repo.join("scenes/cornell-box/cornell-box.toml")).unwrap();
+        (config.width, config.height) = (SIZE, SIZE);
+        LoadedScene::load(config).unwrap()
+    }
+
+    fn bits(image: &[Rgb]) -> Vec<[u32; 3]> {
+        image
+            .iter()
+            .map(|c| [c.r.to_bits(), c.g.to_bits(), c.b.to_bits()])
+            .collect()
+    }
+
+    fn mean_luminance(image: &[Rgb], spp: u32) -> f64 {
+        let sum: f64 = image.iter().map(|c| c.luminance() as f64).sum();
+        sum / (image.len() as f64 * spp as f64)
+    }
+
+    /// What `lean-path.sh`'s timings rest on: every mode renders the scalar mode's image bit
+    /// for bit, with and without a split at the first vertex (the split in lanes included).
+    #[test]
+    fn every_mode_renders_the_scalar_image() {
+        let loaded = cornell_box();
+        let mut modes = vec![Mode::Phased, Mode::Lanes];
+        if avx2_available() {
+            modes.extend([Mode::Avx2, Mode::Surface8]);
+        }
+        for branches in [1, 3] {
+            let mut lean = Lean::new(&loaded.scene, 8).unwrap();
+            lean.branches = branches;
+            let scalar = bits(&lean.render(&loaded, Mode::Scalar, 4, 1, SIZE, SIZE));
+            for &mode in &modes {
+                let image = bits(&lean.render(&loaded, mode, 4, 1, SIZE, SIZE));
+                let differ = image.iter().zip(&scalar).filter(|(a, b)| a != b).count();
+                assert_eq!(differ, 0, "branches {branches}: {differ} pixels differ");
+            }
+        }
+    }
+
+    /// Splitting keeps the estimator unbiased: the image's mean at three branches agrees
+    /// with one branch's within the noise of so few samples.
+    #[test]
+    fn a_split_changes_the_mean_only_by_noise() {
+        let loaded = cornell_box();
+        let spp = 16;
+        let mean = |branches| {
+            let mut lean = Lean::new(&loaded.scene, 8).unwrap();
+            lean.branches = branches;
+            mean_luminance(&lean.render(&loaded, Mode::Scalar, spp, 7, SIZE, SIZE), spp)
+        };
+        let (one, three) = (mean(1), mean(3));
+        assert!(one > 0.0, "the lamp lights the box");
+        assert!(
+            (three / one - 1.0).abs() < 0.03,
+            "mean luminance {three} at three branches against {one} at one"
+        );
     }
 }

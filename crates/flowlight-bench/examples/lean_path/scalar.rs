@@ -252,14 +252,10 @@ impl Lean<'_> {
         let vertex = path.depth;
         let last = vertex >= self.path_depth;
         if !last && vertex >= RR_DEPTH {
-            // Past the split a branch's β holds its 1/k, which the roulette multiplies back
-            // out, as MCPT's does (×1 without branches: the same bits).
-            let split = if vertex > 1 {
-                self.branches as f32
-            } else {
-                1.0
-            };
-            let throughput = path.beta.max_component() * split;
+            // The roulette starts past the split (the first vertex; RR_DEPTH > 1, checked
+            // where it is defined), so a branch's β holds its 1/k, which the roulette
+            // multiplies back out, as MCPT's does (×1 without branches: the same bits).
+            let throughput = path.beta.max_component() * self.branches as f32;
             let survive = (throughput * albedo.max_component()).min(0.95);
             path.rng.seek(vertex, SLOT_ROULETTE);
             if path.rng.uniform() >= survive {
