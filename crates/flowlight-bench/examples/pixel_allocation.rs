@@ -206,3 +206,64 @@ fn main() {
         std::process::exit(1);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Neyman's allocation by hand: relative variances 4 and 1 want rates ∝ 2 : 1, i.e.
+    /// 4/3 and 2/3; rounded to powers of two, 1 and 1/2 (mean 3/4), which the gain divides
+    /// out: uniform Σv = 5, allocated 4/1 + 1/(1/2) = 6, gain 5 / (6 · 3/4) = 10/9.
+    #[test]
+    fn rates_follow_the_relative_standard_deviation_in_powers_of_two() {
+        let n = rates(&[4.0, 1.0]);
+        assert_eq!(n, vec![1.0, 0.5]);
+        let (g, mean_n) = gain(&[4.0, 1.0], &n);
+        assert!((mean_n - 0.75).abs() < 1e-12);
+        assert!((g - 10.0 / 9.0).abs() < 1e-12, "{g}");
+        // Uniform variance: every rate 1, no gain.
+        let n = rates(&[2.0; 5]);
+        assert!(n.iter().all(|&k| k == 1.0));
+        assert!((gain(&[2.0; 5], &n).0 - 1.0).abs() < 1e-12);
+    }
+
+    /// A pixel the pilot saw as noiseless keeps samples (the floor), rates stay in 1/8 … 8,
+    /// and a region with no variance at all is sampled uniformly.
+    #[test]
+    fn rates_are_floored_and_clamped() {
+        let mut v = vec![0.0; 64];
+        v[0] = 1e6;
+        let n = rates(&v);
+        assert_eq!(n[0], 8.0);
+        assert!(n[1..].iter().all(|&k| k == 0.125), "{:?}", &n[..4]);
+        assert_eq!(rates(&[0.0; 3]), vec![1.0; 3]);
+    }
+
+    /// The window mean stays inside its region: a spike outside the region does not leak in,
+    /// and a constant region stays constant.
+    #[test]
+    fn smoothing_is_confined_to_the_region() {
+        let (w, h) = (8, 8);
+        let mut v = vec![1.0; w * h];
+        v[7] = 100.0; // x = 7, y = 0: outside the region x < 4
+        let s = smoothed(&v, w, (0, 4, 0, h));
+        assert_eq!(s.len(), 4 * h);
+        assert!(s.iter().all(|&x| (x - 1.0).abs() < 1e-12));
+        let s = smoothed(&v, w, (4, 8, 0, 4));
+        // (7, 0)'s window clamped to the region: 3 × 3 pixels, one of them the spike.
+        assert!((s[3] - (8.0 + 100.0) / 9.0).abs() < 1e-12, "{}", s[3]);
+    }
+
+    /// The sample variance over images, relative to a scale: two images 1 and 3 in every
+    /// channel have variance 2 per channel; over a scale of 1, 3 · 2 / (1 + ε).
+    #[test]
+    fn relative_variance_sums_the_channels() {
+        let im = |x: f32| Image {
+            width: 1,
+            height: 1,
+            pixels: vec![Rgb::new(x, x, x)],
+        };
+        let v = relative_variance(&[im(1.0), im(3.0)], |_, _| 1.0);
+        assert!((v[0] - 6.0 / (1.0 + EPS)).abs() < 1e-12, "{}", v[0]);
+    }
+}
