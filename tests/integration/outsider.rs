@@ -668,13 +668,31 @@ fn the_existing_mutation_plugins_pass_the_kit() {
 fn the_kit_refuses_a_mutation_whose_ratio_is_wrong() {
     // The generated mutation with its symmetric ratio 1 replaced by 2: every acceptance
     // doubles, detailed balance fails, and the kit must say so.
-    let dir = outside("wrong-ratio");
+    let err = kit_error_with_ratio("wrong-ratio", "2.0");
+    assert!(err.contains("ratio 2 but T(y→x)/T(x→y)"), "{err}");
+}
+
+#[test]
+fn the_kit_refuses_a_degenerate_ratio_where_the_densities_are_not() {
+    // NaN is a strategy's word for a degenerate density, which the kit accepts only where the
+    // strategy's own densities are degenerate; the symmetric mutation's never are.
+    let err = kit_error_with_ratio("nan-ratio", "f32::NAN");
+    assert!(
+        err.contains("reports a degenerate density (ratio NaN)"),
+        "{err}"
+    );
+}
+
+/// The kit's error for the generated raw mutation `name` with its symmetric ratio 1
+/// replaced by the Rust expression `ratio`.
+fn kit_error_with_ratio(name: &str, ratio: &str) -> String {
+    let dir = outside(name);
     let out = flowlight(
         &[
             "new-plugin",
             "--kind",
             "raw-mutation",
-            "wrong-ratio",
+            name,
             dir.to_str().unwrap(),
         ],
         Path::new(""),
@@ -686,16 +704,19 @@ fn the_kit_refuses_a_mutation_whose_ratio_is_wrong() {
     );
     let lib_rs = dir.join("src/lib.rs");
     let source = std::fs::read_to_string(&lib_rs).unwrap();
-    let broken = source.replace("transition_ratio: 1.0", "transition_ratio: 2.0");
+    let broken = source.replace(
+        "transition_ratio: 1.0",
+        &format!("transition_ratio: {ratio}"),
+    );
     assert_ne!(source, broken, "the template changed: update this test");
     std::fs::write(&lib_rs, broken).unwrap();
     cargo(&dir, &["build", "--release", "--offline", "--quiet"]);
     let lib = outsider_target()
         .join("release")
-        .join(flowlight_host::plugin::plugin_file_name("wrong-ratio"));
+        .join(flowlight_host::plugin::plugin_file_name(name));
     let err = flowlight_testkit::check_mutation(lib.to_str().unwrap(), &[]).unwrap_err();
-    assert!(err.contains("ratio 2 but T(y→x)/T(x→y)"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
+    err
 }
 
 /// Another Rust toolchain installed beside this one (rustup), whose `rustc --version`

@@ -36,9 +36,13 @@
 //!    cannot reverse (T(y → x) = 0, e.g. a cap that does not contain the original vertex
 //!    seen from the new one) must report ratio 0, so that it is always rejected: detailed
 //!    balance f(x)T(x→y)a(x→y) = f(y)T(y→x)a(y→x) then holds with both sides 0.
-//! 4. **Finite**: the ratio and f(y) are finite and non-negative.
+//! 4. **Finite**: the ratio and f(y) are finite and non-negative, but for one case: a
+//!    ratio of NaN is how a strategy reports a move whose density is degenerate (0/0 or ∞/∞,
+//!    e.g. a vertex whose Jacobian vanishes or overflows; `flowlight_sdk::Proposal`), which
+//!    the integrator rejects and counts. Such a move passes only where T(y → x)/T(x → y)
+//!    from the densities is not a finite number either, and is counted as degenerate.
 //!
-//! At least [`MIN_VALID`] proposals (over all scenes) must be valid with a ratio above 0 (a strategy that
+//! At least [`MIN_VALID`] proposals (over all scenes) must be valid with a finite ratio above 0 (a strategy that
 //! always misses, or only proposes moves it cannot reverse, passes nothing). Then **unbiasedness in the furnace**: ERPT with this strategy alone renders
 //! the white furnace (a closed sphere of albedo ½ emitting 1, seen from inside, path-space
 //! depth N = 8), whose every pixel is 2·(1 − 0.5⁹) exactly; over eight independent renders
@@ -83,6 +87,8 @@ pub struct MutationReport {
     pub proposals: usize,
     pub valid: usize,
     pub irreversible: usize,
+    /// Valid moves whose density is degenerate (ratio NaN): rejected by the integrator.
+    pub degenerate: usize,
     /// Largest relative difference between the reported ratio and T(y→x)/T(x→y).
     pub worst_ratio_error: f64,
     /// What was counted on each scene of [`DENSITY_SCENES`], in order.
@@ -97,11 +103,12 @@ impl std::fmt::Display for MutationReport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "{}: {} of {} proposals valid ({} irreversible, ratio 0), worst ratio error {:.2e}; furnace {:.5} ± {:.5} (exact {:.5})",
+            "{}: {} of {} proposals valid ({} irreversible, ratio 0; {} degenerate, ratio NaN), worst ratio error {:.2e}; furnace {:.5} ± {:.5} (exact {:.5})",
             self.name,
             self.valid,
             self.proposals,
             self.irreversible,
+            self.degenerate,
             self.worst_ratio_error,
             self.furnace_mean,
             self.furnace_stderr,
@@ -110,8 +117,14 @@ impl std::fmt::Display for MutationReport {
         for c in &self.scenes {
             write!(
                 f,
-                "\n  {:<18} {:>5} of {:>5} valid, {:>5} through mirrors or glass, {:>4} irreversible, worst ratio error {:.2e}",
-                c.scene, c.valid, c.proposals, c.through_dirac, c.irreversible, c.worst_ratio_error
+                "\n  {:<18} {:>5} of {:>5} valid, {:>5} through mirrors or glass, {:>4} irreversible, {:>3} degenerate, worst ratio error {:.2e}",
+                c.scene,
+                c.valid,
+                c.proposals,
+                c.through_dirac,
+                c.irreversible,
+                c.degenerate,
+                c.worst_ratio_error
             )?;
         }
         Ok(())
@@ -205,6 +218,9 @@ pub struct SceneCounts {
     pub valid: usize,
     /// Moves it cannot reverse (ratio 0).
     pub irreversible: usize,
+    /// Moves whose density is degenerate (ratio NaN, as the strategy's own densities say):
+    /// rejected by the integrator.
+    pub degenerate: usize,
     /// Moves from a path with a Dirac (mirror or glass) vertex.
     pub through_dirac: usize,
     /// Largest relative ratio error on the scene.
@@ -221,6 +237,7 @@ pub fn check_densities(
         proposals: 0,
         valid: 0,
         irreversible: 0,
+        degenerate: 0,
         worst_ratio_error: 0.0,
         scenes: Vec::new(),
         furnace_mean: 0.0,
@@ -233,14 +250,16 @@ pub fn check_densities(
         report.proposals += counts.proposals;
         report.valid += counts.valid;
         report.irreversible += counts.irreversible;
+        report.degenerate += counts.degenerate;
         report.worst_ratio_error = report.worst_ratio_error.max(counts.worst_ratio_error);
         report.scenes.push(counts);
     }
-    if report.valid - report.irreversible < MIN_VALID {
+    let judged = report.valid - report.irreversible - report.degenerate;
+    if judged < MIN_VALID {
         return Err(format!(
             "{}: only {} of {} proposals were valid and reversible (at least {MIN_VALID} needed to judge it)",
             report.name,
-            report.valid - report.irreversible,
+            judged,
             report.proposals
         ));
     }
@@ -329,14 +348,28 @@ fn check_scene(
             }
             let f_y = measurement(&scene, &y);
             let ratio = ratio as f64;
+            let forward = set.density(0, &x, &y)?;
+            let reverse = set.density(0, &y, &x)?;
+            if ratio.is_nan() && f_y.is_valid_radiance() {
+                // NaN is the SDK's word for a move whose density is degenerate (`Proposal`):
+                // the integrator rejects and counts it. Taken as such only where the
+                // densities the strategy evaluates are degenerate too.
+                let expected = reverse / forward;
+                if expected.is_finite() && expected >= 0.0 {
+                    return Err(format!(
+                        "{name}: reports a degenerate density (ratio NaN) where T(y→x)/T(x→y) = {reverse}/{forward} = {expected} ({})",
+                        what()
+                    ));
+                }
+                counts.degenerate += 1;
+                continue;
+            }
             if !ratio.is_finite() || ratio < 0.0 || !f_y.is_valid_radiance() {
                 return Err(format!(
                     "{name}: invalid ratio {ratio} or contribution {f_y:?} ({})",
                     what()
                 ));
             }
-            let forward = set.density(0, &x, &y)?;
-            let reverse = set.density(0, &y, &x)?;
             if forward.is_nan() || forward <= 0.0 {
                 return Err(format!(
                     "{name}: proposed a path its density says it cannot reach: T(x→y) = {forward} ({})",
