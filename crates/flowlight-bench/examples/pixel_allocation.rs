@@ -10,8 +10,8 @@
 //! pixel each, independent seeds) give each pixel's estimated relative variance, and the
 //! evaluation renders (independent of the pilot: other seeds) give it again, unbiased, to
 //! score the allocation with. For pixel i with relative variance v_i per sample (summed over
-//! the three channels, each over its reference value squared plus relMSE's ε = 0.01), an
-//! image with n_i samples at pixel i has relMSE ∝ Σ v_i / n_i. With the same total of
+//! the three channels, each over its reference value squared plus relMSE's ε, `REL_EPS`),
+//! an image with n_i samples at pixel i has relMSE ∝ Σ v_i / n_i. With the same total of
 //! samples, uniform sampling gives Σ v_i, and the least is (Σ √v_i)² / P at n_i ∝ √v_i
 //! (Neyman's allocation). The allocation tried here is what a renderer could do from a pilot:
 //!
@@ -29,11 +29,10 @@
 //! from the image divides the gain by 1 + pilot spp / image spp.
 
 use flowlight_core::Rgb;
+use flowlight_host::metrics::REL_EPS;
 use flowlight_host::output::read_exr_rgb;
 use std::path::Path;
 
-/// relMSE's ε (`flowlight compare`).
-const EPS: f64 = 0.01;
 const WINDOW: usize = 5;
 const FLOOR: f64 = 0.05;
 const RATES: (i32, i32) = (-3, 3);
@@ -46,7 +45,7 @@ struct Image {
 
 /// Channel `c` (0, 1, 2: R, G, B) of `p`.
 fn channel(p: Rgb, c: usize) -> f64 {
-    [p.r, p.g, p.b][c] as f64
+    p.to_array()[c] as f64
 }
 
 fn read(path: &Path) -> Result<Image, String> {
@@ -75,7 +74,7 @@ fn relative_variance(images: &[Image], scale: impl Fn(usize, usize) -> f64) -> V
                     let values = images.iter().map(|im| channel(im.pixels[i], c));
                     let mean = values.clone().sum::<f64>() / n;
                     let var = values.map(|v| (v - mean) * (v - mean)).sum::<f64>() / (n - 1.0);
-                    var / (scale(i, c).powi(2) + EPS)
+                    var / (scale(i, c).powi(2) + REL_EPS)
                 })
                 .sum()
         })
@@ -264,6 +263,6 @@ mod tests {
             pixels: vec![Rgb::new(x, x, x)],
         };
         let v = relative_variance(&[im(1.0), im(3.0)], |_, _| 1.0);
-        assert!((v[0] - 6.0 / (1.0 + EPS)).abs() < 1e-12, "{}", v[0]);
+        assert!((v[0] - 6.0 / (1.0 + REL_EPS)).abs() < 1e-12, "{}", v[0]);
     }
 }
