@@ -40,7 +40,8 @@
 //!    ratio of NaN is how a strategy reports a move whose density is degenerate (0/0 or ∞/∞,
 //!    e.g. a vertex whose Jacobian vanishes or overflows; `flowlight_sdk::Proposal`), which
 //!    the integrator rejects and counts. Such a move passes only where T(y → x)/T(x → y)
-//!    from the densities is not a finite number either, and is counted as degenerate.
+//!    from the densities has no value either (0/0, ∞/∞ or a NaN density), and is counted
+//!    as degenerate; a NaN where T(x → y) = 0 alone still fails check 2's promise.
 //!
 //! At least [`MIN_VALID`] proposals (over all scenes) must be valid with a finite ratio above 0 (a strategy that
 //! always misses, or only proposes moves it cannot reverse, passes nothing). Then **unbiasedness in the furnace**: ERPT with this strategy alone renders
@@ -353,9 +354,10 @@ fn check_scene(
             if ratio.is_nan() && f_y.is_valid_radiance() {
                 // NaN is the SDK's word for a move whose density is degenerate (`Proposal`):
                 // the integrator rejects and counts it. Taken as such only where the
-                // densities the strategy evaluates are degenerate too.
+                // densities the strategy evaluates have no ratio either (0/0, ∞/∞ or a NaN
+                // density); T(x→y) = 0 against T(y→x) > 0 is check 2's failure, not this.
                 let expected = reverse / forward;
-                if expected.is_finite() && expected >= 0.0 {
+                if !expected.is_nan() {
                     return Err(format!(
                         "{name}: reports a degenerate density (ratio NaN) where T(y→x)/T(x→y) = {reverse}/{forward} = {expected} ({})",
                         what()
